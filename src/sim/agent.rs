@@ -1,0 +1,157 @@
+//! The non-learning agents used by `sorting_line eval`, the benchmark and the tests:
+//! `rba`, `rba-hold`, a seeded `random`, and `constant:K[:M|:cat]`.
+
+use std::fmt;
+use std::str::FromStr;
+
+use super::config::{LineConfig, Variant};
+use super::line::{Action, Observation};
+use super::material::SortMode;
+use super::rba::RbaTable;
+use super::rng::{integer, stream, SimRng, Stream};
+use super::speed::SPEED_COUNT;
+
+/// Which sort mode a constant-speed agent uses (advanced line).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModeChoice {
+    Fixed(SortMode),
+    /// The mode matching the observed ratio category.
+    Observed,
+}
+
+/// An agent as named on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AgentSpec {
+    Rba,
+    RbaHold,
+    Random,
+    Constant { speed_index: usize, mode: ModeChoice },
+}
+
+impl FromStr for AgentSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let usage = "allowed: rba, rba-hold, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
+        match s {
+            "rba" => return Ok(AgentSpec::Rba),
+            "rba-hold" => return Ok(AgentSpec::RbaHold),
+            "random" => return Ok(AgentSpec::Random),
+            _ => {}
+        }
+        let parts: Vec<&str> = s.split(':').collect();
+        if parts[0] != "constant" || !(2..=3).contains(&parts.len()) {
+            return Err(format!("unknown agent '{s}': {usage}"));
+        }
+        let speed_index = parts[1]
+            .parse::<usize>()
+            .ok()
+            .filter(|&k| k < SPEED_COUNT)
+            .ok_or_else(|| format!("speed index '{}' in '{s}' is out of range: allowed 0..9", parts[1]))?;
+        let mode = match parts.get(2) {
+            None => ModeChoice::Fixed(SortMode::Basic),
+            Some(&"cat") => ModeChoice::Observed,
+            Some(m) => ModeChoice::Fixed(
+                m.parse::<u8>()
+                    .ok()
+                    .and_then(SortMode::from_index)
+                    .ok_or_else(|| format!("mode '{m}' in '{s}' is out of range: allowed 0..2 or cat"))?,
+            ),
+        };
+        Ok(AgentSpec::Constant { speed_index, mode })
+    }
+}
+
+impl fmt::Display for AgentSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            AgentSpec::Rba => f.write_str("rba"),
+            AgentSpec::RbaHold => f.write_str("rba-hold"),
+            AgentSpec::Random => f.write_str("random"),
+            AgentSpec::Constant { speed_index, mode: ModeChoice::Observed } => write!(f, "constant:{speed_index}:cat"),
+            AgentSpec::Constant { speed_index, mode: ModeChoice::Fixed(SortMode::Basic) } => {
+                write!(f, "constant:{speed_index}")
+            }
+            AgentSpec::Constant { speed_index, mode: ModeChoice::Fixed(m) } => {
+                write!(f, "constant:{speed_index}:{}", m.index())
+            }
+        }
+    }
+}
+
+/// A ready-to-act agent.
+#[derive(Clone, Debug)]
+pub enum Agent {
+    Rba(RbaTable),
+    RbaHold(RbaTable),
+    Random { rng: SimRng, variant: Variant },
+    Constant { speed_index: usize, mode: ModeChoice },
+}
+
+impl Agent {
+    /// Builds the agent for a line configuration. Mode choices need the advanced line.
+    pub fn new(spec: AgentSpec, config: &LineConfig, seed: u64) -> Result<Self, String> {
+        Ok(match spec {
+            AgentSpec::Rba => Agent::Rba(RbaTable::build(config)),
+            AgentSpec::RbaHold => Agent::RbaHold(RbaTable::build(config)),
+            AgentSpec::Random => Agent::Random { rng: stream(seed, Stream::Agent), variant: config.variant },
+            AgentSpec::Constant { mode, .. }
+                if config.variant == Variant::Basic && mode != ModeChoice::Fixed(SortMode::Basic) =>
+            {
+                return Err(format!("agent '{spec}' sets a sort mode, which only the advanced line has"));
+            }
+            AgentSpec::Constant { speed_index, mode } => Agent::Constant { speed_index, mode },
+        })
+    }
+
+    /// Restarts the random agent's stream (each evaluation episode reseeds its agent).
+    pub fn reseed(&mut self, seed: u64) {
+        if let Agent::Random { rng, .. } = self {
+            *rng = stream(seed, Stream::Agent);
+        }
+    }
+
+    /// The action for an observation, given the belt's current speed index.
+    pub fn act(&mut self, observation: Observation, current_speed: usize) -> Action {
+        match self {
+            Agent::Rba(table) => table.decide(observation),
+            Agent::RbaHold(table) => table.decide_holding(observation, current_speed),
+            Agent::Random { rng, variant } => {
+                let n = match variant {
+                    Variant::Basic => SPEED_COUNT,
+                    Variant::Advanced => SPEED_COUNT * 3,
+                };
+                Action::from_discrete(*variant, integer(rng, 0, n as u32) as usize).expect("in range")
+            }
+            Agent::Constant { speed_index, mode } => Action::new(
+                *speed_index,
+                match mode {
+                    ModeChoice::Fixed(m) => *m,
+                    ModeChoice::Observed => SortMode::for_category(observation.category),
+                },
+            ),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_and_print() {
+        for s in ["rba", "rba-hold", "random", "constant:3", "constant:9:cat", "constant:0:2"] {
+            assert_eq!(s.parse::<AgentSpec>().unwrap().to_string(), s);
+        }
+        assert!("constant:10".parse::<AgentSpec>().unwrap_err().contains("allowed 0..9"));
+        assert!("constant:1:5".parse::<AgentSpec>().unwrap_err().contains("allowed 0..2 or cat"));
+        assert!("ppo".parse::<AgentSpec>().unwrap_err().starts_with("unknown agent 'ppo'"));
+    }
+
+    #[test]
+    fn modes_need_the_advanced_line() {
+        let basic = LineConfig::default();
+        assert!(Agent::new("constant:3:cat".parse().unwrap(), &basic, 0).is_err());
+        assert!(Agent::new("constant:3".parse().unwrap(), &basic, 0).is_ok());
+    }
+}

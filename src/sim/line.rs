@@ -1,0 +1,452 @@
+//! One sorting line: input sensor, conveyor belt, sorting machine and containers, stepped one
+//! tick at a time. This is the reference environment's dynamics, number for number, with the
+//! defects listed in the dynamics notes (section 0) fixed: per-line seeded streams, truncation
+//! instead of termination, and the KPIs reported every step.
+//!
+//! # One step, in order
+//! 1. **Sort** the batch in the sorting machine at the sorter's accuracy: correct = floor(n * acc)
+//!    per material, the rest goes to the wrong container.
+//! 2. **Advance**: machine <- belt, belt <- input, input <- a new batch (input stream), and the
+//!    accuracy computed for the belt batch last step travels with it to the sorter.
+//! 3. **Set the speed** (and the mode) from the action; a change of speed is counted.
+//! 4. **Accuracy** of the batch now on the belt (the one the last observation described):
+//!    noise stream draw 1 = U(0.10, 0.15); with a matching mode, draw 2 = U(0, 0.05) replaces it
+//!    (both draws are consumed, as in the reference).
+//! 5. **Reward** from that accuracy, the speed and the switching penalty.
+//! 6. **Observe** the new input batch: noise stream draw = U(-n, n) (drawn even when n = 0),
+//!    reading = round2(clamp(q + q * u, 0, 1)).
+//! 7. step += 1; `truncated` once step >= max_steps. `terminated` is never set.
+//!
+//! A reset draws one observation-noise value (for the fixed first input batch) and nothing else.
+
+use serde::{Deserialize, Serialize};
+
+use super::accuracy::{noiseless_accuracy, with_noise, ModeEffect, START_ACCURACY};
+use super::config::{LineConfig, Variant};
+use super::input::InputGenerator;
+use super::material::{Batch, Category, SortMode};
+use super::reward::reward;
+use super::rng::{stream, uniform, SimRng, Stream};
+use super::round::round2;
+use super::speed::{SPEEDS, SPEED_COUNT, START_SPEED_INDEX};
+
+/// The fixed contents of the line after a reset: input, belt, sorting machine.
+pub const START_INPUT: Batch = Batch::new(30, 50);
+pub const START_BELT: Batch = Batch::new(40, 20);
+pub const START_MACHINE: Batch = Batch::new(75, 25);
+
+/// What the agent commands for one tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Action {
+    /// 0..=9, speed (i + 1) / 10.
+    pub speed_index: usize,
+    /// Ignored by the basic line.
+    pub mode: SortMode,
+}
+
+impl Action {
+    pub fn new(speed_index: usize, mode: SortMode) -> Self {
+        assert!(speed_index < SPEED_COUNT, "speed index {speed_index} out of 0..=9");
+        Action { speed_index, mode }
+    }
+
+    /// Decodes a Gymnasium action: basic `speed_index`, advanced `speed_index * 3 + mode`.
+    pub fn from_discrete(variant: Variant, action: usize) -> Option<Self> {
+        match variant {
+            Variant::Basic => (action < SPEED_COUNT).then(|| Action::new(action, SortMode::Basic)),
+            Variant::Advanced => (action < SPEED_COUNT * 3)
+                .then(|| Action::new(action / 3, SortMode::from_index((action % 3) as u8).unwrap())),
+        }
+    }
+
+    pub fn to_discrete(self, variant: Variant) -> usize {
+        match variant {
+            Variant::Basic => self.speed_index,
+            Variant::Advanced => self.speed_index * 3 + self.mode.index(),
+        }
+    }
+
+    pub fn speed(self) -> f64 {
+        SPEEDS[self.speed_index]
+    }
+}
+
+/// What the agent sees: the noisy input reading and (advanced) the exact ratio category.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observation {
+    /// Noisy amount of the next batch, 0..=1, two decimals.
+    pub quantity: f64,
+    /// Ratio category of the next batch (noise-free; the basic line does not show it).
+    pub category: Category,
+}
+
+/// The four container counters, in material units.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Containers {
+    pub a: u64,
+    pub a_false: u64,
+    pub b: u64,
+    pub b_false: u64,
+}
+
+impl Containers {
+    pub fn total(&self) -> u64 {
+        self.a + self.a_false + self.b + self.b_false
+    }
+
+    /// The real purity of what was sorted: correctly sorted / all sorted (0 when empty).
+    pub fn purity(&self) -> f64 {
+        ratio_or_zero(self.a + self.b, self.total())
+    }
+
+    /// Share of material A that was sorted correctly (the reference dashboard's "A %").
+    pub fn recall_a(&self) -> f64 {
+        ratio_or_zero(self.a, self.a + self.a_false)
+    }
+
+    /// Share of material B that was sorted correctly.
+    pub fn recall_b(&self) -> f64 {
+        ratio_or_zero(self.b, self.b + self.b_false)
+    }
+}
+
+fn ratio_or_zero(num: u64, den: u64) -> f64 {
+    if den == 0 {
+        0.0
+    } else {
+        num as f64 / den as f64
+    }
+}
+
+/// The result of one step.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepOutcome {
+    /// Steps taken in this episode, this one included.
+    pub step: u32,
+    pub action: Action,
+    /// Accuracy set for the batch on the belt (sorted at the next step).
+    pub accuracy: f64,
+    /// Occupancy of the batch on the belt.
+    pub occupancy: f64,
+    pub reward: f64,
+    pub speed_changed: bool,
+    pub observation: Observation,
+    /// Always false: nothing ends an episode but the time limit.
+    pub terminated: bool,
+    /// The time limit was reached.
+    pub truncated: bool,
+}
+
+/// A sorting line with its own random streams.
+#[derive(Clone, Debug)]
+pub struct Line {
+    config: LineConfig,
+    seed: u64,
+    episode: u32,
+    step: u32,
+    generator: InputGenerator,
+    noise: SimRng,
+    input: Batch,
+    belt: Batch,
+    machine: Batch,
+    belt_accuracy: f64,
+    sorter_accuracy: f64,
+    speed_index: usize,
+    mode: SortMode,
+    containers: Containers,
+    observation: Observation,
+    cumulative_reward: f64,
+    speed_changes: u32,
+    last: Option<StepOutcome>,
+    /// Units that entered the line this episode (start contents included): for conservation checks.
+    entered: u64,
+}
+
+impl Line {
+    /// A line seeded with `seed`, already reset (episode 0).
+    ///
+    /// # Panics
+    /// If the configuration is invalid: validate configurations from users first.
+    pub fn new(config: LineConfig, seed: u64) -> Self {
+        config.validate().expect("a valid line configuration");
+        let mut line = Line {
+            generator: InputGenerator::new(config.input, seed),
+            noise: stream(seed, Stream::Noise),
+            config,
+            seed,
+            episode: 0,
+            step: 0,
+            input: START_INPUT,
+            belt: START_BELT,
+            machine: START_MACHINE,
+            belt_accuracy: START_ACCURACY,
+            sorter_accuracy: START_ACCURACY,
+            speed_index: START_SPEED_INDEX,
+            mode: SortMode::Basic,
+            containers: Containers::default(),
+            observation: Observation { quantity: 0.0, category: Category::Basic },
+            cumulative_reward: 0.0,
+            speed_changes: 0,
+            last: None,
+            entered: 0,
+        };
+        line.restart();
+        line
+    }
+
+    /// Starts a new episode. With a seed, both streams restart from it; without one they carry
+    /// on, so a run of several episodes is reproduced by its first seed.
+    pub fn reset(&mut self, seed: Option<u64>) -> Observation {
+        if let Some(seed) = seed {
+            self.seed = seed;
+            self.generator.reseed(seed);
+            self.noise = stream(seed, Stream::Noise);
+        }
+        self.episode += 1;
+        self.restart()
+    }
+
+    fn restart(&mut self) -> Observation {
+        self.step = 0;
+        self.input = START_INPUT;
+        self.belt = START_BELT;
+        self.machine = START_MACHINE;
+        self.belt_accuracy = START_ACCURACY;
+        self.sorter_accuracy = START_ACCURACY;
+        self.speed_index = START_SPEED_INDEX;
+        self.mode = SortMode::Basic;
+        self.containers = Containers::default();
+        self.cumulative_reward = 0.0;
+        self.speed_changes = 0;
+        self.last = None;
+        self.entered = u64::from(START_INPUT.total() + START_BELT.total() + START_MACHINE.total());
+        self.observation = self.observe();
+        self.observation
+    }
+
+    /// Advances the line one tick (see the module docs for the exact order).
+    pub fn step(&mut self, action: Action) -> StepOutcome {
+        // 1. Sort the machine's batch.
+        let correct_a = (f64::from(self.machine.a) * self.sorter_accuracy) as u32;
+        let correct_b = (f64::from(self.machine.b) * self.sorter_accuracy) as u32;
+        self.containers.a += u64::from(correct_a);
+        self.containers.b += u64::from(correct_b);
+        self.containers.a_false += u64::from(self.machine.a - correct_a);
+        self.containers.b_false += u64::from(self.machine.b - correct_b);
+
+        // 2. Advance the line.
+        self.machine = self.belt;
+        self.belt = self.input;
+        self.input = self.generator.next_batch();
+        self.entered += u64::from(self.input.total());
+        self.sorter_accuracy = self.belt_accuracy;
+
+        // 3. Set speed and mode.
+        let speed_changed = action.speed_index != self.speed_index;
+        self.speed_index = action.speed_index;
+        self.mode = match self.config.variant {
+            Variant::Basic => SortMode::Basic,
+            Variant::Advanced => action.mode,
+        };
+        self.speed_changes += u32::from(speed_changed);
+
+        // 4. Accuracy of the belt batch.
+        let effect = self.mode_effect();
+        let occupancy = self.belt.occupancy();
+        let noiseless = noiseless_accuracy(occupancy, self.speed_index, effect);
+        let mut noise = uniform(&mut self.noise, super::accuracy::NOISE.0, super::accuracy::NOISE.1);
+        if effect == ModeEffect::Matched {
+            let (low, high) = super::accuracy::MATCHED_NOISE;
+            noise = uniform(&mut self.noise, low, high);
+        }
+        self.belt_accuracy = with_noise(noiseless, noise);
+
+        // 5. Reward.
+        let penalty = if speed_changed { self.config.action_penalty } else { 0.0 };
+        let reward = reward(self.belt_accuracy, self.config.threshold, self.speed_index, penalty);
+        self.cumulative_reward += reward;
+
+        // 6. Observe the new input; 7. count the step.
+        self.observation = self.observe();
+        self.step += 1;
+        let outcome = StepOutcome {
+            step: self.step,
+            action: Action { speed_index: self.speed_index, mode: self.mode },
+            accuracy: self.belt_accuracy,
+            occupancy,
+            reward,
+            speed_changed,
+            observation: self.observation,
+            terminated: false,
+            truncated: self.step >= self.config.max_steps,
+        };
+        self.last = Some(outcome);
+        outcome
+    }
+
+    fn mode_effect(&self) -> ModeEffect {
+        match self.config.variant {
+            Variant::Basic => ModeEffect::NoMode,
+            Variant::Advanced if self.mode.matches(self.belt.category()) => ModeEffect::Matched,
+            Variant::Advanced => ModeEffect::Mismatched,
+        }
+    }
+
+    /// Reads the input sensor (one noise-stream draw).
+    fn observe(&mut self) -> Observation {
+        let amount = self.input.occupancy();
+        let n = self.config.obs_noise;
+        let u = uniform(&mut self.noise, -n, n);
+        let quantity = round2((amount + amount * u).clamp(0.0, 1.0));
+        Observation { quantity, category: self.input.category() }
+    }
+
+    pub fn config(&self) -> &LineConfig {
+        &self.config
+    }
+    /// The seed the current streams started from.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+    /// Episodes started since the line was built (0 for the first).
+    pub fn episode(&self) -> u32 {
+        self.episode
+    }
+    /// Steps taken in this episode.
+    pub fn step_count(&self) -> u32 {
+        self.step
+    }
+    /// Whether this episode has reached its time limit.
+    pub fn truncated(&self) -> bool {
+        self.step >= self.config.max_steps
+    }
+    pub fn observation(&self) -> Observation {
+        self.observation
+    }
+    pub fn input(&self) -> Batch {
+        self.input
+    }
+    pub fn belt(&self) -> Batch {
+        self.belt
+    }
+    pub fn machine(&self) -> Batch {
+        self.machine
+    }
+    pub fn containers(&self) -> Containers {
+        self.containers
+    }
+    pub fn belt_accuracy(&self) -> f64 {
+        self.belt_accuracy
+    }
+    pub fn sorter_accuracy(&self) -> f64 {
+        self.sorter_accuracy
+    }
+    pub fn speed_index(&self) -> usize {
+        self.speed_index
+    }
+    pub fn speed(&self) -> f64 {
+        SPEEDS[self.speed_index]
+    }
+    pub fn mode(&self) -> SortMode {
+        self.mode
+    }
+    pub fn cumulative_reward(&self) -> f64 {
+        self.cumulative_reward
+    }
+    pub fn speed_changes(&self) -> u32 {
+        self.speed_changes
+    }
+    pub fn last_step(&self) -> Option<&StepOutcome> {
+        self.last.as_ref()
+    }
+    /// Units that entered this episode, the start contents included.
+    pub fn entered(&self) -> u64 {
+        self.entered
+    }
+    /// Units now in the line or its containers; always equal to [`Line::entered`].
+    pub fn accounted(&self) -> u64 {
+        u64::from(self.input.total() + self.belt.total() + self.machine.total()) + self.containers.total()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::config::{Setup, SETUPS, VARIANTS};
+
+    #[test]
+    fn first_step_sorts_the_start_batch_at_075() {
+        let mut line = Line::new(LineConfig::for_setup(Setup::A, Variant::Basic), 1);
+        assert_eq!(line.observation().quantity, 0.8); // [30, 50], no noise in setup A
+        let out = line.step(Action::new(5, SortMode::Basic));
+        // [75, 25] at 0.75: 56 + 18 correct, 19 + 7 wrong.
+        assert_eq!(line.containers(), Containers { a: 56, a_false: 19, b: 18, b_false: 7 });
+        assert_eq!(line.belt(), START_INPUT);
+        assert_eq!(line.machine(), START_BELT);
+        assert!(!out.speed_changed, "0.6 is the start speed");
+        // Belt occupancy 0.8 at speed 0.6 (limit 0.5): base 0.1 -> accuracy 0, reward -0.1.
+        assert_eq!(out.accuracy, 0.0);
+        assert_eq!(out.reward, -0.1);
+    }
+
+    #[test]
+    fn episode_is_truncated_never_terminated() {
+        let mut line = Line::new(LineConfig::for_setup(Setup::B, Variant::Advanced), 9);
+        for k in 1..=50 {
+            let out = line.step(Action::new(k % 10, SortMode::Positive));
+            assert!(!out.terminated);
+            assert_eq!(out.truncated, k == 50);
+        }
+    }
+
+    #[test]
+    fn same_seed_same_trajectory_and_lines_do_not_interfere() {
+        for setup in SETUPS {
+            for variant in VARIANTS {
+                let config = LineConfig::for_setup(setup, variant);
+                let mut alone = Line::new(config.clone(), 42);
+                let mut twin = Line::new(config.clone(), 42);
+                let mut other = Line::new(config, 43);
+                for k in 0..200 {
+                    let action = Action::new((k * 7) % 10, SortMode::from_index((k % 3) as u8).unwrap());
+                    other.step(action);
+                    let a = alone.step(action);
+                    other.step(action);
+                    assert_eq!(a, twin.step(action));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reset_without_seed_continues_the_streams() {
+        let config = LineConfig::for_setup(Setup::D, Variant::Basic);
+        let mut generator = crate::sim::input::InputGenerator::new(config.input, 5);
+        let batches: Vec<Batch> = (0..11).map(|_| generator.next_batch()).collect();
+        let mut line = Line::new(config.clone(), 5);
+        for _ in 0..10 {
+            line.step(Action::new(3, SortMode::Basic));
+        }
+        line.reset(None);
+        assert_eq!((line.episode(), line.step_count(), line.input()), (1, 0, START_INPUT));
+        line.step(Action::new(3, SortMode::Basic));
+        assert_eq!(line.input(), batches[10], "the input stream carried on");
+        // A seeded reset repeats episode 0 exactly.
+        let mut fresh = Line::new(config, 5);
+        assert_eq!(line.reset(Some(5)), fresh.observation());
+        for k in 0..20 {
+            assert_eq!(line.step(Action::new(k % 10, SortMode::Basic)), fresh.step(Action::new(k % 10, SortMode::Basic)));
+        }
+    }
+
+    #[test]
+    fn discrete_actions_round_trip() {
+        for a in 0..30 {
+            let act = Action::from_discrete(Variant::Advanced, a).unwrap();
+            assert_eq!(act.to_discrete(Variant::Advanced), a);
+        }
+        assert_eq!(Action::from_discrete(Variant::Advanced, 17), Some(Action::new(5, SortMode::Negative)));
+        assert_eq!(Action::from_discrete(Variant::Basic, 10), None);
+        assert_eq!(Action::from_discrete(Variant::Advanced, 30), None);
+    }
+}

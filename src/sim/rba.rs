@@ -1,0 +1,265 @@
+//! The rule-based agent's table: for every input reading (and, advanced, ratio category) the
+//! action with the highest *expected* immediate reward, computed in closed form from the model.
+//!
+//! The reference fills its table with one noisy sample per cell and treats the noisy reading as
+//! the true amount. Here each cell is an expectation: over the accuracy noise (closed form, see
+//! `accuracy::accuracy_law`) and over the batch totals that could have produced the reading,
+//! weighted by the input generator's exact prior and the sensor's likelihood. With no sensor
+//! noise that weighting is a point mass on the reading itself. Decisions are array lookups.
+//!
+//! `rba-hold` is the penalty-aware variant: it compares the expected reward of keeping the current
+//! speed with that of each change *after* the expected switching penalty (charged only when the
+//! accuracy clears the threshold), and keeps its speed on ties.
+
+use serde::Serialize;
+
+use super::accuracy::{accuracy_law, noiseless_accuracy, ModeEffect};
+use super::config::{LineConfig, Variant};
+use super::input::{prior, MAX_TOTAL};
+use super::line::{Action, Observation};
+use super::material::{Category, SortMode, CATEGORIES, SORT_MODES};
+use super::observation::{level, likelihood, LEVELS};
+use super::reward::expected_reward;
+use super::speed::SPEED_COUNT;
+
+/// Expected reward (no penalty) and probability of clearing the threshold of one action.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Value {
+    reward: f64,
+    p_above: f64,
+}
+
+impl Value {
+    fn with_penalty(self, penalty: f64) -> f64 {
+        self.reward - self.p_above * penalty
+    }
+}
+
+/// The precomputed decisions of `rba` and `rba-hold` for one line configuration.
+#[derive(Clone, Debug)]
+pub struct RbaTable {
+    variant: Variant,
+    /// Best action per cell (`cell = level * 3 + category`).
+    best: Vec<Action>,
+    /// Best action per cell and current speed (`cell * SPEED_COUNT + speed`).
+    hold: Vec<Action>,
+}
+
+/// The actions an agent chooses among: speeds, times the modes of the advanced line.
+fn options(variant: Variant) -> Vec<Action> {
+    let modes: &[SortMode] = match variant {
+        Variant::Basic => &[SortMode::Basic],
+        Variant::Advanced => &SORT_MODES,
+    };
+    (0..SPEED_COUNT).flat_map(|s| modes.iter().map(move |&m| Action::new(s, m))).collect()
+}
+
+fn effect(variant: Variant, mode: SortMode, category: Category) -> ModeEffect {
+    match variant {
+        Variant::Basic => ModeEffect::NoMode,
+        Variant::Advanced if mode.matches(category) => ModeEffect::Matched,
+        Variant::Advanced => ModeEffect::Mismatched,
+    }
+}
+
+/// The expected value of `action` on a batch of `total` units and `category` (noiseless table).
+fn value_at(config: &LineConfig, total: usize, category: Category, action: Action) -> Value {
+    let occupancy = total as f64 / 100.0;
+    let e = effect(config.variant, action.mode, category);
+    let c = noiseless_accuracy(occupancy, action.speed_index, e);
+    let law = accuracy_law(c, e, config.threshold);
+    Value { reward: expected_reward(&law, config.threshold, action.speed_index, 0.0), p_above: law.p_above }
+}
+
+impl RbaTable {
+    pub fn build(config: &LineConfig) -> Self {
+        let joint = prior(config.input);
+        let options = options(config.variant);
+        let mut best = Vec::with_capacity(LEVELS * 3);
+        let mut hold = Vec::with_capacity(LEVELS * 3 * SPEED_COUNT);
+        for reading in 0..LEVELS {
+            for category in CATEGORIES {
+                // Posterior weight of each true total given the reading (and category).
+                let mut weights: Vec<(usize, Category, f64)> = Vec::new();
+                for total in 0..=MAX_TOTAL {
+                    let lik = likelihood(reading, total, config.obs_noise);
+                    if lik == 0.0 {
+                        continue;
+                    }
+                    match config.variant {
+                        Variant::Advanced => weights.push((total, category, joint[total][category.index()] * lik)),
+                        Variant::Basic => {
+                            for c in CATEGORIES {
+                                weights.push((total, c, joint[total][c.index()] * lik));
+                            }
+                        }
+                    }
+                }
+                let mass: f64 = weights.iter().map(|w| w.2).sum();
+                if mass <= 0.0 {
+                    // A reading the generator cannot produce: trust it as the true amount.
+                    weights = vec![(reading, category, 1.0)];
+                }
+                let mass: f64 = weights.iter().map(|w| w.2).sum();
+                let values: Vec<Value> = options
+                    .iter()
+                    .map(|&action| {
+                        weights.iter().fold(Value::default(), |acc, &(total, c, w)| {
+                            let v = value_at(config, total, c, action);
+                            Value { reward: acc.reward + w / mass * v.reward, p_above: acc.p_above + w / mass * v.p_above }
+                        })
+                    })
+                    .collect();
+                best.push(argmax(&options, &values, None, config.action_penalty));
+                for current in 0..SPEED_COUNT {
+                    hold.push(argmax(&options, &values, Some(current), config.action_penalty));
+                }
+            }
+        }
+        RbaTable { variant: config.variant, best, hold }
+    }
+
+    fn cell(&self, observation: Observation) -> usize {
+        let category = match self.variant {
+            Variant::Basic => Category::Basic, // the basic line has no ratio sensor
+            Variant::Advanced => observation.category,
+        };
+        level(observation.quantity) * 3 + category.index()
+    }
+
+    /// `rba`: the action with the highest expected immediate reward, ignoring the switching
+    /// penalty (as the reference's agent does).
+    pub fn decide(&self, observation: Observation) -> Action {
+        self.best[self.cell(observation)]
+    }
+
+    /// `rba-hold`: the best action after the expected cost of changing from `current_speed`.
+    pub fn decide_holding(&self, observation: Observation, current_speed: usize) -> Action {
+        self.hold[self.cell(observation) * SPEED_COUNT + current_speed]
+    }
+}
+
+/// The option with the highest value; ties go to the earliest (slowest) option, except that
+/// with a current speed an option keeping that speed wins ties (and pays no penalty).
+fn argmax(options: &[Action], values: &[Value], current: Option<usize>, penalty: f64) -> Action {
+    let score = |i: usize| match current {
+        None => values[i].reward,
+        Some(cur) if options[i].speed_index == cur => values[i].reward,
+        Some(_) => values[i].with_penalty(penalty),
+    };
+    let mut best = 0;
+    for i in 1..options.len() {
+        let keeps = current == Some(options[i].speed_index) && current != Some(options[best].speed_index);
+        if score(i) > score(best) || (keeps && score(i) >= score(best)) {
+            best = i;
+        }
+    }
+    options[best]
+}
+
+/// One row of the expected-reward analysis printed by `sorting_line table`.
+#[derive(Clone, Debug, Serialize)]
+pub struct AnalysisRow {
+    pub variant: Variant,
+    /// True occupancy of the batch, 0..=1.
+    pub occupancy: f64,
+    pub category: Category,
+    pub speed: f64,
+    pub mode: SortMode,
+    /// Accuracy before the noise is subtracted.
+    pub noiseless_accuracy: f64,
+    pub expected_accuracy: f64,
+    pub p_above_threshold: f64,
+    /// Expected immediate reward without switching penalty.
+    pub expected_reward: f64,
+    /// Whether this is the best action for this occupancy (and category).
+    pub best: bool,
+}
+
+/// The noise-free model analysis behind the agent: every (occupancy, category, speed, mode).
+/// The basic line has one category (its rows say `basic`).
+pub fn analysis(config: &LineConfig) -> Vec<AnalysisRow> {
+    let options = options(config.variant);
+    let categories: &[Category] = match config.variant {
+        Variant::Basic => &[Category::Basic],
+        Variant::Advanced => &CATEGORIES,
+    };
+    let mut rows = Vec::new();
+    for total in 0..=MAX_TOTAL {
+        for &category in categories {
+            let values: Vec<Value> = options.iter().map(|&a| value_at(config, total, category, a)).collect();
+            let chosen = argmax(&options, &values, None, 0.0);
+            for (&action, value) in options.iter().zip(&values) {
+                let e = effect(config.variant, action.mode, category);
+                let c = noiseless_accuracy(total as f64 / 100.0, action.speed_index, e);
+                rows.push(AnalysisRow {
+                    variant: config.variant,
+                    occupancy: total as f64 / 100.0,
+                    category,
+                    speed: action.speed(),
+                    mode: action.mode,
+                    noiseless_accuracy: c,
+                    expected_accuracy: accuracy_law(c, e, config.threshold).mean,
+                    p_above_threshold: value.p_above,
+                    expected_reward: value.reward,
+                    best: action == chosen,
+                });
+            }
+        }
+    }
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::config::Setup;
+
+    fn obs(q: f64, c: Category) -> Observation {
+        Observation { quantity: q, category: c }
+    }
+
+    #[test]
+    fn noise_free_basic_picks_fastest_speed_within_limit() {
+        let table = RbaTable::build(&LineConfig::for_setup(Setup::A, Variant::Basic));
+        // Occupancy 0.5: limit of speed 0.6 is 0.5 -> speed index 5.
+        assert_eq!(table.decide(obs(0.5, Category::Basic)).speed_index, 5);
+        // Occupancy 0.15: the reference's noisy table says 0.8; the expectation says 0.9
+        // (limit 0.2 covers 0.15 with no excess).
+        assert_eq!(table.decide(obs(0.15, Category::Basic)).speed_index, 8);
+        assert_eq!(table.decide(obs(0.05, Category::Basic)).speed_index, 9);
+        assert_eq!(table.decide(obs(0.95, Category::Basic)).speed_index, 0);
+    }
+
+    #[test]
+    fn advanced_matches_mode_to_category() {
+        let table = RbaTable::build(&LineConfig::for_setup(Setup::A, Variant::Advanced));
+        for c in CATEGORIES {
+            for q in [0.1, 0.4, 0.77] {
+                assert_eq!(table.decide(obs(q, c)).mode, SortMode::for_category(c));
+            }
+        }
+        // With the mode matched, up to 0.05 of excess costs nothing: one notch faster than basic.
+        assert_eq!(table.decide(obs(0.54, Category::Basic)).speed_index, 5);
+    }
+
+    #[test]
+    fn hold_keeps_speed_when_change_does_not_pay() {
+        let config = LineConfig::for_setup(Setup::B, Variant::Basic);
+        let table = RbaTable::build(&config);
+        let o = obs(0.5, Category::Basic);
+        assert_eq!(table.decide(o).speed_index, 5);
+        // One notch slower costs 0.056 of speed reward, less than the 0.5 penalty.
+        assert_eq!(table.decide_holding(o, 4).speed_index, 4);
+        // Too fast for 0.5 (accuracy collapses): changing pays even with the penalty.
+        assert_ne!(table.decide_holding(o, 9).speed_index, 9);
+        assert_eq!(table.decide_holding(o, 5).speed_index, 5);
+    }
+
+    #[test]
+    fn analysis_has_one_best_row_per_cell() {
+        let rows = analysis(&LineConfig::for_setup(Setup::A, Variant::Advanced));
+        assert_eq!(rows.len(), 101 * 3 * 30);
+        assert_eq!(rows.iter().filter(|r| r.best).count(), 101 * 3);
+    }
+}
