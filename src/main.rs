@@ -1,1 +1,150 @@
-fn main(){}
+//! The `sorting_line` command line: `eval` and `table` run the simulation library offline,
+//! `node` runs the line as a ROS 2 node.
+
+use std::io::{self, IsTerminal, Write};
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use sorting_line::eval::{evaluate, EvalSummary};
+use sorting_line::ros::options::NodeArgs;
+use sorting_line::sim::agent::AgentSpec;
+use sorting_line::sim::rba::analysis;
+use sorting_line::sim::{LineConfig, Setup, Variant};
+
+#[derive(Parser)]
+#[command(name = "sorting_line", version, about = "The SortingEnv sorting line: simulation, evaluation and ROS 2 node")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Evaluate an agent offline on the simulation library (no ROS).
+    Eval(EvalArgs),
+    /// Print the expected-reward analysis behind the rule-based agent as CSV.
+    Table(TableArgs),
+    /// Run the line as a ROS 2 node.
+    Node(NodeArgs),
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// rba, rba-hold, random, constant:K, constant:K:cat or constant:K:M (K = 0..9, M = 0..2).
+    #[arg(long)]
+    agent: AgentSpec,
+    /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
+    #[arg(long)]
+    setup: Setup,
+    #[arg(long, default_value = "basic")]
+    variant: Variant,
+    /// Number of episodes; episode i is reset with seed SEED + i.
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    #[arg(long, default_value_t = 42)]
+    seed: u64,
+    /// Steps per episode.
+    #[arg(long, default_value_t = 50)]
+    max_steps: u32,
+    /// Print one JSON object instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct TableArgs {
+    #[arg(long, default_value = "basic")]
+    variant: Variant,
+    /// Accuracy threshold of the reward.
+    #[arg(long, default_value_t = 0.7)]
+    threshold: f64,
+}
+
+fn main() -> ExitCode {
+    // `--ros-args ... [--]` belongs to ROS, not to clap: split it off first.
+    let (args, ros_args) = sorting_line::ros::options::split_ros_args(std::env::args().collect());
+    let cli = Cli::parse_from(args);
+    let result = match cli.command {
+        Command::Eval(args) => run_eval(args),
+        Command::Table(args) => run_table(args),
+        Command::Node(args) => sorting_line::ros::run(args, ros_args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("sorting_line: {message}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run_eval(args: EvalArgs) -> Result<(), String> {
+    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
+    let bar = if io::stderr().is_terminal() && args.episodes >= 20 {
+        let bar = ProgressBar::new(args.episodes as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} episodes, {per_sec}, eta {eta}")
+                .expect("a valid template"),
+        );
+        bar.set_message(format!("{} on {:?} {}", args.agent, args.setup, args.variant));
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let summary = evaluate(&config, args.agent, args.episodes, args.seed, |_| bar.inc(1))?;
+    bar.finish_and_clear();
+    let mut out = io::stdout().lock();
+    let written = if args.json {
+        serde_json::to_writer(&mut out, &summary).map_err(|e| e.to_string()).and_then(|_| {
+            writeln!(out).map_err(|e| e.to_string())
+        })
+    } else {
+        print_summary(&mut out, args.setup, &summary).map_err(|e| e.to_string())
+    };
+    written
+}
+
+fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Result<()> {
+    writeln!(
+        out,
+        "agent {} | setup {:?} {} | {} episodes from seed {}",
+        s.agent, setup, s.config.variant, s.episodes, s.seed
+    )?;
+    writeln!(out, "reward        {:.2} +- {:.2} (std; standard error {:.2})", s.reward_mean, s.reward_std, s.reward_se)?;
+    writeln!(out, "mean speed    {:.1} %", s.speed_mean * 100.0)?;
+    writeln!(out, "mean accuracy {:.3}", s.accuracy_mean)?;
+    writeln!(out, "purity        {:.1} %", s.purity_mean * 100.0)?;
+    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)
+}
+
+fn run_table(args: TableArgs) -> Result<(), String> {
+    let config = LineConfig { variant: args.variant, threshold: args.threshold, ..LineConfig::default() };
+    config.validate().map_err(|e| e.to_string())?;
+    let mut out = io::stdout().lock();
+    let write = |out: &mut io::StdoutLock| -> io::Result<()> {
+        writeln!(
+            out,
+            "variant,occupancy,category,speed,mode,noiseless_accuracy,expected_accuracy,p_above_threshold,expected_reward,best"
+        )?;
+        for r in analysis(&config) {
+            writeln!(
+                out,
+                "{},{:.2},{},{:.1},{},{:.6},{:.6},{:.6},{:.6},{}",
+                r.variant,
+                r.occupancy,
+                r.category as u8,
+                r.speed,
+                r.mode as u8,
+                r.noiseless_accuracy,
+                r.expected_accuracy,
+                r.p_above_threshold,
+                r.expected_reward,
+                u8::from(r.best)
+            )?;
+        }
+        Ok(())
+    };
+    write(&mut out).map_err(|e| e.to_string())
+}

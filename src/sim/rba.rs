@@ -7,14 +7,15 @@
 //! weighted by the input generator's exact prior and the sensor's likelihood. With no sensor
 //! noise that weighting is a point mass on the reading itself. Decisions are array lookups.
 //!
-//! `rba-hold` is the penalty-aware variant: it compares the expected reward of keeping the current
-//! speed with that of each change *after* the expected switching penalty (charged only when the
-//! accuracy clears the threshold), and keeps its speed on ties.
+//! `rba-hold` is the penalty-aware variant: a change of speed must pay back its expected penalty
+//! (charged only when the accuracy clears the threshold) within the time the current input regime
+//! is expected to last: one step for random input, the expected rest of a pattern for seasonal
+//! input (see [`hold_horizon`]). It keeps its speed on ties.
 
 use serde::Serialize;
 
 use super::accuracy::{accuracy_law, noiseless_accuracy, ModeEffect};
-use super::config::{LineConfig, Variant};
+use super::config::{InputKind, LineConfig, Variant};
 use super::input::{prior, MAX_TOTAL};
 use super::line::{Action, Observation};
 use super::material::{Category, SortMode, CATEGORIES, SORT_MODES};
@@ -30,8 +31,9 @@ struct Value {
 }
 
 impl Value {
-    fn with_penalty(self, penalty: f64) -> f64 {
-        self.reward - self.p_above * penalty
+    /// Value over `horizon` steps of moving to this action now, paying the penalty once.
+    fn after_change(self, penalty: f64, horizon: f64) -> f64 {
+        horizon * self.reward - self.p_above * penalty
     }
 }
 
@@ -110,9 +112,10 @@ impl RbaTable {
                         })
                     })
                     .collect();
-                best.push(argmax(&options, &values, None, config.action_penalty));
+                best.push(argmax(&options, &values, None, 0.0, 1.0));
+                let horizon = hold_horizon(config.input);
                 for current in 0..SPEED_COUNT {
-                    hold.push(argmax(&options, &values, Some(current), config.action_penalty));
+                    hold.push(argmax(&options, &values, Some(current), config.action_penalty, horizon));
                 }
             }
         }
@@ -139,13 +142,28 @@ impl RbaTable {
     }
 }
 
+/// How many steps a reading's regime is expected to last, counting the current one: the horizon
+/// over which `rba-hold` lets a change of speed pay back its penalty. Random input is fresh every
+/// step (1). A seasonal pattern lasts L = 10, 11 or 12 steps (uniform); seen at a random step, its
+/// expected rest including that step is E[L^2] / (2 E[L]) + 1/2 (length-biased sampling).
+pub fn hold_horizon(input: InputKind) -> f64 {
+    match input {
+        InputKind::Random => 1.0,
+        InputKind::Seasonal | InputKind::Seasonal3 => {
+            let lengths = [10.0, 11.0, 12.0];
+            let mean: f64 = lengths.iter().sum::<f64>() / 3.0;
+            let mean_sq: f64 = lengths.iter().map(|l| l * l).sum::<f64>() / 3.0;
+            mean_sq / (2.0 * mean) + 0.5
+        }
+    }
+}
+
 /// The option with the highest value; ties go to the earliest (slowest) option, except that
 /// with a current speed an option keeping that speed wins ties (and pays no penalty).
-fn argmax(options: &[Action], values: &[Value], current: Option<usize>, penalty: f64) -> Action {
+fn argmax(options: &[Action], values: &[Value], current: Option<usize>, penalty: f64, horizon: f64) -> Action {
     let score = |i: usize| match current {
-        None => values[i].reward,
-        Some(cur) if options[i].speed_index == cur => values[i].reward,
-        Some(_) => values[i].with_penalty(penalty),
+        Some(cur) if options[i].speed_index != cur => values[i].after_change(penalty, horizon),
+        _ => horizon * values[i].reward,
     };
     let mut best = 0;
     for i in 1..options.len() {
@@ -188,7 +206,7 @@ pub fn analysis(config: &LineConfig) -> Vec<AnalysisRow> {
     for total in 0..=MAX_TOTAL {
         for &category in categories {
             let values: Vec<Value> = options.iter().map(|&a| value_at(config, total, category, a)).collect();
-            let chosen = argmax(&options, &values, None, 0.0);
+            let chosen = argmax(&options, &values, None, 0.0, 1.0);
             for (&action, value) in options.iter().zip(&values) {
                 let e = effect(config.variant, action.mode, category);
                 let c = noiseless_accuracy(total as f64 / 100.0, action.speed_index, e);
@@ -249,11 +267,21 @@ mod tests {
         let table = RbaTable::build(&config);
         let o = obs(0.5, Category::Basic);
         assert_eq!(table.decide(o).speed_index, 5);
-        // One notch slower costs 0.056 of speed reward, less than the 0.5 penalty.
+        // One notch slower costs 0.056 of speed reward a step: over a ~6-step pattern that is
+        // less than the 0.5 penalty.
         assert_eq!(table.decide_holding(o, 4).speed_index, 4);
+        // Three notches slower costs 0.17 a step: a change pays back within the pattern.
+        assert_eq!(table.decide_holding(o, 2).speed_index, 5);
         // Too fast for 0.5 (accuracy collapses): changing pays even with the penalty.
         assert_ne!(table.decide_holding(o, 9).speed_index, 9);
         assert_eq!(table.decide_holding(o, 5).speed_index, 5);
+    }
+
+    #[test]
+    fn hold_horizon_is_one_for_random_input_and_the_rest_of_a_pattern_otherwise() {
+        assert_eq!(hold_horizon(InputKind::Random), 1.0);
+        let h = hold_horizon(InputKind::Seasonal);
+        assert!((h - (365.0 / 3.0 / 22.0 + 0.5)).abs() < 1e-12, "{h}");
     }
 
     #[test]
