@@ -1,0 +1,232 @@
+#!/usr/bin/env bash
+# Idempotent set-up of sorting_line on a machine WITHOUT a ROS install (Debian 12, Python 3.11):
+#   1. .venv/ at the repository root (python3.11)
+#   2. the pinned ros-jazzy-* wheels of launch_scripts/requirements-ros.txt (rclpy + Fast DDS, messages,
+#      and the rosidl/ament build tools)
+#   3. msg/ (ROS package sorting_line_interfaces) compiled with plain CMake and installed INTO .venv/,
+#      so `.venv/bin/python -c "from sorting_line_interfaces.msg import LineState"` works with nothing
+#      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
+#   4. `cargo build --release` when Cargo.toml exists
+# Steps already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
+#
+# Usage: launch_scripts/setup.sh [--force] [--no-cargo]
+#   --force      redo steps 2 and 3 even if their stamps match
+#   --no-cargo   skip step 4 (same as SORTING_LINE_SKIP_CARGO=1)
+# Environment (all optional):
+#   SORTING_LINE_PYTHON      interpreter for a new venv (default: python3.11; must be CPython 3.11 with
+#                            its headers, e.g. Debian packages python3.11-venv python3.11-dev)
+#   SORTING_LINE_KEEP_BUILD  1 = keep the CMake build tree (.venv/.sorting_line/build) for debugging
+# Afterwards: `source launch_scripts/env.sh` (venv + Fast DDS profile + RMW settings).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+VENV="$ROOT/.venv"
+STATE="$VENV/.sorting_line"
+REQ="$ROOT/launch_scripts/requirements-ros.txt"
+MSG_DIR="$ROOT/msg"
+PYTHON="${SORTING_LINE_PYTHON:-python3.11}"
+# Bump when the recipe below changes in a way that needs a rebuild of existing venvs.
+RECIPE=3
+
+FORCE=0
+CARGO=1
+[[ "${SORTING_LINE_SKIP_CARGO:-0}" == 1 ]] && CARGO=0
+for arg in "$@"; do
+  case "$arg" in
+    --force) FORCE=1 ;;
+    --no-cargo) CARGO=0 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "setup.sh: unknown argument: $arg (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+T0=$SECONDS
+say() { printf '[setup %3ds] %s\n' "$((SECONDS - T0))" "$*"; }
+die() { printf '[setup] ERROR: %s\n' "$*" >&2; exit 1; }
+
+# Serialise concurrent runs (run.sh and test.sh may both call this): lock on this script file.
+if command -v flock >/dev/null 2>&1; then
+  exec 9<"${BASH_SOURCE[0]}"
+  flock -x 9
+fi
+
+sha() { sha256sum | cut -c1-16; }
+
+# ---------------------------------------------------------------------------------------------
+# 1. venv
+# ---------------------------------------------------------------------------------------------
+venv_ok() {
+  [[ -x "$VENV/bin/python" ]] &&
+    "$VENV/bin/python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' >/dev/null 2>&1
+}
+
+make_venv() {
+  if venv_ok; then
+    say "venv: $VENV (exists)"
+    return
+  fi
+  command -v "$PYTHON" >/dev/null 2>&1 || die "$PYTHON not found (set SORTING_LINE_PYTHON)"
+  "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' ||
+    die "$PYTHON is not Python 3.11 (the ros-jazzy-* wheels are cp311)"
+  if [[ -e "$VENV" ]]; then
+    say "venv: $VENV is broken or not Python 3.11, recreating it"
+    rm -rf "$VENV"
+  fi
+  say "venv: creating $VENV with $("$PYTHON" -c 'import sys; print(sys.executable, sys.version.split()[0])')"
+  "$PYTHON" -m venv "$VENV" || die "python -m venv failed (Debian: apt-get install python3.11-venv)"
+}
+
+# ---------------------------------------------------------------------------------------------
+# 2. pinned wheels
+# ---------------------------------------------------------------------------------------------
+PY_ID=""
+pip_key() { { echo "recipe=$RECIPE"; echo "python=$PY_ID"; cat "$REQ"; } | sha; }
+
+install_wheels() {
+  local key
+  key="$(pip_key)"
+  if [[ $FORCE == 0 && -f "$STATE/pip.stamp" && "$(cat "$STATE/pip.stamp")" == "$key" ]]; then
+    say "wheels: up to date (requirements-ros.txt unchanged)"
+    return
+  fi
+  say "wheels: installing launch_scripts/requirements-ros.txt (about 85 MB of wheels)"
+  rm -f "$STATE/pip.stamp" "$STATE/interfaces.stamp"
+  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" ||
+    die "pip install -r $REQ failed"
+  mkdir -p "$STATE"
+  echo "$key" >"$STATE/pip.stamp"
+}
+
+# ---------------------------------------------------------------------------------------------
+# 3. sorting_line_interfaces (msg/) -> .venv
+# ---------------------------------------------------------------------------------------------
+# Trap: the wheels' exported CMake files (share/*/cmake/*.cmake, the *__rosidl_generator_pyExport
+# ones) hard-code the include dirs of the interpreter that built the wheels
+# (/opt/python/cp311-cp311/...). Point them at this venv's Python and numpy include dirs.
+fix_wheel_cmake_paths() {
+  local py_inc np_inc files
+  py_inc="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
+  np_inc="$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')"
+  [[ -f "$py_inc/Python.h" ]] ||
+    die "Python headers missing ($py_inc/Python.h); Debian: apt-get install python3.11-dev"
+  files="$(grep -rlF --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" || true)"
+  if [[ -n "$files" ]]; then
+    say "interfaces: rewriting build-machine include paths in $(wc -l <<<"$files") wheel CMake files"
+    # numpy first: its path contains the Python prefix.
+    xargs -d "\n" sed -i \
+      -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
+      -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g" <<<"$files"
+    if grep -rlF --include='*.cmake' '/opt/python/' "$VENV/share" >/dev/null; then
+      die "unexpected /opt/python/ paths left in $VENV/share/*/cmake (new wheel versions?)"
+    fi
+  fi
+}
+
+iface_key() {
+  {
+    echo "recipe=$RECIPE"
+    cat "$STATE/pip.stamp"
+    # every file of the package, names and contents
+    (cd "$MSG_DIR" && find . -type f ! -name '.*' ! -name '*~' -print0 | LC_ALL=C sort -z |
+      xargs -0 sha256sum)
+  } | sha
+}
+
+iface_installed() {
+  [[ -f "$VENV/lib/python3.11/site-packages/sorting_line_interfaces/msg/__init__.py" ]]
+}
+
+# Remove the files of a previous install (a deleted .msg must not survive in site-packages).
+uninstall_interfaces() {
+  local manifest="$STATE/interfaces_install_manifest.txt" f
+  [[ -f "$manifest" ]] || return 0
+  while IFS= read -r f; do
+    [[ "$f" == "$VENV"/* ]] && rm -f -- "$f"
+  done <"$manifest"
+  rm -rf "$VENV/lib/python3.11/site-packages/sorting_line_interfaces"
+  rm -f "$manifest"
+}
+
+build_interfaces() {
+  local key build logs jobs
+  key="$(iface_key)"
+  if [[ $FORCE == 0 && -f "$STATE/interfaces.stamp" && "$(cat "$STATE/interfaces.stamp")" == "$key" ]] &&
+    iface_installed; then
+    say "interfaces: up to date (msg/ unchanged)"
+    return
+  fi
+  command -v cc >/dev/null 2>&1 && command -v c++ >/dev/null 2>&1 ||
+    die "C/C++ compilers missing; Debian: apt-get install build-essential"
+  fix_wheel_cmake_paths
+  rm -f "$STATE/interfaces.stamp"
+  uninstall_interfaces
+
+  build="$STATE/build"
+  logs="$STATE/logs"
+  jobs="$(nproc 2>/dev/null || echo 2)"
+  rm -rf "$build"
+  mkdir -p "$build" "$logs"
+
+  # Build against the venv only: no ROS environment of the caller may leak in.
+  local -a envv=(env -u PYTHONPATH -u AMENT_PREFIX_PATH -u CMAKE_PREFIX_PATH -u COLCON_PREFIX_PATH
+    -u ROS_DISTRO -u ROS_VERSION -u PYTHONHOME
+    "PATH=$VENV/bin:$PATH" "AMENT_PREFIX_PATH=$VENV" "CMAKE_PREFIX_PATH=$VENV"
+    "CMAKE_BUILD_PARALLEL_LEVEL=$jobs")
+  run_logged() { # name cmd...
+    local name="$1"; shift
+    if ! "${envv[@]}" "$@" >"$logs/$name.log" 2>&1; then
+      tail -n 40 "$logs/$name.log" >&2
+      die "interfaces: $name failed (full log: $logs/$name.log)"
+    fi
+  }
+
+  say "interfaces: configuring msg/ (CMake $("$VENV/bin/cmake" --version | head -1 | awk '{print $3}'))"
+  run_logged configure "$VENV/bin/cmake" -S "$MSG_DIR" -B "$build" \
+    -DCMAKE_BUILD_TYPE=Release \
+    -DCMAKE_INSTALL_PREFIX="$VENV" \
+    -DPython3_EXECUTABLE="$VENV/bin/python" \
+    -DPython3_FIND_VIRTUALENV=ONLY \
+    -DBUILD_TESTING=OFF \
+    -DSORTING_LINE_INTERFACES_PYTHON_ONLY=ON
+  say "interfaces: building (-j$jobs)"
+  run_logged build "$VENV/bin/cmake" --build "$build" -j "$jobs"
+  say "interfaces: installing into .venv"
+  run_logged install "$VENV/bin/cmake" --install "$build"
+  cp "$build/install_manifest.txt" "$STATE/interfaces_install_manifest.txt"
+  [[ "${SORTING_LINE_KEEP_BUILD:-0}" == 1 ]] || rm -rf "$build"
+
+  # Prove it, from a clean environment (nothing sourced).
+  env -u PYTHONPATH -u AMENT_PREFIX_PATH -u LD_LIBRARY_PATH -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
+    "$VENV/bin/python" -c 'from sorting_line_interfaces.msg import LineState; from sorting_line_interfaces.srv import ResetLine' ||
+    die "interfaces: installed, but the import check failed"
+  echo "$key" >"$STATE/interfaces.stamp"
+  say "interfaces: sorting_line_interfaces installed"
+}
+
+# ---------------------------------------------------------------------------------------------
+# 4. Rust (only when the crate exists)
+# ---------------------------------------------------------------------------------------------
+build_rust() {
+  if [[ $CARGO == 0 ]]; then
+    say "cargo: skipped (--no-cargo)"
+    return
+  fi
+  if [[ ! -f "$ROOT/Cargo.toml" ]]; then
+    say "cargo: no Cargo.toml, skipped"
+    return
+  fi
+  command -v cargo >/dev/null 2>&1 || die "cargo not found (install Rust: https://rustup.rs)"
+  say "cargo: cargo build --release"
+  cargo build --release --manifest-path "$ROOT/Cargo.toml"
+}
+
+# ---------------------------------------------------------------------------------------------
+make_venv
+PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.implementation.cache_tag)')"
+mkdir -p "$STATE"
+install_wheels
+build_interfaces
+build_rust
+say "done (source launch_scripts/env.sh to use the venv with the project's ROS settings)"
