@@ -1,10 +1,21 @@
-//! The ROS 2 node: the line's topics, service, clock and diagnostics on DDS (ros2-client).
+//! The ROS 2 node: the line's topics, service, clock and diagnostics on DDS (ros2-client), and
+//! the ROS conventions ros2-client leaves to us (`--ros-args`, parameters, `ROS_DOMAIN_ID`).
+//!
+//! - `options`: the `node` subcommand's flags; `ros_args`: `--ros-args`; `params`: all of them
+//!   merged and validated; `names`: namespaces and remaps.
+//! - `protocol`: lock-step/realtime command handling of one line, without I/O.
+//! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire.
+//! - `node`: the DDS participant and the event loop.
 
+pub mod clock;
+pub mod diagnostics;
+pub mod messages;
+pub mod names;
+pub mod node;
 pub mod options;
+pub mod params;
+pub mod protocol;
+pub mod qos;
+pub mod ros_args;
 
-use options::NodeArgs;
-
-/// Runs the node until SIGINT/SIGTERM.
-pub fn run(_args: NodeArgs, _ros_args: Vec<String>) -> Result<(), String> {
-    Err("the ROS 2 node is not built yet (see the node issue)".into())
-}
+pub use node::run;

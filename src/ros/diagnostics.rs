@@ -1,0 +1,124 @@
+//! What the node reports about itself: per-line counters (ticks, episodes, commands accepted and
+//! rejected by reason) published on /diagnostics, and logging of rejections that says each
+//! reason once and then at most once per interval, so a flood of bad commands cannot flood the log.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use super::messages::{DiagnosticStatus, KeyValue, DIAGNOSTIC_OK, DIAGNOSTIC_WARN};
+use super::protocol::{Rejection, REJECTIONS};
+
+/// How often a repeated rejection reason may be logged again.
+pub const LOG_INTERVAL: Duration = Duration::from_secs(5);
+
+/// Counters of one line.
+#[derive(Debug)]
+pub struct LineCounters {
+    pub namespace: String,
+    pub ticks: u64,
+    pub episodes: u64,
+    pub accepted: u64,
+    pub rejected: BTreeMap<Rejection, u64>,
+    /// For the tick rate and the warning level: values at the last report.
+    last_report: (Instant, u64, u64),
+    /// Per reason: when it was last logged and how many were not logged since.
+    log_state: BTreeMap<Rejection, (Instant, u64)>,
+}
+
+impl LineCounters {
+    pub fn new(namespace: String) -> Self {
+        LineCounters {
+            namespace,
+            ticks: 0,
+            episodes: 0,
+            accepted: 0,
+            rejected: BTreeMap::new(),
+            last_report: (Instant::now(), 0, 0),
+            log_state: BTreeMap::new(),
+        }
+    }
+
+    pub fn total_rejected(&self) -> u64 {
+        self.rejected.values().sum()
+    }
+
+    /// Counts a rejection and returns the log line to print, if this reason is due one.
+    pub fn reject(&mut self, reason: Rejection, topic: &str, detail: &str) -> Option<String> {
+        *self.rejected.entry(reason).or_default() += 1;
+        let now = Instant::now();
+        match self.log_state.get_mut(&reason) {
+            Some((last, suppressed)) if now.duration_since(*last) < LOG_INTERVAL => {
+                *suppressed += 1;
+                None
+            }
+            entry => {
+                let suppressed = entry.map(|(_, s)| *s).unwrap_or(0);
+                self.log_state.insert(reason, (now, 0));
+                let more = if suppressed > 0 { format!(" ({suppressed} more like it since the last report)") } else { String::new() };
+                Some(format!(
+                    "{}/{topic}: rejected {detail}: {} [{}]{more}; the line keeps its last valid command",
+                    self.namespace.trim_end_matches('/'),
+                    reason.explain(),
+                    reason.key()
+                ))
+            }
+        }
+    }
+
+    /// The DiagnosticStatus of this line; `extra` adds node-wide values (seed, mode, ...).
+    pub fn status(&mut self, extra: Vec<KeyValue>) -> DiagnosticStatus {
+        let now = Instant::now();
+        let (then, ticks_then, rejected_then) = self.last_report;
+        let elapsed = now.duration_since(then).as_secs_f64().max(1e-9);
+        let rate = (self.ticks - ticks_then) as f64 / elapsed;
+        let recent_rejections = self.total_rejected() - rejected_then;
+        self.last_report = (now, self.ticks, self.total_rejected());
+        let kv = |key: &str, value: String| KeyValue { key: key.to_string(), value };
+        let mut values = vec![
+            kv("tick_rate", format!("{rate:.1}")),
+            kv("ticks", self.ticks.to_string()),
+            kv("episodes", self.episodes.to_string()),
+            kv("commands_accepted", self.accepted.to_string()),
+            kv("commands_rejected", self.total_rejected().to_string()),
+        ];
+        for reason in REJECTIONS {
+            values.push(kv(&format!("rejected_{}", reason.key()), self.rejected.get(&reason).copied().unwrap_or(0).to_string()));
+        }
+        values.extend(extra);
+        let (level, message) = if recent_rejections > 0 {
+            (DIAGNOSTIC_WARN, format!("{recent_rejections} commands rejected since the last report"))
+        } else {
+            (DIAGNOSTIC_OK, "running".to_string())
+        };
+        DiagnosticStatus {
+            level,
+            name: format!("sorting_line: {}", self.namespace),
+            message,
+            hardware_id: self.namespace.clone(),
+            values,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_every_rejection_but_logs_each_reason_once_per_interval() {
+        let mut c = LineCounters::new("/plant".into());
+        let first = c.reject(Rejection::InvalidSpeed, "cmd/speed", "speed NaN");
+        assert!(first.unwrap().contains("/plant/cmd/speed: rejected speed NaN"));
+        for _ in 0..99 {
+            assert!(c.reject(Rejection::InvalidSpeed, "cmd/speed", "speed NaN").is_none());
+        }
+        assert!(c.reject(Rejection::Stale, "cmd/speed", "stamp 0").is_some(), "another reason logs at once");
+        assert_eq!(c.rejected[&Rejection::InvalidSpeed], 100);
+        let status = c.status(vec![]);
+        assert_eq!(status.level, DIAGNOSTIC_WARN);
+        let get = |k: &str| status.values.iter().find(|v| v.key == k).unwrap().value.clone();
+        assert_eq!(get("commands_rejected"), "101");
+        assert_eq!(get("rejected_invalid_speed"), "100");
+        assert_eq!(c.status(vec![]).level, DIAGNOSTIC_OK, "no new rejections since");
+    }
+}

@@ -1,0 +1,247 @@
+//! Rust mirrors of every message the node sends or receives. CDR is positional: each struct
+//! lists the fields of its .msg file (msg/msg, msg/srv) in the same order with the same types;
+//! constants in a .msg file are not fields. `MessageTypeName`s are next to the types.
+
+use ros2_client::{Message, MessageTypeName, ServiceTypeName};
+use serde::{Deserialize, Serialize};
+
+/// The interface package built from msg/.
+pub const INTERFACES: &str = "sorting_line_interfaces";
+
+/// builtin_interfaces/Time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct Time {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl Time {
+    pub fn from_nanos(nanos: u64) -> Self {
+        Time { sec: (nanos / 1_000_000_000) as i32, nanosec: (nanos % 1_000_000_000) as u32 }
+    }
+    /// Nanoseconds since zero; negative times (never sent by us) map below zero.
+    pub fn nanos(self) -> i64 {
+        i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec)
+    }
+}
+
+/// std_msgs/Header.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    pub stamp: Time,
+    pub frame_id: String,
+}
+
+/// sorting_line_interfaces/MaterialInput: the input sensor.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MaterialInput {
+    pub header: Header,
+    pub episode: u32,
+    pub step: u32,
+    pub quantity: f64,
+    pub amount_a: u32,
+    pub amount_b: u32,
+    pub occupancy: f64,
+}
+
+/// sorting_line_interfaces/BeltOccupancy.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BeltOccupancy {
+    pub header: Header,
+    pub episode: u32,
+    pub step: u32,
+    pub occupancy: f64,
+    pub speed: f64,
+    pub amount_a: u32,
+    pub amount_b: u32,
+}
+
+/// sorting_line_interfaces/MaterialRatio: the ratio sensor (advanced line).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MaterialRatio {
+    pub header: Header,
+    pub episode: u32,
+    pub step: u32,
+    pub ratio: f64,
+    pub category: u8,
+}
+
+/// sorting_line_interfaces/LineState: the full result of one tick.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LineState {
+    pub header: Header,
+    pub episode: u32,
+    pub step: u32,
+    pub seed: u64,
+    pub speed: f64,
+    pub speed_index: u8,
+    pub mode: u8,
+    pub occupancy: f64,
+    pub accuracy: f64,
+    pub reward: f64,
+    pub cumulative_reward: f64,
+    pub purity: f64,
+    pub recall_a: f64,
+    pub recall_b: f64,
+    pub container_a: u32,
+    pub container_a_false: u32,
+    pub container_b: u32,
+    pub container_b_false: u32,
+    pub speed_changes: u32,
+    pub observation_quantity: f64,
+    pub observation_category: u8,
+    pub terminated: bool,
+    pub truncated: bool,
+}
+
+/// sorting_line_interfaces/SpeedCommand.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SpeedCommand {
+    pub header: Header,
+    pub speed: f64,
+}
+
+/// sorting_line_interfaces/SortModeCommand.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SortModeCommand {
+    pub header: Header,
+    pub mode: u8,
+}
+
+/// sorting_line_interfaces/ResetEvent: published on every reset (services are not recorded in bags).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResetEvent {
+    pub header: Header,
+    pub episode: u32,
+    pub seed: u64,
+}
+
+/// sorting_line_interfaces/ResetLine request.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResetLineRequest {
+    pub has_seed: bool,
+    pub seed: u64,
+}
+
+/// sorting_line_interfaces/ResetLine response.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResetLineResponse {
+    pub success: bool,
+    pub message: String,
+    pub seed: u64,
+    pub episode: u32,
+    pub stamp: Time,
+    pub quantity: f64,
+    pub category: u8,
+}
+
+/// rosgraph_msgs/Clock (not builtin_interfaces/Time: ROS tools match on the type name).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Clock {
+    pub clock: Time,
+}
+
+/// diagnostic_msgs/KeyValue.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct KeyValue {
+    pub key: String,
+    pub value: String,
+}
+
+/// diagnostic_msgs/DiagnosticStatus.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosticStatus {
+    pub level: u8,
+    pub name: String,
+    pub message: String,
+    pub hardware_id: String,
+    pub values: Vec<KeyValue>,
+}
+
+/// diagnostic_msgs/DiagnosticArray.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosticArray {
+    pub header: Header,
+    pub status: Vec<DiagnosticStatus>,
+}
+
+/// DiagnosticStatus levels.
+pub const DIAGNOSTIC_OK: u8 = 0;
+pub const DIAGNOSTIC_WARN: u8 = 1;
+
+macro_rules! messages {
+    ($($ty:ident => ($pkg:expr, $name:literal)),+ $(,)?) => {
+        $(impl Message for $ty {})+
+        /// The ROS type name of a message mirror.
+        pub trait Typed {
+            fn type_name() -> MessageTypeName;
+        }
+        $(impl Typed for $ty {
+            fn type_name() -> MessageTypeName {
+                MessageTypeName::new($pkg, $name)
+            }
+        })+
+    };
+}
+
+messages! {
+    MaterialInput => (INTERFACES, "MaterialInput"),
+    BeltOccupancy => (INTERFACES, "BeltOccupancy"),
+    MaterialRatio => (INTERFACES, "MaterialRatio"),
+    LineState => (INTERFACES, "LineState"),
+    SpeedCommand => (INTERFACES, "SpeedCommand"),
+    SortModeCommand => (INTERFACES, "SortModeCommand"),
+    ResetEvent => (INTERFACES, "ResetEvent"),
+    Clock => ("rosgraph_msgs", "Clock"),
+    DiagnosticArray => ("diagnostic_msgs", "DiagnosticArray"),
+}
+impl Message for ResetLineRequest {}
+impl Message for ResetLineResponse {}
+
+/// The ResetLine service type.
+pub fn reset_service_type() -> ServiceTypeName {
+    ServiceTypeName::new(INTERFACES, "ResetLine")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_round_trips_nanos() {
+        let t = Time::from_nanos(3_250_000_000);
+        assert_eq!(t, Time { sec: 3, nanosec: 250_000_000 });
+        assert_eq!(t.nanos(), 3_250_000_000);
+    }
+
+    /// Field order is the wire format: keep the mirrors and the .msg files in step.
+    #[test]
+    fn mirrors_list_the_msg_fields_in_order() {
+        let root = env!("CARGO_MANIFEST_DIR");
+        let fields = |file: &str| -> Vec<String> {
+            std::fs::read_to_string(format!("{root}/msg/{file}"))
+                .unwrap()
+                .lines()
+                .map(|l| l.split('#').next().unwrap().trim().to_string())
+                .filter(|l| !l.is_empty() && !l.contains('=') && l != "---")
+                .map(|l| l.split_whitespace().nth(1).unwrap().to_string())
+                .collect()
+        };
+        // serde_yaml's mapping keeps the struct's declaration order.
+        let yaml_fields = |y: serde_yaml::Value| -> Vec<String> {
+            y.as_mapping().unwrap().keys().map(|k| k.as_str().unwrap().to_string()).collect()
+        };
+        let check = |file: &str, y: serde_yaml::Value| assert_eq!(yaml_fields(y), fields(file), "{file}");
+        check("msg/MaterialInput.msg", serde_yaml::to_value(MaterialInput::default()).unwrap());
+        check("msg/BeltOccupancy.msg", serde_yaml::to_value(BeltOccupancy::default()).unwrap());
+        check("msg/MaterialRatio.msg", serde_yaml::to_value(MaterialRatio::default()).unwrap());
+        check("msg/LineState.msg", serde_yaml::to_value(LineState::default()).unwrap());
+        check("msg/SpeedCommand.msg", serde_yaml::to_value(SpeedCommand::default()).unwrap());
+        check("msg/SortModeCommand.msg", serde_yaml::to_value(SortModeCommand::default()).unwrap());
+        check("msg/ResetEvent.msg", serde_yaml::to_value(ResetEvent::default()).unwrap());
+        let srv = fields("srv/ResetLine.srv");
+        let request = yaml_fields(serde_yaml::to_value(ResetLineRequest::default()).unwrap());
+        let response = yaml_fields(serde_yaml::to_value(ResetLineResponse::default()).unwrap());
+        assert_eq!([request, response].concat(), srv);
+    }
+}

@@ -1,0 +1,497 @@
+//! The running node: one DDS participant (loopback-only, on `ROS_DOMAIN_ID`), one ROS node, and
+//! for each hosted line its publishers, subscriptions and `reset` service. A single async task
+//! waits on all inputs at once (commands, service requests, the realtime timer, the diagnostics
+//! timer, SIGINT/SIGTERM), so an idle node in lock-step uses no CPU.
+
+use std::net::{IpAddr, Ipv4Addr};
+use std::time::{Duration, Instant};
+
+use async_signal::{Signal, Signals};
+use futures::stream::{self, LocalBoxStream, StreamExt};
+use ros2_client::{
+    Context, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
+    Server, ServiceMapping, Subscription,
+};
+use rustdds::DomainParticipantBuilder;
+use serde::Serialize;
+
+use super::clock::SimClock;
+use super::diagnostics::LineCounters;
+use super::messages::*;
+use super::names::{Names, NODE_NAME};
+use super::options::{NodeArgs, TickMode};
+use super::params::NodeParams;
+use super::protocol::{Accepted, HostedLine, Rejection, TimerTick};
+use super::qos::default_profile;
+use super::ros_args::RosArgs;
+use crate::sim::{Observation, StepOutcome, Variant};
+
+/// How often /diagnostics is published (wall time).
+const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
+
+/// Highest ROS_DOMAIN_ID DDS allows with the default port mapping.
+const MAX_DOMAIN_ID: u16 = 232;
+
+fn log(level: &str, message: impl AsRef<str>) {
+    eprintln!("[{level}] [{NODE_NAME}]: {}", message.as_ref());
+}
+
+/// `ROS_DOMAIN_ID`, which ros2-client's `Context::new` would ignore.
+fn domain_id() -> Result<u16, String> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(v) if v.trim().is_empty() => Ok(0),
+        Ok(v) => v
+            .trim()
+            .parse::<u16>()
+            .ok()
+            .filter(|d| *d <= MAX_DOMAIN_ID)
+            .ok_or_else(|| format!("ROS_DOMAIN_ID = {v} is out of range: allowed 0 ..= {MAX_DOMAIN_ID}")),
+    }
+}
+
+/// Runs the node until SIGINT or SIGTERM.
+pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
+    let ros = RosArgs::parse(&ros_args, NODE_NAME)?;
+    let names = Names::new(&ros)?;
+    let params = NodeParams::resolve(&args, &ros.params, &ros.params_files, &names)?;
+    let domain = domain_id()?;
+    // Before any DDS thread exists, so a signal during start-up is ours to handle.
+    let signals = Signals::new([Signal::Int, Signal::Term]).map_err(|e| format!("cannot catch signals: {e}"))?;
+
+    // Loopback only: test and benchmark traffic must not leave the machine, and a simulator has
+    // no business on the plant network unless someone builds that deliberately.
+    let participant = DomainParticipantBuilder::new(domain)
+        .with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)])
+        .build()
+        .map_err(|e| format!("cannot create the DDS participant on domain {domain}: {e:?}"))?;
+    let context = Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
+    let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
+    let mut node = context.new_node(node_name, node_options(&params)).map_err(|e| format!("cannot create the node: {e:?}"))?;
+
+    let clock = SimClock::new(params.tick_period);
+    let mut endpoints = Vec::new();
+    let mut runtimes = Vec::new();
+    for k in 0..params.lines {
+        let namespace = names.line_namespace(k, params.lines);
+        endpoints.push(LineEndpoints::new(&mut node, &names, &namespace, params.line.variant)?);
+        runtimes.push(LineRuntime {
+            host: HostedLine::new(params.line.clone(), params.seed + u64::from(k), clock, params.mode),
+            counters: LineCounters::new(namespace),
+        });
+    }
+    let shared = Shared {
+        clock_pub: publisher::<Clock>(&mut node, &names.global("/clock"))?,
+        diagnostics_pub: publisher::<DiagnosticArray>(&mut node, &names.global("/diagnostics"))?,
+        params: params.clone(),
+    };
+    let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
+
+    log(
+        "INFO",
+        format!(
+            "{}/{} up on ROS_DOMAIN_ID {domain}: {} {} line(s), {} input, {:?}, seed {}{}",
+            names.namespace.trim_end_matches('/'),
+            names.node_name,
+            params.lines,
+            params.line.variant,
+            params.line.input,
+            params.mode,
+            params.seed,
+            if params.mode == TickMode::Realtime { format!(", {} Hz", params.rate) } else { String::new() }
+        ),
+    );
+    let spin = async move {
+        if let Err(e) = spinner.spin().await {
+            log("ERROR", format!("node spinner stopped: {e:?}"));
+        }
+    };
+    smol::block_on(smol::future::or(serve(&endpoints, &mut runtimes, &shared, signals), spin));
+    // Drop order matters: entities, then the node, then the context (the participant announces
+    // its departure, so peers see the node leave at once).
+    drop(endpoints);
+    drop(shared);
+    drop(node);
+    drop(context);
+    log("INFO", "shut down cleanly");
+    Ok(())
+}
+
+/// Declares every parameter with its value. They are fixed for the run: changing the dynamics
+/// mid-run would silently break every trajectory, so set requests are refused with a reason.
+fn node_options(params: &NodeParams) -> NodeOptions {
+    let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(true);
+    let mut declared = Vec::new();
+    for (name, value) in params.as_values() {
+        let value = match value {
+            serde_yaml::Value::Bool(b) => ParameterValue::Boolean(b),
+            serde_yaml::Value::Number(n) if n.is_f64() => ParameterValue::Double(n.as_f64().unwrap_or_default()),
+            serde_yaml::Value::Number(n) => {
+                ParameterValue::Integer(n.as_i64().unwrap_or_else(|| n.as_u64().map_or(i64::MAX, |u| u as i64)))
+            }
+            other => ParameterValue::String(other.as_str().unwrap_or_default().to_string()),
+        };
+        declared.push((name, value.clone()));
+        options = options.declare_parameter(name, value);
+    }
+    // The validator also sees the declarations themselves: those pass, any change is refused.
+    options.parameter_validator(Box::new(move |name: &str, value: &ParameterValue| {
+        match declared.iter().find(|(n, _)| *n == name) {
+            Some((_, v)) if v == value => Ok(()),
+            _ => Err(format!("parameter {name} is fixed for the run: restart the node with the new value")),
+        }
+    }))
+}
+
+fn topic_name(absolute: &str) -> Result<Name, String> {
+    Name::parse(absolute).map_err(|e| format!("'{absolute}' is not a valid topic name: {e:?}"))
+}
+
+fn publisher<M: Message + Serialize + Typed>(node: &mut Node, absolute: &str) -> Result<Publisher<M>, String> {
+    let qos = default_profile();
+    let topic = node
+        .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
+        .map_err(|e| format!("cannot create topic {absolute}: {e:?}"))?;
+    node.create_publisher(&topic, Some(qos)).map_err(|e| format!("cannot publish {absolute}: {e:?}"))
+}
+
+fn subscription<M: Message + Typed + 'static>(node: &mut Node, absolute: &str) -> Result<Subscription<M>, String>
+where
+    M: for<'de> serde::Deserialize<'de>,
+{
+    let qos = default_profile();
+    let topic = node
+        .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
+        .map_err(|e| format!("cannot create topic {absolute}: {e:?}"))?;
+    node.create_subscription(&topic, Some(qos)).map_err(|e| format!("cannot subscribe {absolute}: {e:?}"))
+}
+
+/// The ROS endpoints of one line. They do not change while serving, so the input streams can
+/// borrow them while the line's state ([`LineRuntime`]) is mutated.
+struct LineEndpoints {
+    namespace: String,
+    input: Publisher<MaterialInput>,
+    belt: Publisher<BeltOccupancy>,
+    ratio: Option<Publisher<MaterialRatio>>,
+    state: Publisher<LineState>,
+    reset_event: Publisher<ResetEvent>,
+    speed_cmd: Subscription<SpeedCommand>,
+    mode_cmd: Option<Subscription<SortModeCommand>>,
+    reset: Server<ResetLineRequest, ResetLineResponse>,
+}
+
+/// The mutable part of one line: the simulation with its protocol, and its counters.
+struct LineRuntime {
+    host: HostedLine,
+    counters: LineCounters,
+}
+
+/// Node-wide publishers and settings.
+struct Shared {
+    clock_pub: Publisher<Clock>,
+    diagnostics_pub: Publisher<DiagnosticArray>,
+    params: NodeParams,
+}
+
+impl LineEndpoints {
+    fn new(node: &mut Node, names: &Names, namespace: &str, variant: Variant) -> Result<Self, String> {
+        let t = |relative: &str| names.topic(namespace, relative);
+        let advanced = variant == Variant::Advanced;
+        let qos = default_profile();
+        let reset_name = t("reset");
+        let reset = node
+            .create_server(
+                ServiceMapping::Enhanced, // what rmw_fastrtps_cpp (Jazzy's default) speaks
+                &topic_name(&reset_name)?,
+                &reset_service_type(),
+                qos.clone(),
+                qos,
+            )
+            .map_err(|e| format!("cannot serve {reset_name}: {e:?}"))?;
+        Ok(LineEndpoints {
+            namespace: namespace.to_string(),
+            input: publisher(node, &t("input"))?,
+            belt: publisher(node, &t("belt/occupancy"))?,
+            ratio: if advanced { Some(publisher(node, &t("sensors/ratio"))?) } else { None },
+            state: publisher(node, &t("state"))?,
+            reset_event: publisher(node, &t("events/reset"))?,
+            speed_cmd: subscription(node, &t("cmd/speed"))?,
+            mode_cmd: if advanced { Some(subscription(node, &t("cmd/sort_mode"))?) } else { None },
+            reset,
+        })
+    }
+
+    fn send<M: Message + Serialize + std::fmt::Debug>(&self, publisher: &Publisher<M>, topic: &str, message: M) {
+        if let Err(e) = publisher.publish(message) {
+            log("WARN", format!("{}: cannot publish {topic}: {e:?}", self.namespace));
+        }
+    }
+
+    /// Publishes everything that describes the current tick; `state` last, because clients wait
+    /// for it and by then the sensors of the same tick are out.
+    fn publish_tick(&self, host: &HostedLine, outcome: Option<&StepOutcome>) {
+        let line = host.line();
+        let header = Header { stamp: host.stamp(), frame_id: String::new() };
+        let (episode, step) = (line.episode(), line.step_count());
+        let (input, belt, observation) = (line.input(), line.belt(), line.observation());
+        self.send(
+            &self.input,
+            "input",
+            MaterialInput {
+                header: header.clone(),
+                episode,
+                step,
+                quantity: observation.quantity,
+                amount_a: input.a,
+                amount_b: input.b,
+                occupancy: input.occupancy(),
+            },
+        );
+        self.send(
+            &self.belt,
+            "belt/occupancy",
+            BeltOccupancy {
+                header: header.clone(),
+                episode,
+                step,
+                occupancy: belt.occupancy(),
+                speed: line.speed(),
+                amount_a: belt.a,
+                amount_b: belt.b,
+            },
+        );
+        if let Some(ratio) = &self.ratio {
+            let message =
+                MaterialRatio { header: header.clone(), episode, step, ratio: input.ratio(), category: input.category() as u8 };
+            self.send(ratio, "sensors/ratio", message);
+        }
+        let containers = line.containers();
+        let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+        // Right after a reset no step has happened: report the start state with reward 0.
+        let (occupancy, accuracy, reward) = match outcome {
+            Some(o) => (o.occupancy, o.accuracy, o.reward),
+            None => (belt.occupancy(), line.belt_accuracy(), 0.0),
+        };
+        let state = LineState {
+            header,
+            episode,
+            step,
+            seed: line.seed(),
+            speed: line.speed(),
+            speed_index: line.speed_index() as u8,
+            mode: line.mode() as u8,
+            occupancy,
+            accuracy,
+            reward,
+            cumulative_reward: line.cumulative_reward(),
+            purity: containers.purity(),
+            recall_a: containers.recall_a(),
+            recall_b: containers.recall_b(),
+            container_a: count(containers.a),
+            container_a_false: count(containers.a_false),
+            container_b: count(containers.b),
+            container_b_false: count(containers.b_false),
+            speed_changes: line.speed_changes(),
+            observation_quantity: observation.quantity,
+            observation_category: observation.category as u8,
+            terminated: false,
+            truncated: line.truncated(),
+        };
+        self.send(&self.state, "state", state);
+    }
+
+    fn publish_reset_event(&self, host: &HostedLine) {
+        let event = ResetEvent {
+            header: Header { stamp: host.stamp(), frame_id: String::new() },
+            episode: host.line().episode(),
+            seed: host.line().seed(),
+        };
+        self.send(&self.reset_event, "events/reset", event);
+    }
+
+    /// The tagged input streams of this line.
+    fn events(&self, k: usize) -> Vec<LocalBoxStream<'_, Event>> {
+        let err = |e| format!("{e:?}");
+        let mut streams = vec![
+            self.speed_cmd.async_stream().map(move |r| Event::Speed(k, r.map_err(err))).boxed_local(),
+            self.reset.receive_request_stream().map(move |r| Event::Reset(k, r.map_err(err))).boxed_local(),
+        ];
+        if let Some(mode_cmd) = &self.mode_cmd {
+            streams.push(mode_cmd.async_stream().map(move |r| Event::Mode(k, r.map_err(err))).boxed_local());
+        }
+        streams
+    }
+}
+
+/// Everything from DDS that can wake the node.
+enum Event {
+    Speed(usize, Result<(SpeedCommand, MessageInfo), String>),
+    Mode(usize, Result<(SortModeCommand, MessageInfo), String>),
+    Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
+}
+
+fn show_stamp(t: Time) -> String {
+    format!("{}.{:09}", t.sec, t.nanosec)
+}
+
+/// The node's one task: waits on every input, handles each completely, repeats until a signal.
+async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared: &Shared, signals: Signals) {
+    let mut clock_time = Time::default();
+    let mut publish_clock = |runtimes: &[LineRuntime]| {
+        // With several lines, /clock follows the line that is furthest ahead and never goes back.
+        let newest = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
+        if newest > clock_time {
+            clock_time = newest;
+            if let Err(e) = shared.clock_pub.publish(Clock { clock: newest }) {
+                log("WARN", format!("cannot publish /clock: {e:?}"));
+            }
+        }
+    };
+    for (e, r) in endpoints.iter().zip(runtimes.iter()) {
+        e.publish_tick(&r.host, None);
+    }
+    publish_clock(runtimes);
+
+    let mut events = stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)));
+    let mut signals = signals.fuse();
+    let realtime = shared.params.mode == TickMode::Realtime;
+    let mut timer = StreamExt::fuse(if realtime {
+        smol::Timer::interval(Duration::from_secs_f64(1.0 / shared.params.rate))
+    } else {
+        smol::Timer::never()
+    });
+    let mut diagnostics = StreamExt::fuse(smol::Timer::interval(DIAGNOSTICS_PERIOD));
+    let started = Instant::now();
+
+    loop {
+        futures::select! {
+            event = events.select_next_some() => match event {
+                Event::Speed(k, received) => {
+                    let (e, r) = (&endpoints[k], &mut runtimes[k]);
+                    let result = match &received {
+                        Ok((cmd, _)) => r.host.on_speed(cmd.header.stamp, cmd.speed).map_err(|reason| {
+                            (reason, format!("speed {} for stamp {}", cmd.speed, show_stamp(cmd.header.stamp)))
+                        }),
+                        Err(error) => Err((Rejection::Malformed, format!("message ({error})"))),
+                    };
+                    if settle(e, r, "cmd/speed", result) {
+                        publish_clock(runtimes);
+                    }
+                }
+                Event::Mode(k, received) => {
+                    let (e, r) = (&endpoints[k], &mut runtimes[k]);
+                    let result = match &received {
+                        Ok((cmd, _)) => r.host.on_sort_mode(cmd.header.stamp, cmd.mode).map_err(|reason| {
+                            (reason, format!("sort mode {} for stamp {}", cmd.mode, show_stamp(cmd.header.stamp)))
+                        }),
+                        Err(error) => Err((Rejection::Malformed, format!("message ({error})"))),
+                    };
+                    if settle(e, r, "cmd/sort_mode", result) {
+                        publish_clock(runtimes);
+                    }
+                }
+                Event::Reset(k, Ok((request_id, request))) => {
+                    let (e, r) = (&endpoints[k], &mut runtimes[k]);
+                    let observation = r.host.reset(request.has_seed.then_some(request.seed));
+                    r.counters.episodes += 1;
+                    e.publish_reset_event(&r.host);
+                    e.publish_tick(&r.host, None);
+                    let response = reset_response(&r.host, observation, request.has_seed);
+                    if let Err(error) = e.reset.async_send_response(request_id, response).await {
+                        log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
+                    }
+                    publish_clock(runtimes);
+                }
+                Event::Reset(k, Err(error)) => {
+                    log("WARN", format!("{}/reset: unreadable request: {error}", endpoints[k].namespace));
+                }
+            },
+            _ = timer.select_next_some() => {
+                for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
+                    match r.host.timer_tick() {
+                        TimerTick::Stepped(outcome) => {
+                            r.counters.ticks += 1;
+                            e.publish_tick(&r.host, Some(&outcome));
+                        }
+                        TimerTick::Reset(_) => {
+                            r.counters.episodes += 1;
+                            e.publish_reset_event(&r.host);
+                            e.publish_tick(&r.host, None);
+                        }
+                    }
+                }
+                publish_clock(runtimes);
+            },
+            _ = diagnostics.select_next_some() => publish_diagnostics(runtimes, shared, started),
+            signal = signals.select_next_some() => {
+                let name = match signal { Ok(Signal::Int) => "SIGINT", Ok(Signal::Term) => "SIGTERM", _ => "a signal" };
+                log("INFO", format!("received {name}: leaving the graph"));
+                break;
+            },
+        }
+    }
+}
+
+/// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
+/// whether the line stepped.
+fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Accepted, (Rejection, String)>) -> bool {
+    match result {
+        Ok(Accepted::Stored) => {
+            r.counters.accepted += 1;
+            false
+        }
+        Ok(Accepted::Stepped(outcome)) => {
+            r.counters.accepted += 1;
+            r.counters.ticks += 1;
+            e.publish_tick(&r.host, Some(&outcome));
+            true
+        }
+        Err((reason, detail)) => {
+            if let Some(line) = r.counters.reject(reason, topic, &detail) {
+                log("WARN", line);
+            }
+            false
+        }
+    }
+}
+
+fn reset_response(host: &HostedLine, observation: Observation, seeded: bool) -> ResetLineResponse {
+    let line = host.line();
+    let how = if seeded { "seeded with" } else { "continuing the streams of seed" };
+    ResetLineResponse {
+        success: true,
+        message: format!("episode {} started, {how} {}", line.episode(), line.seed()),
+        seed: line.seed(),
+        episode: line.episode(),
+        stamp: host.stamp(),
+        quantity: observation.quantity,
+        category: observation.category as u8,
+    }
+}
+
+fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: Instant) {
+    let p = &shared.params;
+    let status = runtimes
+        .iter_mut()
+        .map(|r| {
+            let line = r.host.line();
+            let kv = |key: &str, value: String| KeyValue { key: key.to_string(), value };
+            let extra = vec![
+                kv("seed", line.seed().to_string()),
+                kv("episode", line.episode().to_string()),
+                kv("step", line.step_count().to_string()),
+                kv("sim_time", show_stamp(r.host.stamp())),
+                kv("variant", p.line.variant.to_string()),
+                kv("input", p.line.input.to_string()),
+                kv("mode", format!("{:?}", p.mode).to_lowercase()),
+                kv("uptime_s", format!("{:.0}", started.elapsed().as_secs_f64())),
+            ];
+            r.counters.status(extra)
+        })
+        .collect();
+    let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
+    let array = DiagnosticArray { header: Header { stamp, frame_id: String::new() }, status };
+    if let Err(e) = shared.diagnostics_pub.publish(array) {
+        log("WARN", format!("cannot publish /diagnostics: {e:?}"));
+    }
+}

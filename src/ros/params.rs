@@ -1,0 +1,287 @@
+//! The node's parameters: one validated set, filled in order from the defaults, `--params-file`
+//! (ours, then those in `--ros-args`), `--ros-args -p`, and finally explicit command-line flags.
+//! Every value goes through one setter, so a wrong type or an out-of-range value fails at start
+//! with the parameter, the value, where it came from and what is allowed.
+
+use std::path::Path;
+
+use serde_yaml::Value;
+
+use super::names::Names;
+use super::options::{NodeArgs, TickMode};
+use crate::sim::LineConfig;
+
+/// Everything the node needs to know before it starts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeParams {
+    pub line: LineConfig,
+    /// Seed of line 0; line k uses seed + k.
+    pub seed: u64,
+    pub mode: TickMode,
+    /// Ticks per second of wall time (realtime mode).
+    pub rate: f64,
+    pub lines: u32,
+    /// Simulated seconds per tick.
+    pub tick_period: f64,
+}
+
+impl Default for NodeParams {
+    fn default() -> Self {
+        NodeParams {
+            line: LineConfig::default(),
+            seed: 42,
+            mode: TickMode::Lockstep,
+            rate: 10.0,
+            lines: 1,
+            tick_period: 1.0,
+        }
+    }
+}
+
+/// Most lines one process hosts (memory and message rate stay bounded).
+pub const MAX_LINES: u32 = 64;
+
+/// Every parameter the node declares, with what it accepts.
+pub const PARAMETERS: &[(&str, &str)] = &[
+    ("variant", "basic or advanced"),
+    ("input", "random, seasonal or seasonal3"),
+    ("obs_noise", "0.0 ..= 1.0"),
+    ("action_penalty", "0.0 ..= 10.0"),
+    ("threshold", "0.0 ..< 1.0"),
+    ("max_steps", "1 ..= 1000000"),
+    ("seed", "0 ..= 18446744073709551615"),
+    ("mode", "lockstep or realtime"),
+    ("rate", "0.0 <.. 100000.0 (ticks per second)"),
+    ("lines", "1 ..= 64"),
+    ("tick_period", "0.000001 ..= 3600.0 (seconds)"),
+    ("use_sim_time", "true or false (ignored: this node is the clock)"),
+];
+
+fn allowed(name: &str) -> &'static str {
+    PARAMETERS.iter().find(|(n, _)| *n == name).map(|(_, a)| *a).unwrap_or("")
+}
+
+impl NodeParams {
+    /// Resolves the parameters from every source, in precedence order.
+    pub fn resolve(args: &NodeArgs, ros_params: &[(String, Value)], ros_files: &[impl AsRef<Path>], names: &Names) -> Result<Self, String> {
+        let mut p = NodeParams::default();
+        for file in args.params_file.iter().map(|f| f.as_path()).chain(ros_files.iter().map(|f| f.as_ref())) {
+            for (name, value) in load_params_file(file, names)? {
+                p.set(&name, &value, &format!("params file {}", file.display()))?;
+            }
+        }
+        for (name, value) in ros_params {
+            p.set(name, value, "--ros-args -p")?;
+        }
+        for (name, value) in explicit_flags(args) {
+            p.set(name, &value, &format!("--{}", name.replace('_', "-")))?;
+        }
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Sets one parameter from a YAML value.
+    pub fn set(&mut self, name: &str, value: &Value, source: &str) -> Result<(), String> {
+        let bad = || {
+            format!(
+                "parameter {name} = {} (from {source}) is not valid: allowed {}",
+                show(value),
+                allowed(name)
+            )
+        };
+        let float = || value.as_f64().filter(|v| v.is_finite()).ok_or_else(bad);
+        let text = || value.as_str().ok_or_else(bad);
+        match name {
+            "variant" => self.line.variant = text()?.parse().map_err(|_| bad())?,
+            "input" => self.line.input = text()?.parse().map_err(|_| bad())?,
+            "obs_noise" => self.line.obs_noise = float()?,
+            "action_penalty" => self.line.action_penalty = float()?,
+            "threshold" => self.line.threshold = float()?,
+            "max_steps" => self.line.max_steps = value.as_u64().and_then(|v| u32::try_from(v).ok()).ok_or_else(bad)?,
+            "seed" => self.seed = value.as_u64().ok_or_else(bad)?,
+            "mode" => {
+                self.mode = match text()? {
+                    "lockstep" => TickMode::Lockstep,
+                    "realtime" => TickMode::Realtime,
+                    _ => return Err(bad()),
+                }
+            }
+            "rate" => self.rate = float()?,
+            "lines" => self.lines = value.as_u64().and_then(|v| u32::try_from(v).ok()).ok_or_else(bad)?,
+            "tick_period" => self.tick_period = float()?,
+            "use_sim_time" => {
+                value.as_bool().ok_or_else(bad)?;
+            }
+            _ => {
+                let known: Vec<&str> = PARAMETERS.iter().map(|(n, _)| *n).collect();
+                return Err(format!("unknown parameter '{name}' (from {source}): allowed {}", known.join(", ")));
+            }
+        }
+        // Range errors name the source at once, not at the end.
+        self.validate().map_err(|e| format!("{e} (from {source})"))
+    }
+
+    /// Checks every range; the message names the parameter, its value and what is allowed.
+    pub fn validate(&self) -> Result<(), String> {
+        self.line.validate().map_err(|e| format!("parameter {e}"))?;
+        let out_of_range = |name: &str, value: String| {
+            Err(format!("parameter {name} = {value} is out of range: allowed {}", allowed(name)))
+        };
+        if !(self.rate > 0.0 && self.rate <= 100_000.0) {
+            return out_of_range("rate", self.rate.to_string());
+        }
+        if !(1..=MAX_LINES).contains(&self.lines) {
+            return out_of_range("lines", self.lines.to_string());
+        }
+        if !(self.tick_period >= 1e-6 && self.tick_period <= 3600.0) {
+            return out_of_range("tick_period", self.tick_period.to_string());
+        }
+        if self.seed.checked_add(u64::from(self.lines - 1)).is_none() {
+            return out_of_range("seed", format!("{} (with {} lines, seed + k overflows)", self.seed, self.lines));
+        }
+        Ok(())
+    }
+
+    /// The parameters as (name, YAML value), for declaring them on the node.
+    pub fn as_values(&self) -> Vec<(&'static str, Value)> {
+        let l = &self.line;
+        vec![
+            ("variant", Value::from(l.variant.to_string())),
+            ("input", Value::from(l.input.to_string())),
+            ("obs_noise", Value::from(l.obs_noise)),
+            ("action_penalty", Value::from(l.action_penalty)),
+            ("threshold", Value::from(l.threshold)),
+            ("max_steps", Value::from(l.max_steps)),
+            ("seed", Value::from(self.seed)),
+            ("mode", Value::from(if self.mode == TickMode::Lockstep { "lockstep" } else { "realtime" })),
+            ("rate", Value::from(self.rate)),
+            ("lines", Value::from(self.lines)),
+            ("tick_period", Value::from(self.tick_period)),
+        ]
+    }
+}
+
+fn show(value: &Value) -> String {
+    serde_yaml::to_string(value).map(|s| s.trim().to_string()).unwrap_or_else(|_| format!("{value:?}"))
+}
+
+/// The flags given on the command line, as parameter values.
+fn explicit_flags(a: &NodeArgs) -> Vec<(&'static str, Value)> {
+    let mut v = Vec::new();
+    let mut push = |name, value: Option<Value>| {
+        if let Some(value) = value {
+            v.push((name, value));
+        }
+    };
+    push("variant", a.variant.map(|x| Value::from(x.to_string())));
+    push("input", a.input.map(|x| Value::from(x.to_string())));
+    push("obs_noise", a.obs_noise.map(Value::from));
+    push("action_penalty", a.action_penalty.map(Value::from));
+    push("threshold", a.threshold.map(Value::from));
+    push("max_steps", a.max_steps.map(Value::from));
+    push("seed", a.seed.map(Value::from));
+    push("mode", a.mode.map(|m| Value::from(if m == TickMode::Lockstep { "lockstep" } else { "realtime" })));
+    push("rate", a.rate.map(Value::from));
+    push("lines", a.lines.map(Value::from));
+    push("tick_period", a.tick_period.map(Value::from));
+    v
+}
+
+/// Reads a parameter file: either a flat mapping of parameters, or the launch_ros form
+/// `<node key>: {ros__parameters: {...}}` where the node key is `/**`, the node's name or its
+/// fully qualified name (sections for other nodes are skipped).
+pub fn load_params_file(path: &Path, names: &Names) -> Result<Vec<(String, Value)>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read params file {}: {e}", path.display()))?;
+    let doc: Value =
+        serde_yaml::from_str(&text).map_err(|e| format!("params file {} is not valid YAML: {e}", path.display()))?;
+    let Some(top) = doc.as_mapping() else {
+        return Err(format!("params file {} must be a mapping of parameters", path.display()));
+    };
+    let launch_form = top.values().any(|v| v.get("ros__parameters").is_some());
+    let mut out = Vec::new();
+    let flatten = |out: &mut Vec<(String, Value)>, map: &serde_yaml::Mapping| -> Result<(), String> {
+        for (k, v) in map {
+            let key = k.as_str().ok_or_else(|| format!("params file {}: key {k:?} is not a string", path.display()))?;
+            out.push((key.to_string(), v.clone()));
+        }
+        Ok(())
+    };
+    if !launch_form {
+        flatten(&mut out, top)?;
+        return Ok(out);
+    }
+    let fqn = if names.namespace == "/" {
+        format!("/{}", names.node_name)
+    } else {
+        format!("{}/{}", names.namespace, names.node_name)
+    };
+    let ours = ["/**", "**", names.node_name.as_str(), fqn.as_str(), fqn.trim_start_matches('/')];
+    for (key, section) in top {
+        let key = key.as_str().unwrap_or_default();
+        if !ours.contains(&key) {
+            continue;
+        }
+        let params = section.get("ros__parameters").and_then(Value::as_mapping).ok_or_else(|| {
+            format!("params file {}: section '{key}' has no ros__parameters mapping", path.display())
+        })?;
+        flatten(&mut out, params)?;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros::ros_args::RosArgs;
+    use crate::sim::Variant;
+
+    fn names(ns: &str) -> Names {
+        Names::new(&RosArgs { namespace: Some(ns.into()), ..RosArgs::default() }).unwrap()
+    }
+
+    fn write(text: &str) -> tempfile::TempPath {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        std::io::Write::write_all(&mut f, text.as_bytes()).unwrap();
+        f.into_temp_path()
+    }
+
+    #[test]
+    fn precedence_is_file_then_ros_p_then_flags() {
+        let f = write("/**:\n  ros__parameters:\n    seed: 1\n    threshold: 0.8\n    lines: 3\n");
+        let ros = vec![("seed".to_string(), Value::from(2))];
+        let args = NodeArgs { lines: Some(4), ..NodeArgs::default() };
+        let p = NodeParams::resolve(&args, &ros, &[&f], &names("/plant")).unwrap();
+        assert_eq!((p.seed, p.line.threshold, p.lines), (2, 0.8, 4));
+    }
+
+    #[test]
+    fn launch_form_takes_only_our_sections() {
+        let f = write(
+            "/plant/sorting_line:\n  ros__parameters:\n    variant: advanced\nother_node:\n  ros__parameters:\n    variant: nonsense\n",
+        );
+        let p = NodeParams::resolve(&NodeArgs::default(), &[], &[&f], &names("/plant")).unwrap();
+        assert_eq!(p.line.variant, Variant::Advanced);
+    }
+
+    #[test]
+    fn errors_name_parameter_value_source_and_range() {
+        let f = write("threshold: 1.5\n");
+        let e = NodeParams::resolve(&NodeArgs::default(), &[], &[&f], &names("/")).unwrap_err();
+        assert!(e.contains("threshold = 1.5 is out of range: allowed 0.0 ..< 1.0"), "{e}");
+        assert!(e.contains("params file"), "{e}");
+        let e = NodeParams::resolve(&NodeArgs { lines: Some(0), ..NodeArgs::default() }, &[], &[] as &[&Path], &names("/"))
+            .unwrap_err();
+        assert!(e.contains("lines = 0 is out of range: allowed 1 ..= 64"), "{e}");
+        let bad_type = vec![("max_steps".to_string(), Value::from("many"))];
+        let e = NodeParams::resolve(&NodeArgs::default(), &bad_type, &[] as &[&Path], &names("/")).unwrap_err();
+        assert!(e.contains("max_steps = many (from --ros-args -p) is not valid: allowed 1 ..= 1000000"), "{e}");
+        let unknown = vec![("speed".to_string(), Value::from(1))];
+        let e = NodeParams::resolve(&NodeArgs::default(), &unknown, &[] as &[&Path], &names("/")).unwrap_err();
+        assert!(e.contains("unknown parameter 'speed'"), "{e}");
+        let f = write("a: [unclosed\n");
+        let e = NodeParams::resolve(&NodeArgs::default(), &[], &[&f], &names("/")).unwrap_err();
+        assert!(e.contains("is not valid YAML"), "{e}");
+        let e = NodeParams::resolve(&NodeArgs::default(), &[], &[Path::new("/nonexistent.yaml")], &names("/")).unwrap_err();
+        assert!(e.contains("cannot read params file /nonexistent.yaml"), "{e}");
+    }
+}

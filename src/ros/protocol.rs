@@ -1,0 +1,331 @@
+//! The command protocol of one hosted line, without any DDS: which commands a tick needs, which
+//! are stale, duplicated, early or invalid, and when the line advances. Keeping it free of I/O
+//! lets the unit tests pin every rule; `node.rs` only moves messages in and out.
+//!
+//! - Lock-step: the line waits at tick T (stamp T * period). A command answers T by carrying that
+//!   stamp. When the commands the tick needs have arrived (speed; and sort mode on the advanced
+//!   line), the line steps once to T + 1. A second command of the same kind for T is a duplicate;
+//!   an older stamp is stale; a newer one names a tick that does not exist yet.
+//! - Realtime: a timer steps the line; the newest valid command is held until replaced. Stamps
+//!   may lag (the controller answers a tick the line has already left) but may not run ahead or
+//!   go backwards.
+//!
+//! In both modes an invalid value (NaN, off the ten speeds, unknown mode) is rejected and the line
+//! keeps its last valid command. Every rejection carries a [`Rejection`] reason for the logs and
+//! /diagnostics.
+
+use super::clock::SimClock;
+use super::messages::Time;
+use super::options::TickMode;
+use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
+use crate::sim::{Action, Line, LineConfig, Observation, SortMode, StepOutcome, Variant};
+
+/// Why a command was dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Rejection {
+    /// NaN, infinite, out of 0.1..=1.0 or between two of the ten speeds.
+    InvalidSpeed,
+    /// A sort mode other than 0, 1, 2.
+    UnknownMode,
+    /// A sort mode sent to the basic line, which has none.
+    ModeOnBasicLine,
+    /// The stamp names a tick the line has already left.
+    Stale,
+    /// A second command of the same kind for the same tick.
+    Duplicate,
+    /// The stamp names a tick that does not exist (yet), or falls between ticks.
+    UnknownTick,
+    /// The episode reached its time limit: the line waits for a reset.
+    EpisodeOver,
+    /// The message could not be decoded (wrong type or corrupt data).
+    Malformed,
+}
+
+pub const REJECTIONS: [Rejection; 8] = [
+    Rejection::InvalidSpeed,
+    Rejection::UnknownMode,
+    Rejection::ModeOnBasicLine,
+    Rejection::Stale,
+    Rejection::Duplicate,
+    Rejection::UnknownTick,
+    Rejection::EpisodeOver,
+    Rejection::Malformed,
+];
+
+impl Rejection {
+    /// The counter's name on /diagnostics.
+    pub fn key(self) -> &'static str {
+        match self {
+            Rejection::InvalidSpeed => "invalid_speed",
+            Rejection::UnknownMode => "unknown_mode",
+            Rejection::ModeOnBasicLine => "mode_on_basic_line",
+            Rejection::Stale => "stale",
+            Rejection::Duplicate => "duplicate",
+            Rejection::UnknownTick => "unknown_tick",
+            Rejection::EpisodeOver => "episode_over",
+            Rejection::Malformed => "malformed",
+        }
+    }
+
+    /// A sentence for the log.
+    pub fn explain(self) -> &'static str {
+        match self {
+            Rejection::InvalidSpeed => "speed is not one of 0.1, 0.2, ..., 1.0",
+            Rejection::UnknownMode => "sort mode is not 0 (basic), 1 (positive) or 2 (negative)",
+            Rejection::ModeOnBasicLine => "the basic line has no sort mode",
+            Rejection::Stale => "stamp names a tick the line has already left",
+            Rejection::Duplicate => "a command of this kind already answered this tick",
+            Rejection::UnknownTick => "stamp names no current tick (ahead of the line or between ticks)",
+            Rejection::EpisodeOver => "the episode is over; call reset",
+            Rejection::Malformed => "it could not be decoded",
+        }
+    }
+}
+
+/// What a command did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Accepted {
+    /// Stored; the tick still waits for another command (lock-step) or for the timer (realtime).
+    Stored,
+    /// It completed the tick: the line stepped.
+    Stepped(StepOutcome),
+}
+
+/// One line as the node hosts it.
+#[derive(Clone, Debug)]
+pub struct HostedLine {
+    line: Line,
+    clock: SimClock,
+    mode: TickMode,
+    /// Tick number of the current state; runs on across episodes.
+    tick: u64,
+    pending_speed: Option<usize>,
+    pending_mode: Option<SortMode>,
+    /// The last valid command (realtime holds it; lock-step reports it).
+    held: Action,
+    /// Newest stamp accepted in realtime mode.
+    newest_stamp: i64,
+}
+
+impl HostedLine {
+    pub fn new(config: LineConfig, seed: u64, clock: SimClock, mode: TickMode) -> Self {
+        HostedLine {
+            line: Line::new(config, seed),
+            clock,
+            mode,
+            tick: 0,
+            pending_speed: None,
+            pending_mode: None,
+            held: Action::new(START_SPEED_INDEX, SortMode::Basic),
+            newest_stamp: i64::MIN,
+        }
+    }
+
+    pub fn line(&self) -> &Line {
+        &self.line
+    }
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+    pub fn stamp(&self) -> Time {
+        self.clock.stamp(self.tick)
+    }
+
+    fn advanced(&self) -> bool {
+        self.line.config().variant == Variant::Advanced
+    }
+
+    /// Starts a new episode at a new tick (stamps never repeat, so old commands become stale).
+    pub fn reset(&mut self, seed: Option<u64>) -> Observation {
+        self.tick += 1;
+        self.pending_speed = None;
+        self.pending_mode = None;
+        self.held = Action::new(START_SPEED_INDEX, SortMode::Basic);
+        self.line.reset(seed)
+    }
+
+    /// Handles `cmd/speed`.
+    pub fn on_speed(&mut self, stamp: Time, speed: f64) -> Result<Accepted, Rejection> {
+        let index = index_of_speed(speed).ok_or(Rejection::InvalidSpeed)?;
+        self.check_stamp(stamp, self.pending_speed.is_some())?;
+        self.held.speed_index = index;
+        self.pending_speed = Some(index);
+        Ok(self.complete_tick())
+    }
+
+    /// Handles `cmd/sort_mode`.
+    pub fn on_sort_mode(&mut self, stamp: Time, mode: u8) -> Result<Accepted, Rejection> {
+        if !self.advanced() {
+            return Err(Rejection::ModeOnBasicLine);
+        }
+        let mode = SortMode::from_index(mode).ok_or(Rejection::UnknownMode)?;
+        self.check_stamp(stamp, self.pending_mode.is_some())?;
+        self.held.mode = mode;
+        self.pending_mode = Some(mode);
+        Ok(self.complete_tick())
+    }
+
+    fn check_stamp(&mut self, stamp: Time, already_answered: bool) -> Result<(), Rejection> {
+        match self.mode {
+            TickMode::Lockstep => {
+                let tick = self.clock.tick_of(stamp).ok_or(Rejection::UnknownTick)?;
+                if tick < self.tick {
+                    return Err(Rejection::Stale);
+                }
+                if tick > self.tick {
+                    return Err(Rejection::UnknownTick);
+                }
+                if self.line.truncated() {
+                    return Err(Rejection::EpisodeOver);
+                }
+                if already_answered {
+                    return Err(Rejection::Duplicate);
+                }
+            }
+            TickMode::Realtime => {
+                let nanos = stamp.nanos();
+                if nanos > self.stamp().nanos() {
+                    return Err(Rejection::UnknownTick);
+                }
+                if nanos < self.newest_stamp {
+                    return Err(Rejection::Stale);
+                }
+                self.newest_stamp = nanos;
+            }
+        }
+        Ok(())
+    }
+
+    /// Lock-step: steps once the tick has every command it needs.
+    fn complete_tick(&mut self) -> Accepted {
+        if self.mode != TickMode::Lockstep {
+            return Accepted::Stored;
+        }
+        let mode_ready = !self.advanced() || self.pending_mode.is_some();
+        match (self.pending_speed, mode_ready) {
+            (Some(speed_index), true) => {
+                let mode = self.pending_mode.unwrap_or(SortMode::Basic);
+                Accepted::Stepped(self.step(Action::new(speed_index, mode)))
+            }
+            _ => Accepted::Stored,
+        }
+    }
+
+    fn step(&mut self, action: Action) -> StepOutcome {
+        self.pending_speed = None;
+        self.pending_mode = None;
+        self.tick += 1;
+        self.line.step(action)
+    }
+
+    /// Realtime: one timer tick on the held command. At the time limit the next timer tick starts
+    /// a new episode instead (the streams carry on), so a live line never stalls.
+    pub fn timer_tick(&mut self) -> TimerTick {
+        if self.line.truncated() {
+            TimerTick::Reset(self.reset(None))
+        } else {
+            TimerTick::Stepped(self.step(self.held))
+        }
+    }
+}
+
+/// What a realtime timer tick did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TimerTick {
+    Stepped(StepOutcome),
+    Reset(Observation),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::Setup;
+
+    fn host(variant: Variant, mode: TickMode) -> HostedLine {
+        HostedLine::new(LineConfig::for_setup(Setup::B, variant), 42, SimClock::new(0.5), mode)
+    }
+
+    #[test]
+    fn lockstep_basic_steps_on_each_speed_for_the_current_tick() {
+        let mut h = host(Variant::Basic, TickMode::Lockstep);
+        let mut reference = Line::new(LineConfig::for_setup(Setup::B, Variant::Basic), 42);
+        for k in 0..50u64 {
+            let stamp = h.stamp();
+            assert_eq!(stamp, SimClock::new(0.5).stamp(k));
+            match h.on_speed(stamp, 0.3).unwrap() {
+                Accepted::Stepped(out) => assert_eq!(out, reference.step(Action::new(2, SortMode::Basic))),
+                Accepted::Stored => panic!("basic line needs only the speed"),
+            }
+            assert_eq!(h.on_speed(stamp, 0.3), Err(Rejection::Stale), "the tick was answered");
+        }
+        assert_eq!(h.on_speed(h.stamp(), 0.3), Err(Rejection::EpisodeOver));
+        h.reset(Some(1));
+        assert!(matches!(h.on_speed(h.stamp(), 0.3), Ok(Accepted::Stepped(_))));
+    }
+
+    #[test]
+    fn lockstep_advanced_needs_both_commands_in_any_order() {
+        let mut h = host(Variant::Advanced, TickMode::Lockstep);
+        let s = h.stamp();
+        assert_eq!(h.on_sort_mode(s, 2), Ok(Accepted::Stored));
+        assert_eq!(h.on_sort_mode(s, 1), Err(Rejection::Duplicate));
+        let Ok(Accepted::Stepped(out)) = h.on_speed(s, 0.4) else { panic!("should step") };
+        assert_eq!(out.action, Action::new(3, SortMode::Negative), "the first mode command counts");
+        let s = h.stamp();
+        assert_eq!(h.on_speed(s, 0.2), Ok(Accepted::Stored));
+        assert!(matches!(h.on_sort_mode(s, 0), Ok(Accepted::Stepped(_))));
+    }
+
+    #[test]
+    fn bad_commands_are_rejected_and_change_nothing() {
+        let mut clean = host(Variant::Advanced, TickMode::Lockstep);
+        let mut noisy = host(Variant::Advanced, TickMode::Lockstep);
+        for k in 0..40 {
+            let s = noisy.stamp();
+            let future = SimClock::new(0.5).stamp(noisy.tick() + 1);
+            assert_eq!(noisy.on_speed(s, f64::NAN), Err(Rejection::InvalidSpeed));
+            assert_eq!(noisy.on_speed(s, 0.55), Err(Rejection::InvalidSpeed));
+            assert_eq!(noisy.on_speed(s, -3.0), Err(Rejection::InvalidSpeed));
+            assert_eq!(noisy.on_sort_mode(s, 7), Err(Rejection::UnknownMode));
+            assert_eq!(noisy.on_speed(future, 0.5), Err(Rejection::UnknownTick));
+            assert_eq!(noisy.on_speed(Time { sec: 0, nanosec: 1 }, 0.5), Err(Rejection::UnknownTick));
+            if k > 0 {
+                assert_eq!(noisy.on_speed(SimClock::new(0.5).stamp(0), 0.5), Err(Rejection::Stale));
+            }
+            let speed = 0.1 * f64::from(k % 10 + 1);
+            let mode = (k % 3) as u8;
+            for h in [&mut clean, &mut noisy] {
+                let s = h.stamp();
+                h.on_sort_mode(s, mode).unwrap();
+                h.on_speed(s, speed).unwrap();
+            }
+            assert_eq!(clean.line().last_step(), noisy.line().last_step());
+        }
+        let mut basic = host(Variant::Basic, TickMode::Lockstep);
+        assert_eq!(basic.on_sort_mode(basic.stamp(), 1), Err(Rejection::ModeOnBasicLine));
+    }
+
+    #[test]
+    fn realtime_holds_the_last_valid_command_and_restarts_episodes() {
+        let mut h = host(Variant::Advanced, TickMode::Realtime);
+        assert_eq!(h.on_speed(h.stamp(), 0.9), Ok(Accepted::Stored));
+        assert_eq!(h.on_sort_mode(h.stamp(), 1), Ok(Accepted::Stored));
+        let TimerTick::Stepped(first) = h.timer_tick() else { panic!() };
+        assert_eq!(first.action, Action::new(8, SortMode::Positive));
+        assert_eq!(h.on_speed(h.stamp(), f64::INFINITY), Err(Rejection::InvalidSpeed));
+        let ahead = SimClock::new(0.5).stamp(h.tick() + 5);
+        assert_eq!(h.on_speed(ahead, 0.1), Err(Rejection::UnknownTick));
+        // A lagging stamp is fine in realtime (the line moved on meanwhile); going backwards is not.
+        h.timer_tick();
+        let before = SimClock::new(0.5).stamp(h.tick() - 1);
+        assert_eq!(h.on_speed(before, 0.9), Ok(Accepted::Stored));
+        assert_eq!(h.on_speed(h.stamp(), 0.9), Ok(Accepted::Stored));
+        assert_eq!(h.on_speed(before, 0.9), Err(Rejection::Stale));
+        for _ in 2..50 {
+            let TimerTick::Stepped(out) = h.timer_tick() else { panic!("episode still running") };
+            assert_eq!(out.action, Action::new(8, SortMode::Positive));
+        }
+        assert!(matches!(h.timer_tick(), TimerTick::Reset(_)));
+        assert_eq!(h.line().episode(), 1);
+    }
+}
