@@ -217,7 +217,7 @@ build_rust() {
     say "cargo: no Cargo.toml, skipped"
     return
   fi
-  command -v cargo >/dev/null 2>&1 || die "cargo not found (install Rust: https://rustup.rs)"
+  command -v cargo >/dev/null 2>&1 || die "cargo not found: install the Rust toolchain (rustup) first"
   say "cargo: cargo build --release"
   cargo build --release --manifest-path "$ROOT/Cargo.toml"
 }

@@ -28,6 +28,25 @@ enum Command {
     Table(TableArgs),
     /// Run the line as a ROS 2 node.
     Node(NodeArgs),
+    /// Print the library's trajectory for a seed and an action list, one JSON object per step
+    /// (the reference other paths are compared with).
+    Trace(TraceArgs),
+}
+
+#[derive(Args)]
+struct TraceArgs {
+    #[arg(long)]
+    setup: Setup,
+    #[arg(long, default_value = "basic")]
+    variant: Variant,
+    #[arg(long, default_value_t = 42)]
+    seed: u64,
+    #[arg(long, default_value_t = 50)]
+    max_steps: u32,
+    /// Comma-separated Gymnasium actions (basic: speed index; advanced: speed index * 3 + mode);
+    /// `r` resets without a seed, `r<N>` resets with seed N.
+    #[arg(long, value_delimiter = ',')]
+    actions: Vec<String>,
 }
 
 #[derive(Args)]
@@ -70,6 +89,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => run_eval(args),
         Command::Table(args) => run_table(args),
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
+        Command::Trace(args) => run_trace(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -147,4 +167,34 @@ fn run_table(args: TableArgs) -> Result<(), String> {
         Ok(())
     };
     write(&mut out).map_err(|e| e.to_string())
+}
+
+fn run_trace(args: TraceArgs) -> Result<(), String> {
+    use sorting_line::sim::{Action, Line};
+    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
+    config.validate().map_err(|e| e.to_string())?;
+    let mut line = Line::new(config, args.seed);
+    let mut out = io::stdout().lock();
+    let mut emit = |value: serde_json::Value| writeln!(out, "{value}").map_err(|e| e.to_string());
+    emit(serde_json::json!({"reset": {"seed": line.seed(), "episode": line.episode(), "observation": line.observation()}}))?;
+    for token in &args.actions {
+        if let Some(seed) = token.strip_prefix('r') {
+            let seed = if seed.is_empty() { None } else { Some(seed.parse::<u64>().map_err(|_| format!("bad reset '{token}'"))?) };
+            let observation = line.reset(seed);
+            emit(serde_json::json!({"reset": {"seed": line.seed(), "episode": line.episode(), "observation": observation}}))?;
+            continue;
+        }
+        let action = token
+            .parse::<usize>()
+            .ok()
+            .and_then(|a| Action::from_discrete(args.variant, a))
+            .ok_or_else(|| format!("action '{token}' is out of range for the {} line", args.variant))?;
+        let outcome = line.step(action);
+        let c = line.containers();
+        emit(serde_json::json!({
+            "step": outcome, "episode": line.episode(), "cumulative_reward": line.cumulative_reward(),
+            "containers": c, "purity": c.purity(), "speed_changes": line.speed_changes(),
+        }))?;
+    }
+    Ok(())
 }
