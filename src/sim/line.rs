@@ -35,13 +35,33 @@ pub const START_INPUT: Batch = Batch::new(30, 50);
 pub const START_BELT: Batch = Batch::new(40, 20);
 pub const START_MACHINE: Batch = Batch::new(75, 25);
 
-/// What the agent commands for one tick.
+/// What the agent commands for one tick. Decoding checks the speed index like [`Action::new`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "RawAction")]
 pub struct Action {
     /// 0..=9, speed (i + 1) / 10.
     pub speed_index: usize,
     /// Ignored by the basic line.
     pub mode: SortMode,
+}
+
+/// An action as decoded, before its range check.
+#[derive(Deserialize)]
+struct RawAction {
+    speed_index: usize,
+    #[serde(default)]
+    mode: SortMode,
+}
+
+impl TryFrom<RawAction> for Action {
+    type Error = String;
+    fn try_from(raw: RawAction) -> Result<Self, String> {
+        if raw.speed_index < SPEED_COUNT {
+            Ok(Action { speed_index: raw.speed_index, mode: raw.mode })
+        } else {
+            Err(format!("speed_index = {} is out of range: allowed 0..=9", raw.speed_index))
+        }
+    }
 }
 
 impl Action {
@@ -225,7 +245,13 @@ impl Line {
     }
 
     /// Advances the line one tick (see the module docs for the exact order).
+    ///
+    /// # Panics
+    /// If `action.speed_index` is out of 0..=9 (only possible by building an `Action` literal:
+    /// [`Action::new`] and decoding check it). The check comes first, so the line is never left
+    /// half-stepped.
     pub fn step(&mut self, action: Action) -> StepOutcome {
+        assert!(action.speed_index < SPEED_COUNT, "speed index {} out of 0..=9", action.speed_index);
         // 1. Sort the machine's batch.
         let correct_a = (f64::from(self.machine.a) * self.sorter_accuracy) as u32;
         let correct_b = (f64::from(self.machine.b) * self.sorter_accuracy) as u32;
@@ -437,6 +463,19 @@ mod tests {
         for k in 0..20 {
             assert_eq!(line.step(Action::new(k % 10, SortMode::Basic)), fresh.step(Action::new(k % 10, SortMode::Basic)));
         }
+    }
+
+    #[test]
+    fn out_of_range_actions_are_refused_when_decoded_and_before_stepping() {
+        let err = serde_json::from_str::<Action>(r#"{"speed_index": 12, "mode": "basic"}"#).unwrap_err();
+        assert!(err.to_string().contains("speed_index = 12 is out of range"), "{err}");
+        let ok: Action = serde_json::from_str(r#"{"speed_index": 9, "mode": "negative"}"#).unwrap();
+        assert_eq!(ok, Action::new(9, SortMode::Negative));
+        let mut line = Line::new(LineConfig::default(), 1);
+        let bad = Action { speed_index: 10, mode: SortMode::Basic };
+        let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| line.step(bad)));
+        assert!(stepped.is_err());
+        assert_eq!((line.step_count(), line.speed_index(), line.machine()), (0, START_SPEED_INDEX, START_MACHINE));
     }
 
     #[test]
