@@ -25,6 +25,8 @@ cd "$ROOT"
 VENV="$ROOT/.venv"
 STATE="$VENV/.sorting_line"
 REQ="$ROOT/launch_scripts/requirements-ros.txt"
+REQ_BRIDGE="$ROOT/launch_scripts/requirements-bridge.txt"
+BRIDGE="$ROOT/bridge"
 MSG_DIR="$ROOT/msg"
 PYTHON="${SORTING_LINE_PYTHON:-python3.11}"
 # Bump when the recipe below changes in a way that needs a rebuild of existing venvs.
@@ -82,19 +84,19 @@ make_venv() {
 # 2. pinned wheels
 # ---------------------------------------------------------------------------------------------
 PY_ID=""
-pip_key() { { echo "recipe=$RECIPE"; echo "python=$PY_ID"; cat "$REQ"; } | sha; }
+pip_key() { { echo "recipe=$RECIPE"; echo "python=$PY_ID"; cat "$REQ" "$REQ_BRIDGE"; } | sha; }
 
 install_wheels() {
   local key
   key="$(pip_key)"
   if [[ $FORCE == 0 && -f "$STATE/pip.stamp" && "$(cat "$STATE/pip.stamp")" == "$key" ]]; then
-    say "wheels: up to date (requirements-ros.txt unchanged)"
+    say "wheels: up to date (requirements-ros.txt, requirements-bridge.txt unchanged)"
     return
   fi
-  say "wheels: installing launch_scripts/requirements-ros.txt (about 85 MB of wheels)"
+  say "wheels: installing requirements-ros.txt and requirements-bridge.txt (torch brings ~4 GB of CUDA libraries)"
   rm -f "$STATE/pip.stamp" "$STATE/interfaces.stamp"
-  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" ||
-    die "pip install -r $REQ failed"
+  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
+    die "pip install -r $REQ -r $REQ_BRIDGE failed"
   mkdir -p "$STATE"
   echo "$key" >"$STATE/pip.stamp"
 }
@@ -208,6 +210,26 @@ build_interfaces() {
 # ---------------------------------------------------------------------------------------------
 # 4. Rust (only when the crate exists)
 # ---------------------------------------------------------------------------------------------
+# ---------------------------------------------------------------------------------------------
+# 4. the bridge package (bridge/, sorting_line_gym), editable so the tests run the source tree
+# ---------------------------------------------------------------------------------------------
+install_bridge() {
+  if [[ ! -f "$BRIDGE/pyproject.toml" ]]; then
+    say "bridge: no bridge/pyproject.toml, skipped"
+    return
+  fi
+  local key
+  key="$( { echo "$ROOT"; cat "$BRIDGE/pyproject.toml"; } | sha)"
+  if [[ $FORCE == 0 && -f "$STATE/bridge.stamp" && "$(cat "$STATE/bridge.stamp")" == "$key" ]]; then
+    say "bridge: up to date"
+    return
+  fi
+  say "bridge: pip install -e bridge (dependencies come from the pinned requirements)"
+  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q --no-deps --no-build-isolation -e "$BRIDGE" ||
+    die "pip install -e $BRIDGE failed"
+  echo "$key" >"$STATE/bridge.stamp"
+}
+
 build_rust() {
   if [[ $CARGO == 0 ]]; then
     say "cargo: skipped (--no-cargo)"
@@ -228,5 +250,6 @@ PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.im
 mkdir -p "$STATE"
 install_wheels
 build_interfaces
+install_bridge
 build_rust
 say "done (source launch_scripts/env.sh to use the venv with the project's ROS settings)"

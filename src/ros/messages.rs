@@ -116,6 +116,78 @@ pub struct ResetEvent {
     pub seed: u64,
 }
 
+/// sorting_line_interfaces/LineCommands: one command per line, for vectorised clients.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LineCommands {
+    pub header: Header,
+    pub stamp_sec: Vec<i32>,
+    pub stamp_nanosec: Vec<u32>,
+    pub speeds: Vec<f64>,
+    pub modes: Vec<u8>,
+}
+
+/// sorting_line_interfaces/LineStates: every line's state as arrays (struct of arrays).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LineStates {
+    pub header: Header,
+    pub stamp_sec: Vec<i32>,
+    pub stamp_nanosec: Vec<u32>,
+    pub episode: Vec<u32>,
+    pub step: Vec<u32>,
+    pub seed: Vec<u64>,
+    pub speed: Vec<f64>,
+    pub speed_index: Vec<u8>,
+    pub mode: Vec<u8>,
+    pub occupancy: Vec<f64>,
+    pub accuracy: Vec<f64>,
+    pub reward: Vec<f64>,
+    pub cumulative_reward: Vec<f64>,
+    pub purity: Vec<f64>,
+    pub recall_a: Vec<f64>,
+    pub recall_b: Vec<f64>,
+    pub container_a: Vec<u32>,
+    pub container_a_false: Vec<u32>,
+    pub container_b: Vec<u32>,
+    pub container_b_false: Vec<u32>,
+    pub speed_changes: Vec<u32>,
+    pub observation_quantity: Vec<f64>,
+    pub observation_category: Vec<u8>,
+    pub truncated: Vec<bool>,
+}
+
+impl LineStates {
+    /// Lays out per-line states as arrays.
+    pub fn from_states(header: Header, states: &[LineState]) -> Self {
+        let col = |f: &dyn Fn(&LineState) -> f64| states.iter().map(f).collect::<Vec<f64>>();
+        LineStates {
+            header,
+            stamp_sec: states.iter().map(|s| s.header.stamp.sec).collect(),
+            stamp_nanosec: states.iter().map(|s| s.header.stamp.nanosec).collect(),
+            episode: states.iter().map(|s| s.episode).collect(),
+            step: states.iter().map(|s| s.step).collect(),
+            seed: states.iter().map(|s| s.seed).collect(),
+            speed: col(&|s| s.speed),
+            speed_index: states.iter().map(|s| s.speed_index).collect(),
+            mode: states.iter().map(|s| s.mode).collect(),
+            occupancy: col(&|s| s.occupancy),
+            accuracy: col(&|s| s.accuracy),
+            reward: col(&|s| s.reward),
+            cumulative_reward: col(&|s| s.cumulative_reward),
+            purity: col(&|s| s.purity),
+            recall_a: col(&|s| s.recall_a),
+            recall_b: col(&|s| s.recall_b),
+            container_a: states.iter().map(|s| s.container_a).collect(),
+            container_a_false: states.iter().map(|s| s.container_a_false).collect(),
+            container_b: states.iter().map(|s| s.container_b).collect(),
+            container_b_false: states.iter().map(|s| s.container_b_false).collect(),
+            speed_changes: states.iter().map(|s| s.speed_changes).collect(),
+            observation_quantity: col(&|s| s.observation_quantity),
+            observation_category: states.iter().map(|s| s.observation_category).collect(),
+            truncated: states.iter().map(|s| s.truncated).collect(),
+        }
+    }
+}
+
 /// sorting_line_interfaces/ResetLine request.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ResetLineRequest {
@@ -192,6 +264,8 @@ messages! {
     SpeedCommand => (INTERFACES, "SpeedCommand"),
     SortModeCommand => (INTERFACES, "SortModeCommand"),
     ResetEvent => (INTERFACES, "ResetEvent"),
+    LineCommands => (INTERFACES, "LineCommands"),
+    LineStates => (INTERFACES, "LineStates"),
     Clock => ("rosgraph_msgs", "Clock"),
     DiagnosticArray => ("diagnostic_msgs", "DiagnosticArray"),
 }
@@ -239,6 +313,8 @@ mod tests {
         check("msg/SpeedCommand.msg", serde_yaml::to_value(SpeedCommand::default()).unwrap());
         check("msg/SortModeCommand.msg", serde_yaml::to_value(SortModeCommand::default()).unwrap());
         check("msg/ResetEvent.msg", serde_yaml::to_value(ResetEvent::default()).unwrap());
+        check("msg/LineCommands.msg", serde_yaml::to_value(LineCommands::default()).unwrap());
+        check("msg/LineStates.msg", serde_yaml::to_value(LineStates::default()).unwrap());
         let srv = fields("srv/ResetLine.srv");
         let request = yaml_fields(serde_yaml::to_value(ResetLineRequest::default()).unwrap());
         let response = yaml_fields(serde_yaml::to_value(ResetLineResponse::default()).unwrap());

@@ -24,7 +24,7 @@ use super::params::NodeParams;
 use super::protocol::{Accepted, HostedLine, Rejection, TimerTick};
 use super::qos::default_profile;
 use super::ros_args::RosArgs;
-use crate::sim::{Observation, StepOutcome, Variant};
+use crate::sim::{Observation, Variant};
 
 /// How often /diagnostics is published (wall time).
 const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
@@ -83,6 +83,8 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let shared = Shared {
         clock_pub: publisher::<Clock>(&mut node, &names.global("/clock"))?,
         diagnostics_pub: publisher::<DiagnosticArray>(&mut node, &names.global("/diagnostics"))?,
+        batch_cmd: subscription::<LineCommands>(&mut node, &names.topic(&names.namespace, "batch/cmd"))?,
+        batch_state: publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?,
         params: params.clone(),
     };
     let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
@@ -186,11 +188,26 @@ struct LineRuntime {
     counters: LineCounters,
 }
 
-/// Node-wide publishers and settings.
+/// Node-wide endpoints and settings. `batch/cmd` and `batch/state` (in the node's namespace)
+/// carry every line at once: a vectorised client exchanges two messages per round trip instead
+/// of two per line, which is what lets one rclpy process drive many lines.
 struct Shared {
     clock_pub: Publisher<Clock>,
     diagnostics_pub: Publisher<DiagnosticArray>,
+    batch_cmd: Subscription<LineCommands>,
+    batch_state: Publisher<LineStates>,
     params: NodeParams,
+}
+
+impl Shared {
+    fn publish_batch_state(&self, runtimes: &[LineRuntime]) {
+        let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
+        let states: Vec<LineState> = runtimes.iter().map(|r| line_state(&r.host)).collect();
+        let states = LineStates::from_states(Header { stamp, frame_id: String::new() }, &states);
+        if let Err(e) = self.batch_state.publish(states) {
+            log("WARN", format!("cannot publish batch/state: {e:?}"));
+        }
+    }
 }
 
 impl LineEndpoints {
@@ -229,7 +246,7 @@ impl LineEndpoints {
 
     /// Publishes everything that describes the current tick; `state` last, because clients wait
     /// for it and by then the sensors of the same tick are out.
-    fn publish_tick(&self, host: &HostedLine, outcome: Option<&StepOutcome>) {
+    fn publish_tick(&self, host: &HostedLine) {
         let line = host.line();
         let header = Header { stamp: host.stamp(), frame_id: String::new() };
         let (episode, step) = (line.episode(), line.step_count());
@@ -262,42 +279,10 @@ impl LineEndpoints {
         );
         if let Some(ratio) = &self.ratio {
             let message =
-                MaterialRatio { header: header.clone(), episode, step, ratio: input.ratio(), category: input.category() as u8 };
+                MaterialRatio { header, episode, step, ratio: input.ratio(), category: input.category() as u8 };
             self.send(ratio, "sensors/ratio", message);
         }
-        let containers = line.containers();
-        let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-        // Right after a reset no step has happened: report the start state with reward 0.
-        let (occupancy, accuracy, reward) = match outcome {
-            Some(o) => (o.occupancy, o.accuracy, o.reward),
-            None => (belt.occupancy(), line.belt_accuracy(), 0.0),
-        };
-        let state = LineState {
-            header,
-            episode,
-            step,
-            seed: line.seed(),
-            speed: line.speed(),
-            speed_index: line.speed_index() as u8,
-            mode: line.mode() as u8,
-            occupancy,
-            accuracy,
-            reward,
-            cumulative_reward: line.cumulative_reward(),
-            purity: containers.purity(),
-            recall_a: containers.recall_a(),
-            recall_b: containers.recall_b(),
-            container_a: count(containers.a),
-            container_a_false: count(containers.a_false),
-            container_b: count(containers.b),
-            container_b_false: count(containers.b_false),
-            speed_changes: line.speed_changes(),
-            observation_quantity: observation.quantity,
-            observation_category: observation.category as u8,
-            terminated: false,
-            truncated: line.truncated(),
-        };
-        self.send(&self.state, "state", state);
+        self.send(&self.state, "state", line_state(host));
     }
 
     fn publish_reset_event(&self, host: &HostedLine) {
@@ -323,8 +308,47 @@ impl LineEndpoints {
     }
 }
 
+/// The `state` message of a line's current tick. Right after a reset no step has happened: it
+/// reports the start state with reward 0.
+fn line_state(host: &HostedLine) -> LineState {
+    let line = host.line();
+    let containers = line.containers();
+    let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+    let observation = line.observation();
+    let (occupancy, accuracy, reward) = match line.last_step() {
+        Some(o) => (o.occupancy, o.accuracy, o.reward),
+        None => (line.belt().occupancy(), line.belt_accuracy(), 0.0),
+    };
+    LineState {
+        header: Header { stamp: host.stamp(), frame_id: String::new() },
+        episode: line.episode(),
+        step: line.step_count(),
+        seed: line.seed(),
+        speed: line.speed(),
+        speed_index: line.speed_index() as u8,
+        mode: line.mode() as u8,
+        occupancy,
+        accuracy,
+        reward,
+        cumulative_reward: line.cumulative_reward(),
+        purity: containers.purity(),
+        recall_a: containers.recall_a(),
+        recall_b: containers.recall_b(),
+        container_a: count(containers.a),
+        container_a_false: count(containers.a_false),
+        container_b: count(containers.b),
+        container_b_false: count(containers.b_false),
+        speed_changes: line.speed_changes(),
+        observation_quantity: observation.quantity,
+        observation_category: observation.category as u8,
+        terminated: false,
+        truncated: line.truncated(),
+    }
+}
+
 /// Everything from DDS that can wake the node.
 enum Event {
+    Batch(Result<(LineCommands, MessageInfo), String>),
     Speed(usize, Result<(SpeedCommand, MessageInfo), String>),
     Mode(usize, Result<(SortModeCommand, MessageInfo), String>),
     Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
@@ -348,11 +372,13 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
         }
     };
     for (e, r) in endpoints.iter().zip(runtimes.iter()) {
-        e.publish_tick(&r.host, None);
+        e.publish_tick(&r.host);
     }
     publish_clock(runtimes);
 
-    let mut events = stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)));
+    let batch = shared.batch_cmd.async_stream().map(|r| Event::Batch(r.map_err(|e| format!("{e:?}")))).boxed_local();
+    let mut events =
+        stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)).chain(std::iter::once(batch)));
     let mut signals = signals.fuse();
     let realtime = shared.params.mode == TickMode::Realtime;
     let mut timer = StreamExt::fuse(if realtime {
@@ -366,6 +392,12 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     loop {
         futures::select! {
             event = events.select_next_some() => match event {
+                Event::Batch(received) => {
+                    if handle_batch(endpoints, runtimes, shared, received) {
+                        shared.publish_batch_state(runtimes);
+                        publish_clock(runtimes);
+                    }
+                }
                 Event::Speed(k, received) => {
                     let (e, r) = (&endpoints[k], &mut runtimes[k]);
                     let result = match &received {
@@ -395,11 +427,12 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     let observation = r.host.reset(request.has_seed.then_some(request.seed));
                     r.counters.episodes += 1;
                     e.publish_reset_event(&r.host);
-                    e.publish_tick(&r.host, None);
+                    e.publish_tick(&r.host);
                     let response = reset_response(&r.host, observation, request.has_seed);
                     if let Err(error) = e.reset.async_send_response(request_id, response).await {
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
                     }
+                    shared.publish_batch_state(runtimes);
                     publish_clock(runtimes);
                 }
                 Event::Reset(k, Err(error)) => {
@@ -409,17 +442,18 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
             _ = timer.select_next_some() => {
                 for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
                     match r.host.timer_tick() {
-                        TimerTick::Stepped(outcome) => {
+                        TimerTick::Stepped(_) => {
                             r.counters.ticks += 1;
-                            e.publish_tick(&r.host, Some(&outcome));
+                            e.publish_tick(&r.host);
                         }
                         TimerTick::Reset(_) => {
                             r.counters.episodes += 1;
                             e.publish_reset_event(&r.host);
-                            e.publish_tick(&r.host, None);
+                            e.publish_tick(&r.host);
                         }
                     }
                 }
+                shared.publish_batch_state(runtimes);
                 publish_clock(runtimes);
             },
             _ = diagnostics.select_next_some() => publish_diagnostics(runtimes, shared, started),
@@ -432,6 +466,53 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     }
 }
 
+/// Applies a batch command line by line, through the same rules as the per-line topics (mode
+/// first, then speed). Returns whether any line stepped.
+fn handle_batch(
+    endpoints: &[LineEndpoints],
+    runtimes: &mut [LineRuntime],
+    shared: &Shared,
+    received: Result<(LineCommands, MessageInfo), String>,
+) -> bool {
+    let n = runtimes.len();
+    let advanced = shared.params.line.variant == Variant::Advanced;
+    let cmd = match received {
+        Ok((cmd, _)) => cmd,
+        Err(error) => {
+            settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err((Rejection::Malformed, format!("message ({error})"))));
+            return false;
+        }
+    };
+    let modes_ok = cmd.modes.len() == n || (!advanced && cmd.modes.is_empty());
+    if cmd.stamp_sec.len() != n || cmd.stamp_nanosec.len() != n || cmd.speeds.len() != n || !modes_ok {
+        let detail = format!(
+            "batch of {} stamps, {} speeds, {} modes for {n} lines",
+            cmd.stamp_sec.len(),
+            cmd.speeds.len(),
+            cmd.modes.len()
+        );
+        settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err((Rejection::Malformed, detail)));
+        return false;
+    }
+    let mut stepped = false;
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
+        let stamp = Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] };
+        if advanced {
+            let mode = cmd.modes[k];
+            let result = r
+                .host
+                .on_sort_mode(stamp, mode)
+                .map_err(|reason| (reason, format!("sort mode {mode} for stamp {}", show_stamp(stamp))));
+            stepped |= settle(e, r, "batch/cmd", result);
+        }
+        let speed = cmd.speeds[k];
+        let result =
+            r.host.on_speed(stamp, speed).map_err(|reason| (reason, format!("speed {speed} for stamp {}", show_stamp(stamp))));
+        stepped |= settle(e, r, "batch/cmd", result);
+    }
+    stepped
+}
+
 /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
 /// whether the line stepped.
 fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Accepted, (Rejection, String)>) -> bool {
@@ -440,10 +521,10 @@ fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Ac
             r.counters.accepted += 1;
             false
         }
-        Ok(Accepted::Stepped(outcome)) => {
+        Ok(Accepted::Stepped(_)) => {
             r.counters.accepted += 1;
             r.counters.ticks += 1;
-            e.publish_tick(&r.host, Some(&outcome));
+            e.publish_tick(&r.host);
             true
         }
         Err((reason, detail)) => {

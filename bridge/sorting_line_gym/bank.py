@@ -1,0 +1,239 @@
+"""The lines of one node, driven together: what both the single-line environment and the
+vector environments stand on.
+
+A bank owns one rclpy node and one executor, and (with ``node="spawn"``) the node process. One
+call to :meth:`LineBank.step` publishes the commands of every line and waits for every line's next
+``state``: one round trip steps all lines.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from typing import Sequence
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
+
+from .transport import (
+    QOS,
+    BatchLink,
+    BridgeError,
+    LineLink,
+    NodeProcess,
+    Waiter,
+    acquire_rclpy,
+    private_namespace,
+    release_rclpy,
+    stamp_key,
+)
+
+#: The paper's setups: input generator, relative sensor noise, switching penalty.
+SETUPS = {
+    "A": {"input": "random", "obs_noise": 0.0, "action_penalty": 0.0},
+    "B": {"input": "seasonal", "obs_noise": 0.0, "action_penalty": 0.5},
+    "C": {"input": "random", "obs_noise": 0.3, "action_penalty": 0.0},
+    "D": {"input": "seasonal", "obs_noise": 0.3, "action_penalty": 0.5},
+}
+
+#: Longest episode the node accepts; used when truncation is left to a TimeLimit wrapper.
+UNLIMITED_STEPS = 1_000_000
+
+#: How often the first reset is retried when its step-0 state does not arrive (late matching).
+HANDSHAKE_ATTEMPTS = 3
+
+_bank_ids = itertools.count()
+
+
+class LineBank:
+    """N lines hosted by one `sorting_line node`, stepped in lock-step together: with
+    ``batch=False`` through each line's own topics (:meth:`step`), with ``batch=True`` through the
+    node's ``batch/cmd`` and ``batch/state`` (:meth:`step_batch`)."""
+
+    def __init__(
+        self,
+        *,
+        variant: str,
+        setup: str = "A",
+        lines: int = 1,
+        namespace: str | None = None,
+        node: str = "spawn",
+        max_steps: int | None = None,
+        threshold: float = 0.7,
+        step_timeout: float = 2.0,
+        startup_timeout: float = 20.0,
+        watch_sensors: bool = False,
+        batch: bool = False,
+    ):
+        if variant not in ("basic", "advanced"):
+            raise ValueError(f"variant = {variant!r} is not valid: allowed 'basic', 'advanced'")
+        if setup not in SETUPS:
+            raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
+        if node not in ("spawn", "attach"):
+            raise ValueError(f"node = {node!r} is not valid: allowed 'spawn' (start a node) or 'attach'")
+        if not 1 <= lines <= 64:
+            raise ValueError(f"lines = {lines} is out of range: allowed 1 ..= 64")
+        if step_timeout <= 0 or startup_timeout <= 0:
+            raise ValueError("step_timeout and startup_timeout must be positive (seconds)")
+        if node == "attach" and not namespace:
+            raise ValueError("node='attach' needs the namespace of the running node")
+        self.variant = variant
+        self.advanced = variant == "advanced"
+        self.setup = setup
+        self.step_timeout = step_timeout
+        self.startup_timeout = startup_timeout
+        self.namespace = namespace or private_namespace()
+        self.process: NodeProcess | None = None
+        self._closed = False
+        acquire_rclpy()
+        try:
+            if node == "spawn":
+                options = dict(SETUPS[setup], variant=variant, threshold=threshold, lines=lines)
+                options["max_steps"] = max_steps if max_steps is not None else UNLIMITED_STEPS
+                self.process = NodeProcess(self.namespace, options)
+            # No parameter services or rosout: every entity is one more thing each wait scans.
+            self.node = rclpy.create_node(
+                f"sorting_line_gym_{os.getpid()}_{next(_bank_ids)}",
+                start_parameter_services=False,
+                enable_rosout=False,
+            )
+            self.executor = SingleThreadedExecutor()
+            self.executor.add_node(self.node)
+            base = self.namespace.rstrip("/")
+            spaces = [base] if lines == 1 else [f"{base}/line_{k}" for k in range(lines)]
+            # The single-line env uses the line's own topics (the documented per-line protocol);
+            # vector envs the batch topics, two messages per round trip whatever the number of lines.
+            per_line = not batch
+            self.links = [LineLink(self.node, ns, self.advanced, per_line_topics=per_line) for ns in spaces]
+            self.batch = None if per_line else BatchLink(self.node, self.namespace, self.links)
+            self.waiter = Waiter(self.executor, self.process)
+            self.sensors: list[dict[str, dict]] = [{"input": {}, "belt": {}} for _ in spaces]
+            if watch_sensors:
+                for k, ns in enumerate(spaces):
+                    self.node.create_subscription(MaterialInput, f"{ns}/input", self._keep(k, "input"), QOS)
+                    self.node.create_subscription(BeltOccupancy, f"{ns}/belt/occupancy", self._keep(k, "belt"), QOS)
+            self._connected = False
+        except BaseException:
+            self.close()
+            raise
+
+    def _keep(self, k: int, kind: str):
+        store = self.sensors[k][kind]
+
+        def keep(message):
+            store[stamp_key(message.header.stamp)] = message
+            while len(store) > 8:  # the renderer needs the current tick only
+                store.pop(next(iter(store)))
+
+        return keep
+
+    def __len__(self) -> int:
+        return len(self.links)
+
+    # ----------------------------------------------------------------------------------------
+    def _connect(self) -> None:
+        self.waiter.until(
+            lambda: all(link.endpoints_matched(self.node) for link in self.links)
+            and (self.batch is None or self.batch.matched(self.node)),
+            self.startup_timeout,
+            lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics)",
+        )
+        self._connected = True
+
+    def reset(self, seeds: dict[int, int | None]):
+        """Resets the given lines (index -> seed, None = the node's streams carry on) and returns
+        their reset responses. The first reset also proves that states flow (handshake)."""
+        if not self._connected:
+            self._connect()
+            responses = {}
+            for attempt in range(HANDSHAKE_ATTEMPTS):
+                responses.update(self._reset_once(seeds))
+                try:
+                    if self.batch is not None:
+                        first_state = self.batch.saw_current_ticks
+                    else:
+                        first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
+                    self.waiter.until(
+                        first_state,
+                        min(2.0, self.step_timeout),
+                        lambda: f"the first state of {self.namespace} after reset",
+                    )
+                    return responses
+                except BridgeError:
+                    if attempt == HANDSHAKE_ATTEMPTS - 1 or (self.process and not self.process.alive()):
+                        raise
+            return responses
+        return self._reset_once(seeds)
+
+    def _reset_once(self, seeds: dict[int, int | None]):
+        for k, seed in seeds.items():
+            self.links[k].send_reset(seed)
+        self.waiter.until(
+            lambda: all(self.links[k].reset_done() for k in seeds),
+            self.step_timeout,
+            lambda: "the reply of " + ", ".join(f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done()),
+        )
+        return {k: self.links[k].finish_reset() for k in seeds}
+
+    def step(self, actions: Sequence[tuple[int, int]]) -> list[LineState]:
+        """Sends (speed index, mode) to every line and waits for each line's next state."""
+        if len(actions) != len(self.links):
+            raise ValueError(f"{len(actions)} actions for {len(self.links)} lines")
+        for link in self.links:
+            if link.tick is None:
+                raise BridgeError(f"{link.namespace}: step() before reset()")
+        if self.batch is not None:
+            raise BridgeError("a bank of several lines steps with step_batch()")
+        for link, (speed, mode) in zip(self.links, actions):
+            link.send_action(speed, mode)
+        pending = set(range(len(self.links)))
+
+        def arrived() -> bool:
+            for k in list(pending):
+                link = self.links[k]
+                if link.take_next_state():
+                    pending.discard(k)
+                    continue
+                link.drain()
+                if link.take_next_state():
+                    pending.discard(k)
+            return not pending
+
+        self.waiter.until(
+            arrived, self.step_timeout, lambda: "; ".join(self.links[k].describe_wait() for k in sorted(pending))
+        )
+        return [link.last_state for link in self.links]
+
+    def step_batch(self, speed_indices, modes):
+        """Steps every line through ``batch/cmd`` and returns the ``batch/state`` message (arrays,
+        entry k = line k)."""
+        if self.batch is None:
+            raise BridgeError("a single-line bank steps with step()")
+        for link in self.links:
+            if link.tick is None:
+                raise BridgeError(f"{link.namespace}: step() before reset()")
+        self.batch.send(speed_indices, modes)
+        self.waiter.until(self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
+        return self.batch.last
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        node = getattr(self, "node", None)
+        if node is not None:
+            self.executor.remove_node(node)
+            node.destroy_node()
+            self.executor.shutdown(timeout_sec=0.5)
+        if self.process is not None:
+            # A node killed from outside (a fault test) is not an error of close().
+            self.process.stop()
+        release_rclpy()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass

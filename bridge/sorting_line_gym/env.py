@@ -1,0 +1,239 @@
+"""The sorting line as a Gymnasium environment, one line of a `sorting_line` ROS 2 node.
+
+## Description
+Material enters a conveyor belt in batches of two materials, A and B; a sorting machine splits
+each batch into two containers. The faster the belt, the more it earns, but the less accurately a
+crowded belt is sorted. The advanced line adds a ratio sensor and a sorting mode that helps when it
+matches the batch (A-rich, B-rich or mixed). This is the SortingEnv benchmark (Maus et al.) with
+the reference implementation's dynamics, simulated by the Rust node and reached over ROS 2 topics.
+
+## Action space
+- `SortingLine-v0`: `Discrete(10)`, the belt speed index i (speed (i + 1) / 10).
+- `SortingLineAdvanced-v0`: `Discrete(30)`, `speed_index * 3 + mode`, mode 0 mixed, 1 A-rich,
+  2 B-rich.
+
+## Observation space
+- basic: `Box(0, 1, (1,), float32)`: the input sensor's reading of the next batch's amount
+  (relative noise in setups C, D; two decimals).
+- advanced: `Box(0, 2, (2,), float32)`: the reading and the next batch's ratio category (0, 1, 2).
+The action answers the observation: it sets the speed (and mode) the observed batch is sorted at.
+
+## Reward
+If the accuracy of the batch is below the threshold (0.7): -0.1. Otherwise
+0.5 * (accuracy - 0.7) / 0.3 + 0.5 * (speed - 0.1) / 0.9 - penalty, where the penalty (0.5 in
+setups B, D) is charged when the belt speed changes.
+
+## Starting state
+Fixed line contents (input 30/50, belt 40/20, machine 75/25, speed 0.6); `reset(seed=s)` restarts
+the node's random streams from s, so the same seed and actions give the same trajectory as
+`sorting_line trace --seed s` and `sorting_line eval`.
+
+## Episode end
+No terminal state. Episodes are truncated by the time limit: `gymnasium.make` applies a TimeLimit
+of 50 steps (`max_episode_steps=250` for training); constructing the class directly with
+`max_episode_steps=N` makes the node truncate at N.
+
+## Arguments
+`setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "spawn" (default: start,
+own and stop a node process in a namespace of its own) or "attach" (use the node serving
+`namespace`); `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
+`startup_timeout`; `render_mode` "rgb_array" or "human".
+
+## Info
+accuracy, purity (correct / all sorted), recall_a, recall_b, speed, speed_index, mode, occupancy,
+containers (a, a_false, b, b_false), speed_changes, cumulative_reward, episode, step, sim_time, seed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .bank import LineBank
+
+#: Largest seed the bridge draws for the node when reset() gets none.
+SEED_BOUND = 2**63
+
+
+def observation_space(variant: str) -> spaces.Box:
+    if variant == "advanced":
+        return spaces.Box(low=0.0, high=2.0, shape=(2,), dtype=np.float32)
+    return spaces.Box(low=0.0, high=1.0, shape=(1,), dtype=np.float32)
+
+
+def action_space(variant: str) -> spaces.Discrete:
+    return spaces.Discrete(30 if variant == "advanced" else 10)
+
+
+def decode_action(variant: str, action) -> tuple[int, int]:
+    """(speed index, mode) of a Gymnasium action."""
+    a = int(action)
+    if variant == "advanced":
+        return a // 3, a % 3
+    return a, 0
+
+
+def observe(variant: str, quantity: float, category: int) -> np.ndarray:
+    if variant == "advanced":
+        return np.array([quantity, category], dtype=np.float32)
+    return np.array([quantity], dtype=np.float32)
+
+
+def state_info(state) -> dict[str, Any]:
+    """The KPIs of a LineState message."""
+    stamp = state.header.stamp
+    return {
+        "accuracy": state.accuracy,
+        "purity": state.purity,
+        "recall_a": state.recall_a,
+        "recall_b": state.recall_b,
+        "speed": state.speed,
+        "speed_index": int(state.speed_index),
+        "mode": int(state.mode),
+        "occupancy": state.occupancy,
+        "containers": (state.container_a, state.container_a_false, state.container_b, state.container_b_false),
+        "speed_changes": int(state.speed_changes),
+        "cumulative_reward": state.cumulative_reward,
+        "episode": int(state.episode),
+        "step": int(state.step),
+        "sim_time": stamp.sec + stamp.nanosec * 1e-9,
+        "seed": int(state.seed),
+    }
+
+
+class SortingLineEnv(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
+
+    def __init__(
+        self,
+        setup: str = "A",
+        variant: str = "basic",
+        namespace: str | None = None,
+        node: str = "spawn",
+        max_episode_steps: int | None = None,
+        step_timeout: float = 2.0,
+        startup_timeout: float = 20.0,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
+        self.variant = variant
+        self.render_mode = render_mode
+        self.observation_space = observation_space(variant)
+        self.action_space = action_space(variant)
+        self.bank = LineBank(
+            variant=variant,
+            setup=setup,
+            namespace=namespace,
+            node=node,
+            max_steps=max_episode_steps,
+            step_timeout=step_timeout,
+            startup_timeout=startup_timeout,
+            watch_sensors=render_mode is not None,
+        )
+        self.namespace = self.bank.namespace
+        self._history = None
+        self._live = None
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        # One seed reproduces a whole run: without a seed, the next node seed comes from np_random.
+        node_seed = int(seed) if seed is not None else int(self.np_random.integers(0, SEED_BOUND))
+        response = self.bank.reset({0: node_seed})[0]
+        self._history = _History(self.bank.links[0]) if self.render_mode else None
+        info = {"episode": int(response.episode), "seed": int(response.seed), "step": 0}
+        if self.render_mode == "human":
+            self.render()
+        return observe(self.variant, response.quantity, response.category), info
+
+    def step(self, action):
+        if not self.action_space.contains(action):
+            raise ValueError(f"action {action!r} is not in {self.action_space}")
+        state = self.bank.step([decode_action(self.variant, action)])[0]
+        obs = observe(self.variant, state.observation_quantity, state.observation_category)
+        if self._history is not None:
+            self._history.record(state, self.bank.sensors[0])
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(state.reward), False, bool(state.truncated), state_info(state)
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render_mode: pass render_mode='rgb_array' or 'human'")
+            return None
+        from . import render as dashboard
+
+        frame = self._history.frame(self.variant, self.spec.id if self.spec else "SortingLine", self.bank.setup)
+        if self.render_mode == "rgb_array":
+            return dashboard.render_dashboard(frame)
+        if self._live is None:
+            self._live = dashboard.LiveDashboard()
+        self._live.show(frame)
+        return None
+
+    def close(self):
+        if self._live is not None:
+            self._live.close()
+            self._live = None
+        bank = getattr(self, "bank", None)
+        if bank is not None:
+            bank.close()
+        super().close()
+
+
+class _History:
+    """What the dashboard shows: the episode so far, rebuilt from the node's messages."""
+
+    def __init__(self, link):
+        self.link = link
+        self.states = []
+        self.belts = []  # belt (A, B) per tick, to know what is in the machine
+        self.input_ab = (30, 50)
+        self.belt_ab = (40, 20)
+        self.machine_ab = (75, 25)
+        self.episode = link.tick.episode if link.tick else 0
+        self.seed = None
+
+    def record(self, state, sensors):
+        key = (state.header.stamp.sec, state.header.stamp.nanosec)
+        self.machine_ab = self.belt_ab
+        belt = sensors["belt"].get(key)
+        if belt is not None:
+            self.belt_ab = (belt.amount_a, belt.amount_b)
+        entered = sensors["input"].get(key)
+        if entered is not None:
+            self.input_ab = (entered.amount_a, entered.amount_b)
+        self.states.append(state)
+        self.seed = state.seed
+
+    def frame(self, variant: str, env_id: str, setup: str):
+        from .render import DashboardFrame
+
+        s = self.states
+        last = s[-1] if s else None
+        return DashboardFrame(
+            variant=variant,
+            title=f"{env_id} setup {setup}, seed {self.seed}, episode {self.episode}",
+            input_ab=self.input_ab,
+            belt_ab=self.belt_ab,
+            machine_ab=self.machine_ab,
+            containers=(
+                (last.container_a, last.container_a_false, last.container_b, last.container_b_false) if last else (0, 0, 0, 0)
+            ),
+            belt_accuracy=last.accuracy if last else 0.75,
+            sorter_accuracy=s[-2].accuracy if len(s) > 1 else 0.75,
+            occupancy=last.occupancy if last else 0.6,
+            speed=last.speed if last else 0.6,
+            mode=int(last.mode) if (last and variant == "advanced") else (0 if variant == "advanced" else None),
+            purity=last.purity if last else 0.0,
+            history_reward=[x.reward for x in s],
+            history_speed=[x.speed for x in s],
+            history_accuracy=[x.accuracy for x in s],
+            history_occupancy=[x.occupancy for x in s],
+            history_mode=[int(x.mode) for x in s] if variant == "advanced" else None,
+            max_steps=max(50, len(s)),
+        )

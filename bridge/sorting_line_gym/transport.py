@@ -1,0 +1,368 @@
+"""The rclpy side of the bridge: the node process, one line's endpoints, and waiting.
+
+Rules this module keeps (shared/platform/ros2-without-a-ros-install.md explains why):
+- one executor per bridge, owned by it; no ``spin_until_future_complete`` (it leaks a task per
+  call in rclpy 7.1): every wait is ``executor.spin_once`` in a loop with a deadline;
+- every wait has a timeout and fails with an error naming the namespace, the topic or service and
+  the tick it waited for, and fails at once if the node process it owns has died;
+- QoS is explicit (reliable, volatile, keep-last 10, as the node);
+- the first exchange is a handshake: a reset whose step-0 ``state`` must arrive, which proves
+  that commands and states flow before the first step (volatile samples sent before matching
+  are lost, and graph counts can lie for a while after a node dies).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+from array import array
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from builtin_interfaces.msg import Time
+from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, SortModeCommand, SpeedCommand
+from sorting_line_interfaces.srv import ResetLine
+
+#: The ten belt speeds; a speed index i commands SPEEDS[i].
+SPEEDS = tuple(round(0.1 * (i + 1), 1) for i in range(10))
+
+#: The node's QoS for commands and state.
+QOS = QoSProfile(
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+    history=HistoryPolicy.KEEP_LAST,
+)
+
+
+class BridgeError(RuntimeError):
+    """The node or the link to it failed (the node exited, a reset was refused, ...)."""
+
+
+class BridgeTimeout(BridgeError, TimeoutError):
+    """A wait ran out of time; the message names what was waited for."""
+
+
+# --------------------------------------------------------------------------------------------
+# rclpy, once per process
+# --------------------------------------------------------------------------------------------
+_rclpy_lock = threading.Lock()
+_rclpy_users = 0
+_rclpy_ours = False
+
+
+def acquire_rclpy() -> None:
+    """Initialises rclpy if nobody has; paired with :func:`release_rclpy`."""
+    global _rclpy_users, _rclpy_ours
+    with _rclpy_lock:
+        if _rclpy_users == 0 and not rclpy.ok():
+            rclpy.init()
+            _rclpy_ours = True
+        _rclpy_users += 1
+
+
+def release_rclpy() -> None:
+    """Shuts rclpy down when the last user that needed it to be initialised is gone."""
+    global _rclpy_users, _rclpy_ours
+    with _rclpy_lock:
+        _rclpy_users = max(0, _rclpy_users - 1)
+        if _rclpy_users == 0 and _rclpy_ours and rclpy.ok():
+            rclpy.shutdown()
+            _rclpy_ours = False
+
+
+# --------------------------------------------------------------------------------------------
+# The node process
+# --------------------------------------------------------------------------------------------
+def find_node_binary() -> str:
+    """The `sorting_line` binary: $SORTING_LINE_BIN, this checkout's release build, or PATH."""
+    candidates = [os.environ.get("SORTING_LINE_BIN")]
+    repo = Path(__file__).resolve().parents[2]
+    candidates.append(str(repo / "target" / "release" / "sorting_line"))
+    candidates.append(shutil.which("sorting_line"))
+    for c in candidates:
+        if c and os.path.isfile(c) and os.access(c, os.X_OK):
+            return c
+    raise BridgeError(
+        "cannot find the sorting_line binary: set SORTING_LINE_BIN, or build it with "
+        "`cargo build --release` (launch_scripts/setup.sh does)"
+    )
+
+
+_spawn_counter = itertools.count()
+
+
+def private_namespace() -> str:
+    """A namespace no other bridge in any process uses: /sorting_line_gym/p<pid>_<n>."""
+    return f"/sorting_line_gym/p{os.getpid()}_{next(_spawn_counter)}"
+
+
+class NodeProcess:
+    """A `sorting_line node` process owned by a bridge: started with the given options in its own
+    namespace, its log kept in a temporary file, stopped with SIGINT (SIGKILL if it hangs)."""
+
+    def __init__(self, namespace: str, options: dict[str, object]):
+        self.namespace = namespace
+        args = [find_node_binary(), "node"]
+        for key, value in options.items():
+            if value is not None:
+                args += [f"--{key.replace('_', '-')}", str(value)]
+        args += ["--ros-args", "-r", f"__ns:={namespace}"]
+        self.command = args
+        self._log = tempfile.NamedTemporaryFile(prefix="sorting_line_node_", suffix=".log", delete=False)
+        self.log_path = self._log.name
+        self.process = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT)
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def log_tail(self, lines: int = 8) -> str:
+        try:
+            text = Path(self.log_path).read_text(errors="replace").strip().splitlines()
+        except OSError:
+            return ""
+        return "\n".join(text[-lines:])
+
+    def death_notice(self) -> str:
+        return (
+            f"the sorting_line node for {self.namespace} exited with code {self.process.returncode}"
+            f" (log {self.log_path}):\n{self.log_tail()}"
+        )
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """Stops the node; returns its exit code."""
+        if self.alive():
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout)
+        self._log.close()
+        return self.process.returncode
+
+
+# --------------------------------------------------------------------------------------------
+# Waiting
+# --------------------------------------------------------------------------------------------
+class Waiter:
+    """Spins one executor until a condition holds, with a deadline and a liveness check."""
+
+    def __init__(self, executor: SingleThreadedExecutor, process: NodeProcess | None):
+        self.executor = executor
+        self.process = process
+
+    def until(self, done: Callable[[], bool], timeout: float, what: Callable[[], str]) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise BridgeTimeout(f"timed out after {timeout:g} s waiting for {what()}")
+            if self.process is not None and not self.process.alive():
+                raise BridgeError(f"while waiting for {what()}: {self.process.death_notice()}")
+            self.executor.spin_once(timeout_sec=min(remaining, 0.05))
+
+
+# --------------------------------------------------------------------------------------------
+# One line
+# --------------------------------------------------------------------------------------------
+def stamp_key(t: Time) -> tuple[int, int]:
+    return (t.sec, t.nanosec)
+
+
+@dataclass
+class Tick:
+    """Where a line is: the stamp to answer, the episode and the step."""
+
+    stamp: Time
+    episode: int
+    step: int
+
+
+def _drain(sub, inbox: deque) -> None:
+    """Takes every message a subscription has already received, without the executor.
+
+    The executor hands over one message per wake-up, each wake-up rebuilding a wait set over every
+    entity; when several messages are due together (the states of a round trip), taking the rest
+    directly, as the executor itself does (``Subscription.handle.take_message``), saves those
+    wake-ups.
+    """
+    with sub.handle:
+        while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
+            inbox.append(taken[0])
+
+
+class LineLink:
+    """The endpoints of one line on the bridge's rclpy node, and its lock-step position.
+
+    With ``per_line_topics=False`` (lines driven through :class:`BatchLink`) only the reset
+    service is used: fewer entities for the executor to scan."""
+
+    def __init__(self, node: Node, namespace: str, advanced: bool, per_line_topics: bool = True):
+        self.namespace = namespace.rstrip("/") or ""
+        self.advanced = advanced
+        self.node = node
+        name = lambda rel: f"{self.namespace}/{rel}"
+        self.state_topic = name("state")
+        self.reset_client = node.create_client(ResetLine, name("reset"), qos_profile=QOS)
+        self.speed_pub = self.mode_pub = self.state_sub = None
+        # States arrive in order; keep a short backlog so nothing is lost while we publish.
+        self.inbox: deque[LineState] = deque(maxlen=64)
+        if per_line_topics:
+            self.speed_pub = node.create_publisher(SpeedCommand, name("cmd/speed"), QOS)
+            self.mode_pub = node.create_publisher(SortModeCommand, name("cmd/sort_mode"), QOS) if advanced else None
+            self.state_sub = node.create_subscription(LineState, self.state_topic, lambda m: self.inbox.append(m), QOS)
+        self.tick: Tick | None = None
+        self.last_state: LineState | None = None
+        self._reset_future = None
+
+    # -- matching ----------------------------------------------------------------------------
+    def endpoints_matched(self, node: Node) -> bool:
+        """Commands have a reader and the state topic a writer (necessary, not sufficient)."""
+        ok = self.reset_client.service_is_ready()
+        if self.speed_pub is not None:
+            ok = ok and self.speed_pub.get_subscription_count() > 0 and node.count_publishers(self.state_topic) > 0
+        if self.mode_pub is not None:
+            ok = ok and self.mode_pub.get_subscription_count() > 0
+        return ok
+
+    # -- reset -------------------------------------------------------------------------------
+    def send_reset(self, seed: int | None) -> None:
+        request = ResetLine.Request()
+        request.has_seed = seed is not None
+        request.seed = int(seed) if seed is not None else 0
+        self._reset_future = self.reset_client.call_async(request)
+
+    def reset_done(self) -> bool:
+        return self._reset_future is not None and self._reset_future.done()
+
+    def finish_reset(self) -> ResetLine.Response:
+        response = self._reset_future.result()
+        self._reset_future = None
+        if response is None or not response.success:
+            raise BridgeError(f"{self.namespace}/reset refused: {getattr(response, 'message', 'no response')}")
+        self.tick = Tick(response.stamp, response.episode, 0)
+        # States of earlier ticks can no longer be what anyone waits for. The new episode's
+        # step-0 state may already be here (the node publishes it before replying): keep it.
+        start = stamp_key(response.stamp)
+        kept = [s for s in self.inbox if stamp_key(s.header.stamp) >= start]
+        self.inbox.clear()
+        self.inbox.extend(kept)
+        return response
+
+    def saw_state_of_current_tick(self) -> bool:
+        """Whether the step-0 state of the current episode arrived (the handshake's proof)."""
+        t = self.tick
+        return any(s.episode == t.episode and stamp_key(s.header.stamp) == stamp_key(t.stamp) for s in self.inbox)
+
+    # -- step --------------------------------------------------------------------------------
+    def send_action(self, speed_index: int, mode: int) -> None:
+        t = self.tick
+        if self.mode_pub is not None:
+            m = SortModeCommand()
+            m.header.stamp = t.stamp
+            m.mode = int(mode)
+            self.mode_pub.publish(m)
+        s = SpeedCommand()
+        s.header.stamp = t.stamp
+        s.speed = SPEEDS[speed_index]
+        self.speed_pub.publish(s)
+
+    def drain(self) -> None:
+        _drain(self.state_sub, self.inbox)
+
+    def take_next_state(self) -> bool:
+        """Consumes the inbox up to the state of the tick after ours; True once it is there."""
+        t = self.tick
+        while self.inbox:
+            s = self.inbox.popleft()
+            if s.episode == t.episode and s.step == t.step + 1:
+                self.last_state = s
+                self.tick = Tick(s.header.stamp, s.episode, s.step)
+                return True
+            # Anything else is older (the step-0 state, a previous episode): never returned.
+        return False
+
+    def describe_wait(self) -> str:
+        t = self.tick
+        return (
+            f"{self.state_topic} of episode {t.episode} step {t.step + 1} "
+            f"(answering the tick stamped {t.stamp.sec}.{t.stamp.nanosec:09d})"
+        )
+
+
+class BatchLink:
+    """``batch/cmd`` and ``batch/state`` of a node: every line's command in one message and every
+    line's state in one message of arrays, so a round trip over N lines costs two messages, not 2N,
+    and the states arrive as buffers rather than N message objects."""
+
+    def __init__(self, node: Node, namespace: str, links: list[LineLink]):
+        self.links = links
+        base = namespace.rstrip("/")
+        self.state_topic = f"{base}/batch/state"
+        self.cmd_pub = node.create_publisher(LineCommands, f"{base}/batch/cmd", QOS)
+        self.inbox: deque[LineStates] = deque(maxlen=64)
+        self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda m: self.inbox.append(m), QOS)
+        self.last: LineStates | None = None
+        self._speeds = np.array(SPEEDS)
+
+    def matched(self, node: Node) -> bool:
+        return self.cmd_pub.get_subscription_count() > 0 and node.count_publishers(self.state_topic) > 0
+
+    def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
+        cmd = LineCommands()
+        cmd.stamp_sec = array("i", (link.tick.stamp.sec for link in self.links))
+        cmd.stamp_nanosec = array("I", (link.tick.stamp.nanosec for link in self.links))
+        cmd.speeds = array("d", self._speeds[speed_indices].tolist())
+        if self.links[0].advanced:
+            cmd.modes = array("B", np.asarray(modes, dtype=np.uint8).tobytes())
+        self.cmd_pub.publish(cmd)
+
+    def _find(self, want_step) -> LineStates | None:
+        """The first batch in the inbox showing every line at the step ``want_step(link)`` of its
+        current episode; older batches are dropped."""
+        _drain(self.state_sub, self.inbox)
+        episodes = [link.tick.episode for link in self.links]
+        steps = [want_step(link) for link in self.links]
+        while self.inbox:
+            batch = self.inbox.popleft()
+            if len(batch.step) == len(self.links) and list(batch.episode) == episodes and list(batch.step) == steps:
+                return batch
+        return None
+
+    def saw_current_ticks(self) -> bool:
+        """Whether a batch showed every line at its current tick (the handshake after a reset)."""
+        batch = self._find(lambda link: link.tick.step)
+        if batch is None:
+            return False
+        self.inbox.appendleft(batch)  # still the newest state of the lines
+        return True
+
+    def take_next_states(self) -> bool:
+        batch = self._find(lambda link: link.tick.step + 1)
+        if batch is None:
+            return False
+        for k, link in enumerate(self.links):
+            stamp = Time(sec=batch.stamp_sec[k], nanosec=batch.stamp_nanosec[k])
+            link.tick = Tick(stamp, batch.episode[k], batch.step[k])
+        self.last = batch
+        return True
+
+    def describe_wait(self) -> str:
+        ticks = ", ".join(f"{link.namespace} step {link.tick.step + 1}" for link in self.links[:4])
+        more = f" and {len(self.links) - 4} more lines" if len(self.links) > 4 else ""
+        return f"{self.state_topic} with the next state of every line ({ticks}{more})"

@@ -1,0 +1,234 @@
+"""N lines of one `sorting_line node` (``--lines N``) as one vectorised environment: one round
+trip steps every line. Two faces over the same bank of lines:
+
+- :class:`SortingLineVectorEnv`, a Gymnasium ``VectorEnv`` (``gymnasium.make_vec(id, num_envs=N,
+  vectorization_mode="vector_entry_point")``), autoreset mode SAME_STEP: a line whose episode ends
+  is reset within the same step; its last observation and info are in ``infos["final_obs"]`` and
+  ``infos["final_info"]``.
+- :class:`SortingLineSB3VecEnv`, a Stable-Baselines3 ``VecEnv`` with SB3's conventions: same-step
+  reset, ``terminal_observation`` and ``TimeLimit.truncated`` in each line's info.
+
+Seeding: ``reset(seed=s)`` seeds line k with s + k (as the node seeds line k of ``--seed s``);
+every later reset of a line draws its node seed from that line's generator, so one seed reproduces
+the whole run.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .bank import LineBank
+from .env import SEED_BOUND, action_space, observation_space, observe
+
+
+def batch_info(b) -> dict[str, np.ndarray]:
+    """The KPIs of a ``LineStates`` message as arrays (entry k = line k), the same keys as the
+    single-line ``info`` (see ``env.state_info``)."""
+    arr = np.asarray
+    return {
+        "accuracy": arr(b.accuracy),
+        "purity": arr(b.purity),
+        "recall_a": arr(b.recall_a),
+        "recall_b": arr(b.recall_b),
+        "speed": arr(b.speed),
+        "speed_index": arr(b.speed_index, dtype=np.int64),
+        "mode": arr(b.mode, dtype=np.int64),
+        "occupancy": arr(b.occupancy),
+        "containers": np.stack([arr(b.container_a), arr(b.container_a_false), arr(b.container_b), arr(b.container_b_false)], axis=1),
+        "speed_changes": arr(b.speed_changes, dtype=np.int64),
+        "cumulative_reward": arr(b.cumulative_reward),
+        "episode": arr(b.episode, dtype=np.int64),
+        "step": arr(b.step, dtype=np.int64),
+        "sim_time": arr(b.stamp_sec) + arr(b.stamp_nanosec) * 1e-9,
+        "seed": arr(b.seed, dtype=np.uint64),
+    }
+
+
+def _line_info(info: dict[str, np.ndarray], k: int) -> dict[str, Any]:
+    """Line k's entry of a batched info, as the single-line env reports it."""
+    return {key: (tuple(int(x) for x in v[k]) if key == "containers" else v[k].item()) for key, v in info.items()}
+
+
+class _Lines:
+    """The bank plus per-line seed generators: what both vector faces share."""
+
+    def __init__(self, num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout):
+        self.variant = variant
+        self.bank = LineBank(
+            variant=variant,
+            setup=setup,
+            lines=num_envs,
+            namespace=namespace,
+            node=node,
+            max_steps=max_episode_steps,
+            step_timeout=step_timeout,
+            startup_timeout=startup_timeout,
+            batch=True,
+        )
+        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+
+    def seed_lines(self, seed: int | None) -> None:
+        if seed is not None:
+            self.rngs = [np.random.default_rng(seed + k) for k in range(len(self.rngs))]
+
+    def next_seed(self, k: int) -> int:
+        return int(self.rngs[k].integers(0, SEED_BOUND))
+
+    def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
+        responses = self.bank.reset(seeds)
+        return {k: observe(self.variant, r.quantity, r.category) for k, r in responses.items()}
+
+    def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        a = np.asarray(actions, dtype=np.int64)
+        if self.variant == "advanced":
+            speeds, modes = a // 3, a % 3
+        else:
+            speeds, modes = a, np.zeros_like(a)
+        b = self.bank.step_batch(speeds, modes)
+        quantity = np.asarray(b.observation_quantity, dtype=np.float32)
+        if self.variant == "advanced":
+            obs = np.stack([quantity, np.asarray(b.observation_category, dtype=np.float32)], axis=1)
+        else:
+            obs = quantity[:, None]
+        rewards = np.asarray(b.reward, dtype=np.float64)
+        truncated = np.asarray(b.truncated, dtype=bool)
+        return obs, rewards, truncated, batch_info(b)
+
+    def close(self):
+        self.bank.close()
+
+
+class SortingLineVectorEnv(VectorEnv):
+    """Gymnasium VectorEnv over the lines of one node (see the module docstring)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 4,
+        setup: str = "A",
+        variant: str = "basic",
+        namespace: str | None = None,
+        node: str = "spawn",
+        max_episode_steps: int | None = 50,
+        step_timeout: float = 2.0,
+        startup_timeout: float = 20.0,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None:
+            raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
+        self.num_envs = num_envs
+        self.single_observation_space = observation_space(variant)
+        self.single_action_space = action_space(variant)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.render_mode = None
+        self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+
+    def reset(self, *, seed: int | Sequence[int] | None = None, options: dict | None = None):
+        if isinstance(seed, (list, tuple)):
+            seeds = [int(s) for s in seed]
+            super().reset(seed=seeds[0])
+            for k, s in enumerate(seeds):
+                self._lines.rngs[k] = np.random.default_rng(s)
+        else:
+            super().reset(seed=seed)
+            self._lines.seed_lines(seed)
+            seeds = [seed + k if seed is not None else self._lines.next_seed(k) for k in range(self.num_envs)]
+        obs = self._lines.reset(dict(enumerate(seeds)))
+        return np.stack([obs[k] for k in range(self.num_envs)]), {}
+
+    def step(self, actions):
+        obs, rewards, truncated, info = self._lines.step(actions)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        # Every line reports every key: the ``_key`` masks are all true.
+        infos: dict[str, Any] = dict(info)
+        for key in info:
+            infos[f"_{key}"] = np.ones(self.num_envs, dtype=bool)
+        done = np.flatnonzero(truncated).tolist()
+        if done:
+            fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
+            for k in done:
+                infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": _line_info(info, k)}, k)
+                obs[k] = fresh[k]
+        return obs, rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs):
+        self._lines.close()
+
+
+def _sb3_vec_env_base():
+    from stable_baselines3.common.vec_env import VecEnv  # SB3 is an optional dependency
+
+    return VecEnv
+
+
+class SortingLineSB3VecEnv(_sb3_vec_env_base()):
+    """Stable-Baselines3 VecEnv over the lines of one node (see the module docstring)."""
+
+    def __init__(
+        self,
+        num_envs: int = 4,
+        setup: str = "A",
+        variant: str = "basic",
+        namespace: str | None = None,
+        node: str = "spawn",
+        max_episode_steps: int | None = 50,
+        step_timeout: float = 2.0,
+        startup_timeout: float = 20.0,
+        seed: int | None = None,
+    ):
+        self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        self._lines.seed_lines(seed)
+        super().__init__(num_envs, observation_space(variant), action_space(variant))
+        self._actions = None
+
+    def reset(self):
+        # seed() sets self._seeds = [s + k]: those lines start from those seeds and their generators.
+        seeds = {}
+        for k in range(self.num_envs):
+            if self._seeds[k] is not None:
+                self._lines.rngs[k] = np.random.default_rng(self._seeds[k])
+                seeds[k] = int(self._seeds[k])
+            else:
+                seeds[k] = self._lines.next_seed(k)
+        obs = self._lines.reset(seeds)
+        self.reset_infos = [{"seed": seeds[k]} for k in range(self.num_envs)]
+        self._reset_seeds()
+        self._reset_options()
+        return np.stack([obs[k] for k in range(self.num_envs)])
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        obs, rewards, truncated, info = self._lines.step(self._actions)
+        infos = [_line_info(info, k) for k in range(self.num_envs)]
+        done = np.flatnonzero(truncated).tolist()
+        if done:
+            fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
+            for k in done:
+                infos[k]["terminal_observation"] = obs[k].copy()
+                infos[k]["TimeLimit.truncated"] = True
+                obs[k] = fresh[k]
+        return obs, rewards.astype(np.float32), truncated.copy(), infos
+
+    def close(self) -> None:
+        self._lines.close()
+
+    # The lines are not separate Python envs: attribute access answers for this object.
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        return [getattr(self, attr_name) for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        raise AttributeError(f"the lines of SortingLineSB3VecEnv have no per-line method {method_name!r}")
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
