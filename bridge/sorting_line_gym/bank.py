@@ -168,6 +168,10 @@ class LineBank:
         return self._reset_once(seeds)
 
     def _reset_once(self, seeds: dict[int, int | None]):
+        if self.batch is not None:
+            self.batch.send_reset(seeds)
+            self.waiter.until(self.batch.reset_done, self.step_timeout, lambda: f"the reply of {self.batch.reset_name}")
+            return self.batch.finish_reset(seeds)
         for k, seed in seeds.items():
             self.links[k].send_reset(seed)
         self.waiter.until(

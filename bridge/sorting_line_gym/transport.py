@@ -35,7 +35,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from builtin_interfaces.msg import Time
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, SortModeCommand, SpeedCommand
-from sorting_line_interfaces.srv import ResetLine
+from sorting_line_interfaces.srv import ResetLine, ResetLines
 
 #: The ten belt speeds; a speed index i commands SPEEDS[i].
 SPEEDS = tuple(round(0.1 * (i + 1), 1) for i in range(10))
@@ -185,6 +185,17 @@ def stamp_key(t: Time) -> tuple[int, int]:
 
 
 @dataclass
+class ResetResult:
+    """What a reset tells about one line: its first observation and where it now stands."""
+
+    quantity: float
+    category: int
+    episode: int
+    seed: int
+    stamp: Time
+
+
+@dataclass
 class Tick:
     """Where a line is: the stamp to answer, the episode and the step."""
 
@@ -209,8 +220,8 @@ def _drain(sub, inbox: deque) -> None:
 class LineLink:
     """The endpoints of one line on the bridge's rclpy node, and its lock-step position.
 
-    With ``per_line_topics=False`` (lines driven through :class:`BatchLink`) only the reset
-    service is used: fewer entities for the executor to scan."""
+    With ``per_line_topics=False`` (lines driven and reset through :class:`BatchLink`) it creates
+    no endpoints at all: every entity is one more thing each executor wait scans."""
 
     def __init__(self, node: Node, namespace: str, advanced: bool, per_line_topics: bool = True):
         self.namespace = namespace.rstrip("/") or ""
@@ -218,11 +229,11 @@ class LineLink:
         self.node = node
         name = lambda rel: f"{self.namespace}/{rel}"
         self.state_topic = name("state")
-        self.reset_client = node.create_client(ResetLine, name("reset"), qos_profile=QOS)
-        self.speed_pub = self.mode_pub = self.state_sub = None
+        self.speed_pub = self.mode_pub = self.state_sub = self.reset_client = None
         # States arrive in order; keep a short backlog so nothing is lost while we publish.
         self.inbox: deque[LineState] = deque(maxlen=64)
         if per_line_topics:
+            self.reset_client = node.create_client(ResetLine, name("reset"), qos_profile=QOS)
             self.speed_pub = node.create_publisher(SpeedCommand, name("cmd/speed"), QOS)
             self.mode_pub = node.create_publisher(SortModeCommand, name("cmd/sort_mode"), QOS) if advanced else None
             self.state_sub = node.create_subscription(LineState, self.state_topic, lambda m: self.inbox.append(m), QOS)
@@ -233,7 +244,7 @@ class LineLink:
     # -- matching ----------------------------------------------------------------------------
     def endpoints_matched(self, node: Node) -> bool:
         """Commands have a reader and the state topic a writer (necessary, not sufficient)."""
-        ok = self.reset_client.service_is_ready()
+        ok = self.reset_client is None or self.reset_client.service_is_ready()
         if self.speed_pub is not None:
             ok = ok and self.speed_pub.get_subscription_count() > 0 and node.count_publishers(self.state_topic) > 0
         if self.mode_pub is not None:
@@ -250,7 +261,7 @@ class LineLink:
     def reset_done(self) -> bool:
         return self._reset_future is not None and self._reset_future.done()
 
-    def finish_reset(self) -> ResetLine.Response:
+    def finish_reset(self) -> ResetResult:
         response = self._reset_future.result()
         self._reset_future = None
         if response is None or not response.success:
@@ -262,7 +273,7 @@ class LineLink:
         kept = [s for s in self.inbox if stamp_key(s.header.stamp) >= start]
         self.inbox.clear()
         self.inbox.extend(kept)
-        return response
+        return ResetResult(response.quantity, response.category, response.episode, response.seed, response.stamp)
 
     def saw_state_of_current_tick(self) -> bool:
         """Whether the step-0 state of the current episode arrived (the handshake's proof)."""
@@ -315,13 +326,43 @@ class BatchLink:
         base = namespace.rstrip("/")
         self.state_topic = f"{base}/batch/state"
         self.cmd_pub = node.create_publisher(LineCommands, f"{base}/batch/cmd", QOS)
+        self.reset_client = node.create_client(ResetLines, f"{base}/batch/reset", qos_profile=QOS)
+        self.reset_name = f"{base}/batch/reset"
+        self._reset_future = None
         self.inbox: deque[LineStates] = deque(maxlen=64)
         self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda m: self.inbox.append(m), QOS)
         self.last: LineStates | None = None
         self._speeds = np.array(SPEEDS)
 
     def matched(self, node: Node) -> bool:
-        return self.cmd_pub.get_subscription_count() > 0 and node.count_publishers(self.state_topic) > 0
+        return (
+            self.cmd_pub.get_subscription_count() > 0
+            and node.count_publishers(self.state_topic) > 0
+            and self.reset_client.service_is_ready()
+        )
+
+    def send_reset(self, seeds: dict[int, int | None]) -> None:
+        request = ResetLines.Request()
+        request.lines = array("I", seeds.keys())
+        request.has_seed = [s is not None for s in seeds.values()]
+        request.seeds = array("Q", (int(s) if s is not None else 0 for s in seeds.values()))
+        self._reset_future = self.reset_client.call_async(request)
+
+    def reset_done(self) -> bool:
+        return self._reset_future is not None and self._reset_future.done()
+
+    def finish_reset(self, seeds: dict[int, int | None]) -> dict[int, ResetResult]:
+        response = self._reset_future.result()
+        self._reset_future = None
+        if response is None or not response.success:
+            raise BridgeError(f"{self.reset_name} refused: {getattr(response, 'message', 'no response')}")
+        b = response.states
+        results = {}
+        for k in seeds:
+            stamp = Time(sec=b.stamp_sec[k], nanosec=b.stamp_nanosec[k])
+            self.links[k].tick = Tick(stamp, b.episode[k], b.step[k])
+            results[k] = ResetResult(b.observation_quantity[k], b.observation_category[k], b.episode[k], b.seed[k], stamp)
+        return results
 
     def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
         cmd = LineCommands()

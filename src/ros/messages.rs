@@ -207,6 +207,22 @@ pub struct ResetLineResponse {
     pub category: u8,
 }
 
+/// sorting_line_interfaces/ResetLines request.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResetLinesRequest {
+    pub lines: Vec<u32>,
+    pub has_seed: Vec<bool>,
+    pub seeds: Vec<u64>,
+}
+
+/// sorting_line_interfaces/ResetLines response.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ResetLinesResponse {
+    pub success: bool,
+    pub message: String,
+    pub states: LineStates,
+}
+
 /// rosgraph_msgs/Clock (not builtin_interfaces/Time: ROS tools match on the type name).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Clock {
@@ -271,10 +287,17 @@ messages! {
 }
 impl Message for ResetLineRequest {}
 impl Message for ResetLineResponse {}
+impl Message for ResetLinesRequest {}
+impl Message for ResetLinesResponse {}
 
 /// The ResetLine service type.
 pub fn reset_service_type() -> ServiceTypeName {
     ServiceTypeName::new(INTERFACES, "ResetLine")
+}
+
+/// The ResetLines service type.
+pub fn batch_reset_service_type() -> ServiceTypeName {
+    ServiceTypeName::new(INTERFACES, "ResetLines")
 }
 
 #[cfg(test)]
@@ -315,6 +338,10 @@ mod tests {
         check("msg/ResetEvent.msg", serde_yaml::to_value(ResetEvent::default()).unwrap());
         check("msg/LineCommands.msg", serde_yaml::to_value(LineCommands::default()).unwrap());
         check("msg/LineStates.msg", serde_yaml::to_value(LineStates::default()).unwrap());
+        let batch = fields("srv/ResetLines.srv");
+        let request = yaml_fields(serde_yaml::to_value(ResetLinesRequest::default()).unwrap());
+        let response = yaml_fields(serde_yaml::to_value(ResetLinesResponse::default()).unwrap());
+        assert_eq!([request, response].concat(), batch);
         let srv = fields("srv/ResetLine.srv");
         let request = yaml_fields(serde_yaml::to_value(ResetLineRequest::default()).unwrap());
         let response = yaml_fields(serde_yaml::to_value(ResetLineResponse::default()).unwrap());

@@ -85,6 +85,7 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
         diagnostics_pub: publisher::<DiagnosticArray>(&mut node, &names.global("/diagnostics"))?,
         batch_cmd: subscription::<LineCommands>(&mut node, &names.topic(&names.namespace, "batch/cmd"))?,
         batch_state: publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?,
+        batch_reset: server(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?,
         params: params.clone(),
     };
     let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
@@ -168,6 +169,22 @@ where
     node.create_subscription(&topic, Some(qos)).map_err(|e| format!("cannot subscribe {absolute}: {e:?}"))
 }
 
+fn server<Req, Resp>(node: &mut Node, absolute: &str, service: ros2_client::ServiceTypeName) -> Result<Server<Req, Resp>, String>
+where
+    Req: Message + Clone + for<'de> serde::Deserialize<'de> + 'static,
+    Resp: Message + Serialize + 'static,
+{
+    let qos = default_profile();
+    node.create_server(
+        ServiceMapping::Enhanced, // what rmw_fastrtps_cpp (Jazzy's default) speaks
+        &topic_name(absolute)?,
+        &service,
+        qos.clone(),
+        qos,
+    )
+    .map_err(|e| format!("cannot serve {absolute}: {e:?}"))
+}
+
 /// The ROS endpoints of one line. They do not change while serving, so the input streams can
 /// borrow them while the line's state ([`LineRuntime`]) is mutated.
 struct LineEndpoints {
@@ -196,15 +213,13 @@ struct Shared {
     diagnostics_pub: Publisher<DiagnosticArray>,
     batch_cmd: Subscription<LineCommands>,
     batch_state: Publisher<LineStates>,
+    batch_reset: Server<ResetLinesRequest, ResetLinesResponse>,
     params: NodeParams,
 }
 
 impl Shared {
     fn publish_batch_state(&self, runtimes: &[LineRuntime]) {
-        let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
-        let states: Vec<LineState> = runtimes.iter().map(|r| line_state(&r.host)).collect();
-        let states = LineStates::from_states(Header { stamp, frame_id: String::new() }, &states);
-        if let Err(e) = self.batch_state.publish(states) {
+        if let Err(e) = self.batch_state.publish(batch_states(runtimes)) {
             log("WARN", format!("cannot publish batch/state: {e:?}"));
         }
     }
@@ -214,17 +229,7 @@ impl LineEndpoints {
     fn new(node: &mut Node, names: &Names, namespace: &str, variant: Variant) -> Result<Self, String> {
         let t = |relative: &str| names.topic(namespace, relative);
         let advanced = variant == Variant::Advanced;
-        let qos = default_profile();
-        let reset_name = t("reset");
-        let reset = node
-            .create_server(
-                ServiceMapping::Enhanced, // what rmw_fastrtps_cpp (Jazzy's default) speaks
-                &topic_name(&reset_name)?,
-                &reset_service_type(),
-                qos.clone(),
-                qos,
-            )
-            .map_err(|e| format!("cannot serve {reset_name}: {e:?}"))?;
+        let reset = server(node, &t("reset"), reset_service_type())?;
         Ok(LineEndpoints {
             namespace: namespace.to_string(),
             input: publisher(node, &t("input"))?,
@@ -308,6 +313,13 @@ impl LineEndpoints {
     }
 }
 
+/// Every line's current state, as arrays.
+fn batch_states(runtimes: &[LineRuntime]) -> LineStates {
+    let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
+    let states: Vec<LineState> = runtimes.iter().map(|r| line_state(&r.host)).collect();
+    LineStates::from_states(Header { stamp, frame_id: String::new() }, &states)
+}
+
 /// The `state` message of a line's current tick. Right after a reset no step has happened: it
 /// reports the start state with reward 0.
 fn line_state(host: &HostedLine) -> LineState {
@@ -349,6 +361,7 @@ fn line_state(host: &HostedLine) -> LineState {
 /// Everything from DDS that can wake the node.
 enum Event {
     Batch(Result<(LineCommands, MessageInfo), String>),
+    BatchReset(Result<(RmwRequestId, ResetLinesRequest), String>),
     Speed(usize, Result<(SpeedCommand, MessageInfo), String>),
     Mode(usize, Result<(SortModeCommand, MessageInfo), String>),
     Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
@@ -377,8 +390,10 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     publish_clock(runtimes);
 
     let batch = shared.batch_cmd.async_stream().map(|r| Event::Batch(r.map_err(|e| format!("{e:?}")))).boxed_local();
+    let resets =
+        shared.batch_reset.receive_request_stream().map(|r| Event::BatchReset(r.map_err(|e| format!("{e:?}")))).boxed_local();
     let mut events =
-        stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)).chain(std::iter::once(batch)));
+        stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)).chain([batch, resets]));
     let mut signals = signals.fuse();
     let realtime = shared.params.mode == TickMode::Realtime;
     let mut timer = StreamExt::fuse(if realtime {
@@ -422,12 +437,24 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         publish_clock(runtimes);
                     }
                 }
+                Event::BatchReset(Ok((request_id, request))) => {
+                    let response = match batch_reset(endpoints, runtimes, &request) {
+                        Ok(message) => ResetLinesResponse { success: true, message, states: batch_states(runtimes) },
+                        Err(message) => {
+                            log("WARN", format!("batch/reset refused: {message}"));
+                            ResetLinesResponse { success: false, message, states: batch_states(runtimes) }
+                        }
+                    };
+                    if let Err(error) = shared.batch_reset.async_send_response(request_id, response).await {
+                        log("WARN", format!("batch/reset: cannot send the response: {error:?}"));
+                    }
+                    shared.publish_batch_state(runtimes);
+                    publish_clock(runtimes);
+                }
+                Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
                 Event::Reset(k, Ok((request_id, request))) => {
                     let (e, r) = (&endpoints[k], &mut runtimes[k]);
-                    let observation = r.host.reset(request.has_seed.then_some(request.seed));
-                    r.counters.episodes += 1;
-                    e.publish_reset_event(&r.host);
-                    e.publish_tick(&r.host);
+                    let observation = reset_line(e, r, request.has_seed.then_some(request.seed));
                     let response = reset_response(&r.host, observation, request.has_seed);
                     if let Err(error) = e.reset.async_send_response(request_id, response).await {
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
@@ -464,6 +491,42 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
             },
         }
     }
+}
+
+/// Resets one line and publishes its new tick (and the reset event, for bags).
+fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, seed: Option<u64>) -> Observation {
+    let observation = r.host.reset(seed);
+    r.counters.episodes += 1;
+    e.publish_reset_event(&r.host);
+    e.publish_tick(&r.host);
+    observation
+}
+
+/// Resets the lines a `batch/reset` request names; refuses the whole request if it is malformed.
+fn batch_reset(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], request: &ResetLinesRequest) -> Result<String, String> {
+    let n = request.lines.len();
+    if request.has_seed.len() != n || request.seeds.len() != n {
+        return Err(format!(
+            "{} lines, {} has_seed, {} seeds: the three lists must have the same length",
+            n,
+            request.has_seed.len(),
+            request.seeds.len()
+        ));
+    }
+    let mut seen = vec![false; runtimes.len()];
+    for &k in &request.lines {
+        let ok = (k as usize) < runtimes.len() && !seen[k as usize];
+        if !ok {
+            return Err(format!("line {k} is out of range or repeated: allowed each of 0 ..= {} once", runtimes.len() - 1));
+        }
+        seen[k as usize] = true;
+    }
+    for i in 0..n {
+        let k = request.lines[i] as usize;
+        let seed = request.has_seed[i].then_some(request.seeds[i]);
+        reset_line(&endpoints[k], &mut runtimes[k], seed);
+    }
+    Ok(format!("{n} line(s) reset"))
 }
 
 /// Applies a batch command line by line, through the same rules as the per-line topics (mode
