@@ -414,26 +414,20 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     }
                 }
                 Event::Speed(k, received) => {
-                    let (e, r) = (&endpoints[k], &mut runtimes[k]);
-                    let result = match &received {
-                        Ok((cmd, _)) => r.host.on_speed(cmd.header.stamp, cmd.speed).map_err(|reason| {
-                            (reason, format!("speed {} for stamp {}", cmd.speed, show_stamp(cmd.header.stamp)))
-                        }),
-                        Err(error) => Err((Rejection::Malformed, format!("message ({error})"))),
+                    let result = match received {
+                        Ok((cmd, _)) => apply_speed(&mut runtimes[k], cmd.header.stamp, cmd.speed),
+                        Err(error) => Err(malformed(&error)),
                     };
-                    if settle(e, r, "cmd/speed", result) {
+                    if settle(&endpoints[k], &mut runtimes[k], "cmd/speed", result) {
                         publish_clock(runtimes);
                     }
                 }
                 Event::Mode(k, received) => {
-                    let (e, r) = (&endpoints[k], &mut runtimes[k]);
-                    let result = match &received {
-                        Ok((cmd, _)) => r.host.on_sort_mode(cmd.header.stamp, cmd.mode).map_err(|reason| {
-                            (reason, format!("sort mode {} for stamp {}", cmd.mode, show_stamp(cmd.header.stamp)))
-                        }),
-                        Err(error) => Err((Rejection::Malformed, format!("message ({error})"))),
+                    let result = match received {
+                        Ok((cmd, _)) => apply_mode(&mut runtimes[k], cmd.header.stamp, cmd.mode),
+                        Err(error) => Err(malformed(&error)),
                     };
-                    if settle(e, r, "cmd/sort_mode", result) {
+                    if settle(&endpoints[k], &mut runtimes[k], "cmd/sort_mode", result) {
                         publish_clock(runtimes);
                     }
                 }
@@ -542,7 +536,7 @@ fn handle_batch(
     let cmd = match received {
         Ok((cmd, _)) => cmd,
         Err(error) => {
-            settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err((Rejection::Malformed, format!("message ({error})"))));
+            settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err(malformed(&error)));
             return false;
         }
     };
@@ -561,24 +555,33 @@ fn handle_batch(
     for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
         let stamp = Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] };
         if advanced {
-            let mode = cmd.modes[k];
-            let result = r
-                .host
-                .on_sort_mode(stamp, mode)
-                .map_err(|reason| (reason, format!("sort mode {mode} for stamp {}", show_stamp(stamp))));
+            let result = apply_mode(r, stamp, cmd.modes[k]);
             stepped |= settle(e, r, "batch/cmd", result);
         }
-        let speed = cmd.speeds[k];
-        let result =
-            r.host.on_speed(stamp, speed).map_err(|reason| (reason, format!("speed {speed} for stamp {}", show_stamp(stamp))));
+        let result = apply_speed(r, stamp, cmd.speeds[k]);
         stepped |= settle(e, r, "batch/cmd", result);
     }
     stepped
 }
 
+/// A rejected command: why, and what it said (for the log).
+type Refusal = (Rejection, String);
+
+fn apply_speed(r: &mut LineRuntime, stamp: Time, speed: f64) -> Result<Accepted, Refusal> {
+    r.host.on_speed(stamp, speed).map_err(|reason| (reason, format!("speed {speed} for stamp {}", show_stamp(stamp))))
+}
+
+fn apply_mode(r: &mut LineRuntime, stamp: Time, mode: u8) -> Result<Accepted, Refusal> {
+    r.host.on_sort_mode(stamp, mode).map_err(|reason| (reason, format!("sort mode {mode} for stamp {}", show_stamp(stamp))))
+}
+
+fn malformed(error: &str) -> Refusal {
+    (Rejection::Malformed, format!("message ({error})"))
+}
+
 /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
 /// whether the line stepped.
-fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Accepted, (Rejection, String)>) -> bool {
+fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Accepted, Refusal>) -> bool {
     match result {
         Ok(Accepted::Stored) => {
             r.counters.accepted += 1;
