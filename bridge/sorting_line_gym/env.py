@@ -41,7 +41,8 @@ own and stop a node process in a namespace of its own) or "attach" (use the node
 
 ## Info
 accuracy, purity (correct / all sorted), recall_a, recall_b, speed, speed_index, mode, occupancy,
-containers (a, a_false, b, b_false), speed_changes, cumulative_reward, episode, step, sim_time, seed.
+containers (a, a_false, b, b_false), speed_changes, cumulative_reward, step, sim_time (simulated
+seconds since the reset), seed.
 """
 
 from __future__ import annotations
@@ -82,9 +83,15 @@ def observe(variant: str, quantity: float, category: int) -> np.ndarray:
     return np.array([quantity], dtype=np.float32)
 
 
-def state_info(state) -> dict[str, Any]:
-    """The KPIs of a LineState message."""
-    stamp = state.header.stamp
+def sim_seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def state_info(state, episode_start: float) -> dict[str, Any]:
+    """The KPIs of a LineState message. Nothing here may depend on the node's history (its
+    episode counter or absolute clock): the same seed and actions must give the same info, and
+    the key ``episode`` belongs to episode-statistics wrappers (SB3's Monitor, Gymnasium's
+    RecordEpisodeStatistics). ``sim_time`` is simulated seconds since the episode's reset."""
     return {
         "accuracy": state.accuracy,
         "purity": state.purity,
@@ -97,9 +104,8 @@ def state_info(state) -> dict[str, Any]:
         "containers": (state.container_a, state.container_a_false, state.container_b, state.container_b_false),
         "speed_changes": int(state.speed_changes),
         "cumulative_reward": state.cumulative_reward,
-        "episode": int(state.episode),
         "step": int(state.step),
-        "sim_time": stamp.sec + stamp.nanosec * 1e-9,
+        "sim_time": sim_seconds(state.header.stamp) - episode_start,
         "seed": int(state.seed),
     }
 
@@ -144,8 +150,9 @@ class SortingLineEnv(gym.Env):
         # One seed reproduces a whole run: without a seed, the next node seed comes from np_random.
         node_seed = int(seed) if seed is not None else int(self.np_random.integers(0, SEED_BOUND))
         response = self.bank.reset({0: node_seed})[0]
+        self._episode_start = sim_seconds(response.stamp)
         self._history = _History(self.bank.links[0]) if self.render_mode else None
-        info = {"episode": int(response.episode), "seed": int(response.seed), "step": 0}
+        info = {"seed": int(response.seed), "step": 0}
         if self.render_mode == "human":
             self.render()
         return observe(self.variant, response.quantity, response.category), info
@@ -159,7 +166,7 @@ class SortingLineEnv(gym.Env):
             self._history.record(state, self.bank.sensors[0])
         if self.render_mode == "human":
             self.render()
-        return obs, float(state.reward), False, bool(state.truncated), state_info(state)
+        return obs, float(state.reward), False, bool(state.truncated), state_info(state, self._episode_start)
 
     def render(self):
         if self.render_mode is None:

@@ -22,10 +22,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .bank import LineBank
-from .env import SEED_BOUND, action_space, observation_space, observe
+from .env import SEED_BOUND, action_space, observation_space, observe, sim_seconds
 
 
-def batch_info(b) -> dict[str, np.ndarray]:
+def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
     """The KPIs of a ``LineStates`` message as arrays (entry k = line k), the same keys as the
     single-line ``info`` (see ``env.state_info``)."""
     arr = np.asarray
@@ -41,9 +41,8 @@ def batch_info(b) -> dict[str, np.ndarray]:
         "containers": np.stack([arr(b.container_a), arr(b.container_a_false), arr(b.container_b), arr(b.container_b_false)], axis=1),
         "speed_changes": arr(b.speed_changes, dtype=np.int64),
         "cumulative_reward": arr(b.cumulative_reward),
-        "episode": arr(b.episode, dtype=np.int64),
         "step": arr(b.step, dtype=np.int64),
-        "sim_time": arr(b.stamp_sec) + arr(b.stamp_nanosec) * 1e-9,
+        "sim_time": arr(b.stamp_sec) + arr(b.stamp_nanosec) * 1e-9 - episode_start,
         "seed": arr(b.seed, dtype=np.uint64),
     }
 
@@ -70,6 +69,8 @@ class _Lines:
             batch=True,
         )
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+        # Simulated time of each line's last reset: info["sim_time"] counts from there.
+        self.episode_start = np.zeros(num_envs)
 
     def seed_lines(self, seed: int | None) -> None:
         if seed is not None:
@@ -80,6 +81,8 @@ class _Lines:
 
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
         responses = self.bank.reset(seeds)
+        for k, r in responses.items():
+            self.episode_start[k] = sim_seconds(r.stamp)
         return {k: observe(self.variant, r.quantity, r.category) for k, r in responses.items()}
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
@@ -96,7 +99,7 @@ class _Lines:
             obs = quantity[:, None]
         rewards = np.asarray(b.reward, dtype=np.float64)
         truncated = np.asarray(b.truncated, dtype=bool)
-        return obs, rewards, truncated, batch_info(b)
+        return obs, rewards, truncated, batch_info(b, self.episode_start)
 
     def close(self):
         self.bank.close()
@@ -183,9 +186,11 @@ class SortingLineSB3VecEnv(_sb3_vec_env_base()):
         seed: int | None = None,
     ):
         self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
-        self._lines.seed_lines(seed)
+        self.render_mode = None
         super().__init__(num_envs, observation_space(variant), action_space(variant))
         self._actions = None
+        if seed is not None:
+            self.seed(seed)  # line k starts from seed + k, as with VecEnv.seed() and PPO(seed=...)
 
     def reset(self):
         # seed() sets self._seeds = [s + k]: those lines start from those seeds and their generators.
