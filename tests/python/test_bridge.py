@@ -1,0 +1,686 @@
+"""The Gymnasium bridge (bridge/sorting_line_gym) against the REAL node (target/release/sorting_line).
+
+Every environment here spawns (or attaches to) a real `sorting_line node` process over Fast DDS, so
+this file runs inside the loopback-only network namespace that launch_scripts/test.sh creates
+(conftest.py refuses to run elsewhere):
+
+    unshare -n bash -c 'ip link set lo up; source launch_scripts/env.sh; export ROS_DOMAIN_ID=91;
+                        python -m pytest tests/python/test_bridge.py -q'
+
+What is checked:
+- Gymnasium's and Stable-Baselines3's environment checkers, for both ids (Gymnasium's includes
+  reset-seed determinism, step determinism, returned-data reuse, render modes and double close);
+- the trajectories equal the simulation library's (`sorting_line trace`) number for number, through
+  the single-line env (one seeded episode; several episodes with unseeded resets) and through the
+  vector envs (line k = seed S + k, across SAME_STEP autoresets);
+- reproducibility: one seed reproduces a whole multi-episode run, in two separately spawned nodes;
+- failures: a node killed mid-episode makes the next step fail fast, naming the namespace, and a
+  new env works afterwards; attaching to a namespace where nothing runs times out, naming it;
+- render_mode="rgb_array", the spaces, the info keys, truncation (TimeLimit of gymnasium.make,
+  the node's own max_episode_steps), and a short PPO run on the SB3 VecEnv.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
+from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
+from sorting_line_gym.vector import SortingLineSB3VecEnv, SortingLineVectorEnv
+
+ROOT = Path(__file__).resolve().parents[2]
+BASIC = "sorting_line_gym:SortingLine-v0"
+ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
+IDS = {"basic": BASIC, "advanced": ADVANCED}
+CATEGORY = {"basic": 0, "positive": 1, "negative": 2}
+UNLIMITED = 1_000_000
+
+# The KPIs every step's info carries (env.py's docstring). Its "episode" (the node's episode number)
+# and "sim_time" are not required here: see test_step_info_does_not_depend_on_earlier_episodes and
+# the episode-statistics tests for why they cannot stay as they are.
+INFO_KEYS = {
+    "accuracy", "purity", "recall_a", "recall_b", "speed", "speed_index", "mode", "occupancy", "containers",
+    "speed_changes", "cumulative_reward", "step", "seed",
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Helpers
+
+
+def node_binary() -> Path:
+    path = Path(os.environ.get("NODE_BIN") or ROOT / "target" / "release" / "sorting_line")
+    assert path.is_file(), f"node binary {path} not found: run `cargo build --release`"
+    return path
+
+
+def trace(setup: str, variant: str, seed: int, actions, max_steps: int = UNLIMITED) -> list[dict]:
+    """`sorting_line trace`: one dict per line; "reset" entries for (re)sets, step entries otherwise.
+    `actions` are Gymnasium actions, or "r<seed>" to reset with a seed."""
+    argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),
+            "--max-steps", str(max_steps), "--actions", ",".join(str(a) for a in actions)]
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, f"`{' '.join(argv)}` failed ({r.returncode}): {r.stderr}"
+    return [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+
+
+def expected_obs(variant: str, observation: dict) -> np.ndarray:
+    """A trace observation as the env must return it (float32)."""
+    q = np.float32(observation["quantity"])
+    if variant == "advanced":
+        return np.array([q, np.float32(CATEGORY[observation["category"]])], dtype=np.float32)
+    return np.array([q], dtype=np.float32)
+
+
+def assert_obs(obs, variant: str, observation: dict, where: str) -> None:
+    want = expected_obs(variant, observation)
+    assert isinstance(obs, np.ndarray) and obs.dtype == np.float32, f"{where}: obs {obs!r} is not float32"
+    assert obs.shape == want.shape and np.array_equal(obs, want), f"{where}: obs {obs!r} != library {want!r}"
+
+
+def assert_step(variant: str, obs, reward, info: dict, entry: dict, where: str) -> None:
+    """One env step (obs, reward, info KPIs) against one trace step entry, exactly."""
+    assert "step" in entry, f"{where}: the library has a reset here: {entry}"
+    s, c = entry["step"], entry["containers"]
+    assert_obs(obs, variant, s["observation"], where)
+    assert reward == s["reward"], f"{where}: reward {reward!r} != library {s['reward']!r}"
+    got = {
+        "accuracy": info["accuracy"], "purity": info["purity"], "containers": tuple(int(x) for x in info["containers"]),
+        "speed_changes": int(info["speed_changes"]), "occupancy": info["occupancy"],
+        "cumulative_reward": info["cumulative_reward"], "speed_index": int(info["speed_index"]),
+        "mode": int(info["mode"]), "step": int(info["step"]),
+    }
+    want = {
+        "accuracy": s["accuracy"], "purity": entry["purity"], "containers": (c["a"], c["a_false"], c["b"], c["b_false"]),
+        "speed_changes": entry["speed_changes"], "occupancy": s["occupancy"],
+        "cumulative_reward": entry["cumulative_reward"], "speed_index": s["action"]["speed_index"],
+        "mode": CATEGORY[s["action"]["mode"]], "step": s["step"],
+    }
+    diff = {k: (got[k], want[k]) for k in want if got[k] != want[k]}
+    assert not diff, f"{where}: info differs from the library (env, library): {diff}"
+
+
+def fixed_actions(n_actions: int, count: int, seed: int) -> list[int]:
+    return [int(a) for a in np.random.default_rng(seed).integers(0, n_actions, size=count)]
+
+
+def strip_node_counters(info: dict) -> dict:
+    """info without the node's process-wide counters (its episode number and simulated clock run
+    on across resets): for comparing runs made one after the other in the same node."""
+    return {k: v for k, v in info.items() if k not in ("episode", "sim_time")}
+
+
+def same(a, b) -> bool:
+    """Exact structural equality of trajectories (arrays by value, dtype included)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype == b.dtype
+                and a.shape == b.shape and bool(np.all(a == b)))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
+
+
+def first_difference(a: list, b: list) -> str:
+    for i, (x, y) in enumerate(zip(a, b)):
+        if not same(x, y):
+            return f"entry {i}: {x!r}\n    vs {y!r}"
+    return f"lengths {len(a)} vs {len(b)}"
+
+
+# --------------------------------------------------------------------------------------------
+# Fixtures
+
+
+@pytest.fixture
+def make_env(request):
+    """make_env(id_or_None, **kwargs): gymnasium.make(id, ...) or, with id None, SortingLineEnv(...);
+    every env is closed at teardown (a second close is harmless)."""
+    envs = []
+
+    def close_all():
+        errors = []
+        for env in reversed(envs):
+            try:
+                env.close()
+            except Exception as e:  # noqa: BLE001 - report every env that fails to close
+                errors.append(repr(e))
+        assert not errors, f"closing the envs failed: {errors}"
+
+    request.addfinalizer(close_all)
+
+    def make(env_id=None, **kwargs):
+        env = gymnasium.make(env_id, **kwargs) if env_id is not None else SortingLineEnv(**kwargs)
+        envs.append(env)
+        return env
+
+    return make
+
+
+@pytest.fixture
+def make_vec(request):
+    """make_vec(cls, **kwargs): a SortingLineVectorEnv or SortingLineSB3VecEnv closed at teardown."""
+    envs = []
+    request.addfinalizer(lambda: [env.close() for env in reversed(envs)])
+
+    def make(cls, **kwargs):
+        env = cls(**kwargs)
+        envs.append(env)
+        return env
+
+    return make
+
+
+# --------------------------------------------------------------------------------------------
+# Environment checkers
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_gymnasium_check_env(variant, make_env):
+    """Gymnasium's checker on the unwrapped env, render check included (it makes an env per
+    render mode from the spec and renders it) as well as the close check; the env must stay
+    usable afterwards."""
+    from gymnasium.utils.env_checker import check_env
+
+    env = make_env(IDS[variant], setup="B")
+    check_env(env.unwrapped)
+    obs, _ = env.reset(seed=3)
+    assert obs in env.observation_space
+
+
+def test_step_info_does_not_depend_on_earlier_episodes(make_env):
+    """What Gymnasium's step-determinism check demands, spelled out: after reset(seed=s), the same
+    action gives the same observation, reward AND info, however many episodes ran before."""
+    env = make_env(BASIC, setup="B")
+    env.reset(seed=123)
+    first = env.step(3)
+    env.reset(seed=123)
+    second = env.step(3)
+    assert same(first[0], second[0]) and first[1:4] == second[1:4]
+    differing = {k: (first[4][k], second[4][k]) for k in first[4] if not same(first[4][k], second[4][k])}
+    assert not differing, (
+        f"the same seed and action give a different info in a later episode (first, second): {differing}; "
+        "gymnasium.utils.env_checker.check_step_determinism fails on this"
+    )
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_sb3_check_env(variant, make_env):
+    from stable_baselines3.common.env_checker import check_env
+
+    env = make_env(IDS[variant], setup="D")
+    check_env(env, warn=True)
+    check_env(env.unwrapped, warn=True)
+
+
+# --------------------------------------------------------------------------------------------
+# The library's trajectories
+
+
+@pytest.mark.parametrize("setup,variant,seed", [("B", "advanced", 42), ("D", "basic", 7)])
+def test_single_env_matches_the_library(setup, variant, seed, make_env):
+    """reset(seed=S) then a fixed action list == `sorting_line trace --seed S --actions ...`,
+    beyond the 50 steps of the default TimeLimit (here 200)."""
+    env = make_env(IDS[variant], setup=setup, max_episode_steps=200)
+    actions = fixed_actions(env.action_space.n, 120, seed=seed)
+    want = trace(setup, variant, seed, actions)
+    obs, info = env.reset(seed=seed)
+    assert info["seed"] == seed and want[0]["reset"]["seed"] == seed
+    assert_obs(obs, variant, want[0]["reset"]["observation"], "reset")
+    for t, action in enumerate(actions, start=1):
+        obs, reward, terminated, truncated, info = env.step(action)
+        assert type(reward) is float
+        assert terminated is False and truncated is False, f"step {t}: {terminated=} {truncated=}"
+        assert_step(variant, obs, reward, info, want[t], f"{setup} {variant} seed {seed} step {t}")
+
+
+@pytest.mark.parametrize("setup,variant", [("B", "advanced"), ("D", "basic")])
+def test_unseeded_resets_continue_like_the_library(setup, variant, make_env):
+    """A seeded reset, then 3 episodes under the TimeLimit of 50 with reset() in between: each
+    unseeded reset reports the node seed it drew (info["seed"]), and the whole run equals the
+    library's run with those resets (`r<seed>`)."""
+    env = make_env(IDS[variant], setup=setup)
+    actions = fixed_actions(env.action_space.n, 150, seed=11)
+    obs, info = env.reset(seed=5)
+    got = [("reset", obs, info)]
+    tokens = []
+    for t, action in enumerate(actions, start=1):
+        obs, reward, terminated, truncated, info = env.step(action)
+        got.append(("step", obs, reward, info))
+        tokens.append(action)
+        assert truncated == (t % 50 == 0) and not terminated, f"step {t}: {terminated=} {truncated=}"
+        if truncated and t < len(actions):
+            obs, info = env.reset()
+            assert isinstance(info["seed"], int) and 0 <= info["seed"] < 2**63
+            got.append(("reset", obs, info))
+            tokens.append(f"r{info['seed']}")
+    want = trace(setup, variant, 5, tokens)
+    assert len(want) == len(got)
+    for i, (entry, mine) in enumerate(zip(want, got)):
+        if mine[0] == "reset":
+            assert "reset" in entry, f"entry {i}: a reset in the env, a step in the library"
+            assert entry["reset"]["seed"] == mine[2]["seed"]
+            assert_obs(mine[1], variant, entry["reset"]["observation"], f"entry {i} (reset)")
+        else:
+            assert_step(variant, mine[1], mine[2], mine[3], entry, f"entry {i}")
+
+
+def _run_vector(env: SortingLineVectorEnv, seed: int, actions: np.ndarray) -> dict:
+    """reset(seed) and every step of `actions` (T x N); the raw results."""
+    obs, info = env.reset(seed=seed)
+    run = {"reset": (obs.copy(), info), "steps": []}
+    for a in actions:
+        obs, rewards, terminated, truncated, infos = env.step(a)
+        run["steps"].append((obs.copy(), rewards.copy(), terminated.copy(), truncated.copy(), infos))
+    return run
+
+
+def _final_info(infos: dict, k: int) -> dict:
+    """Line k's final_info (Gymnasium nests a dict as a dict of arrays with `_key` masks)."""
+    fi = infos["final_info"]
+    return {key: v[k] for key, v in fi.items() if not key.startswith("_")}
+
+
+@pytest.mark.parametrize("setup,variant", [("B", "advanced"), ("D", "basic")])
+def test_vector_env_matches_the_library_across_autoreset(setup, variant, make_vec):
+    """SortingLineVectorEnv(4): line k == `trace --seed S+k`; at step 50 every line truncates and is
+    reset in the same step (SAME_STEP): final_obs / final_info are the library's step 50, the
+    returned observation is the new episode's reset observation, and the rest of the run equals the
+    library's run after `r<seed>` with the seed the line reports for its new episode."""
+    n, seed, steps = 4, 100, 65
+    env = make_vec(SortingLineVectorEnv, num_envs=n, setup=setup, variant=variant)
+    assert env.metadata["autoreset_mode"] == gymnasium.vector.AutoresetMode.SAME_STEP
+    actions = np.stack([fixed_actions(env.single_action_space.n, n, seed=t) for t in range(steps)])
+    run = _run_vector(env, seed, actions)
+
+    obs0 = run["reset"][0]
+    assert obs0.shape == (n, env.single_observation_space.shape[0]) and obs0.dtype == np.float32
+    new_seeds = [int(run["steps"][50][4]["seed"][k]) for k in range(n)]
+    for k in range(n):
+        tokens = [int(a) for a in actions[:50, k]] + [f"r{new_seeds[k]}"] + [int(a) for a in actions[50:, k]]
+        want = trace(setup, variant, seed + k, tokens, max_steps=50)
+        where = f"line {k} (seed {seed + k})"
+        assert want[0]["reset"]["seed"] == seed + k
+        assert_obs(obs0[k], variant, want[0]["reset"]["observation"], f"{where} reset")
+        for t in range(1, steps + 1):
+            obs, rewards, terminated, truncated, infos = run["steps"][t - 1]
+            assert not terminated[k]
+            info_k = {key: infos[key][k] for key in INFO_KEYS}
+            if t < 50:
+                assert not truncated[k] and "final_obs" not in infos, f"{where} step {t}"
+                assert_step(variant, obs[k], float(rewards[k]), info_k, want[t], f"{where} step {t}")
+            elif t == 50:
+                assert truncated[k] and want[50]["step"]["truncated"], f"{where}: no truncation at step 50"
+                assert infos["_final_obs"][k] and infos["_final_info"][k]
+                final = infos["final_obs"][k]
+                assert_step(variant, final, float(rewards[k]), info_k, want[50], f"{where} step 50 (info)")
+                assert_step(variant, final, float(rewards[k]), _final_info(infos, k), want[50],
+                            f"{where} step 50 (final_info)")
+                # The observation returned is the new episode's first one.
+                assert obs[k] in env.single_observation_space
+                assert want[51]["reset"]["seed"] == new_seeds[k]
+                assert_obs(obs[k], variant, want[51]["reset"]["observation"], f"{where} post-reset obs")
+            else:
+                assert not truncated[k] and "final_obs" not in infos, f"{where} step {t}"
+                assert int(info_k["seed"]) == new_seeds[k]
+                assert_step(variant, obs[k], float(rewards[k]), info_k, want[t + 1], f"{where} step {t}")
+
+
+def _flatten_vector_run(run: dict, keep_counters: bool) -> list:
+    out = [("reset", run["reset"][0])]
+    for obs, rewards, terminated, truncated, infos in run["steps"]:
+        infos = dict(infos)
+        if "final_info" in infos:
+            infos["final_info"] = dict(infos["final_info"])
+        if not keep_counters:
+            for d in (infos, infos.get("final_info", {})):
+                for key in ("episode", "sim_time", "_episode", "_sim_time"):
+                    d.pop(key, None)
+        if "final_obs" in infos:
+            infos["final_obs"] = [np.asarray(x) for x in infos["final_obs"]]
+        out.append((obs, rewards, terminated, truncated, infos))
+    return out
+
+
+def test_vector_env_same_seed_same_run_including_autoresets(make_vec):
+    """Two separately spawned vector envs, reset(seed=S), the same actions over three episodes:
+    identical trajectories, autoresets (their drawn seeds and observations) included. A second
+    reset(seed=S) of the first env reproduces it as well (the node's process-wide episode counter
+    and clock aside)."""
+    n, seed, steps = 4, 9, 120
+    kwargs = dict(num_envs=n, setup="D", variant="advanced")
+    first = make_vec(SortingLineVectorEnv, **kwargs)
+    second = make_vec(SortingLineVectorEnv, **kwargs)
+    actions = np.stack([fixed_actions(30, n, seed=1000 + t) for t in range(steps)])
+    a = _run_vector(first, seed, actions)
+    b = _run_vector(second, seed, actions)
+    assert sum(bool(s[3].any()) for s in a["steps"]) == 2  # two autoresets of every line
+    fa, fb = _flatten_vector_run(a, True), _flatten_vector_run(b, True)
+    assert same(fa, fb), "two nodes, same seed: runs differ at " + first_difference(fa, fb)
+    again = _run_vector(first, seed, actions)
+    fa, fc = _flatten_vector_run(a, False), _flatten_vector_run(again, False)
+    assert same(fa, fc), "same env, reset(seed) again: runs differ at " + first_difference(fa, fc)
+
+
+def test_sb3_vec_env_matches_the_library_across_autoreset(make_vec):
+    """SortingLineSB3VecEnv(seed=S): line k == `trace --seed S+k`; at truncation SB3's conventions
+    (done, terminal_observation, TimeLimit.truncated) and the new episode's observation."""
+    n, seed, steps = 3, 21, 55
+    env = make_vec(SortingLineSB3VecEnv, num_envs=n, setup="B", variant="advanced", seed=seed)
+    env.seed(seed)
+    obs0 = env.reset()
+    assert [i["seed"] for i in env.reset_infos] == [seed + k for k in range(n)]
+    actions = np.stack([fixed_actions(30, n, seed=500 + t) for t in range(steps)])
+    results = []
+    for a in actions:
+        env.step_async(a)
+        results.append(env.step_wait())
+    new_seeds = [results[50][3][k]["seed"] for k in range(n)]
+    for k in range(n):
+        tokens = [int(x) for x in actions[:50, k]] + [f"r{new_seeds[k]}"] + [int(x) for x in actions[50:, k]]
+        want = trace("B", "advanced", seed + k, tokens, max_steps=50)
+        assert_obs(obs0[k], "advanced", want[0]["reset"]["observation"], f"line {k} reset")
+        for t in range(1, steps + 1):
+            obs, rewards, dones, infos = results[t - 1]
+            entry = want[t] if t <= 50 else want[t + 1]
+            assert rewards.dtype == np.float32 and bool(dones[k]) == (t == 50)
+            if t == 50:
+                assert infos[k]["TimeLimit.truncated"] is True
+                assert_obs(infos[k]["terminal_observation"], "advanced", entry["step"]["observation"],
+                           f"line {k} terminal_observation")
+                assert_obs(obs[k], "advanced", want[51]["reset"]["observation"], f"line {k} post-reset obs")
+            else:
+                assert "terminal_observation" not in infos[k]
+                assert_obs(obs[k], "advanced", entry["step"]["observation"], f"line {k} step {t}")
+            # SB3 hands rewards over as float32: the library's reward, rounded to float32.
+            assert rewards[k] == np.float32(entry["step"]["reward"]), f"line {k} step {t}"
+            assert infos[k]["accuracy"] == entry["step"]["accuracy"] and infos[k]["purity"] == entry["purity"]
+
+
+def test_sb3_vec_env_constructor_seed_reproduces(make_vec):
+    """SortingLineSB3VecEnv(seed=S) without a later seed(): two envs give the same run."""
+    runs = []
+    actions = np.stack([fixed_actions(10, 2, seed=900 + t) for t in range(60)])
+    for _ in range(2):
+        env = make_vec(SortingLineSB3VecEnv, num_envs=2, setup="D", variant="basic", seed=5)
+        run = [env.reset()]
+        for a in actions:
+            env.step_async(a)
+            obs, rewards, dones, infos = env.step_wait()
+            run.append((obs, rewards, dones, [strip_node_counters(i) for i in infos]))
+        runs.append(run)
+    assert same(runs[0], runs[1]), "same constructor seed, different runs: " + first_difference(*runs)
+
+
+def test_make_vec_uses_the_vector_entry_point(make_vec):
+    env = make_vec(lambda **kw: gymnasium.make_vec(ADVANCED, vectorization_mode="vector_entry_point", **kw),
+                   num_envs=2, setup="B")
+    assert isinstance(env, SortingLineVectorEnv) and env.num_envs == 2
+    assert env.single_action_space == gymnasium.spaces.Discrete(30)
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == (2, 2)
+    for t in range(1, 51):
+        obs, rewards, terminated, truncated, infos = env.step(np.array([3, 4]))
+        assert list(truncated) == [t == 50] * 2, f"step {t}"
+    assert obs in env.observation_space
+
+
+# --------------------------------------------------------------------------------------------
+# The ecosystem's episode statistics: Gymnasium's RecordEpisodeStatistics (single and vector) and
+# SB3 (Monitor / VecMonitor / its algorithms) put {"r", "l", "t"} under info["episode"]; SB3's
+# algorithms read info["episode"] of EVERY step as such a dict.
+
+
+def test_record_episode_statistics_single(make_env):
+    env = gymnasium.wrappers.RecordEpisodeStatistics(make_env(BASIC, setup="A"))
+    env.reset(seed=1)
+    for t in range(1, 51):
+        _, _, _, truncated, info = env.step(t % 10)
+    assert truncated and info["episode"]["l"] == 50
+
+
+def test_record_episode_statistics_vector(make_vec):
+    env = make_vec(lambda **kw: gymnasium.wrappers.vector.RecordEpisodeStatistics(SortingLineVectorEnv(**kw)),
+                   num_envs=2, setup="A", variant="basic")
+    env.reset(seed=1)
+    for t in range(1, 51):
+        _, _, _, truncated, infos = env.step(np.array([t % 10, 9 - t % 10]))
+    assert truncated.all() and list(infos["episode"]["l"]) == [50, 50]
+
+
+def test_sb3_infos_keep_sb3s_episode_convention(make_vec):
+    """Every step's info["episode"], if present, must be SB3's episode-statistics dict: PPO/A2C/DQN
+    feed it into their ep_info_buffer and crash on anything else (see test_short_ppo_run)."""
+    env = make_vec(SortingLineSB3VecEnv, num_envs=2, setup="A", variant="basic", seed=1)
+    env.reset()
+    env.step_async(np.array([3, 4]))
+    _, _, _, infos = env.step_wait()
+    for k, info in enumerate(infos):
+        episode = info.get("episode")
+        assert episode is None or (isinstance(episode, dict) and {"r", "l", "t"} <= episode.keys()), (
+            f"line {k}: info['episode'] = {episode!r} is not SB3's episode-statistics dict"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Reproducibility
+
+
+def _run_single(env, seed: int, actions: list[int]) -> list:
+    """reset(seed) once, then the actions; reset() (unseeded) whenever an episode ends."""
+    obs, info = env.reset(seed=seed)
+    out = [("reset", obs, info)]
+    for a in actions:
+        obs, reward, terminated, truncated, info = env.step(a)
+        out.append(("step", obs, reward, terminated, truncated, info))
+        if terminated or truncated:
+            obs, info = env.reset()
+            out.append(("reset", obs, info))
+    return out
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_one_seed_reproduces_a_multi_episode_run(variant, make_env):
+    """Two separately spawned envs, seeded once: identical 3-episode runs (unseeded resets drawn
+    from the env's np_random), infos included. The first env, seeded again, repeats the run too
+    (its node's process-wide episode counter and clock aside)."""
+    one = make_env(IDS[variant], setup="D")
+    two = make_env(IDS[variant], setup="D")
+    actions = fixed_actions(one.action_space.n, 160, seed=77)
+    a = _run_single(one, 2024, actions)
+    b = _run_single(two, 2024, actions)
+    assert sum(1 for x in a if x[0] == "reset") == 4
+    assert same(a, b), "two envs, same seed: runs differ at " + first_difference(a, b)
+    c = _run_single(one, 2024, actions)
+    strip = lambda run: [x[:-1] + (strip_node_counters(x[-1]),) for x in run]  # noqa: E731
+    sa, sc = strip(a), strip(c)
+    assert same(sa, sc), "same env, seeded again: runs differ at " + first_difference(sa, sc)
+    # A different seed gives a different run (the seed is not ignored).
+    d = _run_single(two, 2025, actions[:60])
+    assert not same(strip(a[: len(d)]), strip(d))
+
+
+# --------------------------------------------------------------------------------------------
+# Failures
+
+
+def test_killed_node_fails_the_next_step_then_a_new_env_works(make_env):
+    env = make_env(BASIC, setup="A", step_timeout=2.0)
+    namespace = env.unwrapped.namespace
+    env.reset(seed=1)
+    for _ in range(5):
+        env.step(4)
+    os.kill(env.unwrapped.bank.process.process.pid, signal.SIGKILL)
+    start = time.monotonic()
+    with pytest.raises(BridgeError) as excinfo:
+        env.step(4)
+    elapsed = time.monotonic() - start
+    assert elapsed < 2.0 + 1.0, f"the failure took {elapsed:.2f} s (step_timeout 2 s)"
+    assert namespace in str(excinfo.value), f"the error does not name {namespace}: {excinfo.value}"
+    env.close()  # closing an env whose node was killed is not an error
+
+    fresh = make_env(BASIC, setup="A")
+    assert fresh.unwrapped.namespace != namespace
+    actions = [4, 5, 6, 7, 8]
+    want = trace("A", "basic", 1, actions)
+    obs, _ = fresh.reset(seed=1)
+    assert_obs(obs, "basic", want[0]["reset"]["observation"], "fresh env reset")
+    for t, a in enumerate(actions, start=1):
+        obs, reward, _, _, info = fresh.step(a)
+        assert_step("basic", obs, reward, info, want[t], f"fresh env step {t}")
+
+
+def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
+    namespace = f"/sl_nobody_{os.getpid()}"
+    env = make_env(BASIC, setup="A", node="attach", namespace=namespace, startup_timeout=1.5)
+    assert env.unwrapped.bank.process is None  # attach starts nothing
+    start = time.monotonic()
+    with pytest.raises(BridgeTimeout) as excinfo:
+        env.reset(seed=1)
+    elapsed = time.monotonic() - start
+    assert elapsed < 1.5 + 0.5, f"reset gave up after {elapsed:.2f} s (startup_timeout 1.5 s)"
+    assert namespace in str(excinfo.value), f"the error does not name {namespace}: {excinfo.value}"
+
+
+def test_attach_to_a_running_node(make_env):
+    """node="attach" drives the line of a node started by someone else (here: another env)."""
+    owner = make_env(None, setup="B", variant="basic")
+    guest = make_env(BASIC, setup="B", node="attach", namespace=owner.namespace)
+    actions = [2, 3, 9, 0]
+    want = trace("B", "basic", 8, actions)
+    obs, _ = guest.reset(seed=8)
+    assert_obs(obs, "basic", want[0]["reset"]["observation"], "attached reset")
+    for t, a in enumerate(actions, start=1):
+        obs, reward, _, _, info = guest.step(a)
+        assert_step("basic", obs, reward, info, want[t], f"attached step {t}")
+    guest.close()
+    assert owner.bank.process.alive(), "closing an attached env stopped the node it does not own"
+
+
+# --------------------------------------------------------------------------------------------
+# Render
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_render_rgb_array(variant, make_env):
+    env = make_env(IDS[variant], setup="B", render_mode="rgb_array")
+    env.reset(seed=4)
+
+    def check(frame, when):
+        assert isinstance(frame, np.ndarray), f"{when}: render() returned {type(frame)}"
+        assert frame.shape == (800, 1600, 3) and frame.dtype == np.uint8, f"{when}: {frame.shape} {frame.dtype}"
+        colours = np.unique(frame.reshape(-1, 3)[::7], axis=0)
+        assert len(colours) > 20, f"{when}: only {len(colours)} colours: blank?"
+        assert (frame < 250).any(axis=2).mean() > 0.02, f"{when}: almost all white"
+
+    first = env.render()
+    check(first, "after reset")
+    for a in (3, 7, 1, 9, 5):
+        env.step(a)
+    later = env.render()
+    check(later, "after 5 steps")
+    assert not np.array_equal(first, later), "the dashboard did not change in 5 steps"
+
+
+# --------------------------------------------------------------------------------------------
+# Spaces, info, truncation
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_spaces_and_info_keys(variant, make_env):
+    env = make_env(IDS[variant], setup="C")
+    n, high, dim = (10, 1.0, 1) if variant == "basic" else (30, 2.0, 2)
+    assert env.action_space == gymnasium.spaces.Discrete(n)
+    assert env.observation_space == gymnasium.spaces.Box(0.0, high, (dim,), np.float32)
+    obs, info = env.reset(seed=0)
+    assert obs in env.observation_space and info["seed"] == 0
+    for a in range(n):
+        obs, reward, terminated, truncated, info = env.step(a)
+        assert obs in env.observation_space and obs.dtype == np.float32
+        assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
+        assert INFO_KEYS <= info.keys(), f"missing info keys: {INFO_KEYS - info.keys()}"
+        speed, mode = (a, 0) if variant == "basic" else (a // 3, a % 3)
+        assert info["speed_index"] == speed and info["mode"] == mode
+        assert info["speed"] == pytest.approx((speed + 1) / 10)
+    with pytest.raises(Exception):
+        env.step(n)  # outside the action space
+
+
+@pytest.mark.parametrize("variant", ["basic", "advanced"])
+def test_make_truncates_at_50(variant, make_env):
+    env = make_env(IDS[variant], setup="A")
+    for episode in range(2):
+        env.reset(seed=episode)
+        for t in range(1, 51):
+            _, _, terminated, truncated, info = env.step(t % env.action_space.n)
+            assert not terminated and truncated == (t == 50), f"episode {episode} step {t}: {truncated=}"
+            assert info["step"] == t
+
+
+def test_direct_max_episode_steps_truncates_in_the_node(make_env):
+    env = make_env(None, setup="B", variant="advanced", max_episode_steps=7)
+    for episode in range(2):
+        env.reset(seed=30 + episode)
+        for t in range(1, 8):
+            _, _, terminated, truncated, info = env.step(t)
+            assert not terminated and truncated == (t == 7), f"episode {episode} step {t}: {truncated=}"
+    # The node says the same as the library with --max-steps 7.
+    want = trace("B", "advanced", 31, list(range(1, 8)), max_steps=7)
+    assert [e["step"]["truncated"] for e in want[1:]] == [False] * 6 + [True]
+
+
+def test_make_max_episode_steps_250(make_env):
+    env = make_env(BASIC, setup="B", max_episode_steps=250)
+    assert env.spec.max_episode_steps == 250
+    env.reset(seed=12)
+    truncated_at = None
+    for t in range(1, 251):
+        _, _, _, truncated, info = env.step(t % 10)
+        if truncated:
+            truncated_at = t
+            break
+        if t == 51:
+            assert info["step"] == 51
+    assert truncated_at == 250
+    obs, _ = env.reset()
+    assert obs in env.observation_space
+
+
+# --------------------------------------------------------------------------------------------
+# Training
+
+
+def test_short_ppo_run(make_vec):
+    """PPO on 4 advanced lines for 2048 steps: completes, and the policy predicts valid actions."""
+    import torch
+    from stable_baselines3 import PPO
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        env = make_vec(SortingLineSB3VecEnv, num_envs=4, setup="B", variant="advanced", seed=42)
+        start = time.monotonic()
+        model = PPO("MlpPolicy", env, n_steps=128, batch_size=128, seed=42, device="cpu", verbose=0)
+        model.learn(total_timesteps=2048)
+        elapsed = time.monotonic() - start
+        assert model.num_timesteps >= 2048
+        assert elapsed < 60, f"PPO took {elapsed:.1f} s"
+        obs = env.reset()
+        for deterministic in (True, False):
+            actions, _ = model.predict(obs, deterministic=deterministic)
+            assert actions.shape == (4,) and all(0 <= int(a) < 30 for a in actions)
+        env.step_async(actions)
+        obs, rewards, dones, infos = env.step_wait()
+        assert obs.shape == (4, 2) and rewards.shape == (4,)
+    finally:
+        torch.set_num_threads(threads)
