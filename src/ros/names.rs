@@ -16,9 +16,12 @@ pub struct Names {
 /// The default node name.
 pub const NODE_NAME: &str = "sorting_line";
 
+/// A name token as rcl validates it: letters, digits and `_`, not starting with a digit, and no
+/// repeated `__` (reserved for ROS's own special names such as `__ns`).
 fn valid_token(t: &str) -> bool {
     !t.is_empty()
         && !t.starts_with(|c: char| c.is_ascii_digit())
+        && !t.contains("__")
         && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
@@ -29,12 +32,12 @@ impl Names {
         let namespace = if namespace.len() > 1 { namespace.trim_end_matches('/').to_string() } else { namespace };
         if namespace != "/" && !namespace[1..].split('/').all(valid_token) {
             return Err(format!(
-                "namespace '{raw}' is not valid: allowed '/' or /-separated tokens of letters, digits and _"
+                "namespace '{raw}' is not valid: allowed '/' or /-separated tokens of letters, digits and single _"
             ));
         }
         let node_name = ros.node_name.clone().unwrap_or_else(|| NODE_NAME.into());
         if !valid_token(&node_name) {
-            return Err(format!("node name '{node_name}' is not valid: allowed letters, digits and _"));
+            return Err(format!("node name '{node_name}' is not valid: allowed letters, digits and single _, not starting with a digit"));
         }
         Ok(Names { namespace, node_name, remaps: ros.remaps.clone() })
     }
@@ -121,8 +124,15 @@ mod tests {
     }
 
     #[test]
-    fn bad_namespaces_are_refused() {
-        let ros = RosArgs { namespace: Some("/pla nt".into()), ..RosArgs::default() };
-        assert!(Names::new(&ros).unwrap_err().contains("namespace '/pla nt' is not valid"));
+    fn bad_namespaces_and_node_names_are_refused() {
+        for bad in ["/pla nt", "/a__b", "/plant/line__x", "/1st"] {
+            let ros = RosArgs { namespace: Some(bad.into()), ..RosArgs::default() };
+            assert!(Names::new(&ros).unwrap_err().contains(&format!("namespace '{bad}' is not valid")), "{bad}");
+        }
+        for bad in ["a__b", "9lives", "sort-line"] {
+            let ros = RosArgs { node_name: Some(bad.into()), ..RosArgs::default() };
+            assert!(Names::new(&ros).unwrap_err().contains(&format!("node name '{bad}' is not valid")), "{bad}");
+        }
+        assert!(Names::new(&RosArgs { namespace: Some("/a_".into()), ..RosArgs::default() }).is_ok());
     }
 }
