@@ -219,10 +219,15 @@ impl HostedLine {
     }
 
     /// Realtime: one timer tick on the held command. At the time limit the next timer tick starts
-    /// a new episode instead (the streams carry on), so a live line never stalls.
+    /// a new episode instead (the streams carry on), so a live line never stalls. The held command
+    /// survives that restart: it was the controller's, not the episode's (an explicit reset does
+    /// return to the start speed).
     pub fn timer_tick(&mut self) -> TimerTick {
         if self.line.truncated() {
-            TimerTick::Reset(self.reset(None))
+            let held = self.held;
+            let observation = self.reset(None);
+            self.held = held;
+            TimerTick::Reset(observation)
         } else {
             TimerTick::Stepped(self.step(self.held))
         }
@@ -327,5 +332,10 @@ mod tests {
         }
         assert!(matches!(h.timer_tick(), TimerTick::Reset(_)));
         assert_eq!(h.line().episode(), 1);
+        let TimerTick::Stepped(out) = h.timer_tick() else { panic!("a new episode runs") };
+        assert_eq!(out.action, Action::new(8, SortMode::Positive), "the command survives the automatic restart");
+        h.reset(Some(3));
+        let TimerTick::Stepped(out) = h.timer_tick() else { panic!() };
+        assert_eq!(out.action.speed_index, START_SPEED_INDEX, "an explicit reset returns to the start speed");
     }
 }
