@@ -1,0 +1,115 @@
+"""pytest set-up of the Python/ROS integration tests.
+
+Refuses to run outside an isolated (loopback-only) network namespace, fixes the ROS environment
+(ROS_DOMAIN_ID from the environment, default 87; Fast DDS with the project's profile) before rclpy
+loads, initialises rclpy once per session with one executor, and starts/stops real node processes.
+
+Run like CI:
+    unshare -n bash -c 'ip link set lo up; source launch_scripts/env.sh; export ROS_DOMAIN_ID=87;
+                        python -m pytest tests/python -q'
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import ros_harness as h  # noqa: E402
+
+h.ros_environment()  # before anything imports rclpy
+
+
+def pytest_sessionstart(session):
+    problem = h.isolation_problem()
+    if problem:
+        pytest.exit(f"refusing to run the ROS tests: {problem}", returncode=3)
+    h.node_binary()  # fails early and clearly when the binary is missing
+
+
+def pytest_report_header(config):
+    env = h.ros_environment()
+    return [f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items())]
+
+
+@pytest.fixture(scope="session")
+def ros():
+    """rclpy, initialised once, with the session's single SingleThreadedExecutor."""
+    session = h.RosSession()
+    yield session
+    session.shutdown()
+
+
+_NAMESPACES = itertools.count()
+
+
+@pytest.fixture
+def namespace(request):
+    """namespace(tag) -> a namespace used by no other node of this session (an exited node's
+    endpoints stay visible to rclpy for ~50 s, so names are never reused)."""
+
+    def make(tag: str = "") -> str:
+        base = h.sanitize(request.node.name)[:40]
+        return "/" + h.sanitize(f"t{next(_NAMESPACES)}_{base}_{tag}")
+
+    return make
+
+
+@pytest.fixture
+def start_node(tmp_path, request):
+    """start_node(*args, env=None) -> NodeProcess. At teardown every node still running gets SIGINT
+    and must exit with 0 within 5 s; a node that died on its own fails the test."""
+    nodes: list[h.NodeProcess] = []
+
+    def start(*args, env=None, log_name=None) -> h.NodeProcess:
+        log = tmp_path / (log_name or f"node_{len(nodes)}.log")
+        node = h.NodeProcess(args, log, env=env)
+        nodes.append(node)
+        return node
+
+    yield start
+    problems = []
+    for node in nodes:
+        if node.stopped_by_test:
+            continue
+        if not node.running():
+            problems.append(f"node exited on its own with {node.proc.returncode}\n{node.describe()}")
+            node.kill()
+            continue
+        try:
+            code = node.stop(signal.SIGINT, timeout=5.0)
+        except AssertionError as e:
+            problems.append(str(e))
+            continue
+        if code != 0:
+            problems.append(f"node exited with {code} after SIGINT (want 0)\n{node.describe()}")
+    if problems:
+        pytest.fail("\n\n".join(problems), pytrace=False)
+
+
+@pytest.fixture
+def client_factory(ros):
+    """client_factory(namespace, variant, node_proc=..., ...) -> LineClient, destroyed at teardown."""
+    clients: list[h.LineClient] = []
+
+    def make(namespace: str, variant: str = "basic", **kwargs) -> h.LineClient:
+        c = h.LineClient(ros, namespace, variant, **kwargs)
+        clients.append(c)
+        return c
+
+    yield make
+    for c in clients:
+        c.destroy()
+
+
+@pytest.fixture
+def probe(ros):
+    """An rclpy node of this test's own (for /clock, /diagnostics, graph queries, parameter clients)."""
+    node = ros.make_node("test_probe")
+    yield node
+    ros.destroy_node(node)

@@ -1,0 +1,621 @@
+"""Helpers for the Python/ROS integration tests of `sorting_line` (and the node benchmark).
+
+- `check_isolated_network()`: DDS test traffic must stay on this machine. Refuses to run unless the
+  process is in a network namespace that has only `lo` (or SORTING_LINE_ALLOW_HOST_NETWORK=1).
+- `ros_environment()`: ROS_DOMAIN_ID (default 87 for tests) and the variables of
+  launch_scripts/env.sh (Fast DDS, its profile, localhost discovery) for anyone who did not source it.
+- `NodeProcess`: the real node binary as a subprocess, stderr captured to a file, stopped with
+  SIGINT (exit code 0 within 5 s is part of its contract).
+- `RosSession`: rclpy initialised once, ONE SingleThreadedExecutor, and bounded waits that spin it
+  with `spin_once(timeout_sec=...)` (never `spin_until_future_complete`, which leaks a task per call
+  in rclpy 7.1).
+- `LineClient`: one line as a lock-step client sees it: reset via the service, step by publishing
+  commands stamped with the current tick and waiting for the next tick's `state`, and every message
+  of every topic of the line collected in lists.
+- `run_trace()`: the simulation library's reference trajectory (`sorting_line trace`), and
+  converters so that node states and trace entries compare field by field.
+
+A node that has exited keeps its DDS endpoints visible to rclpy for about 50 s (RustDDS's dispose
+is dropped by Fast DDS), so a matched publisher or a ready service is never taken as proof that a
+node is up: only a real reply or message is. Tests use a namespace of their own for each node.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Callable, Iterable, Optional
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_TEST_DOMAIN = "87"
+NS_PER_S = 1_000_000_000
+
+CATEGORIES = {"basic": 0, "positive": 1, "negative": 2}
+MODES = {"basic": 0, "positive": 1, "negative": 2}
+
+
+# --------------------------------------------------------------------------------------------
+# Environment
+
+
+def network_interfaces() -> dict[str, set[str]]:
+    """Interfaces of this process's network namespace (`ip -o link`): name -> flags."""
+    out = subprocess.run(["ip", "-o", "link"], capture_output=True, text=True, check=True).stdout
+    interfaces = {}
+    for line in out.splitlines():
+        # "1: lo: <LOOPBACK,UP,LOWER_UP> mtu 65536 ..." ; veth names may carry "@ifN"
+        parts = line.split(":", 2)
+        if len(parts) >= 3:
+            flags = parts[2].split("<", 1)[1].split(">", 1)[0].split(",") if "<" in parts[2] else []
+            interfaces[parts[1].strip().split("@")[0]] = set(flags)
+    return interfaces
+
+
+def isolation_problem() -> Optional[str]:
+    """None when DDS traffic cannot leave this machine; otherwise why we refuse to run."""
+    if os.environ.get("SORTING_LINE_ALLOW_HOST_NETWORK") == "1":
+        return None
+    try:
+        interfaces = network_interfaces()
+    except (OSError, subprocess.CalledProcessError) as e:
+        return f"cannot list network interfaces with `ip -o link` ({e})"
+    others = [n for n in interfaces if n != "lo"]
+    if others:
+        return (
+            f"not in an isolated network namespace: interfaces {', '.join(others)} besides lo. "
+            "Run inside `unshare -n` with `ip link set lo up` (launch_scripts/test.sh does), "
+            "or set SORTING_LINE_ALLOW_HOST_NETWORK=1 to accept DDS traffic on the host network"
+        )
+    if "UP" not in interfaces.get("lo", set()):
+        return "the loopback interface is down in this network namespace: run `ip link set lo up` first"
+    return None
+
+
+def check_isolated_network() -> None:
+    problem = isolation_problem()
+    if problem:
+        raise RuntimeError(problem)
+
+
+def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]:
+    """Sets (if unset) what launch_scripts/env.sh sets, plus ROS_DOMAIN_ID; returns the values.
+
+    Must run before rclpy is initialised (Fast DDS reads the profile when the participant is made).
+    """
+    os.environ.setdefault("ROS_DOMAIN_ID", default_domain)
+    os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(ROOT / "launch_scripts" / "fastdds_profile.xml"))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DISTRO", "jazzy")
+    keys = ["ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "FASTRTPS_DEFAULT_PROFILES_FILE", "ROS_AUTOMATIC_DISCOVERY_RANGE"]
+    return {k: os.environ[k] for k in keys}
+
+
+def node_binary() -> Path:
+    """NODE_BIN, else the release build."""
+    path = Path(os.environ.get("NODE_BIN") or ROOT / "target" / "release" / "sorting_line")
+    if not path.is_file():
+        raise RuntimeError(f"node binary {path} not found: run `cargo build --release` or set NODE_BIN")
+    return path
+
+
+def stamp_ns(stamp) -> int:
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def show_ns(ns: int) -> str:
+    return f"{ns // NS_PER_S}.{ns % NS_PER_S:09d}"
+
+
+# --------------------------------------------------------------------------------------------
+# The node process
+
+
+class NodeProcess:
+    """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
+
+    def __init__(self, args: Iterable[str], log_path: Path, env: Optional[dict[str, str]] = None):
+        self.args = [str(a) for a in args]
+        self.log_path = Path(log_path)
+        self.argv = [str(node_binary()), "node", *self.args]
+        # setpriv execs the node (same pid) with a parent-death signal: a test run that is killed
+        # does not leave nodes behind.
+        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
+        full_env = dict(os.environ)
+        if env:
+            full_env.update(env)
+        self._log = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=full_env)
+        self.pid = self.proc.pid
+        self.stopped_by_test = False
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def log(self) -> str:
+        if not self._log.closed:
+            self._log.flush()
+        try:
+            return self.log_path.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def log_tail(self, lines: int = 15) -> str:
+        return "\n".join(self.log().splitlines()[-lines:])
+
+    def describe(self) -> str:
+        state = "running" if self.running() else f"exited with {self.proc.returncode}"
+        return f"node pid {self.pid} ({state}): {' '.join(self.argv)}\n--- node log (tail) ---\n{self.log_tail()}"
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 5.0) -> int:
+        """Sends `sig` and waits up to `timeout` s; returns the exit code (kills and raises on timeout)."""
+        self.stopped_by_test = True
+        if self.running():
+            self.proc.send_signal(sig)
+        try:
+            code = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+            self._log.close()
+            raise AssertionError(f"node did not exit within {timeout} s of {signal.Signals(sig).name}\n{self.describe()}")
+        self._log.close()
+        return code
+
+    def kill(self) -> None:
+        if self.running():
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+        self._log.close()
+
+
+def run_node_expecting_failure(args: Iterable[str], env: Optional[dict[str, str]] = None, timeout: float = 10.0):
+    """Runs `sorting_line node ARGS` that must fail at start; returns (exit code, stderr)."""
+    full_env = dict(os.environ)
+    if env:
+        full_env.update(env)
+    argv = [str(node_binary()), "node", *[str(a) for a in args]]
+    try:
+        r = subprocess.run(argv, capture_output=True, text=True, env=full_env, timeout=timeout)
+    except subprocess.TimeoutExpired as e:
+        raise AssertionError(f"`{' '.join(argv)}` did not fail at start: still running after {timeout} s") from e
+    return r.returncode, r.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# The reference trajectory
+
+
+def run_trace(setup: str, variant: str, seed: int, actions: Iterable[Any], max_steps: int = 50) -> list[dict]:
+    """`sorting_line trace`: the pure-library trajectory, one dict per line (first = initial reset)."""
+    tokens = [str(a) for a in actions]
+    argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),
+            "--max-steps", str(max_steps)]
+    if tokens:
+        argv += ["--actions", ",".join(tokens)]
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=30)
+    if r.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed ({r.returncode}): {r.stderr}")
+    return [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+
+
+# Node options equivalent to the trace's --setup (threshold 0.7 is the default of both).
+SETUP_FLAGS = {
+    "A": ["--input", "random", "--obs-noise", "0", "--action-penalty", "0"],
+    "B": ["--input", "seasonal", "--obs-noise", "0", "--action-penalty", "0.5"],
+    "C": ["--input", "random", "--obs-noise", "0.3", "--action-penalty", "0"],
+    "D": ["--input", "seasonal", "--obs-noise", "0.3", "--action-penalty", "0.5"],
+}
+
+
+def decode_action(variant: str, action: int) -> tuple[float, Optional[int]]:
+    """Gymnasium action -> (speed, mode): basic = speed index, advanced = speed index * 3 + mode."""
+    if variant == "basic":
+        return round((action + 1) / 10, 1), None
+    return round((action // 3 + 1) / 10, 1), action % 3
+
+
+def trace_reset_view(entry: dict) -> dict:
+    r = entry["reset"]
+    return {"seed": r["seed"], "episode": r["episode"], "observation_quantity": r["observation"]["quantity"],
+            "observation_category": CATEGORIES[r["observation"]["category"]]}
+
+
+def state_reset_view(state) -> dict:
+    return {"seed": state.seed, "episode": state.episode, "observation_quantity": state.observation_quantity,
+            "observation_category": state.observation_category}
+
+
+def trace_step_view(entry: dict) -> dict:
+    s, c = entry["step"], entry["containers"]
+    return {
+        "episode": entry["episode"], "step": s["step"], "speed_index": s["action"]["speed_index"],
+        "mode": MODES[s["action"]["mode"]], "occupancy": s["occupancy"], "accuracy": s["accuracy"],
+        "reward": s["reward"], "cumulative_reward": entry["cumulative_reward"], "purity": entry["purity"],
+        "container_a": c["a"], "container_a_false": c["a_false"], "container_b": c["b"],
+        "container_b_false": c["b_false"], "speed_changes": entry["speed_changes"],
+        "observation_quantity": s["observation"]["quantity"],
+        "observation_category": CATEGORIES[s["observation"]["category"]],
+        "terminated": s["terminated"], "truncated": s["truncated"],
+    }
+
+
+def state_step_view(state) -> dict:
+    keys = ["episode", "step", "speed_index", "mode", "occupancy", "accuracy", "reward", "cumulative_reward",
+            "purity", "container_a", "container_a_false", "container_b", "container_b_false", "speed_changes",
+            "observation_quantity", "observation_category", "terminated", "truncated"]
+    return {k: getattr(state, k) for k in keys}
+
+
+def msg_to_dict(msg) -> Any:
+    """Every field of a ROS message, recursively, as plain Python values (for exact comparison)."""
+    if hasattr(msg, "get_fields_and_field_types"):
+        return {name: msg_to_dict(getattr(msg, name)) for name in msg.get_fields_and_field_types()}
+    if isinstance(msg, (list, tuple)):
+        return [msg_to_dict(m) for m in msg]
+    if isinstance(msg, float) and math.isnan(msg):
+        return "nan"
+    return msg
+
+
+# --------------------------------------------------------------------------------------------
+# rclpy
+
+
+class WaitTimeout(AssertionError):
+    pass
+
+
+class RosSession:
+    """rclpy initialised once, with ONE SingleThreadedExecutor shared by every test node."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self._names = itertools.count()
+
+    def make_node(self, prefix: str = "test_client"):
+        import rclpy.node
+
+        node = rclpy.node.Node(f"{prefix}_{os.getpid()}_{next(self._names)}", context=self.context)
+        self.executor.add_node(node)
+        return node
+
+    def destroy_node(self, node) -> None:
+        self.executor.remove_node(node)
+        node.destroy_node()
+
+    def spin_until(self, condition: Callable[[], Any], timeout: float, what: str,
+                   context: Callable[[], str] = lambda: "", step: float = 0.02,
+                   abort: Callable[[], Optional[str]] = lambda: None):
+        """Spins until `condition()` is truthy (and returns it); raises WaitTimeout naming `what`
+        after `timeout` s, or at once when `abort()` says why waiting is pointless."""
+        deadline = time.monotonic() + timeout
+        while True:
+            result = condition()
+            if result:
+                return result
+            reason = abort()
+            if reason:
+                raise WaitTimeout(f"gave up waiting for {what}: {reason}\n{context()}")
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                extra = context()
+                raise WaitTimeout(f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else ""))
+            self.executor.spin_once(timeout_sec=min(step, remaining))
+
+    def spin_for(self, seconds: float) -> None:
+        """Spins for `seconds`, handling whatever arrives."""
+        deadline = time.monotonic() + seconds
+        while (remaining := deadline - time.monotonic()) > 0:
+            self.executor.spin_once(timeout_sec=min(0.02, remaining))
+
+    def wait_future(self, future, timeout: float, what: str, context: Callable[[], str] = lambda: "",
+                    abort: Callable[[], Optional[str]] = lambda: None):
+        self.spin_until(future.done, timeout, what, context, abort=abort)
+        return future.result()
+
+    def call_service(self, client, request, what: str, wait: float = 10.0, attempt_timeout: float = 3.0,
+                     attempts: int = 3, context: Callable[[], str] = lambda: "",
+                     abort: Callable[[], Optional[str]] = lambda: None):
+        """Waits (bounded) for the service, then calls it, retrying a call that got no reply."""
+        self.spin_until(client.service_is_ready, wait, f"service {what} to be available", context, abort=abort)
+        for attempt in range(1, attempts + 1):
+            future = client.call_async(request)
+            try:
+                return self.wait_future(future, attempt_timeout, f"a reply from {what} (attempt {attempt}/{attempts})",
+                                        context, abort)
+            except WaitTimeout:
+                client.remove_pending_request(future)
+                print(f"ros_harness: no reply from {what} within {attempt_timeout} s (attempt {attempt}/{attempts})\n"
+                      f"{context()}", file=sys.stderr)
+                if attempt == attempts:
+                    raise
+        raise AssertionError("unreachable")
+
+    def shutdown(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.rclpy.shutdown(context=self.context)
+
+
+def join_ns(ns: str, rel: str) -> str:
+    return f"/{rel}" if ns == "/" else f"{ns}/{rel}"
+
+
+class TopicRecorder:
+    """Records every message of one topic (e.g. /clock, /diagnostics) into `msgs`."""
+
+    def __init__(self, session: RosSession, node, topic: str, msg_type, qos: int = 10):
+        self.session, self.topic, self.msgs = session, topic, []
+        self.sub = node.create_subscription(msg_type, topic, self.msgs.append, qos)
+
+    def wait_for(self, predicate: Callable[[Any], bool], timeout: float, what: str,
+                 context: Callable[[], str] = lambda: ""):
+        """The first recorded message (old or new) for which `predicate` holds."""
+        def found():
+            return next((m for m in self.msgs if predicate(m)), None)
+
+        return self.session.spin_until(found, timeout, f"{self.topic}: {what}", context)
+
+
+def diagnostic_values(array, hardware_id: str) -> Optional[dict[str, str]]:
+    """The key/values of the status for `hardware_id` (the line's namespace) in a DiagnosticArray."""
+    for status in array.status:
+        if status.hardware_id == hardware_id:
+            return {kv.key: kv.value for kv in status.values}
+    return None
+
+
+class LineClient:
+    """One line of the node, seen from rclpy: its topics, its `reset` service, lock-step stepping.
+
+    `msgs[topic]` lists every message received per topic (topic names relative to the line), and
+    `by_stamp[topic][stamp_ns]` the messages per tick stamp.
+    """
+
+    TOPICS = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
+
+    def __init__(self, session: RosSession, namespace: str, variant: str = "basic", tick_period: float = 1.0,
+                 node=None, node_proc: Optional[NodeProcess] = None, topics: Optional[list[str]] = None,
+                 mode_topic: bool = False, depth: int = 10):
+        from sorting_line_interfaces.msg import (BeltOccupancy, LineState, MaterialInput, MaterialRatio, ResetEvent,
+                                                 SortModeCommand, SpeedCommand)
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sorting_line_interfaces.srv import ResetLine
+
+        self.session, self.ns, self.variant = session, namespace, variant
+        self.period_ns = round(tick_period * NS_PER_S)
+        self.node_proc = node_proc
+        self.own_node = node is None
+        self.node = node if node is not None else session.make_node()
+        self.msgs: dict[str, list] = defaultdict(list)
+        self.source_times: dict[str, list[int]] = defaultdict(list)  # parallel to msgs
+        self.by_stamp: dict[str, dict[int, list]] = defaultdict(lambda: defaultdict(list))
+        self.stamp: Optional[int] = None  # the tick the line waits at (ns), known after reset()
+        self.first_reset: Optional[int] = None  # stamp of the first reset() of this client
+        # /diagnostics first: a status of our line arriving on it proves that the node sends to
+        # this participant's readers (see wait_connected); (receive time, values) per status.
+        self.diagnostics: list[tuple[float, dict[str, str]]] = []
+        self.diag_sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        types = {"input": MaterialInput, "belt/occupancy": BeltOccupancy, "sensors/ratio": MaterialRatio,
+                 "state": LineState, "events/reset": ResetEvent}
+        wanted = topics if topics is not None else self.TOPICS
+        if variant != "advanced":
+            wanted = [t for t in wanted if t != "sensors/ratio"]
+        # depth: the node's QoS is keep-last 10; a deeper reader queue lets a stalled client (a busy
+        # machine) catch up on a realtime stream without losing samples.
+        self.subs = {t: self.node.create_subscription(types[t], self.name(t), self._recorder(t), depth)
+                     for t in wanted}
+        self.speed_pub = self.node.create_publisher(SpeedCommand, self.name("cmd/speed"), 10)
+        # The basic line has no cmd/sort_mode: publish it there only on request (mode_topic=True).
+        self.mode_pub = (self.node.create_publisher(SortModeCommand, self.name("cmd/sort_mode"), 10)
+                         if variant == "advanced" or mode_topic else None)
+        self.reset_client = self.node.create_client(ResetLine, self.name("reset"))
+        self._SpeedCommand, self._SortModeCommand, self._ResetLine = SpeedCommand, SortModeCommand, ResetLine
+
+    def name(self, rel: str) -> str:
+        return join_ns(self.ns, rel)
+
+    def since_reset(self, topic: str) -> list:
+        """The messages of `topic` from the first reset() of this client on. (Whether the node's
+        start-up tick, published before anyone can have matched, reaches us depends on timing.)"""
+        assert self.first_reset is not None, "reset() first"
+        return [m for m in self.msgs[topic] if stamp_ns(m.header.stamp) >= self.first_reset]
+
+    def _on_diagnostics(self, array) -> None:
+        values = diagnostic_values(array, self.ns)
+        if values is not None:
+            self.diagnostics.append((time.monotonic(), values))
+
+    def _recorder(self, topic: str):
+        msgs, by_stamp, sent = self.msgs[topic], self.by_stamp[topic], self.source_times[topic]
+
+        def record(msg, info):
+            msgs.append(msg)
+            by_stamp[stamp_ns(msg.header.stamp)].append(msg)
+            sent.append(info["source_timestamp"])  # ns, the node's clock when it published
+
+        return record
+
+    def destroy(self) -> None:
+        if self.own_node:
+            self.session.destroy_node(self.node)
+
+    # ---- diagnostics for error messages
+
+    def context(self) -> str:
+        states = [show_ns(stamp_ns(s.header.stamp)) for s in self.msgs["state"][-5:]]
+        matched = {t: s.get_publisher_count() for t, s in self.subs.items()}
+        matched["cmd/speed (subscribers)"] = self.speed_pub.get_subscription_count()
+        if self.mode_pub is not None:
+            matched["cmd/sort_mode (subscribers)"] = self.mode_pub.get_subscription_count()
+        lines = [f"line {self.ns}: waiting at stamp {show_ns(self.stamp) if self.stamp is not None else '?'}; "
+                 f"last states seen: {states or 'none'}; matched endpoints: {matched}; "
+                 f"nodes in the graph: {sorted(self.node.get_node_names_and_namespaces())}"]
+        if self.node_proc is not None:
+            lines.append(self.node_proc.describe())
+        return "\n".join(lines)
+
+    def node_gone(self) -> Optional[str]:
+        if self.node_proc is not None and not self.node_proc.running():
+            return f"the node process exited with {self.node_proc.proc.returncode}"
+        return None
+
+    # ---- waiting
+
+    def wait_connected(self, timeout: float = 10.0) -> None:
+        """Waits until our command publishers and subscriptions are matched with the node (our view),
+        and until a /diagnostics status of this line (1 Hz) has arrived (the node's view: it has
+        discovered this participant and sends to its readers).
+
+        A match count alone proves nothing (stale endpoints linger ~50 s after a node exits), and
+        the node's side may lag ours: a `reset` reply sent before the node has matched our reply
+        reader is lost for good (volatile). The first reset() reply is the proof the node serves."""
+        def matched():
+            ok = self.speed_pub.get_subscription_count() >= 1 and self.subs["state"].get_publisher_count() >= 1
+            if self.variant == "advanced":
+                ok = ok and self.mode_pub.get_subscription_count() >= 1
+            return ok and all(s.get_publisher_count() >= 1 for s in self.subs.values())
+
+        self.session.spin_until(matched, timeout, f"{self.ns}: command publishers and topic subscriptions to match",
+                                self.context, abort=self.node_gone)
+        self.session.spin_until(lambda: self.diagnostics, timeout, f"/diagnostics: a status of {self.ns}",
+                                self.context, abort=self.node_gone)
+
+    def wait_message(self, topic: str, stamp: int, timeout: float = 5.0):
+        """The first message on `topic` stamped `stamp` (ns)."""
+        found = self.by_stamp[topic]
+        return self.session.spin_until(lambda: found.get(stamp, [None])[0], timeout,
+                                       f"{self.name(topic)} for the tick stamped {show_ns(stamp)}", self.context,
+                                       abort=self.node_gone)
+
+    def wait_state(self, stamp: int, timeout: float = 5.0):
+        return self.wait_message("state", stamp, timeout)
+
+    # ---- the service
+
+    def reset(self, seed: Optional[int] = None, timeout: float = 10.0, wait_tick: bool = True):
+        """Calls `reset` and returns its response; waits for the new tick's state.
+
+        Waits (bounded) for the service, then calls it. A call without a reply within 3 s is retried
+        only when the line has evidently not been reset meanwhile (no events/reset, and a /diagnostics
+        status received well after the call still counts the same episodes), so a reset is never
+        executed twice. If the reset did happen but its reply was lost, the response is rebuilt from
+        events/reset and the state of the new tick (`response.message` says so)."""
+        what = f"{self.name('reset')} (seed {seed})"
+        request = self._ResetLine.Request(has_seed=seed is not None, seed=seed or 0)
+        self.session.spin_until(self.reset_client.service_is_ready, timeout, f"service {what} to be available",
+                                self.context, abort=self.node_gone)
+        response = None
+        for attempt in range(1, 4):
+            events_before = len(self.msgs["events/reset"])
+            episodes_before = self.diagnostics[-1][1].get("episodes") if self.diagnostics else None
+            called = time.monotonic()
+            future = self.reset_client.call_async(request)
+            try:
+                response = self.session.wait_future(future, 3.0, f"a reply from {what} (attempt {attempt}/3)",
+                                                    self.context, self.node_gone)
+                break
+            except WaitTimeout:
+                pass
+            # No reply. Did the reset happen? Look for evidence before calling again.
+            def evidence():
+                if len(self.msgs["events/reset"]) > events_before:
+                    return "event"
+                late = [v for t, v in self.diagnostics if t > called + 1.5]
+                if late:
+                    return "diag-reset" if late[-1].get("episodes") != episodes_before else "diag-same"
+                return None
+
+            found = self.session.spin_until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics",
+                                            self.context, abort=self.node_gone)
+            if future.done():
+                response = future.result()
+                break
+            self.reset_client.remove_pending_request(future)
+            print(f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
+                  file=sys.stderr)
+            if found == "event":
+                event = self.msgs["events/reset"][events_before]
+                state = self.wait_state(stamp_ns(event.header.stamp))
+                response = self._ResetLine.Response(
+                    success=True, seed=event.seed, episode=event.episode, stamp=event.header.stamp,
+                    quantity=state.observation_quantity, category=state.observation_category,
+                    message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}")
+                break
+            if found == "diag-reset":
+                raise WaitTimeout(f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
+                                  f"events/reset nor the state arrived\n{self.context()}")
+            # "diag-same": the request never reached the node; calling again is safe.
+        if response is None:
+            raise WaitTimeout(f"no reply from {what} after 3 attempts\n{self.context()}")
+        assert response.success, f"{self.name('reset')} failed: {response.message}"
+        self.stamp = stamp_ns(response.stamp)
+        if self.first_reset is None:
+            self.first_reset = self.stamp
+        if wait_tick:
+            self.wait_state(self.stamp)
+        return response
+
+    # ---- commands
+
+    def _time(self, stamp: int):
+        from builtin_interfaces.msg import Time
+
+        return Time(sec=stamp // NS_PER_S, nanosec=stamp % NS_PER_S)
+
+    def send_speed(self, speed: float, stamp: Optional[int] = None) -> None:
+        msg = self._SpeedCommand(speed=float(speed))
+        msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
+        self.speed_pub.publish(msg)
+
+    def send_mode(self, mode: int, stamp: Optional[int] = None) -> None:
+        msg = self._SortModeCommand(mode=int(mode))
+        msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
+        self.mode_pub.publish(msg)
+
+    def step(self, speed: float, mode: Optional[int] = None, timeout: float = 5.0):
+        """Answers the current tick (speed, and mode on the advanced line); returns the next tick's state."""
+        assert self.stamp is not None, "reset() first: the client does not know the current tick"
+        if self.variant == "advanced":
+            assert mode is not None, "the advanced line needs a sort mode every tick"
+            self.send_mode(mode)
+        self.send_speed(speed)
+        state = self.wait_state(self.stamp + self.period_ns, timeout)
+        self.stamp += self.period_ns
+        return state
+
+    def act(self, action: int, timeout: float = 5.0):
+        """Steps with a Gymnasium action (as `sorting_line trace` takes them)."""
+        speed, mode = decode_action(self.variant, action)
+        return self.step(speed, mode, timeout)
+
+
+def ratio_rule(amount_a: int, amount_b: int) -> tuple[float, int]:
+    """The ratio sensor's rule: A/B rounded to 2 decimals (3.0 when B == 0), positive >= 3, negative <= 1/3."""
+    ratio = 3.0 if amount_b == 0 else round(amount_a / amount_b, 2)
+    if ratio >= 3.0:
+        return ratio, 1
+    if ratio <= 1.0 / 3.0:
+        return ratio, 2
+    return ratio, 0
+
+
+def sanitize(name: str) -> str:
+    """A valid ROS name token from any text (ROS names allow no repeated underscores)."""
+    return re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]", "_", name)).strip("_")
