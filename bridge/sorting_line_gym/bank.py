@@ -144,39 +144,38 @@ class LineBank:
 
     def reset(self, seeds: dict[int, int | None]):
         """Resets the given lines (index -> seed, None = the node's streams carry on) and returns
-        their reset responses. The first reset also proves that states flow (handshake)."""
-        if not self._connected:
-            self._connect()
-            responses = {}
-            for attempt in range(HANDSHAKE_ATTEMPTS):
-                responses.update(self._reset_once(seeds))
-                try:
-                    if self.batch is not None:
-                        first_state = self.batch.saw_current_ticks
-                    else:
-                        first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
-                    self.waiter.until(
-                        first_state,
-                        min(2.0, self.step_timeout),
-                        lambda: f"the first state of {self.namespace} after reset",
-                    )
-                    return responses
-                except BridgeError:
-                    if attempt == HANDSHAKE_ATTEMPTS - 1 or (self.process and not self.process.alive()):
-                        raise
-            return responses
-        return self._reset_once(seeds)
+        their :class:`ResetResult`. The first reset is a handshake: its reply and the step-0 state
+        after it must both arrive. Either can be lost right after discovery (the node may match
+        our request writer before our reply reader, or our state reader), so the handshake is
+        retried; with explicit seeds a repeated reset gives the same episode."""
+        if self._connected:
+            return self._reset_once(seeds)
+        self._connect()
+        if self.batch is not None:
+            first_state = self.batch.saw_current_ticks
+        else:
+            first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
+        for attempt in range(HANDSHAKE_ATTEMPTS):
+            try:
+                responses = self._reset_once(seeds, timeout=min(2.0, self.step_timeout))
+                self.waiter.until(first_state, min(2.0, self.step_timeout), lambda: f"the first state of {self.namespace} after reset")
+                return responses
+            except BridgeError:
+                if attempt == HANDSHAKE_ATTEMPTS - 1 or (self.process and not self.process.alive()):
+                    raise
+        raise AssertionError("unreachable")
 
-    def _reset_once(self, seeds: dict[int, int | None]):
+    def _reset_once(self, seeds: dict[int, int | None], timeout: float | None = None):
+        timeout = self.step_timeout if timeout is None else timeout
         if self.batch is not None:
             self.batch.send_reset(seeds)
-            self.waiter.until(self.batch.reset_done, self.step_timeout, lambda: f"the reply of {self.batch.reset_name}")
+            self.waiter.until(self.batch.reset_done, timeout, lambda: f"the reply of {self.batch.reset_name}")
             return self.batch.finish_reset(seeds)
         for k, seed in seeds.items():
             self.links[k].send_reset(seed)
         self.waiter.until(
             lambda: all(self.links[k].reset_done() for k in seeds),
-            self.step_timeout,
+            timeout,
             lambda: "the reply of " + ", ".join(f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done()),
         )
         return {k: self.links[k].finish_reset() for k in seeds}

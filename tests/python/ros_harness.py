@@ -18,6 +18,13 @@
 A node that has exited keeps its DDS endpoints visible to rclpy for about 50 s (RustDDS's dispose
 is dropped by Fast DDS), so a matched publisher or a ready service is never taken as proof that a
 node is up: only a real reply or message is. Tests use a namespace of their own for each node.
+
+Measured trap: `service_is_ready()` is our side's view. The node (RustDDS) may match our reply
+reader later than our request writer; a reply written before that is never delivered (volatile),
+while the reset itself did happen. So LineClient.wait_connected() also waits for the node's
+/diagnostics (1 Hz) to reach this participant, and LineClient.reset() never sends a second reset
+unless /diagnostics shows the first one did not happen (generic call_service() retries blindly and
+is meant for idempotent services such as GetParameters).
 """
 
 from __future__ import annotations
