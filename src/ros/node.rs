@@ -405,6 +405,8 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     let started = Instant::now();
 
     loop {
+        // Fair (random among ready inputs): a biased order would let a flood of commands starve
+        // the realtime timer and /diagnostics.
         futures::select! {
             event = events.select_next_some() => match event {
                 Event::Batch(received) => {

@@ -82,6 +82,10 @@ impl Rejection {
     }
 }
 
+/// Indices of the per-kind realtime watermarks.
+const SPEED: usize = 0;
+const MODE: usize = 1;
+
 /// What a command did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Accepted {
@@ -103,8 +107,9 @@ pub struct HostedLine {
     pending_mode: Option<SortMode>,
     /// The last valid command (realtime holds it; lock-step reports it).
     held: Action,
-    /// Newest stamp accepted in realtime mode.
-    newest_stamp: i64,
+    /// Newest stamp accepted in realtime mode, per kind (speed, mode): the two commands of one
+    /// tick may arrive in either order, so one kind must not make the other's stamp stale.
+    newest_stamp: [i64; 2],
 }
 
 impl HostedLine {
@@ -117,7 +122,7 @@ impl HostedLine {
             pending_speed: None,
             pending_mode: None,
             held: Action::new(START_SPEED_INDEX, SortMode::Basic),
-            newest_stamp: i64::MIN,
+            newest_stamp: [i64::MIN; 2],
         }
     }
 
@@ -147,7 +152,7 @@ impl HostedLine {
     /// Handles `cmd/speed`.
     pub fn on_speed(&mut self, stamp: Time, speed: f64) -> Result<Accepted, Rejection> {
         let index = index_of_speed(speed).ok_or(Rejection::InvalidSpeed)?;
-        self.check_stamp(stamp, self.pending_speed.is_some())?;
+        self.check_stamp(stamp, self.pending_speed.is_some(), SPEED)?;
         self.held.speed_index = index;
         self.pending_speed = Some(index);
         Ok(self.complete_tick())
@@ -159,13 +164,13 @@ impl HostedLine {
             return Err(Rejection::ModeOnBasicLine);
         }
         let mode = SortMode::from_index(mode).ok_or(Rejection::UnknownMode)?;
-        self.check_stamp(stamp, self.pending_mode.is_some())?;
+        self.check_stamp(stamp, self.pending_mode.is_some(), MODE)?;
         self.held.mode = mode;
         self.pending_mode = Some(mode);
         Ok(self.complete_tick())
     }
 
-    fn check_stamp(&mut self, stamp: Time, already_answered: bool) -> Result<(), Rejection> {
+    fn check_stamp(&mut self, stamp: Time, already_answered: bool, kind: usize) -> Result<(), Rejection> {
         match self.mode {
             TickMode::Lockstep => {
                 let tick = self.clock.tick_of(stamp).ok_or(Rejection::UnknownTick)?;
@@ -187,10 +192,10 @@ impl HostedLine {
                 if nanos > self.stamp().nanos() {
                     return Err(Rejection::UnknownTick);
                 }
-                if nanos < self.newest_stamp {
+                if nanos < self.newest_stamp[kind] {
                     return Err(Rejection::Stale);
                 }
-                self.newest_stamp = nanos;
+                self.newest_stamp[kind] = nanos;
             }
         }
         Ok(())
@@ -326,6 +331,12 @@ mod tests {
         assert_eq!(h.on_speed(before, 0.9), Ok(Accepted::Stored));
         assert_eq!(h.on_speed(h.stamp(), 0.9), Ok(Accepted::Stored));
         assert_eq!(h.on_speed(before, 0.9), Err(Rejection::Stale));
+        // A mode for the newer tick does not make the older tick's speed stale (and vice versa).
+        let mut g = host(Variant::Advanced, TickMode::Realtime);
+        g.timer_tick();
+        let (older, newer) = (SimClock::new(0.5).stamp(0), g.stamp());
+        assert_eq!(g.on_sort_mode(newer, 1), Ok(Accepted::Stored));
+        assert_eq!(g.on_speed(older, 0.9), Ok(Accepted::Stored));
         for _ in 2..50 {
             let TimerTick::Stepped(out) = h.timer_tick() else { panic!("episode still running") };
             assert_eq!(out.action, Action::new(8, SortMode::Positive));
