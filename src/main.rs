@@ -1,5 +1,5 @@
-//! The `sorting_line` command line: `eval` and `table` run the simulation library offline,
-//! `node` runs the line as a ROS 2 node.
+//! The `sorting_line` command line: `eval`, `table`, `policy` and `trace` run the simulation
+//! library offline, `node` runs the line as a ROS 2 node.
 
 use std::io::{self, IsTerminal, Write};
 use std::process::ExitCode;
@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use sorting_line::eval::{evaluate, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
-use sorting_line::sim::rba::analysis;
+use sorting_line::sim::rba::{analysis, RbaTable};
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
 #[derive(Parser)]
@@ -26,6 +26,9 @@ enum Command {
     Eval(EvalArgs),
     /// Print the expected-reward analysis behind the rule-based agent as CSV.
     Table(TableArgs),
+    /// Print the decision tables of `rba` and `rba-hold` for a setup as one JSON object (what a
+    /// controller outside this library, e.g. the Python one, decides with).
+    Policy(PolicyArgs),
     /// Run the line as a ROS 2 node.
     Node(NodeArgs),
     /// Print the library's trajectory for a seed and an action list, one JSON object per step
@@ -73,6 +76,15 @@ struct EvalArgs {
 }
 
 #[derive(Args)]
+struct PolicyArgs {
+    /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
+    #[arg(long)]
+    setup: Setup,
+    #[arg(long, default_value = "basic")]
+    variant: Variant,
+}
+
+#[derive(Args)]
 struct TableArgs {
     #[arg(long, default_value = "basic")]
     variant: Variant,
@@ -88,6 +100,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Eval(args) => run_eval(args),
         Command::Table(args) => run_table(args),
+        Command::Policy(args) => run_policy(args),
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
         Command::Trace(args) => run_trace(args),
     };
@@ -167,6 +180,29 @@ fn run_table(args: TableArgs) -> Result<(), String> {
         Ok(())
     };
     write(&mut out).map_err(|e| e.to_string())
+}
+
+/// `{"setup", "variant", "levels": 101, "rba": [[speed_index, mode]; cell], "rba_hold":
+/// [[[speed_index, mode]; current speed 0..9]; cell], "config"}` with `cell = level * 3 + category`
+/// and `level = round(reading * 100)` clamped to 0..=100 (`observation::level`). The basic line
+/// decides from category slot 0.
+fn run_policy(args: PolicyArgs) -> Result<(), String> {
+    use sorting_line::sim::observation::LEVELS;
+    use sorting_line::sim::speed::SPEED_COUNT;
+    let config = LineConfig::for_setup(args.setup, args.variant);
+    let table = RbaTable::build(&config);
+    let (best, hold) = table.cells();
+    let pair = |a: &sorting_line::sim::Action| [a.speed_index, a.mode.index()];
+    let policy = serde_json::json!({
+        "setup": args.setup,
+        "variant": args.variant,
+        "levels": LEVELS,
+        "rba": best.iter().map(pair).collect::<Vec<_>>(),
+        "rba_hold": hold.chunks(SPEED_COUNT).map(|c| c.iter().map(pair).collect::<Vec<_>>()).collect::<Vec<_>>(),
+        "config": config,
+    });
+    let mut out = io::stdout().lock();
+    writeln!(out, "{policy}").map_err(|e| e.to_string())
 }
 
 fn run_trace(args: TraceArgs) -> Result<(), String> {

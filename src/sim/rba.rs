@@ -140,6 +140,16 @@ impl RbaTable {
     pub fn decide_holding(&self, observation: Observation, current_speed: usize) -> Action {
         self.hold[self.cell(observation) * SPEED_COUNT + current_speed]
     }
+
+    /// The whole table, for clients that decide without this library (`sorting_line policy`):
+    /// `(rba, rba_hold)`, where `rba[level * 3 + category]` is what [`decide`](Self::decide)
+    /// returns for a reading of that level (0..=100, see `observation::level`) and ratio category,
+    /// and `rba_hold[(level * 3 + category) * SPEED_COUNT + current_speed]` what
+    /// [`decide_holding`](Self::decide_holding) returns. The basic line decides from category slot
+    /// 0 (it has no ratio sensor); its three slots are equal.
+    pub fn cells(&self) -> (&[Action], &[Action]) {
+        (&self.best, &self.hold)
+    }
 }
 
 /// How many steps a reading's regime is expected to last, counting the current one: the horizon
@@ -282,6 +292,36 @@ mod tests {
         assert_eq!(hold_horizon(InputKind::Random), 1.0);
         let h = hold_horizon(InputKind::Seasonal);
         assert!((h - (365.0 / 3.0 / 22.0 + 0.5)).abs() < 1e-12, "{h}");
+    }
+
+    #[test]
+    fn exported_cells_agree_with_decide_for_every_cell() {
+        for setup in crate::sim::config::SETUPS {
+            for variant in crate::sim::config::VARIANTS {
+                let table = RbaTable::build(&LineConfig::for_setup(setup, variant));
+                let (best, hold) = table.cells();
+                assert_eq!(best.len(), LEVELS * 3);
+                assert_eq!(hold.len(), LEVELS * 3 * SPEED_COUNT);
+                for l in 0..LEVELS {
+                    for c in CATEGORIES {
+                        let o = obs(l as f64 / 100.0, c);
+                        // The basic line ignores the category: any slot gives slot 0's decision.
+                        let cell = l * 3 + if variant == Variant::Basic { 0 } else { c.index() };
+                        if variant == Variant::Basic {
+                            assert_eq!(best[l * 3 + c.index()], best[cell], "{setup:?} basic level {l}: slots differ");
+                        }
+                        assert_eq!(table.decide(o), best[cell], "{setup:?} {variant} level {l} {c:?}");
+                        for speed in 0..SPEED_COUNT {
+                            assert_eq!(
+                                table.decide_holding(o, speed),
+                                hold[cell * SPEED_COUNT + speed],
+                                "{setup:?} {variant} level {l} {c:?} speed {speed}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

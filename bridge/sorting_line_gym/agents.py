@@ -1,0 +1,208 @@
+"""Non-learning agents for the sorting line, all with one interface.
+
+- :class:`RuleBasedAgent` is the project's rule-based agent, ``rba`` (highest expected immediate
+  reward) or ``rba-hold`` (changes speed only when that pays back the switching penalty). It uses
+  the very table the Rust library decides with (``sorting_line policy`` prints it), so it makes the
+  same decisions as ``sorting_line eval --agent rba|rba-hold``, and is what the controller node
+  (``sorting-line-controller``) and Python evaluations run.
+- :class:`ConstantAgent` keeps one speed (and a fixed mode, or the mode matching the observed
+  ratio category): a baseline, and a predictable agent for tests.
+- :class:`RandomAgent` draws uniformly from the action space with its own seeded NumPy generator:
+  the paper's random baseline. Its draws are not those of ``sorting_line eval --agent random``
+  (that one uses the library's own random stream).
+
+Interface of every agent:
+
+- ``act(quantity, category, current_speed_index) -> (speed_index, mode)``: the decision for the
+  input sensor's reading (0..1), the ratio category (0 mixed, 1 A-rich, 2 B-rich; ignored by the
+  basic line) and the belt's current speed index (only ``rba-hold`` and nothing else uses it);
+  mode is always 0 on the basic line.
+- ``predict(obs, current_speed_index) -> action``: the same on a Gymnasium observation, returning
+  the Gymnasium action (basic: speed index; advanced: speed index * 3 + mode).
+- ``reset(seed=None)``: at the start of an episode (reseeds the random agent; no-op otherwise).
+
+After a reset the belt runs at :data:`START_SPEED_INDEX` (speed 0.6); later the ``speed_index`` of
+the env's ``info`` (or the ``belt/occupancy`` topic's ``speed``) is the current speed.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import subprocess
+from typing import Sequence
+
+import numpy as np
+
+from .transport import find_node_binary
+
+#: Speed index of the belt right after a reset (speed 0.6; src/sim/speed.rs START_SPEED_INDEX).
+START_SPEED_INDEX = 5
+SPEED_COUNT = 10
+MODE_COUNT = 3
+#: Reading levels 0.00, 0.01, ..., 1.00 of the input sensor (the rows of the rule table).
+LEVELS = 101
+
+VARIANTS = ("basic", "advanced")
+SETUPS = ("A", "B", "C", "D")
+
+
+def level(quantity: float) -> int:
+    """The table row of a reading, exactly as the Rust side computes it (``observation::level``):
+    ``round(quantity * 100)`` with halves rounded away from zero (Rust's ``f64::round``, not
+    Python's round-half-to-even), clamped to 0..100; NaN gives 0."""
+    x = float(quantity) * 100.0
+    if not x > 0.0:  # NaN, negative or zero
+        return 0
+    if x >= 100.0:
+        return LEVELS - 1
+    whole = math.floor(x)
+    return int(whole) + (1 if x - whole >= 0.5 else 0)
+
+
+@functools.lru_cache(maxsize=None)
+def load_policy(setup: str, variant: str) -> dict:
+    """The decision tables of ``sorting_line policy --setup SETUP --variant VARIANT``, read once per
+    (setup, variant) and process. Keys: setup, variant, levels, rba (``[speed_index, mode]`` per
+    cell ``level * 3 + category``), rba_hold (per cell, one pair per current speed 0..9), config."""
+    if setup not in SETUPS:
+        raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
+    if variant not in VARIANTS:
+        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(VARIANTS)}")
+    argv = [find_node_binary(), "policy", "--setup", setup, "--variant", variant]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    if result.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
+    policy = json.loads(result.stdout)
+    cells = policy["levels"] * 3
+    if (
+        policy["setup"] != setup
+        or policy["variant"] != variant
+        or policy["levels"] != LEVELS
+        or len(policy["rba"]) != cells
+        or len(policy["rba_hold"]) != cells
+        or any(len(row) != SPEED_COUNT for row in policy["rba_hold"])
+    ):
+        raise RuntimeError(f"`{' '.join(argv)}` printed a table of an unexpected shape")
+    # Tuples: the cached tables are shared by every agent of this process and must not change.
+    policy["rba"] = tuple(tuple(pair) for pair in policy["rba"])
+    policy["rba_hold"] = tuple(tuple(tuple(pair) for pair in row) for row in policy["rba_hold"])
+    return policy
+
+
+class Agent:
+    """The common interface (see the module's docstring)."""
+
+    variant: str = "basic"
+
+    def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
+        raise NotImplementedError
+
+    def reset(self, seed: int | None = None) -> None:
+        """Called at the start of each episode; only the random agent uses it."""
+
+    def predict(self, obs: Sequence[float], current_speed_index: int) -> int:
+        """The Gymnasium action for an observation of the env (basic ``[quantity]``, advanced
+        ``[quantity, category]``)."""
+        quantity = float(obs[0])
+        category = int(round(float(obs[1]))) if self.variant == "advanced" else 0
+        speed_index, mode = self.act(quantity, category, current_speed_index)
+        return speed_index * MODE_COUNT + mode if self.variant == "advanced" else speed_index
+
+
+def _check_variant(variant: str) -> str:
+    if variant not in VARIANTS:
+        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(VARIANTS)}")
+    return variant
+
+
+class RuleBasedAgent(Agent):
+    """``rba`` (``hold=False``) or ``rba-hold`` (``hold=True``) for one of the paper's setups.
+
+    The table is the Rust library's (loaded once per process through ``sorting_line policy``), so
+    decisions equal ``sorting_line eval``'s for the same observations. ``rba`` ignores
+    ``current_speed_index``; ``rba-hold`` needs the belt's current speed."""
+
+    def __init__(self, setup: str, variant: str, hold: bool = False):
+        self.setup, self.variant, self.hold = setup, _check_variant(variant), hold
+        policy = load_policy(setup, variant)
+        self.config = policy["config"]
+        self._rba = policy["rba"]
+        self._hold = policy["rba_hold"]
+
+    @property
+    def name(self) -> str:
+        return "rba-hold" if self.hold else "rba"
+
+    def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
+        if self.variant == "basic":
+            category = 0  # the basic line has no ratio sensor: its table has one category slot
+        elif category not in (0, 1, 2):
+            raise ValueError(f"category = {category!r} is not valid: allowed 0, 1, 2")
+        cell = level(quantity) * 3 + category
+        if not self.hold:
+            return self._rba[cell]
+        if not (isinstance(current_speed_index, (int, np.integer)) and 0 <= current_speed_index < SPEED_COUNT):
+            raise ValueError(f"current_speed_index = {current_speed_index!r} is not valid: allowed 0..9")
+        return self._hold[cell][int(current_speed_index)]
+
+
+class ConstantAgent(Agent):
+    """Always ``speed_index``; on the advanced line mode ``mode`` (0..2), or ``"cat"``: the mode
+    matching the observed ratio category (``sorting_line eval --agent constant:K[:M|:cat]``)."""
+
+    def __init__(self, variant: str, speed_index: int, mode: int | str = 0):
+        self.variant = _check_variant(variant)
+        if not 0 <= speed_index < SPEED_COUNT:
+            raise ValueError(f"speed_index = {speed_index!r} is not valid: allowed 0..9")
+        if mode != "cat" and mode not in range(MODE_COUNT):
+            raise ValueError(f"mode = {mode!r} is not valid: allowed 0, 1, 2 or 'cat'")
+        if variant == "basic" and mode != 0:
+            raise ValueError("a sort mode needs the advanced line")
+        self.speed_index, self.mode = int(speed_index), mode
+
+    def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
+        if self.variant == "basic":
+            return self.speed_index, 0
+        return self.speed_index, int(category) if self.mode == "cat" else int(self.mode)
+
+
+class RandomAgent(Agent):
+    """Uniform over the action space (10 speeds; x 3 modes on the advanced line), from a NumPy
+    generator seeded with ``seed``; ``reset(seed)`` reseeds it (as the evaluation protocol reseeds
+    the agent each episode), ``reset()`` carries on."""
+
+    def __init__(self, variant: str, seed: int | None = None):
+        self.variant = _check_variant(variant)
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
+        n = SPEED_COUNT * MODE_COUNT if self.variant == "advanced" else SPEED_COUNT
+        a = int(self.rng.integers(n))
+        return (a // MODE_COUNT, a % MODE_COUNT) if self.variant == "advanced" else (a, 0)
+
+
+def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> Agent:
+    """An agent by its command-line name: ``rba``, ``rba-hold``, ``random`` (seeded with ``seed``),
+    ``constant:K``, ``constant:K:M`` or ``constant:K:cat`` (K = 0..9, M = 0..2)."""
+    if spec in ("rba", "rba-hold"):
+        return RuleBasedAgent(setup, variant, hold=spec == "rba-hold")
+    if spec == "random":
+        return RandomAgent(variant, seed)
+    parts = spec.split(":")
+    try:
+        if parts[0] != "constant" or len(parts) not in (2, 3):
+            raise ValueError
+        mode: int | str = 0 if len(parts) == 2 else ("cat" if parts[2] == "cat" else int(parts[2]))
+        return ConstantAgent(variant, int(parts[1]), mode)
+    except ValueError as e:
+        detail = f" ({e})" if str(e) else ""
+        raise ValueError(
+            f"agent {spec!r} is not valid{detail}: allowed rba, rba-hold, random, constant:K, constant:K:M, "
+            "constant:K:cat (K = 0..9, M = 0..2; modes on the advanced line only)"
+        ) from None

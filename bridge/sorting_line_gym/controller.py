@@ -1,0 +1,303 @@
+"""`sorting-line-controller`: the rule-based agent as an rclpy node that drives a line live.
+
+    sorting_line node --mode realtime --rate 10 --variant advanced --input seasonal \\
+        --action-penalty 0.5 --ros-args -r __ns:=/plant &
+    sorting-line-controller --namespace /plant --setup B --variant advanced --agent rba-hold
+
+This is the model of a controller for the line, written as a user would: it knows nothing of the
+node's internals, only its topics (README, "The ROS 2 node"). Each tick the node publishes, stamped
+with the tick's simulated time, the input sensor (``input``: the reading of the next batch), the
+belt (``belt/occupancy``: its current ``speed``) and, on the advanced line, the ratio sensor
+(``sensors/ratio``: the next batch's category). The controller collects the readings of one stamp
+from those topics (they arrive as separate messages, in any order), and once it has what its agent
+needs (the reading; the category on the advanced line; the current speed for ``rba-hold``) it
+decides and answers that tick: ``cmd/sort_mode`` (advanced) then ``cmd/speed``, both carrying the
+tick's stamp.
+
+- realtime node: the node ticks on its own clock and holds the last command it received, so a
+  command that arrives after the next tick takes effect one tick later.
+- lock-step node: each answer makes the node advance one tick, so the controller drives the line
+  as fast as the round trip allows. It answers every tick it sees, also the last of an episode,
+  which a lock-step node refuses (``episode_over``) until someone calls ``reset``.
+
+``--setup`` and ``--variant`` must describe the node's line (the table depends on the input
+generator, the sensor noise and the penalty). QoS is the node's: reliable, volatile, keep-last 10.
+``--ros-args`` (e.g. ``-r __ns:=/plant``) is handed to rclpy. SIGINT or SIGTERM stops it cleanly
+(within 0.1 s), logging how many decisions it made.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import IO
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+
+from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
+
+from .agents import Agent, RuleBasedAgent
+from .transport import QOS, SPEEDS
+
+NS_PER_S = 1_000_000_000
+#: Ticks whose readings are still incomplete that the controller keeps; older ones are dropped.
+MAX_PENDING = 32
+#: Decisions whose latency the exit summary describes (the most recent ones).
+LATENCY_WINDOW = 10_000
+#: Longest wait of the executor: how soon a signal stops the controller.
+SPIN_PERIOD = 0.1
+
+
+def stamp_ns(stamp) -> int:
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def speed_index_of(speed: float) -> int | None:
+    """The index of one of the ten belt speeds 0.1..1.0, or None for anything else."""
+    i = round(float(speed) * 10) - 1
+    return i if 0 <= i < len(SPEEDS) and abs(SPEEDS[i] - speed) < 1e-9 else None
+
+
+@dataclass
+class _Readings:
+    """What has arrived for one tick."""
+
+    stamp: object  # builtin_interfaces/Time, echoed in the commands
+    first_seen: float  # time.monotonic() of the first reading
+    quantity: float | None = None
+    category: int | None = None
+    speed_index: int | None = None
+    episode: int = 0
+    step: int = 0
+
+
+class ControllerNode(Node):
+    """Answers every tick of one line with ``agent``'s decision (see the module's docstring).
+
+    ``decision_log``: an open text file that gets one JSON line per decision (stamp, episode, step,
+    readings, decision, and ``latency_ms`` from the tick's first reading to the publication)."""
+
+    def __init__(self, agent: Agent, variant: str, namespace: str | None = None,
+                 node_name: str = "sorting_line_controller", decision_log: IO[str] | None = None):
+        super().__init__(node_name, namespace=namespace)
+        self.agent, self.variant = agent, variant
+        self.advanced = variant == "advanced"
+        self.needs_speed = bool(getattr(agent, "hold", False))
+        self.decision_log = decision_log
+        self.decisions = 0
+        self.skipped = 0  # ticks whose readings never became complete before a newer tick's
+        self.stale = 0  # readings for ticks already answered or skipped
+        self.invalid = 0  # readings that cannot be decided on (unknown category, off-grid speed)
+        # Readings-to-command latencies (ms) of the most recent decisions, for the summary.
+        self.latencies: deque[float] = deque(maxlen=LATENCY_WINDOW)
+        self._pending: dict[int, _Readings] = {}
+        self._newest_answered: int | None = None
+        self._newest_input: int | None = None
+        self._warned_incomplete = False
+
+        self.speed_pub = self.create_publisher(SpeedCommand, "cmd/speed", QOS)
+        self.mode_pub = self.create_publisher(SortModeCommand, "cmd/sort_mode", QOS) if self.advanced else None
+        self.subs = [self.create_subscription(MaterialInput, "input", self._on_input, QOS)]
+        if self.advanced:
+            self.subs.append(self.create_subscription(MaterialRatio, "sensors/ratio", self._on_ratio, QOS))
+        if self.needs_speed:
+            self.subs.append(self.create_subscription(BeltOccupancy, "belt/occupancy", self._on_belt, QOS))
+        self._connect_timer = self.create_timer(0.1, self._check_connected)
+        topics = ", ".join(s.topic_name for s in self.subs)
+        self.get_logger().info(
+            f"{getattr(agent, 'name', type(agent).__name__)} on the {variant} line"
+            f"{' of setup ' + agent.setup if hasattr(agent, 'setup') else ''}: reading {topics}; "
+            f"commanding {self.resolve_topic_name('cmd/speed')}"
+            + (f" and {self.resolve_topic_name('cmd/sort_mode')}" if self.advanced else "")
+        )
+
+    # -- graph ---------------------------------------------------------------------------------
+    def _check_connected(self) -> None:
+        """Logs once that every topic has a peer (a hint for users and scripts, not a guarantee
+        that the node has matched us too)."""
+        pubs = [self.speed_pub] + ([self.mode_pub] if self.mode_pub else [])
+        if all(p.get_subscription_count() > 0 for p in pubs) and all(s.get_publisher_count() > 0 for s in self.subs):
+            self.get_logger().info("connected: every sensor topic has a publisher and every command topic a subscriber")
+            self._connect_timer.cancel()
+            self.destroy_timer(self._connect_timer)
+
+    # -- readings ------------------------------------------------------------------------------
+    def _on_input(self, msg: MaterialInput) -> None:
+        key = stamp_ns(msg.header.stamp)
+        # One writer delivers in order: an input older than the newest one is a new node (or a
+        # restarted one) whose clock starts again. Start over instead of ignoring it for good.
+        if self._newest_input is not None and key < self._newest_input:
+            self.get_logger().warning(
+                f"input went back in time ({key / NS_PER_S:.3f} s after {self._newest_input / NS_PER_S:.3f} s):"
+                " the node restarted? starting over"
+            )
+            self._pending.clear()
+            self._newest_answered = None
+        self._newest_input = key
+        self._reading(msg.header.stamp, msg.episode, msg.step, quantity=float(msg.quantity))
+
+    def _on_ratio(self, msg: MaterialRatio) -> None:
+        if msg.category > 2:
+            self.invalid += 1
+            self.get_logger().warning(f"sensors/ratio: category {msg.category} is not 0, 1 or 2",
+                                      throttle_duration_sec=5.0)
+            return
+        self._reading(msg.header.stamp, msg.episode, msg.step, category=int(msg.category))
+
+    def _on_belt(self, msg: BeltOccupancy) -> None:
+        index = speed_index_of(msg.speed)
+        if index is None:
+            self.invalid += 1
+            self.get_logger().warning(f"belt/occupancy: speed {msg.speed} is not one of the ten speeds",
+                                      throttle_duration_sec=5.0)
+            return
+        self._reading(msg.header.stamp, msg.episode, msg.step, speed_index=index)
+
+    def _reading(self, stamp, episode: int, step: int, **values) -> None:
+        key = stamp_ns(stamp)
+        if self._newest_answered is not None and key <= self._newest_answered:
+            self.stale += 1
+            return
+        tick = self._pending.get(key)
+        if tick is None:
+            tick = self._pending[key] = _Readings(stamp, time.monotonic(), episode=episode, step=step)
+            if len(self._pending) > MAX_PENDING:
+                self._drop(min(self._pending), persistent=True)
+        for name, value in values.items():
+            setattr(tick, name, value)
+        if self._complete(tick):
+            self._answer(key, tick)
+
+    def _missing(self, tick: _Readings) -> list[str]:
+        missing = []
+        if tick.quantity is None:
+            missing.append("input")
+        if self.advanced and tick.category is None:
+            missing.append("sensors/ratio")
+        if self.needs_speed and tick.speed_index is None:
+            missing.append("belt/occupancy")
+        return missing
+
+    def _complete(self, tick: _Readings) -> bool:
+        return not self._missing(tick)
+
+    def _drop(self, key: int, persistent: bool = False) -> None:
+        """Gives up on a tick. ``persistent``: ticks keep arriving incomplete (a topic is silent),
+        which is worth a warning; a tick overtaken by a newer complete one (e.g. while the
+        subscriptions were still matching) is only counted."""
+        tick = self._pending.pop(key)
+        self.skipped += 1
+        if persistent and not self._warned_incomplete:
+            self._warned_incomplete = True
+            self.get_logger().warning(
+                f"{MAX_PENDING} ticks without complete readings, e.g. the tick stamped {key / NS_PER_S:.3f} s: "
+                f"nothing on {', '.join(self._missing(tick))} (does --variant match the node's line?)"
+            )
+
+    # -- decisions -----------------------------------------------------------------------------
+    def _answer(self, key: int, tick: _Readings) -> None:
+        del self._pending[key]
+        # Older ticks can no longer be answered usefully (the node refuses a stamp older than one
+        # it has accepted): drop them.
+        for older in [k for k in self._pending if k < key]:
+            self._drop(older)
+        self._newest_answered = key
+        current = tick.speed_index if tick.speed_index is not None else 0
+        category = tick.category if tick.category is not None else 0
+        speed_index, mode = self.agent.act(tick.quantity, category, current)
+        if self.mode_pub is not None:
+            m = SortModeCommand()
+            m.header.stamp = tick.stamp
+            m.mode = int(mode)
+            self.mode_pub.publish(m)
+        s = SpeedCommand()
+        s.header.stamp = tick.stamp
+        s.speed = SPEEDS[speed_index]
+        self.speed_pub.publish(s)
+        published = time.monotonic()
+        self.decisions += 1
+        latency_ms = (published - tick.first_seen) * 1e3
+        self.latencies.append(latency_ms)
+        if self.decisions == 1:
+            self.get_logger().info(f"first decision: tick {key / NS_PER_S:.3f} s (episode {tick.episode}, "
+                                   f"step {tick.step}) -> speed {SPEEDS[speed_index]}, mode {mode}")
+        if self.decision_log is not None:
+            record = {
+                "stamp_ns": key, "episode": tick.episode, "step": tick.step, "quantity": tick.quantity,
+                "category": tick.category, "current_speed_index": tick.speed_index, "speed_index": speed_index,
+                "mode": mode, "latency_ms": round(latency_ms, 3), "published_monotonic": published,
+            }
+            self.decision_log.write(json.dumps(record) + "\n")
+            self.decision_log.flush()
+
+    def summary(self) -> str:
+        lat = sorted(self.latencies)
+        timing = ""
+        if lat:
+            p50, p99 = lat[len(lat) // 2], lat[min(len(lat) - 1, int(len(lat) * 0.99))]
+            timing = f"; readings-to-command latency p50 {p50:.2f} ms, p99 {p99:.2f} ms"
+            if len(lat) == LATENCY_WINDOW:
+                timing += f" (last {LATENCY_WINDOW} decisions)"
+        return (f"{self.decisions} decisions, {self.skipped} ticks skipped (incomplete readings), "
+                f"{self.stale} stale readings, {self.invalid} invalid readings{timing}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    full = ["sorting-line-controller", *(sys.argv[1:] if argv is None else argv)]
+    p = argparse.ArgumentParser(prog="sorting-line-controller", description=__doc__.split("\n\n")[0],
+                                epilog="ROS arguments go after --ros-args (e.g. --ros-args -r __ns:=/plant).")
+    p.add_argument("--namespace", default=None,
+                   help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)")
+    p.add_argument("--setup", choices="ABCD", required=True, help="the setup of the node's line (A..D)")
+    p.add_argument("--variant", choices=["basic", "advanced"], default="basic")
+    p.add_argument("--agent", choices=["rba", "rba-hold"], default="rba")
+    p.add_argument("--node-name", default="sorting_line_controller")
+    p.add_argument("--decision-log", default=None, metavar="FILE",
+                   help="write one JSON line per decision (readings, decision, latency) to FILE")
+    args = p.parse_args(remove_ros_args(full)[1:])
+    # The table first: a missing binary fails before anything joins the graph.
+    try:
+        agent = RuleBasedAgent(args.setup, args.variant, hold=args.agent == "rba-hold")
+    except Exception as e:  # noqa: BLE001 - reported as a usage error
+        print(f"sorting-line-controller: cannot load the rule table: {e}", file=sys.stderr)
+        return 2
+    log = open(args.decision_log, "w") if args.decision_log else None
+    # Our own SIGINT/SIGTERM handling: the signal only sets a flag, and the loop below ends at the
+    # next wake-up (at most SPIN_PERIOD later), with the context still up. rclpy's handlers would
+    # shut the context down from another thread while a callback may be taking or publishing a
+    # message, which then fails at random.
+    stop: list[str] = []
+    rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop.append(signal.Signals(signum).name))
+    executor = SingleThreadedExecutor()
+    node = None
+    try:
+        node = ControllerNode(agent, args.variant, namespace=args.namespace, node_name=args.node_name,
+                              decision_log=log)
+        executor.add_node(node)
+        while not stop and rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD)
+        if node is not None:
+            node.get_logger().info(f"{stop[0] if stop else 'shutdown'}: stopping: {node.summary()}")
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        if log is not None:
+            log.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
