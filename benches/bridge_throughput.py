@@ -132,27 +132,6 @@ def load() -> str:
 # (a) the raw lock-step loop
 
 
-class Watchdog(threading.Thread):
-    """Wakes the executor once `deadline` (monotonic) has passed, so that a blocking spin_once()
-    (no per-wait timeout timer) cannot hang when a state never comes."""
-
-    def __init__(self, executor):
-        super().__init__(daemon=True)
-        self.executor, self.deadline, self.fired = executor, math.inf, False
-        self._halt = threading.Event()
-        self.start()
-
-    def run(self) -> None:
-        while not self._halt.wait(0.05):
-            if time.monotonic() > self.deadline:
-                self.fired = True
-                self.executor.wake()
-
-    def stop(self) -> None:
-        self._halt.set()
-        self.join()
-
-
 class RawLine:
     """One line of a node of its own, driven by the smallest rclpy lock-step loop."""
 
@@ -185,6 +164,10 @@ class RawLine:
         self.stamp = None  # (sec, nanosec) of the tick we answer
         self.arrived = False
         self._ResetLine = ResetLine
+        # The node benchmark's watchdog (imported here, after any re-exec into the venv and netns:
+        # node_lockstep imports rclpy).
+        from node_lockstep import Watchdog
+
         self.watchdog = Watchdog(self.executor)
 
     def _on_state(self, msg) -> None:
