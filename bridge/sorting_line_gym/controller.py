@@ -46,7 +46,7 @@ from rclpy.utilities import remove_ros_args
 from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
 
 from .agents import Agent, RuleBasedAgent
-from .transport import QOS, SPEEDS
+from .transport import QOS, SPEEDS, publish_commands
 
 NS_PER_S = 1_000_000_000
 #: Ticks whose readings are still incomplete that the controller keeps; older ones are dropped.
@@ -214,15 +214,7 @@ class ControllerNode(Node):
         current = tick.speed_index if tick.speed_index is not None else 0
         category = tick.category if tick.category is not None else 0
         speed_index, mode = self.agent.act(tick.quantity, category, current)
-        if self.mode_pub is not None:
-            m = SortModeCommand()
-            m.header.stamp = tick.stamp
-            m.mode = int(mode)
-            self.mode_pub.publish(m)
-        s = SpeedCommand()
-        s.header.stamp = tick.stamp
-        s.speed = SPEEDS[speed_index]
-        self.speed_pub.publish(s)
+        publish_commands(self.speed_pub, self.mode_pub, tick.stamp, speed_index, mode)
         published = time.monotonic()
         self.decisions += 1
         latency_ms = (published - tick.first_seen) * 1e3

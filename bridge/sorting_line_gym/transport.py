@@ -184,6 +184,20 @@ def stamp_key(t: Time) -> tuple[int, int]:
     return (t.sec, t.nanosec)
 
 
+def publish_commands(speed_pub, mode_pub, stamp: Time, speed_index: int, mode: int) -> None:
+    """Answers the tick stamped ``stamp`` on a line's command topics: the sort mode first (when
+    the line has one, ``mode_pub`` not None), then the speed, which completes the tick."""
+    if mode_pub is not None:
+        m = SortModeCommand()
+        m.header.stamp = stamp
+        m.mode = int(mode)
+        mode_pub.publish(m)
+    s = SpeedCommand()
+    s.header.stamp = stamp
+    s.speed = SPEEDS[speed_index]
+    speed_pub.publish(s)
+
+
 @dataclass
 class ResetResult:
     """What a reset tells about one line: its first observation and where it now stands."""
@@ -282,16 +296,7 @@ class LineLink:
 
     # -- step --------------------------------------------------------------------------------
     def send_action(self, speed_index: int, mode: int) -> None:
-        t = self.tick
-        if self.mode_pub is not None:
-            m = SortModeCommand()
-            m.header.stamp = t.stamp
-            m.mode = int(mode)
-            self.mode_pub.publish(m)
-        s = SpeedCommand()
-        s.header.stamp = t.stamp
-        s.speed = SPEEDS[speed_index]
-        self.speed_pub.publish(s)
+        publish_commands(self.speed_pub, self.mode_pub, self.tick.stamp, speed_index, mode)
 
     def drain(self) -> None:
         _drain(self.state_sub, self.inbox)
