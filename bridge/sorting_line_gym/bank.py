@@ -132,6 +132,18 @@ class LineBank:
     def __len__(self) -> int:
         return len(self.links)
 
+    def sensor_readings(self, k: int, key: tuple[int, int], timeout: float = 2.0) -> tuple[MaterialInput, BeltOccupancy]:
+        """Line k's ``input`` and ``belt/occupancy`` messages of the tick stamped ``key`` (needs
+        ``watch_sensors``). They travel on their own topics and may arrive after the tick's state,
+        so this spins until both are in."""
+        store = self.sensors[k]
+        self.waiter.until(
+            lambda: key in store["input"] and key in store["belt"],
+            timeout,
+            lambda: f"the input and belt/occupancy messages of tick {key[0]}.{key[1]:09d} s on {self.links[k].namespace}",
+        )
+        return store["input"][key], store["belt"][key]
+
     # ----------------------------------------------------------------------------------------
     def _connect(self) -> None:
         self.waiter.until(

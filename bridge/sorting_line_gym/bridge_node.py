@@ -16,6 +16,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 
+from .env import ENV_IDS
 from .transport import BridgeError
 
 
@@ -54,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.episodes < 1:
         p.error(f"--episodes {args.episodes} is out of range: allowed 1 or more")
     action = parse_agent(args.agent, args.variant)
-    env_id = "sorting_line_gym:SortingLineAdvanced-v0" if args.variant == "advanced" else "sorting_line_gym:SortingLine-v0"
+    env_id = f"sorting_line_gym:{ENV_IDS[args.variant]}"
     try:
         env = gym.make(
             env_id,
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.dashboard:
             from .render import save_dashboard
 
-            save_dashboard(env.unwrapped._history.frame(args.variant, env_id, args.setup), args.dashboard)
+            save_dashboard(env.unwrapped.dashboard_frame(), args.dashboard)
             print(f"dashboard: {args.dashboard}")
     except BridgeError as e:
         print(f"sorting-line-bridge: {e}", file=sys.stderr)

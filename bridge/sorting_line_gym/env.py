@@ -54,9 +54,12 @@ import numpy as np
 from gymnasium import spaces
 
 from .bank import LineBank
+from .transport import stamp_key
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
+#: Gymnasium id of each line variant (registered in ``__init__``).
+ENV_IDS = {"basic": "SortingLine-v0", "advanced": "SortingLineAdvanced-v0"}
 
 
 def observation_space(variant: str) -> spaces.Box:
@@ -151,7 +154,7 @@ class SortingLineEnv(gym.Env):
         node_seed = int(seed) if seed is not None else int(self.np_random.integers(0, SEED_BOUND))
         response = self.bank.reset({0: node_seed})[0]
         self._episode_start = sim_seconds(response.stamp)
-        self._history = _History(self.bank.links[0]) if self.render_mode else None
+        self._history = _History(self.bank) if self.render_mode else None
         info = {"seed": int(response.seed), "step": 0}
         if self.render_mode == "human":
             self.render()
@@ -163,7 +166,7 @@ class SortingLineEnv(gym.Env):
         state = self.bank.step([decode_action(self.variant, action)])[0]
         obs = observe(self.variant, state.observation_quantity, state.observation_category)
         if self._history is not None:
-            self._history.record(state, self.bank.sensors[0])
+            self._history.record(state)
         if self.render_mode == "human":
             self.render()
         return obs, float(state.reward), False, bool(state.truncated), state_info(state, self._episode_start)
@@ -174,13 +177,21 @@ class SortingLineEnv(gym.Env):
             return None
         from . import render as dashboard
 
-        frame = self._history.frame(self.variant, self.spec.id if self.spec else "SortingLine", self.bank.setup)
+        frame = self.dashboard_frame()
         if self.render_mode == "rgb_array":
             return dashboard.render_dashboard(frame)
         if self._live is None:
             self._live = dashboard.LiveDashboard()
         self._live.show(frame)
         return None
+
+    def dashboard_frame(self):
+        """The episode so far as a ``render.DashboardFrame`` (for ``render.save_dashboard``);
+        needs a render_mode."""
+        if self._history is None:
+            raise RuntimeError("dashboard_frame() needs a render_mode and a reset() first")
+        env_id = self.spec.id if self.spec else ENV_IDS[self.variant]
+        return self._history.frame(self.variant, env_id, self.bank.setup)
 
     def close(self):
         if self._live is not None:
@@ -193,41 +204,48 @@ class SortingLineEnv(gym.Env):
 
 
 class _History:
-    """What the dashboard shows: the episode so far, rebuilt from the node's messages."""
+    """What the dashboard shows: the episode so far, rebuilt from the node's messages. The
+    sensor readings of a tick are looked up when a frame is drawn, not when its state arrives:
+    they travel on their own topics and may come later."""
 
-    def __init__(self, link):
-        self.link = link
+    START_INPUT, START_BELT, START_MACHINE = (30, 50), (40, 20), (75, 25)
+
+    def __init__(self, bank):
+        self.bank = bank
+        link = bank.links[0]
         self.states = []
-        self.belts = []  # belt (A, B) per tick, to know what is in the machine
-        self.input_ab = (30, 50)
-        self.belt_ab = (40, 20)
-        self.machine_ab = (75, 25)
         self.episode = link.tick.episode if link.tick else 0
         self.seed = None
 
-    def record(self, state, sensors):
-        key = (state.header.stamp.sec, state.header.stamp.nanosec)
-        self.machine_ab = self.belt_ab
-        belt = sensors["belt"].get(key)
-        if belt is not None:
-            self.belt_ab = (belt.amount_a, belt.amount_b)
-        entered = sensors["input"].get(key)
-        if entered is not None:
-            self.input_ab = (entered.amount_a, entered.amount_b)
+    def record(self, state):
         self.states.append(state)
         self.seed = state.seed
+
+    def _contents(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
+        """(input, belt, machine) amounts (A, B) after the last recorded tick: the machine holds
+        what was on the belt one tick before."""
+        s = self.states
+        if not s:
+            return self.START_INPUT, self.START_BELT, self.START_MACHINE
+        entered, belt = self.bank.sensor_readings(0, stamp_key(s[-1].header.stamp))
+        machine = self.START_BELT
+        if len(s) > 1:
+            _, before = self.bank.sensor_readings(0, stamp_key(s[-2].header.stamp))
+            machine = (before.amount_a, before.amount_b)
+        return (entered.amount_a, entered.amount_b), (belt.amount_a, belt.amount_b), machine
 
     def frame(self, variant: str, env_id: str, setup: str):
         from .render import DashboardFrame
 
         s = self.states
         last = s[-1] if s else None
+        input_ab, belt_ab, machine_ab = self._contents()
         return DashboardFrame(
             variant=variant,
             title=f"{env_id} setup {setup}, seed {self.seed}, episode {self.episode}",
-            input_ab=self.input_ab,
-            belt_ab=self.belt_ab,
-            machine_ab=self.machine_ab,
+            input_ab=input_ab,
+            belt_ab=belt_ab,
+            machine_ab=machine_ab,
             containers=(
                 (last.container_a, last.container_a_false, last.container_b, last.container_b_false) if last else (0, 0, 0, 0)
             ),
