@@ -1,0 +1,100 @@
+"""Training hyperparameters: the paper's defaults, kept in RL Zoo style YAML files.
+
+``hyperparams/<algo>.yml`` (shipped with the package) holds one entry per Gymnasium id, as RL Zoo
+does; ``--hyperparams FILE`` replaces it with a file of the same shape and ``--hp key=value``
+overrides single keys (the value is read as YAML: ``--hp gamma=0.9 --hp policy_kwargs="{net_arch:
+[32, 32]}"``). Four keys are ours, not the algorithm's:
+
+- ``n_timesteps``: training budget in environment steps;
+- ``policy``: SB3 policy name (``MlpPolicy``);
+- ``n_envs``: lines trained on at once (1: one env; N > 1: N lines of one node, one round trip each);
+- ``episode_steps``: length of a training episode (the paper trains on 250, evaluates on 50).
+
+Everything else is handed to the algorithm's constructor, so a misspelt key fails there, by name.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+
+from .env import ENV_IDS  # the keys of the hyperparameter files
+
+#: The algorithms sorting-line-train knows, by their command-line name.
+ALGOS = ("ppo", "dqn", "a2c")
+#: Keys of a hyperparameter entry that are not constructor arguments of the algorithm.
+OWN_KEYS = ("n_timesteps", "policy", "n_envs", "episode_steps")
+
+
+def algorithm_class(algo: str):
+    """The Stable-Baselines3 class of ``algo`` (imported on demand: SB3 is heavy)."""
+    import stable_baselines3
+
+    check_algo(algo)
+    return getattr(stable_baselines3, algo.upper())
+
+
+def check_algo(algo: str) -> str:
+    if algo not in ALGOS:
+        raise ValueError(f"algorithm {algo!r} is not valid: allowed {', '.join(ALGOS)}")
+    return algo
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``key=value`` with the value read as YAML (numbers, lists, dicts, strings)."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise ValueError(f"hyperparameter override {text!r} is not valid: expected key=value")
+    try:
+        return key.strip(), yaml.safe_load(value)
+    except yaml.YAMLError as e:
+        raise ValueError(f"hyperparameter override {text!r}: the value is not valid YAML ({e})") from None
+
+
+def load(algo: str, variant: str, path: str | Path | None = None, overrides: Iterable[str] = ()) -> dict[str, Any]:
+    """The hyperparameters of ``algo`` for the line ``variant``: the entry for its Gymnasium id in
+    ``path`` (default: the packaged file), then ``overrides`` applied."""
+    check_algo(algo)
+    env_id = ENV_IDS.get(variant)
+    if env_id is None:
+        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(ENV_IDS)}")
+    if path is None:
+        source = f"sorting_line_gym/hyperparams/{algo}.yml"
+        text = importlib.resources.files("sorting_line_gym").joinpath("hyperparams", f"{algo}.yml").read_text()
+    else:
+        source = str(path)
+        try:
+            text = Path(path).read_text()
+        except OSError as e:
+            raise ValueError(f"hyperparameter file {source}: cannot read it ({e.strerror})") from None
+    try:
+        entries = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ValueError(f"hyperparameter file {source} is not valid YAML: {e}") from None
+    if not isinstance(entries, dict) or env_id not in entries or not isinstance(entries[env_id], dict):
+        found = ", ".join(map(str, entries)) if isinstance(entries, dict) else "nothing"
+        raise ValueError(f"hyperparameter file {source} has no entry for {env_id} (it has: {found})")
+    params = dict(entries[env_id])
+    for text_ in overrides:
+        key, value = parse_override(text_)
+        params[key] = value
+    _check_own_keys(params, source)
+    return params
+
+
+def _check_own_keys(params: dict[str, Any], source: str) -> None:
+    for key, low in (("n_timesteps", 1), ("n_envs", 1), ("episode_steps", 1)):
+        value = params.get(key)
+        if not isinstance(value, int) or isinstance(value, bool) or value < low:
+            raise ValueError(f"{key} = {value!r} (from {source}) is not valid: allowed an integer >= {low}")
+    if not isinstance(params.get("policy"), str):
+        raise ValueError(f"policy = {params.get('policy')!r} (from {source}) is not valid: allowed an SB3 policy name such as MlpPolicy")
+
+
+def split(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(our keys, the algorithm's constructor keyword arguments)."""
+    own = {k: params[k] for k in OWN_KEYS}
+    return own, {k: v for k, v in params.items() if k not in OWN_KEYS}

@@ -1,0 +1,217 @@
+"""`sorting-line-train`: Stable-Baselines3 PPO, DQN or A2C on a sorting line, through ROS 2.
+
+    sorting-line-train --algo ppo --setup B --variant advanced            # the paper's PPO, 100k steps
+    sorting-line-train --algo dqn --setup D --variant basic --hp learning_rate=3e-4 --timesteps 50000
+    sorting-line-train --algo ppo --setup B --variant advanced --n-envs 8 # 8 lines of one node
+
+The environment is the real thing: a `sorting_line` node process started for the run, stepped in
+lock-step over DDS by the bridge (one env, or with ``n_envs`` > 1 N lines of one node stepped by
+one round trip). Defaults are the paper's (``hyperparams/<algo>.yml``, see ``hyperparams``): seed
+42, 100k steps, 250-step training episodes.
+
+Writes ``<out>/<algo>_<setup>_<variant>_seed<seed>.zip`` (the SB3 model) and a ``.json`` beside it
+(algorithm, line, hyperparameters, wall time, steps per second, versions), and TensorBoard logs
+under ``<out>/tensorboard/`` with the line KPIs (``line/purity``, ``line/mean_speed``, ... see
+``callbacks``). A progress bar shows the steps unless ``--no-progress``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from . import hyperparams
+from .agents import SETUPS, VARIANTS
+
+
+@dataclass
+class TrainingRun:
+    """What one training did: written next to the model as JSON."""
+
+    algo: str
+    setup: str
+    variant: str
+    seed: int
+    n_timesteps: int
+    n_envs: int
+    episode_steps: int
+    policy: str
+    hyperparams: dict[str, Any]
+    wall_s: float
+    steps_per_s: float
+    episodes: int
+    model_path: str
+    torch_threads: int
+    versions: dict[str, str]
+
+
+def model_stem(algo: str, setup: str, variant: str, seed: int) -> str:
+    return f"{algo}_{setup}_{variant}_seed{seed}"
+
+
+def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int):
+    """The VecEnv SB3 trains on, wrapped in VecMonitor for episode statistics. One line is a
+    SortingLineEnv in a DummyVecEnv (the fastest round trip); N lines share one node."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    if n_envs == 1:
+        from .env import SortingLineEnv
+
+        venv = DummyVecEnv([lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps)])
+    else:
+        from .vector import SortingLineSB3VecEnv
+
+        venv = SortingLineSB3VecEnv(num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps)
+    return VecMonitor(venv)
+
+
+def versions() -> dict[str, str]:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    return {
+        "python": platform.python_version(),
+        "stable_baselines3": stable_baselines3.__version__,
+        "gymnasium": gymnasium.__version__,
+        "torch": torch.__version__,
+    }
+
+
+def train(
+    algo: str,
+    setup: str,
+    variant: str,
+    *,
+    seed: int = 42,
+    out: str | Path = "models",
+    params: dict[str, Any] | None = None,
+    tensorboard: str | Path | None = None,
+    progress: bool = True,
+    torch_threads: int = 1,
+    verbose: int = 0,
+) -> TrainingRun:
+    """Trains ``algo`` on the line (setup, variant) with ``params`` (default: the packaged
+    hyperparameters) and saves the model; returns what it did."""
+    import torch
+
+    from .callbacks import LineKpiCallback
+
+    if setup not in SETUPS:
+        raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
+    params = params if params is not None else hyperparams.load(algo, variant)
+    own, kwargs = hyperparams.split(params)
+    # Small MLPs on 2 cores: one torch thread leaves the other core to the node and the bridge.
+    torch.set_num_threads(torch_threads)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = model_stem(algo, setup, variant, seed)
+    env = make_training_env(setup, variant, own["n_envs"], own["episode_steps"])
+    try:
+        cls = hyperparams.algorithm_class(algo)
+        model = cls(
+            own["policy"],
+            env,
+            seed=seed,
+            verbose=verbose,
+            tensorboard_log=str(tensorboard) if tensorboard is not None else None,
+            **kwargs,
+        )
+        kpis = LineKpiCallback()
+        start = time.perf_counter()
+        model.learn(total_timesteps=own["n_timesteps"], callback=kpis, progress_bar=progress, tb_log_name=stem)
+        wall = time.perf_counter() - start
+        model_path = out / f"{stem}.zip"
+        model.save(model_path)
+    finally:
+        env.close()
+    run = TrainingRun(
+        algo=algo,
+        setup=setup,
+        variant=variant,
+        seed=seed,
+        n_timesteps=own["n_timesteps"],
+        n_envs=own["n_envs"],
+        episode_steps=own["episode_steps"],
+        policy=own["policy"],
+        hyperparams=kwargs,
+        wall_s=wall,
+        steps_per_s=own["n_timesteps"] / wall,
+        episodes=kpis.episodes,
+        model_path=str(model_path),
+        torch_threads=torch_threads,
+        versions=versions(),
+    )
+    (out / f"{stem}.json").write_text(json.dumps(asdict(run), indent=2) + "\n")
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="sorting-line-train",
+        description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2 (the paper's settings by default).",
+    )
+    p.add_argument("--algo", required=True, choices=hyperparams.ALGOS)
+    p.add_argument("--setup", required=True, choices=SETUPS, help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty")
+    p.add_argument("--variant", default="basic", choices=VARIANTS)
+    p.add_argument("--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)")
+    p.add_argument("--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)")
+    p.add_argument("--n-envs", type=int, help="lines trained on at once (default: n_envs of the hyperparameters, 1)")
+    p.add_argument("--hyperparams", metavar="FILE", help="RL Zoo style YAML file (default: the packaged hyperparams/<algo>.yml)")
+    p.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE", help="override one hyperparameter (value read as YAML); repeatable")
+    p.add_argument("--out", default="models", help="directory for the model and its JSON (default models/)")
+    p.add_argument("--tensorboard", metavar="DIR", help="TensorBoard log directory (default <out>/tensorboard; 'none' to disable)")
+    p.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="SB3's console log (-v)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    overrides = list(args.hp)
+    if args.timesteps is not None:
+        overrides.append(f"n_timesteps={args.timesteps}")
+    if args.n_envs is not None:
+        overrides.append(f"n_envs={args.n_envs}")
+    if args.torch_threads < 1:
+        print(f"sorting-line-train: --torch-threads = {args.torch_threads} is not valid: allowed 1 or more", file=sys.stderr)
+        return 2
+    try:
+        params = hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
+    except ValueError as e:
+        print(f"sorting-line-train: {e}", file=sys.stderr)
+        return 2
+    tensorboard = None if args.tensorboard == "none" else (args.tensorboard or str(Path(args.out) / "tensorboard"))
+    print(f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}", file=sys.stderr)
+    try:
+        run = train(
+            args.algo,
+            args.setup,
+            args.variant,
+            seed=args.seed,
+            out=args.out,
+            params=params,
+            tensorboard=tensorboard,
+            progress=not args.no_progress,
+            torch_threads=args.torch_threads,
+            verbose=args.verbose,
+        )
+    except TypeError as e:  # an unknown constructor keyword from the hyperparameters
+        print(f"sorting-line-train: {e}", file=sys.stderr)
+        return 2
+    print(
+        f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s, {run.episodes} episodes); "
+        f"model {run.model_path}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
