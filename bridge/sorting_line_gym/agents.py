@@ -10,6 +10,8 @@
 - :class:`RandomAgent` draws uniformly from the action space with its own seeded NumPy generator:
   the paper's random baseline. Its draws are not those of ``sorting_line eval --agent random``
   (that one uses the library's own random stream).
+- :class:`TrainedAgent` is a saved Stable-Baselines3 model (``ppo:PATH.zip``, ``dqn:...``,
+  ``a2c:...``, as ``sorting-line-train`` writes them), acting deterministically.
 
 Interface of every agent:
 
@@ -187,9 +189,46 @@ class RandomAgent(Agent):
         return (a // MODE_COUNT, a % MODE_COUNT) if self.variant == "advanced" else (a, 0)
 
 
+class TrainedAgent(Agent):
+    """A saved SB3 model: ``predict`` is the model's deterministic action for the observation
+    (``act`` decodes it into speed index and mode)."""
+
+    ALGOS = ("ppo", "dqn", "a2c")
+
+    def __init__(self, algo: str, path: str, variant: str):
+        import stable_baselines3
+
+        from .env import action_space
+
+        if algo not in self.ALGOS:
+            raise ValueError(f"algorithm {algo!r} is not valid: allowed {', '.join(self.ALGOS)}")
+        self.variant = _check_variant(variant)
+        self.name = f"{algo}:{path}"
+        try:
+            self.model = getattr(stable_baselines3, algo.upper()).load(path, device="cpu")
+        except (OSError, ValueError) as e:
+            raise ValueError(f"cannot load the {algo.upper()} model {path!r}: {e}") from None
+        expected = action_space(variant)
+        if self.model.action_space != expected:
+            raise ValueError(f"the model {path!r} acts in {self.model.action_space}, the {variant} line needs {expected}")
+
+    def predict(self, obs: Sequence[float], current_speed_index: int) -> int:
+        action, _ = self.model.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
+        return int(action)
+
+    def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
+        obs = [quantity, category] if self.variant == "advanced" else [quantity]
+        a = self.predict(obs, current_speed_index)
+        return (a // MODE_COUNT, a % MODE_COUNT) if self.variant == "advanced" else (a, 0)
+
+
 def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> Agent:
     """An agent by its command-line name: ``rba``, ``rba-hold``, ``random`` (seeded with ``seed``),
-    ``constant:K``, ``constant:K:M`` or ``constant:K:cat`` (K = 0..9, M = 0..2)."""
+    ``constant:K``, ``constant:K:M`` or ``constant:K:cat`` (K = 0..9, M = 0..2), or a saved model
+    ``ppo:PATH``, ``dqn:PATH``, ``a2c:PATH``."""
+    algo, sep, path = spec.partition(":")
+    if sep and algo in TrainedAgent.ALGOS:
+        return TrainedAgent(algo, path, variant)
     if spec in ("rba", "rba-hold"):
         return RuleBasedAgent(setup, variant, hold=spec == "rba-hold")
     if spec == "random":
@@ -204,5 +243,5 @@ def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> 
         detail = f" ({e})" if str(e) else ""
         raise ValueError(
             f"agent {spec!r} is not valid{detail}: allowed rba, rba-hold, random, constant:K, constant:K:M, "
-            "constant:K:cat (K = 0..9, M = 0..2; modes on the advanced line only)"
+            "constant:K:cat (K = 0..9, M = 0..2; modes on the advanced line only), ppo:PATH, dqn:PATH, a2c:PATH"
         ) from None
