@@ -1,0 +1,144 @@
+"""Figures of the benchmark report (the episode dashboard is ``render``'s).
+
+- :func:`benchmark_figure`: the paper's Figure 7, mean episode reward per setup and agent, with
+  our spread as error bars and the paper's Table 1 values as markers.
+- :func:`analysis_figure`: the paper's Figure 3 for the basic line, drawn from ``sorting_line
+  table`` (the library's expected-reward analysis, the one the rule-based agent decides with):
+  accuracy against occupancy per speed; the accuracy heat map with the area under the threshold
+  in black; reward against accuracy per speed; the expected-reward heat map with the best speed
+  per occupancy marked.
+
+Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never a window
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+
+from .agents import SETUPS, VARIANTS  # noqa: E402
+from .transport import SPEEDS, find_node_binary  # noqa: E402
+
+AGENT_COLORS = {
+    "random": "#9e9e9e",
+    "rba": "#1f77b4",
+    "rba-hold": "#17becf",
+    "dqn": "#ff7f0e",
+    "ppo": "#2ca02c",
+    "a2c": "#d62728",
+}
+THRESHOLD = 0.7
+
+
+def _save(fig, stem: Path) -> list[Path]:
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    paths = [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+    fig.savefig(paths[0], dpi=120)
+    fig.savefig(paths[1])
+    plt.close(fig)
+    return paths
+
+
+def benchmark_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Path) -> list[Path]:
+    """Grouped bars: one group per setup and variant, one bar per agent that has results."""
+    from .paper import TABLE_1
+
+    agents = [a for a in AGENT_COLORS if any(k[2] == a for k in rows)]
+    groups = [(s, v) for s in SETUPS for v in VARIANTS if any((s, v, a) in rows for a in agents)]
+    fig, ax = plt.subplots(figsize=(13, 5.2), layout="constrained")
+    width = 0.8 / max(1, len(agents))
+    x = np.arange(len(groups))
+    for i, agent in enumerate(agents):
+        offset = (i - (len(agents) - 1) / 2) * width
+        means = [rows[(s, v, agent)]["reward_mean"] if (s, v, agent) in rows else np.nan for s, v in groups]
+        stds = [rows[(s, v, agent)]["reward_std"] if (s, v, agent) in rows else 0.0 for s, v in groups]
+        ax.bar(x + offset, means, width, yerr=stds, capsize=2, label=agent, color=AGENT_COLORS[agent], error_kw={"elinewidth": 0.8})
+        paper = [TABLE_1.get((s, v, agent), (None, None, np.nan))[2] for s, v in groups]
+        if not all(np.isnan(paper)):
+            ax.scatter(x + offset, paper, marker="_", s=120, color="black", zorder=3, linewidths=2)
+    ax.scatter([], [], marker="_", s=120, color="black", linewidths=2, label="paper (Table 1)")
+    ax.set_xticks(x, [f"{s} {'adv' if v == 'advanced' else 'basic'}" for s, v in groups])
+    ax.set_ylabel("episode reward (50 steps, seeds 42..51)")
+    ax.set_title("Mean episode reward per setup and agent, through ROS 2 (bars: ours, +- std; marks: the paper)")
+    ax.axhline(0, color="black", linewidth=0.6)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(ncol=len(agents) + 1, loc="upper center", bbox_to_anchor=(0.5, -0.08), frameon=False)
+    return _save(fig, stem)
+
+
+def read_table(variant: str = "basic") -> list[dict[str, str]]:
+    """The rows of ``sorting_line table --variant VARIANT``."""
+    argv = [find_node_binary(), "table", "--variant", variant]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    if result.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
+    return list(csv.DictReader(io.StringIO(result.stdout)))
+
+
+def reward_of(accuracy: np.ndarray, speed: float) -> np.ndarray:
+    """The step reward without a speed change (README, "Reward")."""
+    r = 0.5 * (accuracy - THRESHOLD) / (1 - THRESHOLD) + 0.5 * (speed - SPEEDS[0]) / (SPEEDS[-1] - SPEEDS[0])
+    return np.where(accuracy < THRESHOLD, -0.1, r)
+
+
+def analysis_figure(stem: Path) -> list[Path]:
+    rows = [r for r in read_table("basic") if r["category"] == "0" and r["mode"] == "0"]
+    occupancies = sorted({float(r["occupancy"]) for r in rows})
+    speeds = sorted({float(r["speed"]) for r in rows})
+    acc = np.full((len(speeds), len(occupancies)), np.nan)
+    reward = np.full_like(acc, np.nan)
+    oi = {o: i for i, o in enumerate(occupancies)}
+    si = {s: i for i, s in enumerate(speeds)}
+    for r in rows:
+        i, j = si[float(r["speed"])], oi[float(r["occupancy"])]
+        acc[i, j] = float(r["expected_accuracy"])
+        reward[i, j] = float(r["expected_reward"])
+    occ = np.array(occupancies)
+    cmap = plt.get_cmap("viridis")
+
+    fig, axes = plt.subplots(2, 2, figsize=(13, 9.5), layout="constrained")
+    ax = axes[0, 0]
+    for i, s in enumerate(speeds):
+        ax.plot(occ, acc[i], color=cmap(i / (len(speeds) - 1)), label=f"{s:.1f}")
+    ax.axhline(THRESHOLD, color="black", linestyle="--", linewidth=1, label="threshold")
+    ax.set(xlabel="belt occupancy", ylabel="expected accuracy", title="Accuracy vs occupancy, per belt speed")
+    ax.legend(title="speed", ncol=2, fontsize=8)
+    ax.grid(alpha=0.3)
+
+    ax = axes[0, 1]
+    masked = np.ma.masked_where(acc < THRESHOLD, acc)
+    ax.imshow(np.ones_like(acc), cmap=ListedColormap(["black"]), aspect="auto", origin="lower",
+              extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
+    im = ax.imshow(masked, cmap="viridis", aspect="auto", origin="lower", vmin=THRESHOLD, vmax=1.0,
+                   extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
+    fig.colorbar(im, ax=ax, label="expected accuracy")
+    ax.set(xlabel="belt occupancy", ylabel="belt speed", title=f"Expected accuracy (black: below the threshold {THRESHOLD})")
+
+    ax = axes[1, 0]
+    a = np.linspace(THRESHOLD, 1.0, 61)
+    for i, s in enumerate(speeds):
+        ax.plot(a, reward_of(a, s), color=cmap(i / (len(speeds) - 1)), label=f"{s:.1f}")
+    ax.set(xlabel="accuracy", ylabel="step reward", title="Reward vs accuracy, per belt speed (above the threshold)")
+    ax.legend(title="speed", ncol=2, fontsize=8)
+    ax.grid(alpha=0.3)
+
+    ax = axes[1, 1]
+    im = ax.imshow(reward, cmap="magma", aspect="auto", origin="lower",
+                   extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
+    best = [speeds[int(np.nanargmax(reward[:, j]))] for j in range(len(occupancies))]
+    ax.plot(occ, best, color="cyan", linewidth=1.5, drawstyle="steps-mid", label="best speed (rba)")
+    fig.colorbar(im, ax=ax, label="expected step reward")
+    ax.set(xlabel="belt occupancy", ylabel="belt speed", title="Expected reward per speed and occupancy")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.suptitle("The basic line's dynamics (sorting_line table; threshold 0.7)")
+    return _save(fig, stem)
