@@ -238,28 +238,45 @@ def main(argv: list[str] | None = None) -> int:
     failures = []
     if todo:
         bar = tqdm(total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True)
-        # rclpy is not fork-safe: workers start fresh interpreters.
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-            pending = {}
-            queue = list(todo)
-            while queue or pending:
-                while queue and len(pending) < args.jobs:
-                    cell = queue.pop(0)
-                    # One job: its SB3 progress bar. Several: only this bar, with the cell names.
-                    pending[pool.submit(run_cell, cell, args.out, args.timesteps, args.n_envs, args.jobs == 1)] = cell
-                    bar.set_postfix_str(", ".join(c.name for c in pending.values()))
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    cell = pending.pop(future)
-                    try:
-                        done[cell] = future.result()
-                        r = done[cell]["evaluation"]
-                        bar.write(f"{cell.name}: {r['reward_mean']:.2f} +- {r['reward_std']:.2f} ({done[cell]['wall_s']:.0f} s)")
-                    except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
-                        failures.append((cell, e))
-                        bar.write(f"{cell.name}: FAILED: {e}")
-                    bar.update(1)
+
+        def finished(cell: Cell, outcome) -> None:
+            if isinstance(outcome, Exception):
+                failures.append((cell, outcome))
+                bar.write(f"{cell.name}: FAILED: {outcome}")
+            else:
+                done[cell] = outcome
+                r = outcome["evaluation"]
+                bar.write(f"{cell.name}: {r['reward_mean']:.2f} +- {r['reward_std']:.2f} ({outcome['wall_s']:.0f} s)")
+            bar.update(1)
+
+        if args.jobs == 1:
+            # In this process, with SB3's progress bar for each training.
+            for cell in todo:
+                bar.set_postfix_str(cell.name)
+                try:
+                    outcome = run_cell(cell, args.out, args.timesteps, args.n_envs, True)
+                except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
+                    outcome = e
+                finished(cell, outcome)
+        else:
+            # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+                pending = {}
+                queue = list(todo)
+                while queue or pending:
+                    while queue and len(pending) < args.jobs:
+                        cell = queue.pop(0)
+                        pending[pool.submit(run_cell, cell, args.out, args.timesteps, args.n_envs, False)] = cell
+                        bar.set_postfix_str(", ".join(c.name for c in pending.values()))
+                    complete, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in complete:
+                        cell = pending.pop(future)
+                        try:
+                            outcome = future.result()
+                        except Exception as e:  # noqa: BLE001
+                            outcome = e
+                        finished(cell, outcome)
         bar.close()
     records = [done[c] for c in cells if c in done]
     if not records:

@@ -98,3 +98,17 @@ def split(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """(our keys, the algorithm's constructor keyword arguments)."""
     own = {k: params[k] for k in OWN_KEYS}
     return own, {k: v for k, v in params.items() if k not in OWN_KEYS}
+
+
+def check_constructor_keys(algo: str, kwargs: dict[str, Any]) -> None:
+    """Fails, naming the key, when ``kwargs`` has a key the algorithm's constructor does not take
+    (before a node is started for nothing)."""
+    import inspect
+
+    accepted = set(inspect.signature(algorithm_class(algo).__init__).parameters) - {"self", "policy", "env"}
+    unknown = sorted(set(kwargs) - accepted)
+    if unknown:
+        raise ValueError(
+            f"{', '.join(unknown)}: not a hyperparameter of {algo.upper()} (allowed: {', '.join(OWN_KEYS)}, "
+            f"and {algo.upper()}'s arguments: {', '.join(sorted(accepted))})"
+        )

@@ -107,6 +107,7 @@ def train(
         raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
     params = params if params is not None else hyperparams.load(algo, variant)
     own, kwargs = hyperparams.split(params)
+    hyperparams.check_constructor_keys(algo, kwargs)
     # Small MLPs on 2 cores: one torch thread leaves the other core to the node and the bridge.
     torch.set_num_threads(torch_threads)
     out = Path(out)
@@ -185,27 +186,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         params = hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
+        hyperparams.check_constructor_keys(args.algo, hyperparams.split(params)[1])
     except ValueError as e:
         print(f"sorting-line-train: {e}", file=sys.stderr)
         return 2
     tensorboard = None if args.tensorboard == "none" else (args.tensorboard or str(Path(args.out) / "tensorboard"))
     print(f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}", file=sys.stderr)
-    try:
-        run = train(
-            args.algo,
-            args.setup,
-            args.variant,
-            seed=args.seed,
-            out=args.out,
-            params=params,
-            tensorboard=tensorboard,
-            progress=not args.no_progress,
-            torch_threads=args.torch_threads,
-            verbose=args.verbose,
-        )
-    except TypeError as e:  # an unknown constructor keyword from the hyperparameters
-        print(f"sorting-line-train: {e}", file=sys.stderr)
-        return 2
+    run = train(
+        args.algo,
+        args.setup,
+        args.variant,
+        seed=args.seed,
+        out=args.out,
+        params=params,
+        tensorboard=tensorboard,
+        progress=not args.no_progress,
+        torch_threads=args.torch_threads,
+        verbose=args.verbose,
+    )
     print(
         f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s, {run.episodes} episodes); "
         f"model {run.model_path}"

@@ -1,0 +1,202 @@
+"""sorting-line-train, sorting-line-eval, sorting-line-benchmark and the report's plots, on tiny
+budgets, against real nodes over DDS (each CLI spawns its own node in a namespace of its own).
+
+What must hold:
+- eval through ROS equals the library's `sorting_line eval --json` episode for episode, bit for bit;
+- training writes a model, its JSON and TensorBoard events with the line KPIs, and is
+  deterministic: the same seed gives the same network weights, through the node;
+- a saved model evaluates, deterministically;
+- the benchmark resumes from its saved cells and draws its figures; the plots are real images;
+- bad arguments fail at once with exit code 2 and a message naming the value.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ros_harness as h
+
+TIMEOUT = 300
+
+
+def run(argv: list[str], cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
+    """A console script of the bridge, in this test's ROS environment."""
+    env = dict(os.environ, **h.ros_environment())
+    result = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT, stdin=subprocess.DEVNULL)
+    if check and result.returncode != 0:
+        raise AssertionError(f"{' '.join(argv)} exited {result.returncode}:\n{result.stderr[-3000:]}")
+    return result
+
+
+def script(name: str) -> str:
+    return str(Path(sys.executable).parent / name)
+
+
+def library_eval(agent: str, setup: str, variant: str, episodes: int) -> dict:
+    out = subprocess.run(
+        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes), "--json"],
+        capture_output=True, text=True, check=True, timeout=60,
+    ).stdout
+    return json.loads(out)
+
+
+def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
+    """A PNG that is more than a blank canvas."""
+    import matplotlib.image
+
+    assert path.is_file() and path.stat().st_size >= min_bytes, f"{path} missing or tiny"
+    pixels = matplotlib.image.imread(path)
+    assert pixels.ndim == 3 and pixels.shape[0] > 200 and pixels.shape[1] > 200
+    assert len(np.unique(pixels.reshape(-1, pixels.shape[2]), axis=0)) > 50, f"{path} is nearly uniform"
+
+
+@pytest.mark.parametrize("agent,setup,variant", [("rba", "D", "basic"), ("rba-hold", "B", "advanced")])
+def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, capsys):
+    from sorting_line_gym import evaluate
+
+    argv = ["--agent", agent, "--setup", setup, "--variant", variant, "--episodes", "3", "--json", "--out", str(tmp_path)]
+    assert evaluate.main(argv) == 0
+    ours = json.loads(capsys.readouterr().out)
+    theirs = library_eval(agent, setup, variant, 3)
+    assert ours["per_episode"] == theirs["per_episode"]
+    for key in ("reward_mean", "reward_std", "speed_mean", "accuracy_mean", "purity_mean", "speed_changes_mean"):
+        assert ours[key] == theirs[key], key
+    stem = f"eval_{agent.replace(':', '-')}_{setup}_{variant}"
+    rows = (tmp_path / f"{stem}.csv").read_text().splitlines()
+    assert rows[0] == "seed,reward,speed_mean,accuracy_mean,purity,speed_changes" and len(rows) == 4
+    assert f"| {setup} | {variant} | {agent} | {theirs['reward_mean']:.2f}" in (tmp_path / f"{stem}.md").read_text()
+    assert json.loads((tmp_path / f"{stem}.json").read_text())["per_episode"] == theirs["per_episode"]
+    assert_real_image(tmp_path / f"{stem}_seed42.png")
+
+
+@pytest.mark.parametrize(
+    "argv,names",
+    [
+        (["--agent", "rba-fast", "--setup", "A"], "rba-fast"),
+        (["--agent", "constant:12", "--setup", "A"], "constant:12"),
+        (["--agent", "ppo:/nonexistent/model.zip", "--setup", "A"], "/nonexistent/model.zip"),
+        (["--agent", "rba", "--setup", "A", "--episodes", "0"], "--episodes = 0"),
+    ],
+)
+def test_eval_rejects_bad_arguments(argv, names, capsys):
+    from sorting_line_gym import evaluate
+
+    assert evaluate.main(argv) == 2  # before any node is started
+    assert names in capsys.readouterr().err
+
+
+def tiny_training(algo: str, out: Path) -> dict:
+    """sorting-line-train's main, in this process (it spawns its node like the console script)."""
+    from sorting_line_gym import train
+
+    hp = {"ppo": ["--hp", "n_steps=128", "--hp", "batch_size=64", "--hp", "n_epochs=2"],
+          "dqn": ["--hp", "learning_starts=64"],
+          "a2c": []}[algo]
+    argv = ["--algo", algo, "--setup", "B", "--variant", "advanced", "--timesteps", "256", "--hp", "episode_steps=100", *hp,
+            "--out", str(out), "--no-progress"]
+    assert train.main(argv) == 0
+    return json.loads((out / f"{algo}_B_advanced_seed42.json").read_text())
+
+
+def policy_weights(model_zip: Path) -> bytes:
+    with zipfile.ZipFile(model_zip) as z:
+        return z.read("policy.pth")
+
+
+def test_training_writes_model_kpis_and_is_deterministic(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    first = tiny_training("ppo", tmp_path / "a")
+    assert first["n_timesteps"] == 256 and first["episode_steps"] == 100 and first["episodes"] == 2
+    assert first["hyperparams"]["gamma"] == 0.85 and first["hyperparams"]["ent_coef"] == 0.03
+    model = Path(first["model_path"])
+    assert model.is_file()
+    events = list((tmp_path / "a" / "tensorboard").rglob("events.out.tfevents.*"))
+    assert events, "no TensorBoard events written"
+    acc = EventAccumulator(str(events[0].parent))
+    acc.Reload()
+    scalars = set(acc.Tags()["scalars"])
+    for tag in ("line/purity", "line/mean_speed", "line/mean_accuracy", "line/speed_changes", "rollout/ep_rew_mean"):
+        assert tag in scalars, f"{tag} not logged (have {sorted(scalars)})"
+    purity = [e.value for e in acc.Scalars("line/purity")]
+    assert all(0.0 < p <= 1.0 for p in purity)
+
+    # Same seed, same commands, same trajectory: the same weights after training through a node.
+    second = tiny_training("ppo", tmp_path / "b")
+    assert policy_weights(Path(second["model_path"])) == policy_weights(model)
+
+    from sorting_line_gym.evaluate import evaluate
+
+    evals = [evaluate(f"ppo:{model}", "B", "advanced", episodes=2) for _ in range(2)]
+    assert evals[0].per_episode == evals[1].per_episode
+    assert evals[0].episodes == 2 and np.isfinite(evals[0].reward_mean)
+
+
+@pytest.mark.parametrize("algo", ["dqn", "a2c"])
+def test_dqn_and_a2c_train_through_ros(algo, tmp_path):
+    record = tiny_training(algo, tmp_path)
+    assert Path(record["model_path"]).is_file() and record["episodes"] == 2
+    defaults = {"dqn": {"gamma": 0.95}, "a2c": {"gamma": 0.9, "learning_rate": 0.0005, "ent_coef": 0.06}}[algo]
+    for key, value in defaults.items():
+        assert record["hyperparams"][key] == value
+
+
+@pytest.mark.parametrize(
+    "argv,names",
+    [
+        (["--hp", "gamma"], "gamma"),
+        (["--hp", "no_such_argument=1"], "no_such_argument"),
+        (["--timesteps", "0"], "n_timesteps = 0"),
+        (["--hyperparams", "/nonexistent.yml"], "/nonexistent.yml"),
+    ],
+)
+def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
+    from sorting_line_gym import train
+
+    assert train.main(["--algo", "ppo", "--setup", "A", "--out", str(tmp_path), "--no-progress", *argv]) == 2
+    assert names in capsys.readouterr().err
+    assert not list(tmp_path.iterdir()), "nothing is written when the arguments are bad"
+
+
+def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
+    from sorting_line_gym import hyperparams
+
+    path = tmp_path / "mine.yml"
+    path.write_text("SortingLine-v0: {n_timesteps: 5000, policy: MlpPolicy, n_envs: 2, episode_steps: 250, gamma: 0.5}\n")
+    assert hyperparams.load("dqn", "basic", path)["gamma"] == 0.5
+    with pytest.raises(ValueError, match="no entry for SortingLineAdvanced-v0"):
+        hyperparams.load("dqn", "advanced", path)
+    defaults = hyperparams.load("ppo", "advanced", overrides=["policy_kwargs={net_arch: [32, 32]}"])
+    assert defaults["policy_kwargs"] == {"net_arch": [32, 32]} and defaults["learning_rate"] == 0.0007
+
+
+def test_console_scripts_are_installed(tmp_path):
+    for name in ("sorting-line-train", "sorting-line-eval", "sorting-line-benchmark"):
+        assert "usage: " + name in run([script(name), "--help"], tmp_path).stdout
+
+
+def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
+    from sorting_line_gym import benchmark
+
+    out = tmp_path / "bench"
+    argv = ["--setups", "B", "--variants", "advanced", "--agents", "rba", "rba-hold", "--out", str(out)]
+    assert benchmark.main(argv) == 0
+    assert "2 to run" in capsys.readouterr().err
+    table = (out / "table.md").read_text()
+    reference = library_eval("rba", "B", "advanced", 10)
+    assert f"**{reference['reward_mean']:.2f}** +- {reference['reward_std']:.2f}" in table
+    assert "| B5 | B | Adv | rba |" in table and "27.33" in table and "22.58 +- 3.29" in table
+    for name in ("figure7.png", "figure3.png", "dashboards/B_advanced_rba-hold.png"):
+        assert_real_image(out / name)
+    assert (out / "figure7.svg").stat().st_size > 10_000
+    assert benchmark.main(argv) == 0
+    assert "2 already done, 0 to run" in capsys.readouterr().err
+    assert (out / "table.md").read_text() == table
