@@ -1,58 +1,88 @@
 #!/usr/bin/env bash
-# The main job on a fresh machine: set up what is missing, then evaluate the built-in agents
-# (random, rba, rba-hold) on the paper's 8 setups with the paper's protocol (seeds 42..51,
-# 50-step episodes) and write the table to results/baselines.md (and .json).
+# The main job on a fresh machine: set up what is missing, then, through ROS 2 (every agent drives
+# a real sorting_line node over DDS):
+#   1. evaluate random, rba and rba-hold on the paper's 8 setups (seeds 42..51, 50 steps)
+#      -> results/baselines/ (table.md, table.json, figure7, figure3, dashboards/)
+#   2. train a quick PPO on setup B advanced (the paper's hyperparameters, a short budget) and
+#      evaluate it beside the rule-based agents -> results/quick_ppo/
+#   3. print both tables; results/summary.md holds them.
+# About 4 minutes after set-up on 2 cores. DDS stays on this machine: as root the job runs in a
+# loopback-only network namespace, otherwise with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 #
-# Usage: launch_scripts/run.sh [--episodes N] [--seed S]
+# Usage: launch_scripts/run.sh [--quick-steps N] [--full [--jobs J] [--train-seeds S...]] [--out DIR]
+#   --quick-steps N   PPO budget of step 2 (default 20000)
+#   --full            instead: the whole benchmark (Table 1: 8 lines x random, rba, rba-hold, DQN, PPO,
+#                     A2C at 100k steps each) -> results/benchmark/; resumable, about 1-2 hours
+#   --jobs J          cells at once in --full (default 2)
+#   --train-seeds S.. training seeds in --full (default 42)
+#   --out DIR         results directory (default results)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-EPISODES=10
-SEED=42
+QUICK_STEPS=20000
+FULL=0
+JOBS=2
+SEEDS=(42)
+OUT=results
+usage() { sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
-    --episodes) EPISODES="$2"; shift 2 ;;
-    --seed) SEED="$2"; shift 2 ;;
-    -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
-    *) echo "run.sh: unknown argument '$1' (allowed: --episodes N, --seed S)" >&2; exit 2 ;;
+    --quick-steps) QUICK_STEPS="$2"; shift 2 ;;
+    --full) FULL=1; shift ;;
+    --jobs) JOBS="$2"; shift 2 ;;
+    --train-seeds) shift; SEEDS=(); while [[ $# -gt 0 && "$1" != --* ]]; do SEEDS+=("$1"); shift; done ;;
+    --out) OUT="$2"; shift 2 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "run.sh: unknown argument '$1' (allowed: --quick-steps N, --full, --jobs J, --train-seeds S..., --out DIR)" >&2; exit 2 ;;
   esac
+done
+for value in "$QUICK_STEPS" "$JOBS" "${SEEDS[@]}"; do
+  if ! [[ "$value" =~ ^[0-9]+$ ]]; then echo "run.sh: '$value' is not valid: allowed a whole number" >&2; exit 2; fi
 done
 
 bash launch_scripts/setup.sh
-BIN="$ROOT/target/release/sorting_line"
-mkdir -p results
-OUT=results/baselines.md
-JSON=results/baselines.json
-# The reference implementation's RBA on seeds 42..51 (shared/reference/dynamics-of-the-reference.md).
-declare -A REF=([A,basic]=27.02 [A,advanced]=36.71 [B,basic]=12.55 [B,advanced]=22.58
-                [C,basic]=21.07 [C,advanced]=30.18 [D,basic]=6.41 [D,advanced]=16.28)
-{
-  echo "# Built-in agents, $EPISODES episodes from seed $SEED (episode reward: mean +- population std)"
-  echo
-  echo "| setup | variant | reference RBA | random | rba | rba-hold | rba-hold speed changes |"
-  echo "|---|---|---|---|---|---|---|"
-} > "$OUT"
-echo "[" > "$JSON"
-first=1
-total=8; done_=0
-for setup in A B C D; do
-  for variant in basic advanced; do
-    row="| $setup | $variant | ${REF[$setup,$variant]}"
-    for agent in random rba rba-hold; do
-      json=$("$BIN" eval --agent "$agent" --setup "$setup" --variant "$variant" --episodes "$EPISODES" --seed "$SEED" --json)
-      [[ $first == 1 ]] && first=0 || echo "," >> "$JSON"
-      echo "$json" >> "$JSON"
-      cell=$(python3 -c 'import json,sys; d=json.loads(sys.argv[1]); print("%.2f +- %.2f" % (d["reward_mean"], d["reward_std"]))' "$json")
-      row="$row | $cell"
-      changes=$(python3 -c 'import json,sys; print("%.1f" % json.loads(sys.argv[1])["speed_changes_mean"])' "$json")
-    done
-    echo "$row | $changes |" >> "$OUT"
-    done_=$((done_ + 1))
-    printf '\r[run] evaluated %d/%d setups' "$done_" "$total" >&2
-  done
-done
-echo "]" >> "$JSON"
-echo >&2
-cat "$OUT"
-echo
-echo "written: $OUT, $JSON"
+mkdir -p "$OUT"
+OUT="$(cd "$OUT" && pwd)"
+
+# The job itself, run below in a loopback-only namespace when we can make one.
+job() {
+  source launch_scripts/env.sh
+  export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((150 + $$ % 50))}"
+  if [[ $FULL == 1 ]]; then
+    local -a seeds
+    read -ra seeds <<< "$SEEDS_LIST"
+    sorting-line-benchmark --out "$OUT/benchmark" --jobs "$JOBS" --train-seeds "${seeds[@]}"
+    return
+  fi
+  echo "== 1/2: random, rba, rba-hold on the 8 setups through ROS" >&2
+  sorting-line-benchmark --agents random rba rba-hold --out "$OUT/baselines" > /dev/null
+  echo "== 2/2: PPO on setup B advanced, $QUICK_STEPS steps, beside the rule-based agents" >&2
+  sorting-line-benchmark --setups B --variants advanced --agents rba rba-hold ppo --timesteps "$QUICK_STEPS" \
+    --out "$OUT/quick_ppo" > /dev/null
+  {
+    echo "# sorting_line: the default job of launch_scripts/run.sh"
+    echo
+    echo "## Built-in agents through ROS (seeds 42..51, 50 steps)"
+    echo
+    sed '1,2d' "$OUT/baselines/table.md"
+    echo
+    echo "## A quick PPO ($QUICK_STEPS steps) on setup B advanced"
+    echo
+    sed '1,2d' "$OUT/quick_ppo/table.md"
+    echo
+    echo "Figures: baselines/figure7.png, baselines/figure3.png; episode dashboards in */dashboards/."
+    echo "The full benchmark (100k steps per RL agent): launch_scripts/run.sh --full"
+  } > "$OUT/summary.md"
+  cat "$OUT/summary.md"
+  echo "written: $OUT/summary.md, $OUT/baselines/, $OUT/quick_ppo/" >&2
+}
+export -f job
+export FULL JOBS QUICK_STEPS OUT
+export SEEDS_LIST="${SEEDS[*]}"
+
+if [[ $(id -u) == 0 ]] && command -v unshare >/dev/null && unshare -n true 2>/dev/null; then
+  unshare -n bash -c 'ip link set lo up; job'
+else
+  echo "run.sh: not root: running on the host network with discovery limited to this machine" >&2
+  job
+fi
