@@ -216,8 +216,11 @@ class LineBank:
                     pending.discard(k)
             return not pending
 
-        self.waiter.until(
-            arrived, self.step_timeout, lambda: "; ".join(self.links[k].describe_wait() for k in sorted(pending))
+        self.waiter.until_received(
+            [link.state_sub for link in self.links],
+            arrived,
+            self.step_timeout,
+            lambda: "; ".join(self.links[k].describe_wait() for k in sorted(pending)),
         )
         return [link.last_state for link in self.links]
 
@@ -230,7 +233,7 @@ class LineBank:
             if link.tick is None:
                 raise BridgeError(f"{link.namespace}: step() before reset()")
         self.batch.send(speed_indices, modes)
-        self.waiter.until(self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
+        self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
         return self.batch.last
 
     def close(self) -> None:
