@@ -55,9 +55,10 @@ class Cell:
 
 
 def plan(setups, variants, agents, train_seeds) -> list[Cell]:
-    """Baselines first (quick), then RL cells by seed, so a partial run has a full seed."""
+    """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
+    so a partial run has whole rows: one algorithm on every line before the next."""
     cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
-    cells += [Cell(s, v, a, seed) for seed in train_seeds for s in setups for v in variants for a in agents if a in ALGOS]
+    cells += [Cell(s, v, a, seed) for seed in train_seeds for a in agents if a in ALGOS for s in setups for v in variants]
     return cells
 
 
