@@ -136,7 +136,9 @@ def summarize(records: list[dict[str, Any]]) -> dict[tuple[str, str, str], dict[
     return rows
 
 
-def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: int) -> str:
+def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: int, agents=AGENTS) -> str:
+    """Our figures beside the paper's and the reference's, for ``agents`` on every line that has
+    results ("not run" marks a requested agent whose cells are missing)."""
     from .paper import REFERENCE, TABLE_1, TABLE_1_INDEX
 
     lines = [
@@ -148,7 +150,7 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
         for variant in VARIANTS:
             if (setup, variant) not in ran:
                 continue
-            for agent in AGENTS:
+            for agent in (a for a in AGENTS if a in agents):
                 key = (setup, variant, agent)
                 row = rows.get(key)
                 paper_key = (setup, variant, agent)
@@ -156,8 +158,12 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
                 ref = REFERENCE.get(key)
                 if row is None and paper is None:
                     continue
+                best = max(r["reward_mean"] for (s_, v_, a_), r in rows.items() if (s_, v_) == (setup, variant) and a_ in agents)
+                mean = f"{row['reward_mean']:.2f}" if row else ""
                 ours = (
-                    f"**{row['reward_mean']:.2f}** +- {row['reward_std']:.2f}" + (f" ({row['seeds']} seeds)" if row["seeds"] > 1 else "")
+                    (f"**{mean}**" if row["reward_mean"] == best else mean)
+                    + f" +- {row['reward_std']:.2f}"
+                    + (f" ({row['seeds']} seeds)" if row["seeds"] > 1 else "")
                     if row else "not run"
                 )
                 lines.append(
@@ -184,17 +190,17 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
         f"\nEpisode reward over seeds 42..51 (50 steps, deterministic policy): mean +- population std over the 10 episodes,"
         f" or, for RL agents trained with more than one seed, the mean over training seeds +- the std across them."
         f" RL agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random or"
-        f" rba-hold rows; its RBA is the reference implementation's."
+        f" rba-hold rows; its RBA is the reference implementation's. Bold: our best agent on the line."
     )
     return "\n".join(lines) + "\n" + note + "\n"
 
 
-def write_report(out: Path, records: list[dict[str, Any]], timesteps: int) -> list[Path]:
+def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS) -> list[Path]:
     from .plots import analysis_figure, benchmark_figure
 
     rows = summarize(records)
     table = out / "table.md"
-    table.write_text(f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps)}")
+    table.write_text(f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents)}")
     (out / "table.json").write_text(
         json.dumps([{"setup": s, "variant": v, "agent": a, **row} for (s, v, a), row in sorted(rows.items())], indent=2) + "\n"
     )
@@ -283,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     if not records:
         print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
         return 1
-    for path in write_report(args.out, records, args.timesteps):
+    for path in write_report(args.out, records, args.timesteps, args.agents):
         print(f"written: {path}", file=sys.stderr)
     print((args.out / "table.md").read_text())
     if failures:
