@@ -218,6 +218,10 @@ impl HostedLine {
     }
 
     fn check_stamp(&mut self, stamp: Time, already_answered: bool, kind: usize) -> Result<(), Rejection> {
+        // Not a valid ROS time, and it would alias another stamp (sec - 1, nanosec + 1e9).
+        if stamp.nanosec >= 1_000_000_000 {
+            return Err(Rejection::UnknownTick);
+        }
         match self.mode {
             TickMode::Lockstep => {
                 let tick = self.clock.tick_of(stamp).ok_or(Rejection::UnknownTick)?;
