@@ -205,7 +205,7 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
 
             bar = tqdm(total=ticks, unit="tick", unit_scale=True, file=sys.stderr, mininterval=2.0)
         t0 = window_t0 = time.perf_counter()
-        window_ticks = 0
+        window_ticks, window_cpu = 0, cpu_times()
         while result.ticks < ticks:
             actions = actions_rng.integers(0, n_actions, size=lines)
             try:
@@ -243,9 +243,9 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
                     "ticks": result.ticks, "seconds": round(now - t0, 3),
                     "ticks_per_s": round(window_ticks / (now - window_t0), 1),
                     "rss_node_mb": round(rss_mb(node_pid), 2), "rss_bridge_mb": round(rss_mb(os.getpid()), 2),
-                    "load": loadavg(),
+                    "load": loadavg(), "steal": round(steal_percent(window_cpu, cpu_times()), 1),
                 })
-                window_t0, window_ticks = now, 0
+                window_t0, window_ticks, window_cpu = now, 0, cpu_times()
         result.seconds = time.perf_counter() - t0
         result.rss_node_end, result.rss_bridge_end = rss_mb(node_pid), rss_mb(os.getpid())
         for ledger in ledgers:  # what is left, including episodes still running
@@ -276,10 +276,11 @@ def report(r: SoakResult) -> str:
         f"  throughput {r.ticks / max(r.seconds, 1e-9):,.0f} line-ticks/s overall; per window of {c['window']:,}: "
         f"first {first:,.0f}, last {last:,.0f}, min {min(rates, default=0):,.0f}, max {max(rates, default=0):,.0f}",
         f"  {os.cpu_count()} CPUs; load average {r.load_before} before, {r.load_after} after; CPU steal {r.steal:.0f} %",
-        "  windows (line-ticks, line-ticks/s, RSS node MB, RSS bridge MB, load):",
+        "  windows (line-ticks, line-ticks/s, RSS node MB, RSS bridge MB, load average, CPU steal %):",
     ]
     for w in r.windows:
-        lines.append(f"    {w['ticks']:>10,} {w['ticks_per_s']:>10,.0f} {w['rss_node_mb']:>8.1f} {w['rss_bridge_mb']:>8.1f}  {w['load']}")
+        lines.append(f"    {w['ticks']:>10,} {w['ticks_per_s']:>10,.0f} {w['rss_node_mb']:>8.1f} {w['rss_bridge_mb']:>8.1f}"
+                     f"  {w['load']}  {w['steal']:>4.1f}")
     return "\n".join(lines)
 
 
@@ -290,15 +291,20 @@ def plot(r: SoakResult, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     x = [w["ticks"] / 1000 for w in r.windows]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, (top, middle, bottom) = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
     top.plot(x, [w["ticks_per_s"] for w in r.windows], marker=".")
     top.set_ylabel("line-ticks/s (per window)")
     top.set_ylim(bottom=0)
     top.set_title(f"soak: {r.ticks:,} line-ticks, {r.config['lines']} lines; lost {r.lost}, misaligned "
                   f"{r.misaligned}, mismatched {r.mismatched}", fontsize=10)
-    bottom.plot(x, [w["rss_node_mb"] for w in r.windows], marker=".", label="node")
-    bottom.plot(x, [w["rss_bridge_mb"] for w in r.windows], marker=".", label="bridge (Python)")
-    bottom.set_ylabel("RSS (MB)")
+    middle.plot(x, [w["rss_node_mb"] for w in r.windows], marker=".", label="node")
+    middle.plot(x, [w["rss_bridge_mb"] for w in r.windows], marker=".", label="bridge (Python)")
+    middle.set_ylabel("RSS (MB)")
+    middle.set_ylim(bottom=0)
+    middle.legend()
+    # The machine is shared: what else ran explains the swings in throughput.
+    bottom.plot(x, [float(w["load"].split()[0]) for w in r.windows], marker=".", label="load average (1 min)")
+    bottom.plot(x, [w["steal"] for w in r.windows], marker=".", label="CPU steal %")
     bottom.set_ylim(bottom=0)
     bottom.set_xlabel("line-ticks (thousands)")
     bottom.legend()

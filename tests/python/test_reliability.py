@@ -9,7 +9,7 @@
   client on a driven line (refused as not_owner, counted, the first client's trajectory untouched;
   a reset takes the line over and the displaced bridge says so); the node restarted under a running
   realtime controller (the controller drives the new node);
-- bad input: a seeded random flood of bad commands at the real node (each rejection counted per
+- bad input: a seeded random flood of bad commands at the real node (FLOOD_TICKS ticks; each rejection counted per
   reason on /diagnostics, the trajectory equal to the library's), and malformed parameter files and
   `--ros-args` refused at start, naming the problem;
 - determinism across paths: the same seeds and actions through the library, the node (1 and 16
@@ -41,6 +41,8 @@ sys.path.insert(0, str(h.ROOT / "benches"))
 import soak  # noqa: E402
 
 SOAK_TICKS = 50_000
+#: Ticks of the topic-level flood (launch_scripts/reliability.sh runs 200).
+FLOOD_TICKS = int(os.environ.get("SORTING_LINE_FLOOD_TICKS", "25"))
 
 
 @pytest.fixture(autouse=True)
@@ -315,13 +317,14 @@ def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(ros,
     """A seeded random flood of bad commands on the topics of a real node (advanced line)."""
     variant, setup, seed = "advanced", "D", 31
     ns = namespace("flood")
-    node = start_node("--variant", variant, *h.SETUP_FLAGS[setup], *ns_args(ns))
+    node = start_node("--variant", variant, *h.SETUP_FLAGS[setup], "--max-steps", str(max(50, FLOOD_TICKS)),
+                      *ns_args(ns))
     diag = diagnostics_recorder(ros, probe)
     line = client_factory(ns, variant, node_proc=node)
     line.wait_connected()
     rng = np.random.default_rng(2024)
-    actions = [int(a) for a in rng.integers(0, 30, size=25)]
-    want = h.run_trace(setup, variant, seed, actions)
+    actions = [int(a) for a in rng.integers(0, 30, size=FLOOD_TICKS)]
+    want = h.run_trace(setup, variant, seed, actions, max_steps=max(50, FLOOD_TICKS))
     line.reset(seed)
     p = line.period_ns
     expected = {"invalid_speed": 0, "unknown_mode": 0, "stale": 0, "unknown_tick": 0, "duplicate": 0}
