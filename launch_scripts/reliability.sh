@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The reliability suite (issue 7) in full size: message-level fuzzing of commands, parameter files
 # and --ros-args (proptest, FUZZ_CASES cases per property), the Python/ROS reliability tests
-# (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), and the
-# 1,000,000-tick soak through the bridge with its plot. CI runs the same tests in reduced size
-# through launch_scripts/test.sh (256 fuzz cases, the 50,000-tick soak).
+# (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), and two
+# 1,000,000-tick soaks through the bridge (basic setup A with its plot, advanced setup D). CI runs
+# the same tests in reduced size through launch_scripts/test.sh (256 fuzz cases, the 50,000-tick
+# soak).
 #
 # Everything that starts nodes runs in a loopback-only network namespace (unshare -n, as root) on
 # a ROS_DOMAIN_ID of its own. Outputs (logs, soak JSON and PNG) go to results/reliability/.
@@ -45,6 +46,11 @@ unshare -n bash -c '
   python -m pytest tests/python/test_reliability.py -q -p no:cacheprovider -rA
 ' 2>&1 | tee "$OUT/tests.log"
 
-step "soak: $TICKS line-ticks through the bridge"
+step "soak: $TICKS line-ticks through the bridge, basic line, setup A"
 .venv/bin/python benches/soak.py --ticks "$TICKS" --domain "$(( ROS_DOMAIN_ID + 1 ))" \
   --json "$OUT/soak.json" --plot "$PLOT" 2>"$OUT/soak.progress" | tee "$OUT/soak.log"
+
+step "soak: $TICKS line-ticks through the bridge, advanced line, setup D"
+.venv/bin/python benches/soak.py --ticks "$TICKS" --setup D --variant advanced --domain "$(( ROS_DOMAIN_ID + 2 ))" \
+  --json "$OUT/soak_advanced.json" --plot "$OUT/soak_advanced.png" 2>"$OUT/soak_advanced.progress" \
+  | tee "$OUT/soak_advanced.log"
