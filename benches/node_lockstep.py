@@ -64,6 +64,8 @@ def progress(msg: str) -> None:
 
 
 def ensure_isolated() -> None:
+    """Returns inside a loopback-only network namespace: re-executes the running script (this one,
+    or another benchmark that imports this function) under `unshare -n` as root, else exits."""
     if os.environ.get(REEXEC_MARK) == "1":
         subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
     problem = h.isolation_problem()
@@ -72,8 +74,8 @@ def ensure_isolated() -> None:
     if os.environ.get(REEXEC_MARK) != "1" and os.geteuid() == 0 and shutil.which("unshare") and shutil.which("ip"):
         progress("not in an isolated network namespace: re-executing under `unshare -n` (lo up)")
         env = dict(os.environ, **{REEXEC_MARK: "1"})
-        os.execvpe("unshare", ["unshare", "-n", "--", sys.executable, os.path.abspath(__file__), *sys.argv[1:]], env)
-    sys.exit(f"node_lockstep.py: refusing to run: {problem}")
+        os.execvpe("unshare", ["unshare", "-n", "--", sys.executable, os.path.abspath(sys.argv[0]), *sys.argv[1:]], env)
+    sys.exit(f"{os.path.basename(sys.argv[0])}: refusing to run: {problem}")
 
 
 # ------------------------------------------------------------------------------------------

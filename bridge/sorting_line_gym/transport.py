@@ -21,6 +21,7 @@ import subprocess
 import tempfile
 import threading
 import time
+import warnings
 from array import array
 from collections import deque
 from dataclasses import dataclass
@@ -113,7 +114,13 @@ def private_namespace() -> str:
 
 class NodeProcess:
     """A `sorting_line node` process owned by a bridge: started with the given options in its own
-    namespace, its log kept in a temporary file, stopped with SIGINT (SIGKILL if it hangs)."""
+    namespace, its log kept in a temporary file, stopped with SIGINT (SIGKILL if it hangs).
+
+    The log is deleted when the node stopped cleanly (exit code 0) and kept when it failed: then
+    its path is in the error (``death_notice``) or in the warning ``stop`` gives. The node gets
+    SIGTERM if the bridge dies (``setpriv --pdeathsig``, where available), so a killed bridge
+    leaves no node behind. (The parent-death signal follows the thread that started the node: a
+    bridge made in a short-lived thread should be made elsewhere.)"""
 
     def __init__(self, namespace: str, options: dict[str, object]):
         self.namespace = namespace
@@ -125,7 +132,10 @@ class NodeProcess:
         self.command = args
         self._log = tempfile.NamedTemporaryFile(prefix="sorting_line_node_", suffix=".log", delete=False)
         self.log_path = self._log.name
-        self.process = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT)
+        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
+        self.process = subprocess.Popen(
+            launcher + args, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT
+        )
 
     def alive(self) -> bool:
         return self.process.poll() is None
@@ -144,7 +154,7 @@ class NodeProcess:
         )
 
     def stop(self, timeout: float = 5.0) -> int | None:
-        """Stops the node; returns its exit code."""
+        """Stops the node; returns its exit code. Deletes the log if the node stopped cleanly."""
         if self.alive():
             self.process.send_signal(signal.SIGINT)
             try:
@@ -152,7 +162,13 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait(timeout)
-        self._log.close()
+        if not self._log.closed:
+            self._log.close()
+            code = self.process.returncode
+            if code == 0:
+                Path(self.log_path).unlink(missing_ok=True)
+            else:
+                warnings.warn(f"{self.death_notice()}\n(the log is kept)", RuntimeWarning, stacklevel=2)
         return self.process.returncode
 
 
@@ -255,6 +271,17 @@ class Tick:
     step: int
 
 
+def check_not_taken_over(namespace: str, ours: int, seen: int) -> None:
+    """A state of a later episode than ours means another client reset the line: our commands are
+    refused from now on (the node lets one client drive an episode), so say so rather than wait."""
+    if seen > ours:
+        raise BridgeError(
+            f"{namespace}: another client reset this line (episode {seen}; this bridge drives episode "
+            f"{ours}); the node refuses this bridge's commands from now on ('not_owner' on /diagnostics). "
+            "Call reset() to take the line back, or give each bridge a line of its own"
+        )
+
+
 def _drain(sub, inbox: deque) -> None:
     """Takes every message a subscription has already received, without the executor.
 
@@ -347,6 +374,7 @@ class LineLink:
                 self.last_state = s
                 self.tick = Tick(s.header.stamp, s.episode, s.step)
                 return True
+            check_not_taken_over(self.namespace, t.episode, s.episode)
             # Anything else is older (the step-0 state, a previous episode): never returned.
         return False
 
@@ -425,6 +453,8 @@ class BatchLink:
             batch = self.inbox.popleft()
             if len(batch.step) == len(self.links) and list(batch.episode) == episodes and list(batch.step) == steps:
                 return batch
+            for link, episode in zip(self.links, batch.episode):
+                check_not_taken_over(link.namespace, link.tick.episode, episode)
         return None
 
     def saw_current_ticks(self) -> bool:

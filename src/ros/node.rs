@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use async_signal::{Signal, Signals};
 use futures::stream::{self, LocalBoxStream, StreamExt};
 use ros2_client::{
-    Context, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
+    Context, Gid, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
     Server, ServiceMapping, Subscription,
 };
 use rustdds::DomainParticipantBuilder;
@@ -21,7 +21,7 @@ use super::messages::*;
 use super::names::{Names, NODE_NAME};
 use super::options::{NodeArgs, TickMode};
 use super::params::NodeParams;
-use super::protocol::{Accepted, HostedLine, Rejection, TimerTick};
+use super::protocol::{Accepted, Client, HostedLine, Rejection, TimerTick};
 use super::qos::default_profile;
 use super::ros_args::RosArgs;
 use crate::sim::{Observation, Variant};
@@ -417,7 +417,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 }
                 Event::Speed(k, received) => {
                     let result = match received {
-                        Ok((cmd, _)) => apply_speed(&mut runtimes[k], cmd.header.stamp, cmd.speed),
+                        Ok((cmd, info)) => apply_speed(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.speed),
                         Err(error) => Err(malformed(&error)),
                     };
                     if settle(&endpoints[k], &mut runtimes[k], "cmd/speed", result) {
@@ -426,7 +426,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 }
                 Event::Mode(k, received) => {
                     let result = match received {
-                        Ok((cmd, _)) => apply_mode(&mut runtimes[k], cmd.header.stamp, cmd.mode),
+                        Ok((cmd, info)) => apply_mode(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.mode),
                         Err(error) => Err(malformed(&error)),
                     };
                     if settle(&endpoints[k], &mut runtimes[k], "cmd/sort_mode", result) {
@@ -535,8 +535,8 @@ fn handle_batch(
 ) -> bool {
     let n = runtimes.len();
     let advanced = shared.params.line.variant == Variant::Advanced;
-    let cmd = match received {
-        Ok((cmd, _)) => cmd,
+    let (cmd, client) = match received {
+        Ok((cmd, info)) => (cmd, client_of(&info)),
         Err(error) => {
             settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err(malformed(&error)));
             return false;
@@ -557,10 +557,10 @@ fn handle_batch(
     for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
         let stamp = Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] };
         if advanced {
-            let result = apply_mode(r, stamp, cmd.modes[k]);
+            let result = apply_mode(r, client, stamp, cmd.modes[k]);
             stepped |= settle(e, r, "batch/cmd", result);
         }
-        let result = apply_speed(r, stamp, cmd.speeds[k]);
+        let result = apply_speed(r, client, stamp, cmd.speeds[k]);
         stepped |= settle(e, r, "batch/cmd", result);
     }
     stepped
@@ -569,12 +569,37 @@ fn handle_batch(
 /// A rejected command: why, and what it said (for the log).
 type Refusal = (Rejection, String);
 
-fn apply_speed(r: &mut LineRuntime, stamp: Time, speed: f64) -> Result<Accepted, Refusal> {
-    r.host.on_speed(stamp, speed).map_err(|reason| (reason, format!("speed {speed} for stamp {}", show_stamp(stamp))))
+/// The participant that wrote a command (the GUID prefix of its writer).
+fn client_of(info: &MessageInfo) -> Client {
+    let gid: Gid = info.publisher_gid();
+    let mut client = Client::default();
+    let n = client.len();
+    client.copy_from_slice(&gid.as_bytes()[..n]);
+    client
 }
 
-fn apply_mode(r: &mut LineRuntime, stamp: Time, mode: u8) -> Result<Accepted, Refusal> {
-    r.host.on_sort_mode(stamp, mode).map_err(|reason| (reason, format!("sort mode {mode} for stamp {}", show_stamp(stamp))))
+fn show_client(client: Option<Client>) -> String {
+    client.map_or_else(|| "none".to_string(), |c| c.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// What a rejected command said, and who sent it when that matters (ownership).
+fn command_detail(host: &HostedLine, client: Client, what: String) -> String {
+    match host.owner() {
+        Some(owner) if owner != client => {
+            format!("{what} from client {} (the episode's owner is {})", show_client(Some(client)), show_client(Some(owner)))
+        }
+        _ => what,
+    }
+}
+
+fn apply_speed(r: &mut LineRuntime, client: Client, stamp: Time, speed: f64) -> Result<Accepted, Refusal> {
+    let result = r.host.speed_from(client, stamp, speed);
+    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("speed {speed} for stamp {}", show_stamp(stamp)))))
+}
+
+fn apply_mode(r: &mut LineRuntime, client: Client, stamp: Time, mode: u8) -> Result<Accepted, Refusal> {
+    let result = r.host.sort_mode_from(client, stamp, mode);
+    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("sort mode {mode} for stamp {}", show_stamp(stamp)))))
 }
 
 fn malformed(error: &str) -> Refusal {
@@ -634,6 +659,7 @@ fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: I
                 kv("input", p.line.input.to_string()),
                 kv("mode", format!("{:?}", p.mode).to_lowercase()),
                 kv("uptime_s", format!("{:.0}", started.elapsed().as_secs_f64())),
+                kv("owner", show_client(r.host.owner())),
             ];
             r.counters.status(extra)
         })

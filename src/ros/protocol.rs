@@ -13,6 +13,14 @@
 //! In both modes an invalid value (NaN, off the ten speeds, unknown mode) is rejected and the line
 //! keeps its last valid command. Every rejection carries a [`Rejection`] reason for the logs and
 //! /diagnostics.
+//!
+//! One client drives a line per episode: the first client ([`Client`], the DDS participant of the
+//! command's writer) whose command is accepted in an episode owns the line until the episode ends
+//! (a reset, or a realtime line's own restart); commands of any other client are rejected
+//! ([`Rejection::NotOwner`]). Two clients can therefore never interleave commands on one line
+//! silently, while a client that died is replaced by anyone who resets the line (its stale DDS
+//! endpoints may linger for a minute, so the rule cannot wait for them to disappear). Who resets
+//! does not matter: a test may reset a line that a controller process then drives.
 
 use super::clock::SimClock;
 use super::messages::Time;
@@ -39,9 +47,11 @@ pub enum Rejection {
     EpisodeOver,
     /// The message could not be decoded (wrong type or corrupt data).
     Malformed,
+    /// Another client's commands drive this episode of the line.
+    NotOwner,
 }
 
-pub const REJECTIONS: [Rejection; 8] = [
+pub const REJECTIONS: [Rejection; 9] = [
     Rejection::InvalidSpeed,
     Rejection::UnknownMode,
     Rejection::ModeOnBasicLine,
@@ -50,6 +60,7 @@ pub const REJECTIONS: [Rejection; 8] = [
     Rejection::UnknownTick,
     Rejection::EpisodeOver,
     Rejection::Malformed,
+    Rejection::NotOwner,
 ];
 
 impl Rejection {
@@ -64,6 +75,7 @@ impl Rejection {
             Rejection::UnknownTick => "unknown_tick",
             Rejection::EpisodeOver => "episode_over",
             Rejection::Malformed => "malformed",
+            Rejection::NotOwner => "not_owner",
         }
     }
 
@@ -78,9 +90,16 @@ impl Rejection {
             Rejection::UnknownTick => "stamp names no current tick (ahead of the line or between ticks)",
             Rejection::EpisodeOver => "the episode is over; call reset",
             Rejection::Malformed => "it could not be decoded",
+            Rejection::NotOwner => {
+                "another client drives this episode of the line (one client per episode; a reset frees the line)"
+            }
         }
     }
 }
+
+/// Who sent a command: the GUID prefix of its DDS writer, i.e. the sending participant (one rclpy
+/// context, or one process of ros2-client). Opaque to the protocol: only compared.
+pub type Client = [u8; 12];
 
 /// Indices of the per-kind realtime watermarks.
 const SPEED: usize = 0;
@@ -110,6 +129,8 @@ pub struct HostedLine {
     /// Newest stamp accepted in realtime mode, per kind (speed, mode): the two commands of one
     /// tick may arrive in either order, so one kind must not make the other's stamp stale.
     newest_stamp: [i64; 2],
+    /// The client whose command was accepted first in this episode; None until then.
+    owner: Option<Client>,
 }
 
 impl HostedLine {
@@ -123,6 +144,7 @@ impl HostedLine {
             pending_mode: None,
             held: Action::new(START_SPEED_INDEX, SortMode::Basic),
             newest_stamp: [i64::MIN; 2],
+            owner: None,
         }
     }
 
@@ -135,6 +157,10 @@ impl HostedLine {
     pub fn stamp(&self) -> Time {
         self.clock.stamp(self.tick)
     }
+    /// The client driving this episode, if any command has been accepted in it.
+    pub fn owner(&self) -> Option<Client> {
+        self.owner
+    }
 
     fn advanced(&self) -> bool {
         self.line.config().variant == Variant::Advanced
@@ -146,7 +172,28 @@ impl HostedLine {
         self.pending_speed = None;
         self.pending_mode = None;
         self.held = Action::new(START_SPEED_INDEX, SortMode::Basic);
+        self.owner = None;
         self.line.reset(seed)
+    }
+
+    /// `cmd/speed` from a client: refused unless it owns the episode or nobody does yet; the first
+    /// accepted command of an episode makes its client the owner.
+    pub fn speed_from(&mut self, client: Client, stamp: Time, speed: f64) -> Result<Accepted, Rejection> {
+        self.admit(client)?;
+        self.on_speed(stamp, speed).inspect(|_| self.owner = Some(client))
+    }
+
+    /// `cmd/sort_mode` from a client, under the same ownership rule as [`Self::speed_from`].
+    pub fn sort_mode_from(&mut self, client: Client, stamp: Time, mode: u8) -> Result<Accepted, Rejection> {
+        self.admit(client)?;
+        self.on_sort_mode(stamp, mode).inspect(|_| self.owner = Some(client))
+    }
+
+    fn admit(&self, client: Client) -> Result<(), Rejection> {
+        match self.owner {
+            Some(owner) if owner != client => Err(Rejection::NotOwner),
+            _ => Ok(()),
+        }
     }
 
     /// Handles `cmd/speed`.
@@ -171,6 +218,10 @@ impl HostedLine {
     }
 
     fn check_stamp(&mut self, stamp: Time, already_answered: bool, kind: usize) -> Result<(), Rejection> {
+        // Not a valid ROS time, and it would alias another stamp (sec - 1, nanosec + 1e9).
+        if stamp.nanosec >= 1_000_000_000 {
+            return Err(Rejection::UnknownTick);
+        }
         match self.mode {
             TickMode::Lockstep => {
                 let tick = self.clock.tick_of(stamp).ok_or(Rejection::UnknownTick)?;
@@ -313,6 +364,28 @@ mod tests {
         }
         let mut basic = host(Variant::Basic, TickMode::Lockstep);
         assert_eq!(basic.on_sort_mode(basic.stamp(), 1), Err(Rejection::ModeOnBasicLine));
+    }
+
+    #[test]
+    fn one_client_drives_an_episode_and_a_reset_frees_the_line() {
+        let (a, b) = ([1; 12], [2; 12]);
+        let mut h = host(Variant::Basic, TickMode::Lockstep);
+        assert_eq!(h.speed_from(b, h.stamp(), f64::NAN), Err(Rejection::InvalidSpeed), "a rejected command claims nothing");
+        assert!(matches!(h.speed_from(a, h.stamp(), 0.3), Ok(Accepted::Stepped(_))));
+        assert_eq!(h.owner(), Some(a));
+        let before = h.line().last_step().copied();
+        assert_eq!(h.speed_from(b, h.stamp(), 0.9), Err(Rejection::NotOwner));
+        assert_eq!(h.line().last_step().copied(), before, "the other client's command changed nothing");
+        h.reset(Some(5));
+        assert_eq!(h.owner(), None, "a reset, by whoever, frees the line");
+        assert!(matches!(h.speed_from(b, h.stamp(), 0.9), Ok(Accepted::Stepped(_))));
+        assert_eq!(h.speed_from(a, h.stamp(), 0.3), Err(Rejection::NotOwner));
+        // Realtime: the line's own restart ends the episode and its ownership too.
+        let mut r = host(Variant::Advanced, TickMode::Realtime);
+        assert_eq!(r.sort_mode_from(a, r.stamp(), 1), Ok(Accepted::Stored));
+        assert_eq!(r.speed_from(b, r.stamp(), 0.5), Err(Rejection::NotOwner));
+        while !matches!(r.timer_tick(), TimerTick::Reset(_)) {}
+        assert_eq!(r.speed_from(b, r.stamp(), 0.5), Ok(Accepted::Stored));
     }
 
     #[test]

@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The reliability suite (issue 7) in full size: message-level fuzzing of commands, parameter files
+# and --ros-args (proptest, FUZZ_CASES cases per property), the Python/ROS reliability tests
+# (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), and two
+# 1,000,000-tick soaks through the bridge (basic setup A with its plot, advanced setup D). CI runs
+# the same tests in reduced size through launch_scripts/test.sh (256 fuzz cases, the 50,000-tick
+# soak).
+#
+# Everything that starts nodes runs in a loopback-only network namespace (unshare -n, as root) on
+# a ROS_DOMAIN_ID of its own. Outputs (logs, soak JSON and PNG) go to results/reliability/.
+#
+# Usage: launch_scripts/reliability.sh [--ticks N] [--fuzz-cases N] [--plot FILE]
+#        (defaults: 1000000 ticks, 20000 cases, results/reliability/soak.png)
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+TICKS=1000000
+FUZZ_CASES=20000
+OUT=results/reliability
+PLOT="$OUT/soak.png"
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --ticks) TICKS="$2"; shift 2 ;;
+    --fuzz-cases) FUZZ_CASES="$2"; shift 2 ;;
+    --plot) PLOT="$2"; shift 2 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "reliability.sh: unknown argument '$1' (allowed: --ticks N, --fuzz-cases N, --plot FILE)" >&2; exit 2 ;;
+  esac
+done
+step() { printf '\n== %s\n' "$*"; }
+
+bash launch_scripts/setup.sh
+mkdir -p "$OUT"
+
+step "fuzz: commands, parameter files, --ros-args ($FUZZ_CASES cases per property)"
+SORTING_LINE_FUZZ_CASES="$FUZZ_CASES" cargo test --release --locked --test fuzz -- --nocapture 2>&1 | tee "$OUT/fuzz.log"
+
+step "Python/ROS reliability tests (loopback-only network namespace; a 200-tick topic-level flood)"
+export SORTING_LINE_FLOOD_TICKS=200
+export ROS_DOMAIN_ID="${SORTING_LINE_TEST_DOMAIN:-$((100 + $$ % 100))}"
+export NODE_BIN="$ROOT/target/release/sorting_line"
+unshare -n bash -c '
+  set -euo pipefail
+  ip link set lo up
+  source launch_scripts/env.sh
+  python -m pytest tests/python/test_reliability.py -q -p no:cacheprovider -rA
+' 2>&1 | tee "$OUT/tests.log"
+
+step "soak: $TICKS line-ticks through the bridge, basic line, setup A"
+.venv/bin/python benches/soak.py --ticks "$TICKS" --domain "$(( ROS_DOMAIN_ID + 1 ))" \
+  --json "$OUT/soak.json" --plot "$PLOT" 2>"$OUT/soak.progress" | tee "$OUT/soak.log"
+
+step "soak: $TICKS line-ticks through the bridge, advanced line, setup D"
+.venv/bin/python benches/soak.py --ticks "$TICKS" --setup D --variant advanced --domain "$(( ROS_DOMAIN_ID + 2 ))" \
+  --json "$OUT/soak_advanced.json" --plot "$OUT/soak_advanced.png" 2>"$OUT/soak_advanced.progress" \
+  | tee "$OUT/soak_advanced.log"
