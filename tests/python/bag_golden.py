@@ -13,10 +13,7 @@ node reports `truncated`. About 255 ticks per bag.
 
 from __future__ import annotations
 
-import os
 import shutil
-import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,38 +30,14 @@ GOLDEN = {
 }
 
 
-def console_script(name: str) -> Path:
-    script = Path(sys.executable).parent / name
-    if not script.is_file():
-        script = Path(shutil.which(name) or script)
-    assert script.is_file(), f"console script {name} missing: reinstall the bridge (launch_scripts/setup.sh)"
-    return script
-
-
-class BagProcess:
+class BagProcess(h.ScriptProcess):
     """`sorting-line-bag ARGS` as a subprocess, stdout and stderr into `log_path`."""
 
-    def __init__(self, args: list[str], log_path: Path):
-        self.argv = [str(console_script("sorting-line-bag")), *[str(a) for a in args]]
-        self.log_path = Path(log_path)
-        self._log = open(self.log_path, "wb")
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
-        env = dict(os.environ, SORTING_LINE_BIN=str(h.node_binary()), PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=env)
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def log(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def describe(self) -> str:
-        state = "running" if self.running() else f"exited with {self.proc.returncode}"
-        return f"{' '.join(self.argv)} ({state})\n--- log ---\n{self.log()}"
+    def __init__(self, args: list, log_path: Path):
+        super().__init__("sorting-line-bag", args, log_path)
 
     def wait_for_output(self, text: str, timeout: float, session: Optional[h.RosSession] = None) -> None:
+        """Waits until the log shows `text` (spinning `session` meanwhile, if given)."""
         deadline = time.monotonic() + timeout
         while text not in self.log():
             if not self.running():
@@ -75,22 +48,6 @@ class BagProcess:
                 session.spin_for(0.05)
             else:
                 time.sleep(0.05)
-
-    def wait(self, timeout: float) -> int:
-        try:
-            code = self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(5)
-            raise AssertionError(f"did not finish within {timeout} s\n{self.describe()}") from None
-        finally:
-            self._log.close()
-        return code
-
-    def stop(self, timeout: float = 10.0) -> int:
-        if self.running():
-            self.proc.send_signal(signal.SIGINT)
-        return self.wait(timeout)
 
 
 def wait_for_command_writers(session: h.RosSession, recorder: BagProcess, namespace: str, variant: str,

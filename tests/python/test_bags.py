@@ -11,7 +11,8 @@ What is checked:
 - a copy of a golden bag with one field changed at one tick makes replay name that topic, tick
   and field; a changed command makes it name the first tick the node then publishes differently;
 - the golden bags' states are the simulation library's trajectory (`sorting_line trace`);
-- the golden bags open with rosbags and with the mcap tools, schemas embedded;
+- the golden bags open with rosbags and with the mcap tools, schemas embedded, type hashes those
+  rosidl generated;
 - `record` on a live line captures resets (seeded or not), commands (a refused one too) and the
   node's options, and that bag replays exactly;
 - `play` feeds a golden bag's sensor data to the real `sorting-line-controller`, whose commands
@@ -23,14 +24,14 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
-import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
 import ros_harness as h
-from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, console_script
+from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess
 from ros_harness import NS_PER_S
 
 from sorting_line_gym.bag import open_bag, rewrite_bag
@@ -152,6 +153,21 @@ def test_golden_bag_opens_with_rosbags_and_mcap(name):
         rewards = [decoded.reward for _, channel, _, decoded in reader.iter_decoded_messages(topics=[f"{ns}/state"])]
     assert rewards == [s["reward"] for s in relative(open_bag(path), "state")]
 
+    # The type hashes in metadata.yaml are those rosidl generated for the interfaces rclpy uses
+    # (what `ros2 bag play` checks against a ROS install's types).
+    import json
+
+    import yaml
+
+    share = Path(sys.prefix) / "share" / "sorting_line_interfaces" / "msg"  # setup.sh installs it into .venv
+    topics = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["topics_with_message_count"]
+    for t in topics:
+        meta = t["topic_metadata"]
+        if meta["type"].startswith("sorting_line_interfaces/"):
+            generated = json.loads((share / (meta["type"].rsplit("/", 1)[1] + ".json")).read_text())
+            want = next(x["hash_string"] for x in generated["type_hashes"] if x["type_name"] == meta["type"])
+            assert meta["type_description_hash"] == want, meta
+
 
 # --------------------------------------------------------------------------------------------
 # Recording a live line
@@ -240,12 +256,10 @@ def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace
 # Bad input
 
 
-def test_bad_input_exits_with_2_and_says_why(tmp_path):
-    script = str(console_script("sorting-line-bag"))
-
-    def run(*args):
-        r = subprocess.run([script, *map(str, args)], capture_output=True, text=True, timeout=60)
-        return r.returncode, r.stderr
+def test_bad_input_exits_with_2_and_says_why(tmp_path, capsys):
+    """The command line's own function (the console script is run by the other tests): each case
+    would cost a process start-up (~2.5 s) otherwise."""
+    from sorting_line_gym.bag.cli import main
 
     corrupt = tmp_path / "corrupt"
     shutil.copytree(DATA / "basic_d", corrupt)
@@ -261,5 +275,6 @@ def test_bad_input_exits_with_2_and_says_why(tmp_path):
         (("info", corrupt), "cannot read the bag"),
     ]
     for args, message in cases:
-        code, err = run(*args)
+        code = main([str(a) for a in args])
+        err = capsys.readouterr().err
         assert (code, message in err) == (2, True), f"{args}: exit {code}, stderr {err!r}"

@@ -29,8 +29,14 @@ class _Stop:
 
     def __init__(self):
         self.signal: str | None = None
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._on)
+        self._previous = {sig: signal.signal(sig, self._on) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def __enter__(self) -> "_Stop":
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
 
     def _on(self, signum, _frame):
         self.signal = signal.Signals(signum).name
@@ -89,10 +95,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "record":
             from .record import record
 
-            stop = _Stop()
-            result = record(args.namespace, args.output, args.topics, duration=args.duration,
-                            max_ticks=args.max_ticks, wait=args.wait, stop=stop,
-                            on_ready=lambda s: print(s, flush=True), diagnostics=args.diagnostics)
+            with _Stop() as stop:
+                result = record(args.namespace, args.output, args.topics, duration=args.duration,
+                                max_ticks=args.max_ticks, wait=args.wait, stop=stop,
+                                on_ready=lambda s: print(s, flush=True), diagnostics=args.diagnostics)
             print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
             return 0
         if args.command == "replay":
@@ -107,10 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "play":
             from .play import play
 
-            stop = _Stop()
-            result = play(args.bag, rate=args.rate, topics=args.topics, namespace=args.namespace,
-                          wait_for=[] if args.no_wait else args.wait_for, wait=args.wait, stop=stop,
-                          on_ready=lambda s: print(s, flush=True))
+            with _Stop() as stop:
+                result = play(args.bag, rate=args.rate, topics=args.topics, namespace=args.namespace,
+                              wait_for=[] if args.no_wait else args.wait_for, wait=args.wait, stop=stop,
+                              on_ready=lambda s: print(s, flush=True))
             print(result.summary(), flush=True)
             return 0
     except BagError as e:
