@@ -15,8 +15,8 @@ What is checked:
   rosidl generated;
 - `record` on a live line captures resets (seeded or not), commands (a refused one too) and the
   node's options, and that bag replays exactly;
-- `play` feeds a golden bag's sensor data to the real `sorting-line-controller`, whose commands
-  are the recorded ones;
+- `play --lockstep` feeds a golden bag's sensor data to the real `sorting-line-controller`, whose
+  commands are the recorded ones; `play --rate` keeps the recorded timing (scaled);
 - bad input exits with 2 and says why.
 """
 
@@ -228,14 +228,13 @@ def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace
     try:
         ros.spin_until(lambda: all(rec[t].sub.get_publisher_count() for t in ("cmd/speed", "cmd/sort_mode")), 20.0,
                        "the controller's command writers", controller.describe)
-        # A tenth of the recorded pace (~40 ms a tick, ~10 s): the lock-step recording ran as fast as
-        # the round trip allowed (~250 ticks/s). Played at that pace, a controller that stalls for
-        # 40-150 ms on this shared machine loses readings from its keep-last-10 queues and never
-        # answers those ticks (seen at rates 1 and 0.2).
-        player = BagProcess(["play", DATA / "advanced_b", "--namespace", ns, "--rate", "0.1"],
-                            tmp_path / "play.log")
+        # Tick by tick, each after the controller's answer, as the lock-step node it was recorded
+        # with. (Played by time at the recorded pace, ~250 ticks/s, a controller that stalls for
+        # a moment on this shared machine loses readings from its keep-last-10 queues and never
+        # answers those ticks: seen at --rate 1, 0.2, and once at 0.1 under a load of 8.)
+        player = BagProcess(["play", DATA / "advanced_b", "--namespace", ns, "--lockstep"], tmp_path / "play.log")
         want = {t: {plain_stamp(m): m for m in relative(bag, t)} for t in ("cmd/speed", "cmd/sort_mode")}
-        ros.spin_until(lambda: all(len(rec[t].items) >= len(want[t]) for t in want), 40.0,
+        ros.spin_until(lambda: all(len(rec[t].items) >= len(want[t]) for t in want), 30.0,
                        f"{len(want['cmd/speed'])} commands of each kind from the controller",
                        lambda: f"received {[len(rec[t].items) for t in want]}; no decision for the ticks "
                                f"{sorted(s // NS_PER_S for s in set(want['cmd/speed']) - set(controller.decisions()))}"
@@ -249,7 +248,26 @@ def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace
         assert got_speed[stamp][1].speed == m["speed"], f"cmd/speed for tick {stamp // NS_PER_S}"
     for stamp, m in want["cmd/sort_mode"].items():
         assert got_mode[stamp][1].mode == m["mode"], f"cmd/sort_mode for tick {stamp // NS_PER_S}"
-    assert "played 1280 messages" in player.log(), player.log()  # all but the 510 commands
+    assert "played 1280 messages" in player.log() and "no answer" not in player.log(), player.log()
+
+
+def test_play_keeps_the_recorded_timing(ros, probe, namespace, tmp_path):
+    """Played by time (4x faster): every message, in order, spread over a quarter of the recording."""
+    from sorting_line_interfaces.msg import MaterialInput
+
+    bag = open_bag(DATA / "basic_d")
+    ns = namespace("timing")
+    inputs = h.TopicRecorder(ros, probe, f"{ns}/input", MaterialInput, qos=1000)
+    player = BagProcess(["play", DATA / "basic_d", "--namespace", ns, "--rate", "4", "--topic", "input",
+                         "--topic", "/clock"], tmp_path / "play.log")
+    ros.spin_until(lambda: not player.running(), 30.0, "play to finish", player.describe)
+    assert player.wait(5) == 0, player.describe()
+    ros.spin_for(0.2)
+    recorded = [m["header"]["stamp"]["sec"] for m in relative(bag, "input")]
+    assert [m.header.stamp.sec for m in inputs.msgs] == recorded
+    span = (bag.on(f"{bag.info.namespace}/input")[-1].log_time - bag.on(f"{bag.info.namespace}/input")[0].log_time) / 1e9
+    played = float(player.log().split(" s (recorded over")[0].rsplit(" ", 1)[1])
+    assert played >= 0.9 * span / 4, player.log()
 
 
 # --------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
     sorting-line-bag record --namespace /plant -o run1            # until Ctrl-C
     sorting-line-bag replay run1                                  # exit 0 identical, 1 differs
     sorting-line-bag play run1 --namespace /test --rate 2         # the sensors, twice as fast
+    sorting-line-bag play run1 --namespace /test --lockstep       # tick by tick, after each answer
     sorting-line-bag info run1
 
 Exit codes: 0 done (replay: identical), 1 replay found a difference, 2 bad input (a missing or
@@ -80,6 +81,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="wait for a subscriber on this topic before playing (default: the line's input)")
     pl.add_argument("--no-wait", action="store_true", help="do not wait for subscribers")
     pl.add_argument("--wait", type=float, default=10.0, help="how long to wait for subscribers (s)")
+    pl.add_argument("--lockstep", action="store_true",
+                    help="tick by tick instead of by time: each tick after the controller answered the previous one "
+                         "on cmd/speed (when the bag shows an answer), as a lock-step node would")
+    pl.add_argument("--answer-timeout", type=float, default=5.0, help="--lockstep: longest wait for an answer (s)")
 
     i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
     i.add_argument("bag")
@@ -116,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
             with _Stop() as stop:
                 result = play(args.bag, rate=args.rate, topics=args.topics, namespace=args.namespace,
                               wait_for=[] if args.no_wait else args.wait_for, wait=args.wait, stop=stop,
-                              on_ready=lambda s: print(s, flush=True))
+                              on_ready=lambda s: print(s, flush=True), lockstep=args.lockstep,
+                              answer_timeout=args.answer_timeout)
             print(result.summary(), flush=True)
             return 0
     except BagError as e:
