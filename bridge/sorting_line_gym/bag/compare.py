@@ -8,7 +8,7 @@ from __future__ import annotations
 import copy
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any
 
 from .schema import CLOCK, PUBLISHED, stamp_ns
 
@@ -141,10 +141,3 @@ def compare(recorded: dict[str, list[dict]], replayed: dict[str, list[dict]], pe
             return Comparison(Difference(topic, tick, stamp, "<message>", f"{len(ours)} messages",
                                          f"{len(theirs)} messages", **ctx), dict(compared), ignored)
     return Comparison(None, dict(compared), ignored)
-
-
-def plain_by_topic(items: Iterable[tuple[str, dict]]) -> dict[str, list[dict]]:
-    out: dict[str, list[dict]] = defaultdict(list)
-    for topic, m in items:
-        out[topic].append(m)
-    return dict(out)

@@ -19,7 +19,6 @@ not in the bag). It stops on SIGINT/SIGTERM, after ``--duration`` seconds, or on
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -221,7 +220,3 @@ def _graph_type(tool: ToolNode, name: str, timeout: float) -> str:
     if found[0] not in typestore().fielddefs:
         raise BagError(f"topic {name} has type {found[0]}, which this tool cannot embed a schema for")
     return found[0]
-
-
-def describe_options(options: dict | None) -> str:
-    return json.dumps(options, sort_keys=True) if options else "unknown"

@@ -34,7 +34,7 @@ from ..transport import BridgeTimeout, LineLink, NodeProcess, private_namespace
 from .bagfile import Bag, BagError, BagMessage, open_bag
 from .compare import Comparison, Difference, compare, shifted
 from .rosnode import ToolNode
-from .schema import CLOCK, COMMANDS, LINE_TYPES, PUBLISHED, GLOBAL_TYPES, decode, join, stamp_ns, typestore
+from .schema import CLOCK, COMMANDS, GLOBAL_TYPES, LINE_TYPES, PUBLISHED, decode, join, stamp_ns, typestore
 
 #: Node options a replay needs, as `sorting_line node` flags (underscores).
 REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
@@ -220,8 +220,7 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
                     break
                 pub = publishers.get(rel)
                 if pub is None:  # a sort mode sent to a basic line: the node refuses it, as it did then
-                    from .rosnode import DEEP_QOS
-                    pub = publishers[rel] = tool.publisher(join(replay_ns, rel), LINE_TYPES[rel], DEEP_QOS)
+                    pub = publishers[rel] = tool.publisher(join(replay_ns, rel), LINE_TYPES[rel])
                 pub.publish(_restamped(store, m, stamp - result.tick_shift * period))
                 result.commands += 1
             else:
