@@ -114,7 +114,8 @@ def private_namespace() -> str:
 
 class NodeProcess:
     """A `sorting_line node` process owned by a bridge: started with the given options in its own
-    namespace, its log kept in a temporary file, stopped with SIGINT (SIGKILL if it hangs).
+    namespace (plus ``ros_args``, e.g. remaps, after ``--ros-args``), its log kept in a temporary
+    file, stopped with SIGINT (SIGKILL if it hangs).
 
     The log is deleted when the node stopped cleanly (exit code 0) and kept when it failed: then
     its path is in the error (``death_notice``) or in the warning ``stop`` gives. The node gets
@@ -122,13 +123,13 @@ class NodeProcess:
     leaves no node behind. (The parent-death signal follows the thread that started the node: a
     bridge made in a short-lived thread should be made elsewhere.)"""
 
-    def __init__(self, namespace: str, options: dict[str, object]):
+    def __init__(self, namespace: str, options: dict[str, object], ros_args: tuple[str, ...] = ()):
         self.namespace = namespace
         args = [find_node_binary(), "node"]
         for key, value in options.items():
             if value is not None:
                 args += [f"--{key.replace('_', '-')}", str(value)]
-        args += ["--ros-args", "-r", f"__ns:={namespace}"]
+        args += ["--ros-args", "-r", f"__ns:={namespace}", *ros_args]
         self.command = args
         self._log = tempfile.NamedTemporaryFile(prefix="sorting_line_node_", suffix=".log", delete=False)
         self.log_path = self._log.name

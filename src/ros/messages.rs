@@ -114,6 +114,9 @@ pub struct ResetEvent {
     pub header: Header,
     pub episode: u32,
     pub seed: u64,
+    /// Whether the streams restarted from `seed` (a seeded reset) or carried on: a replay of a
+    /// bag needs to know, and the same seed twice in a row cannot tell.
+    pub seeded: bool,
 }
 
 /// sorting_line_interfaces/LineCommands: one command per line, for vectorised clients.

@@ -290,11 +290,12 @@ impl LineEndpoints {
         self.send(&self.state, "state", line_state(host));
     }
 
-    fn publish_reset_event(&self, host: &HostedLine) {
+    fn publish_reset_event(&self, host: &HostedLine, seeded: bool) {
         let event = ResetEvent {
             header: Header { stamp: host.stamp(), frame_id: String::new() },
             episode: host.line().episode(),
             seed: host.line().seed(),
+            seeded,
         };
         self.send(&self.reset_event, "events/reset", event);
     }
@@ -471,7 +472,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         }
                         TimerTick::Reset(_) => {
                             r.counters.episodes += 1;
-                            e.publish_reset_event(&r.host);
+                            e.publish_reset_event(&r.host, false);
                             e.publish_tick(&r.host);
                         }
                     }
@@ -493,7 +494,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
 fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, seed: Option<u64>) -> Observation {
     let observation = r.host.reset(seed);
     r.counters.episodes += 1;
-    e.publish_reset_event(&r.host);
+    e.publish_reset_event(&r.host, seed.is_some());
     e.publish_tick(&r.host);
     observation
 }

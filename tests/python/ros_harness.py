@@ -12,6 +12,8 @@
 - `LineClient`: one line as a lock-step client sees it: reset via the service, step by publishing
   commands stamped with the current tick and waiting for the next tick's `state`, and every message
   of every topic of the line collected in lists.
+- `ScriptProcess`: a console script of the bridge (`sorting-line-controller`, `sorting-line-bag`)
+  as a subprocess with its log, stopped with SIGINT.
 - `run_trace()`: the simulation library's reference trajectory (`sorting_line trace`), and
   converters so that node states and trace entries compare field by field.
 
@@ -200,6 +202,62 @@ class NodeProcess:
             self.proc.kill()
             self.proc.wait(timeout=5)
         self._log.close()
+
+
+class ScriptProcess:
+    """A console script of the bridge (`sorting-line-controller`, `sorting-line-bag`, ...) as a
+    subprocess, run as a user runs it: stdout and stderr into `log_path`, SORTING_LINE_BIN set to
+    the node binary of the tests, a parent-death signal as for NodeProcess."""
+
+    def __init__(self, name: str, args: Iterable[Any], log_path: Path, label: Optional[str] = None):
+        script = Path(sys.executable).parent / name
+        if not script.is_file():
+            script = Path(shutil.which(name) or script)
+        assert script.is_file(), (
+            f"console script {script} missing: reinstall the bridge "
+            "(.venv/bin/pip install --no-deps --no-build-isolation -e bridge)")
+        self.label = label or name
+        self.log_path = Path(log_path)
+        self.argv = [str(script), *[str(a) for a in args]]
+        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
+        self._log = open(self.log_path, "wb")
+        env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        self.returncode = None
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def log(self) -> str:
+        if not self._log.closed:
+            self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def describe(self) -> str:
+        state = "running" if self.running() else f"exited with {self.proc.returncode}"
+        return f"{self.label} ({state}): {' '.join(self.argv)}\n--- {self.label} log ---\n{self.log()}"
+
+    def wait(self, timeout: float, sig: Optional[int] = None) -> int:
+        """Sends `sig` (if any and still running), waits up to `timeout` s for the exit code
+        (kills and raises on timeout); a second call returns the same code."""
+        if self.returncode is not None:
+            return self.returncode
+        if sig is not None and self.running():
+            self.proc.send_signal(sig)
+        try:
+            self.returncode = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+            how = f" of {signal.Signals(sig).name}" if sig is not None else ""
+            raise AssertionError(f"{self.label} did not exit within {timeout} s{how}\n{self.describe()}") from None
+        finally:
+            self._log.close()
+        return self.returncode
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGINT; must exit in time."""
+        return self.wait(timeout, signal.SIGINT)
 
 
 def run_node_expecting_failure(args: Iterable[str], env: Optional[dict[str, str]] = None, timeout: float = 10.0):

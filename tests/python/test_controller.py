@@ -24,10 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -70,36 +67,14 @@ def same_binary_for_the_agents(monkeypatch):
 # The controller process
 
 
-class ControllerProcess:
-    """`sorting-line-controller ARGS` (the installed console script) with its log and decision log."""
+class ControllerProcess(h.ScriptProcess):
+    """`sorting-line-controller ARGS` (the installed console script) with its log and decision log;
+    stop() sends SIGINT and wants it to exit in time, having logged its summary."""
 
     def __init__(self, tmp_path: Path, tag: str, args: list[str]):
-        script = Path(sys.executable).parent / "sorting-line-controller"
-        if not script.is_file():
-            script = Path(shutil.which("sorting-line-controller") or script)
-        assert script.is_file(), (
-            f"console script {script} missing: reinstall the bridge "
-            "(.venv/bin/pip install --no-deps --no-build-isolation -e bridge)")
-        self.log_path = tmp_path / f"controller_{tag}.log"
         self.decision_path = tmp_path / f"decisions_{tag}.jsonl"
-        self.argv = [str(script), *args, "--decision-log", str(self.decision_path)]
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
-        self._log = open(self.log_path, "wb")
-        env = dict(os.environ, SORTING_LINE_BIN=str(h.node_binary()), PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=env)
-        self.returncode = None
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def log(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def describe(self) -> str:
-        state = "running" if self.running() else f"exited with {self.proc.returncode}"
-        return f"controller ({state}): {' '.join(self.argv)}\n--- controller log ---\n{self.log()}"
+        super().__init__("sorting-line-controller", [*args, "--decision-log", self.decision_path],
+                         tmp_path / f"controller_{tag}.log", label="controller")
 
     def decisions(self) -> dict[int, dict]:
         """The decision log, by tick stamp (ns)."""
@@ -107,22 +82,6 @@ class ControllerProcess:
             return {}
         rows = [json.loads(line) for line in self.decision_path.read_text().splitlines() if line.strip()]
         return {r["stamp_ns"]: r for r in rows}
-
-    def stop(self, timeout: float = 10.0) -> int:
-        """SIGINT; must exit 0 in time, having logged its summary."""
-        if self.returncode is not None:
-            return self.returncode
-        if self.running():
-            self.proc.send_signal(signal.SIGINT)
-        try:
-            self.returncode = self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
-            raise AssertionError(f"controller did not exit within {timeout} s of SIGINT\n{self.describe()}")
-        finally:
-            self._log.close()
-        return self.returncode
 
 
 @pytest.fixture

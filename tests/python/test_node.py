@@ -468,6 +468,7 @@ def test_two_node_processes_and_the_library_agree(variant, setup, start_node, cl
     compare_with_trace(states_a, h.run_trace(setup, variant, seed, tokens), f"{a.ns} vs trace")
     assert [e.seed for e in a.since_reset("events/reset")] == [seed, seed, 99]
     assert [e.episode for e in a.since_reset("events/reset")] == [1, 2, 3]
+    assert [e.seeded for e in a.since_reset("events/reset")] == [False, False, True]
 
 
 def test_four_lines_are_independent_and_seeded_seed_plus_k(ros, start_node, client_factory, probe, namespace):

@@ -1,0 +1,206 @@
+"""Reading and writing sorting_line bags: ROS 2 bag directories (metadata.yaml + one MCAP file,
+Jazzy's default storage) through `rosbags`, with every message's schema embedded.
+
+Besides the messages, a bag of a line carries under ``custom_data`` (metadata.yaml) the key
+``sorting_line``: JSON with the line's namespace and the options of the node that served it
+(variant, input, noise, penalty, threshold, max_steps, the line's seed, mode, tick_period), so
+that ``sorting-line-bag replay BAG`` can start an identical node with nothing else given.
+
+Bad input (a missing path, something that is not a bag, a corrupt file, a topic the bag does not
+have) raises :class:`BagError`, which the command line turns into a message and exit code 2.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import yaml
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+from .schema import NODE_QOS, decode, relative_to, typestore
+
+#: The custom_data key of the line's description.
+META_KEY = "sorting_line"
+
+
+class BagError(Exception):
+    """The bag (or what was asked of it) is not usable: the message says why."""
+
+
+@dataclass
+class LineInfo:
+    """What a bag says about the line it recorded."""
+
+    namespace: str
+    #: The node's options as `sorting_line node` flags take them (underscores), with ``seed`` the
+    #: seed of this line (node seed + line index).
+    node: dict = field(default_factory=dict)
+
+    def to_json(self) -> str:
+        return json.dumps({"namespace": self.namespace, "node": self.node}, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> "LineInfo":
+        data = json.loads(text)
+        return cls(namespace=data["namespace"], node=dict(data.get("node") or {}))
+
+
+@dataclass
+class BagMessage:
+    topic: str
+    msgtype: str
+    log_time: int  # ns, when the recorder received it
+    data: bytes
+    _plain: dict | None = None
+
+    @property
+    def plain(self) -> dict:
+        """The decoded message as plain values (decoded once)."""
+        if self._plain is None:
+            self._plain = decode(self.data, self.msgtype)
+        return self._plain
+
+
+@dataclass
+class Bag:
+    """A whole bag in memory (sorting_line bags are small: a tick is a few hundred bytes)."""
+
+    path: Path
+    types: dict[str, str]  # topic -> msgtype
+    messages: list[BagMessage]  # in log-time order
+    info: LineInfo | None
+    custom: dict[str, str]
+
+    def on(self, topic: str) -> list[BagMessage]:
+        return [m for m in self.messages if m.topic == topic]
+
+    def by_relative_topic(self) -> dict[str, list[BagMessage]]:
+        """The messages of the line's topics, keyed by their name relative to the line."""
+        out: dict[str, list[BagMessage]] = defaultdict(list)
+        ns = self.info.namespace if self.info else ""
+        for m in self.messages:
+            rel = relative_to(ns, m.topic) if ns else None
+            out[rel if rel is not None else m.topic].append(m)
+        return out
+
+
+def _custom_data(path: Path) -> dict[str, str]:
+    meta = path / "metadata.yaml"
+    if not meta.is_file():
+        return {}
+    try:
+        info = yaml.safe_load(meta.read_text()) or {}
+        return dict(info.get("rosbag2_bagfile_information", {}).get("custom_data") or {})
+    except (yaml.YAMLError, AttributeError, TypeError, ValueError) as e:
+        raise BagError(f"{meta}: unreadable metadata ({e})") from None
+
+
+def open_bag(path: str | Path) -> Bag:
+    """Reads a bag directory (or a bare .mcap file) completely; BagError when it cannot."""
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"{path}: no such bag (expected a bag directory with metadata.yaml, or an .mcap file)")
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise BagError(f"{path}: not a ROS 2 bag directory (no metadata.yaml)")
+    store = typestore()
+    try:
+        with Reader(path) as reader:
+            types = {c.topic: c.msgtype for c in reader.connections}
+            messages = [BagMessage(c.topic, c.msgtype, t, bytes(raw)) for c, t, raw in reader.messages()]
+    except BagError:
+        raise
+    except Exception as e:  # noqa: BLE001 - rosbags raises many kinds for a corrupt file; all are bad input
+        raise BagError(f"{path}: cannot read the bag: {type(e).__name__}: {e}") from None
+    unknown = sorted({t for t in types.values() if t not in store.fielddefs})
+    if unknown:
+        raise BagError(f"{path}: message types this tool does not know: {', '.join(unknown)}")
+    custom = _custom_data(path) if path.is_dir() else {}
+    info = None
+    if META_KEY in custom:
+        try:
+            info = LineInfo.from_json(custom[META_KEY])
+        except (ValueError, KeyError, TypeError) as e:
+            raise BagError(f"{path}: custom_data {META_KEY!r} is not valid ({e})") from None
+    messages.sort(key=lambda m: m.log_time)
+    return Bag(path, types, messages, info, custom)
+
+
+class BagWriter:
+    """A new bag directory (rosbag2 version 9, MCAP storage), schemas from :func:`typestore`."""
+
+    def __init__(self, path: str | Path, custom: dict[str, str] | None = None):
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"{self.path} exists already: choose a new output directory")
+        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        for key, value in (custom or {}).items():
+            self._writer.set_custom_data(key, value)
+        self._connections: dict[str, object] = {}
+        self.counts: dict[str, int] = defaultdict(int)
+        self._writer.open()
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        if topic not in self._connections:
+            self._connections[topic] = self._writer.add_connection(
+                topic, msgtype, typestore=typestore(), offered_qos_profiles=[NODE_QOS])
+
+    def write(self, topic: str, log_time: int, data: bytes | memoryview) -> None:
+        self._writer.write(self._connections[topic], log_time, data)
+        self.counts[topic] += 1
+
+    def close(self) -> None:
+        self._writer.close()
+
+
+def rewrite_bag(src: str | Path, dst: str | Path,
+                change: Callable[[BagMessage], object | None] = lambda m: None) -> int:
+    """Copies bag ``src`` to ``dst`` (custom_data included). ``change(message)`` may return a new
+    message object (a rosbags message of the same type) to store instead; returns how many were
+    changed. For tests (a tampered golden bag) and for trimming a bag by hand."""
+    bag = open_bag(src)
+    store = typestore()
+    writer = BagWriter(dst, bag.custom)
+    changed = 0
+    try:
+        for topic, msgtype in bag.types.items():
+            writer.add_topic(topic, msgtype)
+        for m in bag.messages:
+            new = change(m)
+            data = m.data
+            if new is not None:
+                data = bytes(store.serialize_cdr(new, m.msgtype))
+                changed += 1
+            writer.write(m.topic, m.log_time, data)
+    finally:
+        writer.close()
+    return changed
+
+
+def describe(bag: Bag) -> str:
+    """A short summary: topics with types and counts, and the line's description."""
+    counts: dict[str, int] = defaultdict(int)
+    for m in bag.messages:
+        counts[m.topic] += 1
+    lines = [f"{bag.path}: {len(bag.messages)} messages"]
+    for topic in sorted(bag.types):
+        lines.append(f"  {topic:40s} {bag.types[topic]:45s} {counts[topic]:6d}")
+    if bag.info:
+        lines.append(f"  line {bag.info.namespace}: {json.dumps(bag.info.node, sort_keys=True)}")
+    return "\n".join(lines)
+
+
+def topics_of(bag: Bag, wanted: Iterable[str]) -> list[str]:
+    """Absolute topic names for ``wanted`` (absolute, or relative to the bag's line); BagError
+    naming any the bag does not have."""
+    ns = bag.info.namespace if bag.info else ""
+    out = []
+    for t in wanted:
+        name = t if t.startswith("/") else f"{ns.rstrip('/')}/{t}"
+        if name not in bag.types:
+            raise BagError(f"{bag.path}: no topic {name} in this bag (it has {', '.join(sorted(bag.types))})")
+        out.append(name)
+    return out

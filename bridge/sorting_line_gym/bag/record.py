@@ -1,0 +1,222 @@
+"""`sorting-line-bag record`: records a running line's topics into a ROS 2 bag.
+
+By default it records every topic of the line in namespace NS (``input``, ``belt/occupancy``,
+``sensors/ratio`` on the advanced line, ``state``, ``events/reset`` - the resets, since services
+are not recorded - and the commands ``cmd/speed`` and ``cmd/sort_mode``) and ``/clock``. Messages
+are stored as the CDR bytes rclpy received (``raw=True``), stamped with their receive time, in a
+bag directory with metadata.yaml and one MCAP file whose schemas are the .msg definitions.
+
+It also asks the node serving the line for its parameters (``get_parameters``) and stores them in
+the bag (see :mod:`.bagfile`), which is what makes ``sorting-line-bag replay BAG`` self-contained.
+
+Recording starts once every topic the node publishes is matched and a ``/diagnostics`` status of
+the line has arrived (proof that the node sends to this recorder); then it prints
+``recording ...`` on stdout, and ``matched TOPIC: N publisher(s)`` whenever that count changes
+(a controller that joins later: wait for its line before driving, or its first commands are
+not in the bag). It stops on SIGINT/SIGTERM, after ``--duration`` seconds, or once
+``--max-ticks`` states were recorded, and drains what is still in flight before closing the bag.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from .bagfile import META_KEY, BagError, BagWriter, LineInfo
+from .rosnode import ToolNode
+from .schema import CLOCK, GLOBAL_TYPES, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
+
+#: The node's parameters that describe a line (and thus a replay's node).
+NODE_PARAMETERS = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "mode",
+                   "rate", "lines", "tick_period")
+
+
+@dataclass
+class RecordResult:
+    path: Path
+    counts: dict[str, int] = field(default_factory=dict)
+    info: LineInfo | None = None
+    seconds: float = 0.0
+
+    def summary(self) -> str:
+        total = sum(self.counts.values())
+        size = sum(f.stat().st_size for f in self.path.iterdir() if f.is_file()) if self.path.exists() else 0
+        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
+        return f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB ({per_topic})"
+
+
+def _parameter_value(v):
+    from rcl_interfaces.msg import ParameterType
+
+    return {ParameterType.PARAMETER_BOOL: v.bool_value, ParameterType.PARAMETER_INTEGER: v.integer_value,
+            ParameterType.PARAMETER_DOUBLE: v.double_value, ParameterType.PARAMETER_STRING: v.string_value,
+            }.get(v.type)
+
+
+def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
+    """The parameters of the node that publishes ``<namespace>/state``, with ``seed`` made the
+    line's own (node seed + k for ``<ns>/line_k``); None if no such node answers in time.
+
+    The call is repeated (it is idempotent): right after discovery the node may match our request
+    writer before our reply reader, and a reply sent before that is lost for good (volatile)."""
+    from rcl_interfaces.srv import GetParameters
+
+    state = join(namespace, "state")
+    # Until the node's ros_discovery_info arrives, its endpoints belong to "_CREATED_BY_BARE_DDS_APP_".
+    named = []
+
+    def publishers_named() -> bool:
+        named[:] = [i for i in tool.node.get_publishers_info_by_topic(state) if not i.node_name.startswith("_")]
+        return bool(named)
+
+    try:
+        tool.until(publishers_named, timeout, f"the name of the node publishing {state}")
+    except TimeoutError:
+        return None
+    for info in named:
+        service = join(info.node_namespace, f"{info.node_name}/get_parameters")
+        client = tool.node.create_client(GetParameters, service)
+        values = None
+        try:
+            tool.until(client.service_is_ready, timeout, f"service {service}")
+            for attempt in range(1, 4):
+                future = client.call_async(GetParameters.Request(names=list(NODE_PARAMETERS)))
+                try:
+                    tool.until(future.done, 2.0, f"a reply from {service} (attempt {attempt}/3)")
+                except TimeoutError:
+                    client.remove_pending_request(future)
+                    continue
+                values = [_parameter_value(v) for v in future.result().values]
+                break
+        except TimeoutError:
+            pass
+        finally:
+            tool.node.destroy_client(client)
+        if values is None or None in values:
+            continue
+        options = dict(zip(NODE_PARAMETERS, values))
+        line = 0
+        tail = namespace.rstrip("/").rsplit("/", 1)[-1]
+        if options["lines"] > 1 and tail.startswith("line_") and tail[5:].isdigit():
+            line = int(tail[5:])
+        options["seed"] = int(options["seed"]) + line
+        options["line"] = line
+        return options
+    return None
+
+
+def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, duration: float | None = None,
+           max_ticks: int | None = None, wait: float = 10.0, stop: Callable[[], bool] = lambda: False,
+           on_ready: Callable[[str], None] = print, diagnostics: bool = False) -> RecordResult:
+    """Records until ``stop()`` says so, ``duration`` seconds pass or ``max_ticks`` states arrived.
+
+    ``topics``: absolute names or names relative to ``namespace``; None = the line's topics and
+    /clock (plus /diagnostics with ``diagnostics=True``). Raises BagError for bad input (an
+    unknown topic, an existing output) and TimeoutError when the line does not show up."""
+    namespace = "/" + namespace.strip("/")
+    out = Path(out)
+    if out.exists():
+        raise BagError(f"{out} exists already: choose a new output directory")
+    tool = ToolNode("sorting_line_bag_record")
+    writer = None
+    try:
+        state = join(namespace, "state")
+        tool.until(lambda: tool.node.count_publishers(state) > 0, wait,
+                   f"a sorting_line node publishing {state} (is the namespace right?)")
+        options = node_options(tool, namespace, min(wait, 5.0))
+        if options is None:
+            print(f"sorting-line-bag record: warning: could not read the parameters of the node serving {namespace}; "
+                  "`replay` will need its options as flags", file=sys.stderr, flush=True)
+        variant = options["variant"] if options else (
+            "advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
+        wanted = topics if topics else [*line_topics(variant), CLOCK] + (["/diagnostics"] if diagnostics else [])
+        names = {join(namespace, t): t for t in wanted}
+        types = {}
+        for name in names:
+            rel = relative_to(namespace, name)
+            msgtype = LINE_TYPES.get(rel) if rel is not None else GLOBAL_TYPES.get(name)
+            if msgtype is None:
+                msgtype = _graph_type(tool, name, min(wait, 3.0))
+            types[name] = msgtype
+        info = LineInfo(namespace, options or {})
+        writer = BagWriter(out, {META_KEY: info.to_json()})
+        for name, msgtype in types.items():
+            writer.add_topic(name, msgtype)
+
+        states = [0]
+
+        def keep(name):
+            def on(data: bytes, received: int):
+                writer.write(name, received, data)
+                if name == state:
+                    states[0] += 1
+            return on
+
+        subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
+        # Ready when the node's topics are matched and the node has shown it sends to us.
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        seen_status = []
+        diag = tool.node.create_subscription(
+            DiagnosticArray, "/diagnostics",
+            lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None, 10)
+        node_side = [n for n in subs if relative_to(namespace, n) in PUBLISHED or n == CLOCK]
+        tool.until(lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status, wait,
+                   lambda: f"the topics of {namespace} to match and a /diagnostics status of the line "
+                           f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})")
+        tool.node.destroy_subscription(diag)
+        on_ready(f"recording {len(types)} topics of {namespace} into {out}")
+        started = time.monotonic()
+        matched: dict[str, int] = {}
+        next_check = 0.0
+        while not stop():
+            now = time.monotonic()
+            if duration is not None and now - started >= duration:
+                break
+            if max_ticks is not None and states[0] >= max_ticks:
+                break
+            if now >= next_check:  # tell who joins (a controller started later, say), so scripts can wait for it
+                next_check = now + 0.2
+                for name, sub in subs.items():
+                    n = sub.get_publisher_count()
+                    if matched.get(name) != n:
+                        matched[name] = n
+                        on_ready(f"matched {name}: {n} publisher(s)")
+            tool.executor.spin_once(timeout_sec=0.05)
+        # Drain what is in flight: spin until nothing has arrived for 0.2 s (at most 2 s).
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            before = sum(writer.counts.values())
+            tool.spin_for(0.2)
+            if sum(writer.counts.values()) == before:
+                break
+        return RecordResult(out, dict(writer.counts), info, time.monotonic() - started)
+    finally:
+        if writer is not None:
+            writer.close()
+        tool.close()
+
+
+def _graph_type(tool: ToolNode, name: str, timeout: float) -> str:
+    """The type of a topic the graph knows (any publisher or subscriber), else BagError."""
+    from .schema import typestore
+
+    found: list[str] = []
+
+    def look() -> bool:
+        for topic, types in tool.node.get_topic_names_and_types():
+            if topic == name and types:
+                found.append(types[0])
+                return True
+        return False
+
+    try:
+        tool.until(look, timeout, f"topic {name} in the graph")
+    except TimeoutError:
+        raise BagError(f"unknown topic {name}: nothing publishes or subscribes it (waited {timeout:g} s)") from None
+    if found[0] not in typestore().fielddefs:
+        raise BagError(f"topic {name} has type {found[0]}, which this tool cannot embed a schema for")
+    return found[0]

@@ -1,0 +1,67 @@
+"""The rclpy side the bag tools share: a context, node and executor of their own (so that the
+tools run inside a process that uses rclpy for something else, such as a test session, without
+touching its context), QoS, raw endpoints, and waiting through :class:`~..transport.Waiter`
+(every wait has a timeout and an error naming what it waited for)."""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Callable
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ..transport import NodeProcess, Waiter
+from .schema import rclpy_class
+
+#: Deep reliable queues: a tool that falls behind for a moment (a busy machine) catches up
+#: instead of losing samples (the node's own depth is 10).
+DEEP_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+class ToolNode:
+    """One rclpy context with one node and one executor; ``close()`` shuts all three down."""
+
+    def __init__(self, name: str, process: NodeProcess | None = None):
+        self.context = rclpy.Context()
+        # A context of our own: rclpy installs no signal handlers for it (the caller decides).
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(f"{name}_{os.getpid()}", context=self.context,
+                                      start_parameter_services=False, enable_rosout=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.waiter = Waiter(self.executor, process)
+
+    def until(self, done: Callable[[], bool], timeout: float, what: Callable[[], str] | str) -> None:
+        self.waiter.until(done, timeout, what if callable(what) else (lambda: what))
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+
+    def raw_subscription(self, topic: str, msgtype: str, callback: Callable[[bytes, int], None], qos=DEEP_QOS):
+        """Subscribes ``topic`` without deserialising: ``callback(cdr_bytes, received_ns)``."""
+
+        # Two parameters: rclpy then passes the message info, whose receive time is the DDS
+        # layer's. (The time the executor gets round to the callback would reorder topics.)
+        def on_message(data, info):
+            received = info.get("received_timestamp") if isinstance(info, dict) else None
+            callback(data, int(received) if received else time.time_ns())
+
+        return self.node.create_subscription(rclpy_class(msgtype), topic, on_message, qos, raw=True)
+
+    def publisher(self, topic: str, msgtype: str, qos=DEEP_QOS):
+        """A publisher of ``msgtype``; ``publish(bytes)`` sends CDR bytes as they are."""
+        return self.node.create_publisher(rclpy_class(msgtype), topic, qos)
+
+    def close(self) -> None:
+        try:
+            self.executor.remove_node(self.node)
+            self.node.destroy_node()
+            self.executor.shutdown(timeout_sec=0.5)
+        finally:
+            rclpy.try_shutdown(context=self.context)
