@@ -51,14 +51,14 @@ class BagProcess(h.ScriptProcess):
 
 
 def wait_for_command_writers(session: h.RosSession, recorder: BagProcess, namespace: str, variant: str,
-                             context=lambda: "") -> None:
-    """Waits until the recorder records and has matched two writers on each command topic: the
-    LineClient's and the controller's (discovery between two rclpy processes can take seconds;
-    a command sent before it is not in the bag)."""
+                             context=lambda: "", writers: int = 2) -> None:
+    """Waits until the recorder records and has matched ``writers`` writers on each command topic
+    (by default two: the LineClient's and the controller's). Discovery between two rclpy
+    processes can take seconds, and a command sent before it is not in the bag."""
     recorder.wait_for_output("recording", 20.0, session)
     for rel in ["cmd/speed"] + (["cmd/sort_mode"] if variant == "advanced" else []):
-        session.spin_until(lambda: f"matched {namespace}/{rel}: 2 publisher(s)" in recorder.log(), 20.0,
-                           f"the recorder to match the controller's {rel}", context)
+        session.spin_until(lambda: f"matched {namespace}/{rel}: {writers} publisher(s)" in recorder.log(), 20.0,
+                           f"the recorder to match {writers} writer(s) of {rel}", context)
 
 
 def drive(session: h.RosSession, client: h.LineClient, plan: list, context=lambda: "") -> None:

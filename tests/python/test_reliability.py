@@ -34,6 +34,10 @@ import pytest
 import ros_harness as h
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
 from sorting_line_gym.vector import SortingLineVectorEnv
+from bag_golden import BagProcess, wait_for_command_writers
+from sorting_line_gym.bag.bagfile import open_bag
+from sorting_line_gym.bag.replay import replay
+from sorting_line_gym.bag.schema import stamp_ns
 from test_controller import ControllerProcess
 from test_node import diagnostics_recorder, ns_args, wait_diagnostics
 
@@ -432,6 +436,20 @@ def run_node_line(client, variant, episodes):
     return out
 
 
+def run_bag_replay(path, variant):
+    """The trajectory a bag holds, once `sorting-line-bag replay` has reproduced every recorded
+    message field by field in a fresh lock-step node (else the test fails with the first
+    difference)."""
+    result = replay(path)
+    assert result.identical, result.report()
+    out = []
+    for message in sorted(open_bag(path).by_relative_topic()["state"], key=lambda m: stamp_ns(m.plain)):
+        s = message.plain
+        obs = soak.observation_of(variant, [s["observation_quantity"], s["observation_category"]][: 2 if variant == "advanced" else 1])
+        out.append(("reset", obs) if s["step"] == 0 else (obs, s["reward"], s["cumulative_reward"], s["step"]))
+    return out
+
+
 def run_single_env(variant, setup, episodes):
     env = SortingLineEnv(setup=setup, variant=variant, max_episode_steps=50)
     out = []
@@ -467,7 +485,7 @@ def run_vector_env(variant, setup, episodes, lines, k):
 
 @pytest.mark.parametrize("variant,setup", [("basic", "C"), ("advanced", "D")])
 def test_library_node_bridge_and_vector_paths_give_identical_trajectories(variant, setup, ros, start_node,
-                                                                         client_factory, namespace):
+                                                                         client_factory, namespace, tmp_path):
     rng = np.random.default_rng(99)
     n_actions = 30 if variant == "advanced" else 10
     # A whole episode (to its truncation) and part of another, with new seeds.
@@ -476,17 +494,26 @@ def test_library_node_bridge_and_vector_paths_give_identical_trajectories(varian
     paths = {"library (sorting_line trace)": run_library(setup, variant, episodes)}
 
     ns1, ns16 = namespace("one"), namespace("sixteen")
+    # The 1-line node's run is recorded into a bag as it happens (sorting-line-bag record, a process
+    # of its own), and that bag is replayed into a fresh node below. Only that node runs meanwhile:
+    # /clock is global, and a second node's ticks would be in the bag too.
     node1 = start_node("--variant", variant, *h.SETUP_FLAGS[setup], *ns_args(ns1))
+    bag = tmp_path / "node_one_line"
+    recorder = BagProcess(["record", "--namespace", ns1, "-o", bag], tmp_path / "record.log")
+    client = client_factory(ns1, variant, node_proc=node1)
+    client.wait_connected()
+    wait_for_command_writers(ros, recorder, ns1, variant, recorder.describe, writers=1)
+    paths["node, 1 line"] = run_node_line(client, variant, episodes)
+    ros.spin_for(0.3)
+    assert recorder.stop() == 0, recorder.describe()
+    paths["bag (recorded from the 1-line node), replayed identically"] = run_bag_replay(bag, variant)
+
     node16 = start_node("--variant", variant, "--lines", "16", *h.SETUP_FLAGS[setup], *ns_args(ns16))
-    for label, ns, proc in [("node, 1 line", ns1, node1), ("node, 16 lines (line 9)", f"{ns16}/line_9", node16)]:
-        client = client_factory(ns, variant, node_proc=proc)
-        client.wait_connected()
-        paths[label] = run_node_line(client, variant, episodes)
+    client = client_factory(f"{ns16}/line_9", variant, node_proc=node16)
+    client.wait_connected()
+    paths["node, 16 lines (line 9)"] = run_node_line(client, variant, episodes)
     paths["bridge, SortingLineEnv"] = run_single_env(variant, setup, episodes)
     paths["bridge, SortingLineVectorEnv (16 lines, line 5)"] = run_vector_env(variant, setup, episodes, 16, 5)
-    # BAG REPLAY (issue: determinism across paths): the merger adds the trajectory of
-    # `sorting-line-bag replay` of a bag recorded from one of these runs here, as
-    # paths["bag replay"] = ..., built on the same `episodes`; it is compared like the others below.
 
     reference = paths["library (sorting_line trace)"]
     assert len(reference) == sum(len(a) + 1 for _, a in episodes)
