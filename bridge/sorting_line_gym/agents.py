@@ -193,19 +193,15 @@ class TrainedAgent(Agent):
     """A saved SB3 model: ``predict`` is the model's deterministic action for the observation
     (``act`` decodes it into speed index and mode)."""
 
-    ALGOS = ("ppo", "dqn", "a2c")
-
     def __init__(self, algo: str, path: str, variant: str):
-        import stable_baselines3
-
         from .env import action_space
+        from .hyperparams import algorithm_class
 
-        if algo not in self.ALGOS:
-            raise ValueError(f"algorithm {algo!r} is not valid: allowed {', '.join(self.ALGOS)}")
         self.variant = _check_variant(variant)
         self.name = f"{algo}:{path}"
+        cls = algorithm_class(algo)
         try:
-            self.model = getattr(stable_baselines3, algo.upper()).load(path, device="cpu")
+            self.model = cls.load(path, device="cpu")
         except (OSError, ValueError) as e:
             raise ValueError(f"cannot load the {algo.upper()} model {path!r}: {e}") from None
         expected = action_space(variant)
@@ -226,8 +222,10 @@ def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> 
     """An agent by its command-line name: ``rba``, ``rba-hold``, ``random`` (seeded with ``seed``),
     ``constant:K``, ``constant:K:M`` or ``constant:K:cat`` (K = 0..9, M = 0..2), or a saved model
     ``ppo:PATH``, ``dqn:PATH``, ``a2c:PATH``."""
+    from .hyperparams import ALGOS
+
     algo, sep, path = spec.partition(":")
-    if sep and algo in TrainedAgent.ALGOS:
+    if sep and algo in ALGOS:
         return TrainedAgent(algo, path, variant)
     if spec in ("rba", "rba-hold"):
         return RuleBasedAgent(setup, variant, hold=spec == "rba-hold")

@@ -176,8 +176,10 @@ def evaluate(
 
 def file_stem(agent_spec: str, setup: str, variant: str) -> str:
     """A file name for an agent spec: a model path becomes its file's stem."""
+    from .hyperparams import ALGOS
+
     algo, sep, path = agent_spec.partition(":")
-    name = f"{algo}-{Path(path).stem}" if sep and algo in ("ppo", "dqn", "a2c") else agent_spec.replace(":", "-")
+    name = f"{algo}-{Path(path).stem}" if sep and algo in ALGOS else agent_spec.replace(":", "-")
     return f"eval_{name}_{setup}_{variant}"
 
 
