@@ -36,6 +36,8 @@ from .hyperparams import ALGOS
 
 BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
+#: Row order of the table: the paper's within a line (RBA, DQN, PPO, A2C), our extras first.
+TABLE_ORDER = ("random", "rba", "rba-hold", "dqn", "ppo", "a2c")
 DEFAULT_SEEDS = (42,)
 
 
@@ -150,7 +152,7 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
         for variant in VARIANTS:
             if (setup, variant) not in ran:
                 continue
-            for agent in (a for a in AGENTS if a in agents):
+            for agent in (a for a in TABLE_ORDER if a in agents):
                 key = (setup, variant, agent)
                 row = rows.get(key)
                 paper_key = (setup, variant, agent)
@@ -190,7 +192,8 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
         f"\nEpisode reward over seeds 42..51 (50 steps, deterministic policy): mean +- population std over the 10 episodes,"
         f" or, for RL agents trained with more than one seed, the mean over training seeds +- the std across them."
         f" RL agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random or"
-        f" rba-hold rows; its RBA is the reference implementation's. Bold: our best agent on the line."
+        f" rba-hold rows, and its RBA figures are not what the reference implementation's code gives on the same protocol"
+        f" (last column). Bold: our best agent on the line."
     )
     return "\n".join(lines) + "\n" + note + "\n"
 
