@@ -142,6 +142,19 @@ def line_recorders(probe, ns: str) -> dict[str, TimedRecorder]:
     }
 
 
+def watch(client, controller):
+    """(context, abort) for waits on a line driven by a controller process: what to show when a
+    wait fails, and why to stop waiting early (the node or the controller is gone)."""
+
+    def context():
+        return f"{client.context()}\n{controller.describe()}"
+
+    def abort():
+        return client.node_gone() or (None if controller.running() else f"the controller exited with {controller.proc.returncode}")
+
+    return context, abort
+
+
 def controller_args(ns: str, agent: str, setup: str = "B", variant: str = "advanced") -> list[str]:
     return ["--namespace", ns, "--setup", setup, "--variant", variant, "--agent", agent]
 
@@ -243,11 +256,7 @@ def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_co
     c.wait_connected()
     ctl = start_controller(agent_name, controller_args(ns, agent_name))
 
-    def context():
-        return f"{c.context()}\n{ctl.describe()}"
-
-    def abort():
-        return c.node_gone() or (None if ctl.running() else f"the controller exited with {ctl.proc.returncode}")
+    context, abort = watch(c, ctl)
 
     # Live once it has decided; measure from the states after that (its first answers may be a
     # backlog of older ticks that a late joiner receives, answered after the fact).
@@ -333,11 +342,7 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
     c.wait_connected()
     ctl = start_controller(agent_name, controller_args(ns, agent_name))
 
-    def context():
-        return f"{c.context()}\n{ctl.describe()}"
-
-    def abort():
-        return c.node_gone() or (None if ctl.running() else f"the controller exited with {ctl.proc.returncode}")
+    context, abort = watch(c, ctl)
 
     ros.spin_until(lambda: "connected:" in ctl.log(), 30.0, "the controller to log 'connected'", context, abort=abort)
     # The controller answers the reset's tick, and each answer makes the node step once. Its first
