@@ -152,27 +152,29 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
         for variant in VARIANTS:
             if (setup, variant) not in ran:
                 continue
-            for agent in (a for a in TABLE_ORDER if a in agents):
+            shown = [a for a in TABLE_ORDER if a in agents]
+            best = max(rows[(setup, variant, a)]["reward_mean"] for a in shown if (setup, variant, a) in rows)
+            for agent in shown:
                 key = (setup, variant, agent)
                 row = rows.get(key)
-                paper_key = (setup, variant, agent)
-                paper = TABLE_1.get(paper_key)
+                paper = TABLE_1.get(key)
                 ref = REFERENCE.get(key)
                 if row is None and paper is None:
                     continue
-                best = max(r["reward_mean"] for (s_, v_, a_), r in rows.items() if (s_, v_) == (setup, variant) and a_ in agents)
-                mean = f"{row['reward_mean']:.2f}" if row else ""
-                ours = (
-                    (f"**{mean}**" if row["reward_mean"] == best else mean)
-                    + f" +- {row['reward_std']:.2f}"
-                    + (f" ({row['seeds']} seeds)" if row["seeds"] > 1 else "")
-                    if row else "not run"
-                )
+                if row is None:
+                    ours = "not run"
+                else:
+                    mean = f"{row['reward_mean']:.2f}"
+                    ours = (
+                        (f"**{mean}**" if row["reward_mean"] == best else mean)
+                        + f" +- {row['reward_std']:.2f}"
+                        + (f" ({row['seeds']} seeds)" if row["seeds"] > 1 else "")
+                    )
                 lines.append(
                     "| "
                     + " | ".join(
                         [
-                            TABLE_1_INDEX.get(paper_key, ""),
+                            TABLE_1_INDEX.get(key, ""),
                             setup,
                             "Adv" if variant == "advanced" else "Basic",
                             agent,

@@ -10,14 +10,15 @@ overrides single keys (the value is read as YAML: ``--hp gamma=0.9 --hp policy_k
 - ``n_envs``: lines trained on at once (1: one env; N > 1: N lines of one node, one round trip each);
 - ``episode_steps``: length of a training episode (the paper trains on 250, evaluates on 50).
 
-Everything else is handed to the algorithm's constructor, so a misspelt key fails there, by name.
+Everything else is handed to the algorithm's constructor; ``load`` refuses, by name, a key the
+constructor does not take.
 """
 
 from __future__ import annotations
 
 import importlib.resources
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import yaml
 
@@ -78,10 +79,13 @@ def load(algo: str, variant: str, path: str | Path | None = None, overrides: Ite
         found = ", ".join(map(str, entries)) if isinstance(entries, dict) else "nothing"
         raise ValueError(f"hyperparameter file {source} has no entry for {env_id} (it has: {found})")
     params = dict(entries[env_id])
+    overridden = set()
     for text_ in overrides:
         key, value = parse_override(text_)
         params[key] = value
+        overridden.add(key)
     _check_own_keys(params, source)
+    _check_constructor_keys(algo, params, lambda key: "an override" if key in overridden else source)
     return params
 
 
@@ -100,15 +104,15 @@ def split(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     return own, {k: v for k, v in params.items() if k not in OWN_KEYS}
 
 
-def check_constructor_keys(algo: str, kwargs: dict[str, Any]) -> None:
-    """Fails, naming the key, when ``kwargs`` has a key the algorithm's constructor does not take
-    (before a node is started for nothing)."""
+def _check_constructor_keys(algo: str, params: dict[str, Any], source_of: Callable[[str], str]) -> None:
+    """Fails, naming the key, when ``params`` has a key that is neither ours nor an argument of the
+    algorithm's constructor: at load time, before a node is started for nothing."""
     import inspect
 
     accepted = set(inspect.signature(algorithm_class(algo).__init__).parameters) - {"self", "policy", "env"}
-    unknown = sorted(set(kwargs) - accepted)
+    unknown = sorted(set(split(params)[1]) - accepted)
     if unknown:
         raise ValueError(
-            f"{', '.join(unknown)}: not a hyperparameter of {algo.upper()} (allowed: {', '.join(OWN_KEYS)}, "
-            f"and {algo.upper()}'s arguments: {', '.join(sorted(accepted))})"
+            f"{', '.join(f'{k} (from {source_of(k)})' for k in unknown)}: not a hyperparameter of {algo.upper()} (allowed: "
+            f"{', '.join(OWN_KEYS)}, and {algo.upper()}'s arguments: {', '.join(sorted(accepted))})"
         )

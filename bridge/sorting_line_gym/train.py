@@ -97,8 +97,9 @@ def train(
     torch_threads: int = 1,
     verbose: int = 0,
 ) -> TrainingRun:
-    """Trains ``algo`` on the line (setup, variant) with ``params`` (default: the packaged
-    hyperparameters) and saves the model; returns what it did."""
+    """Trains ``algo`` on the line (setup, variant) with ``params`` (as ``hyperparams.load`` gives
+    them, which checks them; default: the packaged hyperparameters) and saves the model; returns
+    what it did."""
     import torch
 
     from .callbacks import LineKpiCallback
@@ -107,7 +108,6 @@ def train(
         raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
     params = params if params is not None else hyperparams.load(algo, variant)
     own, kwargs = hyperparams.split(params)
-    hyperparams.check_constructor_keys(algo, kwargs)
     # Small MLPs on 2 cores: one torch thread leaves the other core to the node and the bridge.
     torch.set_num_threads(torch_threads)
     out = Path(out)
@@ -186,7 +186,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         params = hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
-        hyperparams.check_constructor_keys(args.algo, hyperparams.split(params)[1])
     except ValueError as e:
         print(f"sorting-line-train: {e}", file=sys.stderr)
         return 2
