@@ -19,6 +19,9 @@ pub struct LineCounters {
     pub episodes: u64,
     pub accepted: u64,
     pub rejected: BTreeMap<Rejection, u64>,
+    /// Messages of the line's own topics sent, and skipped because the topic had no reader.
+    pub published: u64,
+    pub unread: u64,
     /// For the tick rate and the warning level: values at the last report.
     last_report: (Instant, u64, u64),
     /// Per reason: when it was last logged and how many were not logged since.
@@ -33,8 +36,19 @@ impl LineCounters {
             episodes: 0,
             accepted: 0,
             rejected: BTreeMap::new(),
+            published: 0,
+            unread: 0,
             last_report: (Instant::now(), 0, 0),
             log_state: BTreeMap::new(),
+        }
+    }
+
+    /// Counts a message of the line's topics: sent, or skipped (no reader).
+    pub fn count_published(&mut self, sent: bool) {
+        if sent {
+            self.published += 1;
+        } else {
+            self.unread += 1;
         }
     }
 
@@ -80,6 +94,8 @@ impl LineCounters {
             kv("episodes", self.episodes.to_string()),
             kv("commands_accepted", self.accepted.to_string()),
             kv("commands_rejected", self.total_rejected().to_string()),
+            kv("messages_published", self.published.to_string()),
+            kv("messages_unread_skipped", self.unread.to_string()),
         ];
         for reason in REJECTIONS {
             values.push(kv(&format!("rejected_{}", reason.key()), self.rejected.get(&reason).copied().unwrap_or(0).to_string()));

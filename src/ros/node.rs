@@ -80,15 +80,13 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
             counters: LineCounters::new(namespace),
         });
     }
-    let shared = Shared {
-        clock_pub: publisher::<Clock>(&mut node, &names.global("/clock"))?,
-        diagnostics_pub: publisher::<DiagnosticArray>(&mut node, &names.global("/diagnostics"))?,
-        batch_cmd: subscription::<LineCommands>(&mut node, &names.topic(&names.namespace, "batch/cmd"))?,
-        batch_state: publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?,
-        batch_reset: server(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?,
-        params: params.clone(),
-    };
+    let clock_pub = publisher::<Clock>(&mut node, &names.global("/clock"))?;
+    let diagnostics_pub = publisher::<DiagnosticArray>(&mut node, &names.global("/diagnostics"))?;
+    let batch_cmd = subscription::<LineCommands>(&mut node, &names.topic(&names.namespace, "batch/cmd"))?;
+    let batch_state = publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?;
+    let batch_reset = server(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?;
     let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
+    let shared = Shared { clock_pub, diagnostics_pub, batch_cmd, batch_state, batch_reset, params: params.clone(), node };
 
     log(
         "INFO",
@@ -110,11 +108,10 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
         }
     };
     smol::block_on(smol::future::or(serve(&endpoints, &mut runtimes, &shared, signals), spin));
-    // Drop order matters: entities, then the node, then the context (the participant announces
-    // its departure, so peers see the node leave at once).
+    // Drop order matters: entities, then the node (the last field of `shared`), then the context
+    // (the participant announces its departure, so peers see the node leave at once).
     drop(endpoints);
     drop(shared);
-    drop(node);
     drop(context);
     log("INFO", "shut down cleanly");
     Ok(())
@@ -215,9 +212,31 @@ struct Shared {
     batch_state: Publisher<LineStates>,
     batch_reset: Server<ResetLinesRequest, ResetLinesResponse>,
     params: NodeParams,
+    /// Last: the endpoints above are dropped before the node.
+    node: Node,
 }
 
 impl Shared {
+    /// Publishes the message `build` makes if the publisher has a matched reader; returns whether
+    /// it did. Topics nobody reads are skipped: a node hosting 16 lines for a vectorised client
+    /// (which reads `batch/state` only) would otherwise build, serialise and queue 64 unread
+    /// per-line messages per round trip, most of the node's time per tick
+    /// (benches/bridge_throughput.py). Nothing is lost that a volatile reader could have had:
+    /// samples written before a reader matches never reach it anyway, and the node's count
+    /// follows the DDS writer's own matching (the spinner records each match the writer reports).
+    fn offer<M>(&self, publisher: &Publisher<M>, topic: &dyn Fn() -> String, build: impl FnOnce() -> M) -> bool
+    where
+        M: Message + Serialize + std::fmt::Debug,
+    {
+        if publisher.get_subscription_count(&self.node) == 0 {
+            return false;
+        }
+        if let Err(e) = publisher.publish(build()) {
+            log("WARN", format!("cannot publish {}: {e:?}", topic()));
+        }
+        true
+    }
+
     fn publish_batch_state(&self, runtimes: &[LineRuntime]) {
         if let Err(e) = self.batch_state.publish(batch_states(runtimes)) {
             log("WARN", format!("cannot publish batch/state: {e:?}"));
@@ -243,61 +262,57 @@ impl LineEndpoints {
         })
     }
 
-    fn send<M: Message + Serialize + std::fmt::Debug>(&self, publisher: &Publisher<M>, topic: &str, message: M) {
-        if let Err(e) = publisher.publish(message) {
-            log("WARN", format!("{}: cannot publish {topic}: {e:?}", self.namespace));
-        }
-    }
-
-    /// Publishes everything that describes the current tick; `state` last, because clients wait
-    /// for it and by then the sensors of the same tick are out.
-    fn publish_tick(&self, host: &HostedLine) {
+    /// Publishes everything that describes the current tick to the topics that have a reader
+    /// (see [`Shared::offer`]); `state` last, because clients wait for it and by then the sensors
+    /// of the same tick are out.
+    fn publish_tick(&self, shared: &Shared, r: &mut LineRuntime) {
+        let host = &r.host;
         let line = host.line();
         let header = Header { stamp: host.stamp(), frame_id: String::new() };
         let (episode, step) = (line.episode(), line.step_count());
         let (input, belt, observation) = (line.input(), line.belt(), line.observation());
-        self.send(
-            &self.input,
-            "input",
-            MaterialInput {
-                header: header.clone(),
-                episode,
-                step,
-                quantity: observation.quantity,
-                amount_a: input.a,
-                amount_b: input.b,
-                occupancy: input.occupancy(),
-            },
-        );
-        self.send(
-            &self.belt,
-            "belt/occupancy",
-            BeltOccupancy {
-                header: header.clone(),
-                episode,
-                step,
-                occupancy: belt.occupancy(),
-                speed: line.speed(),
-                amount_a: belt.a,
-                amount_b: belt.b,
-            },
-        );
+        let topic = |relative: &'static str| move || format!("{}/{relative}", self.namespace.trim_end_matches('/'));
+        let counters = &mut r.counters;
+        counters.count_published(shared.offer(&self.input, &topic("input"), || MaterialInput {
+            header: header.clone(),
+            episode,
+            step,
+            quantity: observation.quantity,
+            amount_a: input.a,
+            amount_b: input.b,
+            occupancy: input.occupancy(),
+        }));
+        counters.count_published(shared.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy {
+            header: header.clone(),
+            episode,
+            step,
+            occupancy: belt.occupancy(),
+            speed: line.speed(),
+            amount_a: belt.a,
+            amount_b: belt.b,
+        }));
         if let Some(ratio) = &self.ratio {
-            let message =
-                MaterialRatio { header, episode, step, ratio: input.ratio(), category: input.category() as u8 };
-            self.send(ratio, "sensors/ratio", message);
+            counters.count_published(shared.offer(ratio, &topic("sensors/ratio"), || MaterialRatio {
+                header: header.clone(),
+                episode,
+                step,
+                ratio: input.ratio(),
+                category: input.category() as u8,
+            }));
         }
-        self.send(&self.state, "state", line_state(host));
+        counters.count_published(shared.offer(&self.state, &topic("state"), || line_state(host)));
     }
 
-    fn publish_reset_event(&self, host: &HostedLine, seeded: bool) {
-        let event = ResetEvent {
-            header: Header { stamp: host.stamp(), frame_id: String::new() },
-            episode: host.line().episode(),
-            seed: host.line().seed(),
+    fn publish_reset_event(&self, shared: &Shared, r: &mut LineRuntime, seeded: bool) {
+        let line = r.host.line();
+        let topic = || format!("{}/events/reset", self.namespace.trim_end_matches('/'));
+        let sent = shared.offer(&self.reset_event, &topic, || ResetEvent {
+            header: Header { stamp: r.host.stamp(), frame_id: String::new() },
+            episode: line.episode(),
+            seed: line.seed(),
             seeded,
-        };
-        self.send(&self.reset_event, "events/reset", event);
+        });
+        r.counters.count_published(sent);
     }
 
     /// The tagged input streams of this line.
@@ -380,13 +395,11 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
         let newest = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
         if newest > clock_time {
             clock_time = newest;
-            if let Err(e) = shared.clock_pub.publish(Clock { clock: newest }) {
-                log("WARN", format!("cannot publish /clock: {e:?}"));
-            }
+            shared.offer(&shared.clock_pub, &|| "/clock".to_string(), || Clock { clock: newest });
         }
     };
-    for (e, r) in endpoints.iter().zip(runtimes.iter()) {
-        e.publish_tick(&r.host);
+    for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
+        e.publish_tick(shared, r);
     }
     publish_clock(runtimes);
 
@@ -421,7 +434,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         Ok((cmd, info)) => apply_speed(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.speed),
                         Err(error) => Err(malformed(&error)),
                     };
-                    if settle(&endpoints[k], &mut runtimes[k], "cmd/speed", result) {
+                    if settle(&endpoints[k], &mut runtimes[k], shared, "cmd/speed", result) {
                         publish_clock(runtimes);
                     }
                 }
@@ -430,12 +443,12 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         Ok((cmd, info)) => apply_mode(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.mode),
                         Err(error) => Err(malformed(&error)),
                     };
-                    if settle(&endpoints[k], &mut runtimes[k], "cmd/sort_mode", result) {
+                    if settle(&endpoints[k], &mut runtimes[k], shared, "cmd/sort_mode", result) {
                         publish_clock(runtimes);
                     }
                 }
                 Event::BatchReset(Ok((request_id, request))) => {
-                    let response = match batch_reset(endpoints, runtimes, &request) {
+                    let response = match batch_reset(endpoints, runtimes, shared, &request) {
                         Ok(message) => ResetLinesResponse { success: true, message, states: batch_states(runtimes) },
                         Err(message) => {
                             log("WARN", format!("batch/reset refused: {message}"));
@@ -451,7 +464,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
                 Event::Reset(k, Ok((request_id, request))) => {
                     let (e, r) = (&endpoints[k], &mut runtimes[k]);
-                    let observation = reset_line(e, r, request.has_seed.then_some(request.seed));
+                    let observation = reset_line(e, r, shared, request.has_seed.then_some(request.seed));
                     let response = reset_response(&r.host, observation, request.has_seed);
                     if let Err(error) = e.reset.async_send_response(request_id, response).await {
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
@@ -468,12 +481,12 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     match r.host.timer_tick() {
                         TimerTick::Stepped(_) => {
                             r.counters.ticks += 1;
-                            e.publish_tick(&r.host);
+                            e.publish_tick(shared, r);
                         }
                         TimerTick::Reset(_) => {
                             r.counters.episodes += 1;
-                            e.publish_reset_event(&r.host, false);
-                            e.publish_tick(&r.host);
+                            e.publish_reset_event(shared, r, false);
+                            e.publish_tick(shared, r);
                         }
                     }
                 }
@@ -491,16 +504,21 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
 }
 
 /// Resets one line and publishes its new tick (and the reset event, for bags).
-fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, seed: Option<u64>) -> Observation {
+fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, seed: Option<u64>) -> Observation {
     let observation = r.host.reset(seed);
     r.counters.episodes += 1;
-    e.publish_reset_event(&r.host, seed.is_some());
-    e.publish_tick(&r.host);
+    e.publish_reset_event(shared, r, seed.is_some());
+    e.publish_tick(shared, r);
     observation
 }
 
 /// Resets the lines a `batch/reset` request names; refuses the whole request if it is malformed.
-fn batch_reset(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], request: &ResetLinesRequest) -> Result<String, String> {
+fn batch_reset(
+    endpoints: &[LineEndpoints],
+    runtimes: &mut [LineRuntime],
+    shared: &Shared,
+    request: &ResetLinesRequest,
+) -> Result<String, String> {
     let n = request.lines.len();
     if request.has_seed.len() != n || request.seeds.len() != n {
         return Err(format!(
@@ -521,7 +539,7 @@ fn batch_reset(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], reques
     for i in 0..n {
         let k = request.lines[i] as usize;
         let seed = request.has_seed[i].then_some(request.seeds[i]);
-        reset_line(&endpoints[k], &mut runtimes[k], seed);
+        reset_line(&endpoints[k], &mut runtimes[k], shared, seed);
     }
     Ok(format!("{n} line(s) reset"))
 }
@@ -539,7 +557,7 @@ fn handle_batch(
     let (cmd, client) = match received {
         Ok((cmd, info)) => (cmd, client_of(&info)),
         Err(error) => {
-            settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err(malformed(&error)));
+            settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err(malformed(&error)));
             return false;
         }
     };
@@ -551,7 +569,7 @@ fn handle_batch(
             cmd.speeds.len(),
             cmd.modes.len()
         );
-        settle(&endpoints[0], &mut runtimes[0], "batch/cmd", Err((Rejection::Malformed, detail)));
+        settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err((Rejection::Malformed, detail)));
         return false;
     }
     let mut stepped = false;
@@ -559,10 +577,10 @@ fn handle_batch(
         let stamp = Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] };
         if advanced {
             let result = apply_mode(r, client, stamp, cmd.modes[k]);
-            stepped |= settle(e, r, "batch/cmd", result);
+            stepped |= settle(e, r, shared, "batch/cmd", result);
         }
         let result = apply_speed(r, client, stamp, cmd.speeds[k]);
-        stepped |= settle(e, r, "batch/cmd", result);
+        stepped |= settle(e, r, shared, "batch/cmd", result);
     }
     stepped
 }
@@ -609,7 +627,7 @@ fn malformed(error: &str) -> Refusal {
 
 /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
 /// whether the line stepped.
-fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Accepted, Refusal>) -> bool {
+fn settle(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, topic: &str, result: Result<Accepted, Refusal>) -> bool {
     match result {
         Ok(Accepted::Stored) => {
             r.counters.accepted += 1;
@@ -618,7 +636,7 @@ fn settle(e: &LineEndpoints, r: &mut LineRuntime, topic: &str, result: Result<Ac
         Ok(Accepted::Stepped(_)) => {
             r.counters.accepted += 1;
             r.counters.ticks += 1;
-            e.publish_tick(&r.host);
+            e.publish_tick(shared, r);
             true
         }
         Err((reason, detail)) => {

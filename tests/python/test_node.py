@@ -639,3 +639,51 @@ def test_realtime_restarts_episodes_and_keeps_streaming(ros, start_node, client_
     # the next steps run on the held 0.9 again.
     after = [(s.episode, s.step, s.speed) for s in states[first:] if s.step > 0]
     assert all(speed == 0.9 for _, _, speed in after), f"speed not held across the automatic restart: {after}"
+
+
+def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reader(ros, start_node, probe, namespace):
+    """A vectorised client reads `batch/state` only, so the node skips the per-line messages no one
+    reads and counts them on /diagnostics; a reader that subscribes later gets every tick from
+    then on, the same values the batch carries."""
+    import numpy as np
+    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_interfaces.msg import LineState, MaterialInput
+
+    ns = namespace("unread")
+    start_node("--lines", "2", *h.SETUP_FLAGS["D"], "--max-steps", "200", *ns_args(ns))
+    diag = diagnostics_recorder(ros, probe)
+    env = SortingLineVectorEnv(num_envs=2, setup="D", node="attach", namespace=ns, step_timeout=2.0)
+    try:
+        env.reset(seed=5)
+        for t in range(5):
+            env.step(np.array([t % 10, 9 - t % 10]))
+        # Per line: input, belt/occupancy and state for every tick (the start tick, the reset's
+        # step 0, 5 steps) plus the reset event: nothing sent, everything counted as skipped.
+        values = wait_diagnostics(diag, f"{ns}/line_1", {"ticks": "5", "messages_published": "0"})
+        episodes = int(values["episodes"])
+        assert int(values["messages_unread_skipped"]) == 3 + 4 * episodes + 3 * 5, values
+
+        line1 = f"{ns}/line_1"
+        states = h.TopicRecorder(ros, probe, f"{line1}/state", LineState)
+        inputs = h.TopicRecorder(ros, probe, f"{line1}/input", MaterialInput)
+        ros.spin_until(lambda: states.sub.get_publisher_count() > 0, 5.0, f"{line1}/state to be discovered")
+        # Matching completes on the node's side soon after: step until the first state gets through.
+        for _ in range(100):
+            env.step(np.array([3, 3]))
+            ros.spin_for(0.02)
+            if states.msgs:
+                break
+        assert states.msgs, f"no {line1}/state after 100 ticks with a reader"
+        for t in range(10):
+            _, rewards, _, _, info = env.step(np.array([t % 10, 9 - t % 10]))
+            step = int(info["step"][1])
+            got = ros.spin_until(lambda: next((m for m in states.msgs if m.step == step), None), 2.0,
+                                 f"{line1}/state of step {step}")
+            assert got.reward == rewards[1] and got.speed == info["speed"][1], (got, rewards, info)
+            ros.spin_until(lambda: any(m.step == step for m in inputs.msgs), 2.0, f"{line1}/input of step {step}")
+        values = wait_diagnostics(diag, line1, {"ticks": str(int(info["step"][1]))})
+        assert int(values["messages_published"]) >= 2 * 10, values
+        untouched = wait_diagnostics(diag, f"{ns}/line_0", {"ticks": values["ticks"]})
+        assert untouched["messages_published"] == "0", untouched
+    finally:
+        env.close()
