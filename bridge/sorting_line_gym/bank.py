@@ -229,9 +229,7 @@ class LineBank:
         entry k = line k)."""
         if self.batch is None:
             raise BridgeError("a single-line bank steps with step()")
-        for link in self.links:
-            if link.tick is None:
-                raise BridgeError(f"{link.namespace}: step() before reset()")
+        self.batch.check_started()
         self.batch.send(speed_indices, modes)
         self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
         return self.batch.last

@@ -26,6 +26,7 @@ from array import array
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -37,6 +38,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from builtin_interfaces.msg import Time
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, SortModeCommand, SpeedCommand
 from sorting_line_interfaces.srv import ResetLine, ResetLines
+
+from .batch_codec import BatchCodec, from_message
 
 #: The ten belt speeds; a speed index i commands SPEEDS[i].
 SPEEDS = tuple(round(0.1 * (i + 1), 1) for i in range(10))
@@ -389,20 +392,37 @@ class LineLink:
 
 class BatchLink:
     """``batch/cmd`` and ``batch/state`` of a node: every line's command in one message and every
-    line's state in one message of arrays, so a round trip over N lines costs two messages, not 2N,
-    and the states arrive as buffers rather than N message objects."""
+    line's state in one message of arrays, so a round trip over N lines costs two messages, not 2N.
+
+    Both messages cross as bytes, read and written by :mod:`.batch_codec` as numpy records:
+    a state batch is a namespace of arrays (entry k = line k). Where the lines stand is the newest
+    batch that showed them (``position``): its stamps are what the next command answers, and its
+    episodes and steps are compared whole with the next batch's. Nothing is unpacked per line in
+    the step loop; that keeps a 16-line round trip close to a one-line one
+    (benches/bridge_throughput.py).
+    """
 
     def __init__(self, node: Node, namespace: str, links: list[LineLink]):
         self.links = links
+        n = len(links)
         base = namespace.rstrip("/")
         self.state_topic = f"{base}/batch/state"
         self.cmd_pub = node.create_publisher(LineCommands, f"{base}/batch/cmd", QOS)
         self.reset_client = node.create_client(ResetLines, f"{base}/batch/reset", qos_profile=QOS)
         self.reset_name = f"{base}/batch/reset"
         self._reset_future = None
-        self.inbox: deque[LineStates] = deque(maxlen=64)
-        self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda m: self.inbox.append(m), QOS)
-        self.last: LineStates | None = None
+        self.advanced = links[0].advanced
+        self._states = BatchCodec(LineStates, n)
+        self._commands = BatchCodec(LineCommands, n, None if self.advanced else {"modes": 0})
+        #: Received ``batch/state`` messages, serialised (the executor's callback and ``_drain`` both append).
+        self.inbox: deque[bytes] = deque(maxlen=64)
+        self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda raw: self.inbox.append(raw), QOS, raw=True)
+        #: Lines no reset has started yet: they cannot be stepped.
+        self.unstarted = set(range(n))
+        #: The newest batch showing every line's current tick (after a reset: the reply's states).
+        self.position: SimpleNamespace | None = None
+        self.last: SimpleNamespace | None = None
+        self._next_step = None
         self._speeds = np.array(SPEEDS)
 
     def matched(self, node: Node) -> bool:
@@ -427,56 +447,57 @@ class BatchLink:
         self._reset_future = None
         if response is None or not response.success:
             raise BridgeError(f"{self.reset_name} refused: {getattr(response, 'message', 'no response')}")
-        b = response.states
+        # The reply carries every line's state after the reset; lines not reset are where they were.
+        b = self.position = from_message(response.states)
+        self.unstarted.difference_update(seeds)
         results = {}
         for k in seeds:
-            stamp = Time(sec=b.stamp_sec[k], nanosec=b.stamp_nanosec[k])
-            self.links[k].tick = Tick(stamp, b.episode[k], b.step[k])
-            results[k] = ResetResult(b.observation_quantity[k], b.observation_category[k], b.episode[k], b.seed[k], stamp)
+            stamp = Time(sec=int(b.stamp_sec[k]), nanosec=int(b.stamp_nanosec[k]))
+            results[k] = ResetResult(
+                float(b.observation_quantity[k]), int(b.observation_category[k]), int(b.episode[k]), int(b.seed[k]), stamp
+            )
         return results
 
-    def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
-        cmd = LineCommands()
-        cmd.stamp_sec = array("i", (link.tick.stamp.sec for link in self.links))
-        cmd.stamp_nanosec = array("I", (link.tick.stamp.nanosec for link in self.links))
-        cmd.speeds = array("d", self._speeds[speed_indices].tolist())
-        if self.links[0].advanced:
-            cmd.modes = array("B", np.asarray(modes, dtype=np.uint8).tobytes())
-        self.cmd_pub.publish(cmd)
+    def check_started(self) -> None:
+        if self.unstarted:
+            k = min(self.unstarted)
+            raise BridgeError(f"{self.links[k].namespace}: step() before reset()")
 
-    def _find(self, want_step) -> LineStates | None:
-        """The first batch in the inbox showing every line at the step ``want_step(link)`` of its
-        current episode; older batches are dropped."""
+    def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
+        """Answers every line's current tick (the stamps of ``position``)."""
+        p = self.position
+        fields = {"stamp_sec": p.stamp_sec, "stamp_nanosec": p.stamp_nanosec, "speeds": self._speeds[speed_indices]}
+        if self.advanced:
+            fields["modes"] = modes
+        self._next_step = p.step + 1
+        self.cmd_pub.publish(self._commands.encode(**fields))
+
+    def _find(self, step: np.ndarray) -> SimpleNamespace | None:
+        """The first batch in the inbox showing every line in its current episode at ``step``;
+        older batches are dropped."""
         _drain(self.state_sub, self.inbox)
-        episodes = [link.tick.episode for link in self.links]
-        steps = [want_step(link) for link in self.links]
+        episode = self.position.episode
         while self.inbox:
-            batch = self.inbox.popleft()
-            if len(batch.step) == len(self.links) and list(batch.episode) == episodes and list(batch.step) == steps:
+            batch = self._states.decode(self.inbox.popleft())
+            if len(batch.step) == len(self.links) and (batch.episode == episode).all() and (batch.step == step).all():
                 return batch
-            for link, episode in zip(self.links, batch.episode):
-                check_not_taken_over(link.namespace, link.tick.episode, episode)
+            for link, ours, seen in zip(self.links, episode.tolist(), batch.episode.tolist()):
+                check_not_taken_over(link.namespace, ours, seen)
         return None
 
     def saw_current_ticks(self) -> bool:
         """Whether a batch showed every line at its current tick (the handshake after a reset)."""
-        batch = self._find(lambda link: link.tick.step)
-        if batch is None:
-            return False
-        self.inbox.appendleft(batch)  # still the newest state of the lines
-        return True
+        return self._find(self.position.step) is not None
 
     def take_next_states(self) -> bool:
-        batch = self._find(lambda link: link.tick.step + 1)
+        batch = self._find(self._next_step)
         if batch is None:
             return False
-        for k, link in enumerate(self.links):
-            stamp = Time(sec=batch.stamp_sec[k], nanosec=batch.stamp_nanosec[k])
-            link.tick = Tick(stamp, batch.episode[k], batch.step[k])
-        self.last = batch
+        self.position = self.last = batch
         return True
 
     def describe_wait(self) -> str:
-        ticks = ", ".join(f"{link.namespace} step {link.tick.step + 1}" for link in self.links[:4])
-        more = f" and {len(self.links) - 4} more lines" if len(self.links) > 4 else ""
+        p, n = self.position, len(self.links)
+        ticks = ", ".join(f"{self.links[k].namespace} episode {p.episode[k]} step {p.step[k] + 1}" for k in range(min(n, 4)))
+        more = f" and {n - 4} more lines" if n > 4 else ""
         return f"{self.state_topic} with the next state of every line ({ticks}{more})"

@@ -26,30 +26,36 @@ from .env import SEED_BOUND, action_space, observation_space, observe, sim_secon
 
 
 def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
-    """The KPIs of a ``LineStates`` message as arrays (entry k = line k), the same keys as the
-    single-line ``info`` (see ``env.state_info``)."""
-    arr = np.asarray
+    """The KPIs of a state batch (:mod:`.batch_codec`: each batch owns its arrays) as arrays
+    (entry k = line k), the same keys as the single-line ``info`` (see ``env.state_info``)."""
     return {
-        "accuracy": arr(b.accuracy),
-        "purity": arr(b.purity),
-        "recall_a": arr(b.recall_a),
-        "recall_b": arr(b.recall_b),
-        "speed": arr(b.speed),
-        "speed_index": arr(b.speed_index, dtype=np.int64),
-        "mode": arr(b.mode, dtype=np.int64),
-        "occupancy": arr(b.occupancy),
-        "containers": np.stack([arr(b.container_a), arr(b.container_a_false), arr(b.container_b), arr(b.container_b_false)], axis=1),
-        "speed_changes": arr(b.speed_changes, dtype=np.int64),
-        "cumulative_reward": arr(b.cumulative_reward),
-        "step": arr(b.step, dtype=np.int64),
-        "sim_time": arr(b.stamp_sec) + arr(b.stamp_nanosec) * 1e-9 - episode_start,
-        "seed": arr(b.seed, dtype=np.uint64),
+        "accuracy": b.accuracy,
+        "purity": b.purity,
+        "recall_a": b.recall_a,
+        "recall_b": b.recall_b,
+        "speed": b.speed,
+        "speed_index": b.speed_index.astype(np.int64),
+        "mode": b.mode.astype(np.int64),
+        "occupancy": b.occupancy,
+        "containers": np.stack([b.container_a, b.container_a_false, b.container_b, b.container_b_false], axis=1),
+        "speed_changes": b.speed_changes.astype(np.int64),
+        "cumulative_reward": b.cumulative_reward,
+        "step": b.step.astype(np.int64),
+        "sim_time": b.stamp_sec + b.stamp_nanosec * 1e-9 - episode_start,
+        "seed": b.seed,
     }
 
 
 def _line_info(info: dict[str, np.ndarray], k: int) -> dict[str, Any]:
     """Line k's entry of a batched info, as the single-line env reports it."""
     return {key: (tuple(int(x) for x in v[k]) if key == "containers" else v[k].item()) for key, v in info.items()}
+
+
+def _line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    """Every line's entry of a batched info (as ``_line_info``), converting each array once."""
+    columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
+    keys = list(columns)
+    return [dict(zip(keys, values)) for values in zip(*columns.values())]
 
 
 class _Lines:
@@ -92,14 +98,12 @@ class _Lines:
         else:
             speeds, modes = a, np.zeros_like(a)
         b = self.bank.step_batch(speeds, modes)
-        quantity = np.asarray(b.observation_quantity, dtype=np.float32)
+        quantity = b.observation_quantity.astype(np.float32)
         if self.variant == "advanced":
-            obs = np.stack([quantity, np.asarray(b.observation_category, dtype=np.float32)], axis=1)
+            obs = np.stack([quantity, b.observation_category.astype(np.float32)], axis=1)
         else:
             obs = quantity[:, None]
-        rewards = np.asarray(b.reward, dtype=np.float64)
-        truncated = np.asarray(b.truncated, dtype=bool)
-        return obs, rewards, truncated, batch_info(b, self.episode_start)
+        return obs, b.reward, b.truncated, batch_info(b, self.episode_start)
 
     def close(self):
         self.bank.close()
@@ -131,6 +135,9 @@ class SortingLineVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
         self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
+        self._all_lines = np.ones(num_envs, dtype=bool)
+        self._all_lines.flags.writeable = False
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict | None = None):
         if isinstance(seed, (list, tuple)):
@@ -148,10 +155,9 @@ class SortingLineVectorEnv(VectorEnv):
     def step(self, actions):
         obs, rewards, truncated, info = self._lines.step(actions)
         terminated = np.zeros(self.num_envs, dtype=bool)
-        # Every line reports every key: the ``_key`` masks are all true.
         infos: dict[str, Any] = dict(info)
         for key in info:
-            infos[f"_{key}"] = np.ones(self.num_envs, dtype=bool)
+            infos[f"_{key}"] = self._all_lines
         done = np.flatnonzero(truncated).tolist()
         if done:
             fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
@@ -212,7 +218,7 @@ def _make_sb3_vec_env():
 
         def step_wait(self):
             obs, rewards, truncated, info = self._lines.step(self._actions)
-            infos = [_line_info(info, k) for k in range(self.num_envs)]
+            infos = _line_infos(info)
             done = np.flatnonzero(truncated).tolist()
             if done:
                 fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})

@@ -1,0 +1,145 @@
+"""The batch messages (``LineStates``, ``LineCommands``) read and written as numpy records, for
+the vector environment's round trip.
+
+Why not rclpy's own conversion: turning a 16-line ``LineStates`` into a Python message costs about
+42 us (23 ``array.array`` objects plus the message's constructor), rosbags' CDR reader about 71 us,
+in a round trip whose whole budget at 16 lines is a few hundred microseconds
+(benches/bridge_throughput.py). Both batch messages are a ``std_msgs/Header`` followed by sequences
+of primitives of one length N, so for a given N (and an empty ``frame_id``, which is what the node
+and this bridge send) their CDR encoding has fixed offsets: one numpy structured dtype reads the
+whole message in a microsecond, as views on the received bytes, or writes it.
+
+The codec changes speed, never results: a message that does not fit the layout (another length, a
+``frame_id``, another encoding) is handed to rclpy's deserialisation instead, and the tests compare
+both ways with rclpy's on many messages (tests/python/test_batch_codec.py).
+
+Layout rules (CDR, XCDR1 as ROS 2 writes it): a 4-byte encapsulation header (``00 01`` = little
+endian, then 2 option bytes), then the body, where each primitive is aligned to its size counted
+from the body's start; a string is a uint32 length (NUL included) and its bytes; a sequence a uint32
+count and its elements. Writers may pad the message to a multiple of 4 bytes (the last option
+byte then says by how much); rclpy does not, and the codec reads either.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+from rclpy.serialization import deserialize_message, serialize_message
+
+#: ROS primitive type -> numpy format (little endian).
+PRIMITIVES = {
+    "boolean": "?",
+    "uint8": "u1",
+    "int8": "i1",
+    "uint16": "<u2",
+    "int16": "<i2",
+    "uint32": "<u4",
+    "int32": "<i4",
+    "uint64": "<u8",
+    "int64": "<i8",
+    "float": "<f4",
+    "double": "<f8",
+}
+
+#: Encapsulation header of little-endian plain CDR, options zero.
+CDR_LE = b"\x00\x01\x00\x00"
+
+#: The record fields of the header: stamp, and the length (1: just the NUL) and NUL of an empty frame_id.
+HEADER = (("header_sec", "<i4", 0), ("header_nanosec", "<u4", 4), ("header_frame_id_len", "<u4", 8), ("header_frame_id", "u1", 12))
+HEADER_SIZE = 13
+
+
+def _sequences(msg_type) -> list[tuple[str, str]]:
+    """The fields after the header as (name, numpy format); refuses a type the codec cannot lay out."""
+    fields = list(msg_type.get_fields_and_field_types().items())
+    if not fields or fields[0] != ("header", "std_msgs/Header"):
+        raise TypeError(f"{msg_type.__name__}: the codec needs a std_msgs/Header as the first field")
+    result = []
+    for name, kind in fields[1:]:
+        element = kind[len("sequence<") : -1] if kind.startswith("sequence<") else None
+        if element not in PRIMITIVES:
+            raise TypeError(f"{msg_type.__name__}.{name} is {kind}: the codec takes unbounded sequences of primitives only")
+        result.append((name, PRIMITIVES[element]))
+    return result
+
+
+def _align(position: int, size: int) -> int:
+    return (position + size - 1) // size * size
+
+
+class BatchCodec:
+    """Reads and writes one message type whose sequences all have ``n`` entries (``lengths``
+    overrides that per field, e.g. the empty ``modes`` of a basic line's commands)."""
+
+    def __init__(self, msg_type, n: int, lengths: dict[str, int] | None = None):
+        self.msg_type = msg_type
+        self.n = n
+        self.sequences = _sequences(msg_type)
+        self.lengths = {name: n for name, _ in self.sequences} | (lengths or {})
+        names, formats, offsets = [], [], []
+        for name, fmt, offset in HEADER:
+            names.append(name), formats.append(fmt), offsets.append(offset)
+        position = HEADER_SIZE
+        for name, fmt in self.sequences:
+            count = self.lengths[name]
+            position = _align(position, 4)
+            names.append(f"{name}__count"), formats.append("<u4"), offsets.append(position)
+            position += 4
+            size = np.dtype(fmt).itemsize
+            position = _align(position, size) if count else position
+            names.append(name), formats.append((fmt, (count,))), offsets.append(position)
+            position += size * count
+        self.size = len(CDR_LE) + position
+        self.dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": position})
+        template = np.zeros((), dtype=self.dtype)
+        template["header_frame_id_len"] = 1
+        for name, count in self.lengths.items():
+            template[f"{name}__count"] = count
+        self._template = template
+        # The bytes that must be as in the template for a message to fit: the frame_id's length
+        # and NUL, and every sequence's count.
+        fixed = [range(8, 13)] + [range(offsets[i], offsets[i] + 4) for i, name in enumerate(names) if name.endswith("__count")]
+        self._fixed_at = np.array([len(CDR_LE) + i for r in fixed for i in r])
+        self._fixed = np.frombuffer(CDR_LE + template.tobytes(), dtype=np.uint8)[self._fixed_at]
+        self._sizes = (self.size, _align(self.size, 4))
+        self._names = [name for name, _ in self.sequences]
+
+    # -- reading -------------------------------------------------------------------------------
+    def fits(self, raw: bytes) -> bool:
+        """Whether ``raw`` is this layout: little-endian CDR, the size, an empty frame_id, the counts."""
+        if len(raw) not in self._sizes or raw[:2] != CDR_LE[:2]:
+            return False
+        return bool((np.frombuffer(raw, dtype=np.uint8)[self._fixed_at] == self._fixed).all())
+
+    def decode(self, raw: bytes) -> SimpleNamespace:
+        """The message as a namespace of numpy arrays (one per sequence) plus ``stamp_ns`` of its
+        header; through rclpy when ``raw`` does not fit. The arrays are writable views on a copy
+        of ``raw`` owned by this message alone, so they can be handed out without copying."""
+        if not self.fits(raw):
+            return from_message(deserialize_message(raw, self.msg_type))
+        records = np.frombuffer(bytearray(raw), dtype=self.dtype, count=1, offset=len(CDR_LE))
+        fields = {name: records[name][0] for name in self._names}
+        stamp_ns = int(records["header_sec"][0]) * 1_000_000_000 + int(records["header_nanosec"][0])
+        return SimpleNamespace(stamp_ns=stamp_ns, **fields)
+
+    # -- writing -------------------------------------------------------------------------------
+    def encode(self, **values: Any) -> bytes:
+        """The serialised message with the given sequences (header stamp zero, empty frame_id)."""
+        record = self._template.copy()
+        for name, value in values.items():
+            record[name] = value
+        return CDR_LE + record.tobytes()
+
+
+def from_message(message) -> SimpleNamespace:
+    """A rclpy message of a batch type as :meth:`BatchCodec.decode` returns it."""
+    fields = {name: np.asarray(getattr(message, name), dtype=fmt) for name, fmt in _sequences(type(message))}
+    stamp = message.header.stamp
+    return SimpleNamespace(stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec, **fields)
+
+
+def rclpy_bytes(message) -> bytes:
+    """rclpy's serialisation, for comparison in tests."""
+    return serialize_message(message)
