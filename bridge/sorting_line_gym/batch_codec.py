@@ -26,7 +26,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import deserialize_message
 
 #: ROS primitive type -> numpy format (little endian).
 PRIMITIVES = {
@@ -138,8 +138,3 @@ def from_message(message) -> SimpleNamespace:
     fields = {name: np.asarray(getattr(message, name), dtype=fmt) for name, fmt in _sequences(type(message))}
     stamp = message.header.stamp
     return SimpleNamespace(stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec, **fields)
-
-
-def rclpy_bytes(message) -> bytes:
-    """rclpy's serialisation, for comparison in tests."""
-    return serialize_message(message)
