@@ -1,29 +1,34 @@
 #!/usr/bin/env python3
 """Throughput of the Gymnasium bridge (bridge/sorting_line_gym) against the real node, in env-steps/s.
 
-Measures, each as the median of RUNS timed runs (after a warm-up) on a node of its own:
+Subjects, timed in interleaved rounds (round r times every subject once), so a change of machine
+speed during the benchmark (this VM's swings about 3x with host load) hits every subject alike;
+each timed run is a process of its own with a node of its own, started, warmed up, timed and
+stopped before the next one starts (idle envs and nodes left alive beside a subject slow it
+down, a one-line env by up to 40 %); medians over the rounds:
   (a) the raw lock-step ceiling: a minimal rclpy loop on one line's own topics (publish
       `cmd/speed` stamped with the tick, wait for that line's next `state`), the measurement the
       node's lock-step benchmark (benches/node_lockstep.py) makes;
-  (b) `SortingLineEnv`, one line:
+  (b) the single-line env, `SortingLineEnv`:
         - constructed directly with max_episode_steps=1_000_000 (no episode ends, no resets), and
         - `gymnasium.make("sorting_line_gym:SortingLine-v0")` with its 50-step TimeLimit episodes,
           the resets counted in the time (env-steps/s = steps / time including reset());
   (c) `SortingLineVectorEnv` over 1, 4 and 16 lines of one node (batch topics): with 50-step
       episodes (SAME_STEP autoresets included) and without episode ends (max_episode_steps=1e6);
       env-steps/s = round trips/s x lines.
-Then prints a table, the ratio of (b) to (a), the ratio of 16-line to 1-line env-steps/s
-(target >= 10x) and the one-line target (>= 3,000 env-steps/s).
+Then the targets of the bridge issue: one line >= 3,000 env-steps/s, and the vectorised env at 16
+lines >= 10x the single-line env's env-steps/s, as the median of the per-round ratios (16-line
+VectorEnv against SortingLineEnv in the same round, like for like: without episode ends, and with
+50-step episodes); the ratios to the 1-line VectorEnv and to the raw ceiling are printed as well.
+`--plot FILE.png` also draws the medians as a bar chart (and FILE.svg).
 
-DDS traffic must stay on this machine: the script refuses to run outside an isolated (loopback-only)
-network namespace; as root it re-executes itself under `unshare -n` with `lo` up. It sets what
-launch_scripts/env.sh sets (Fast DDS, the project's profile, localhost discovery), uses the
-project's .venv interpreter and a ROS_DOMAIN_ID of its own (--domain, default 89).
+DDS traffic stays on this machine: the script refuses to run outside a loopback-only network
+namespace and, as root, re-executes itself under `unshare -n` with `lo` up. It sets what
+launch_scripts/env.sh sets and a ROS_DOMAIN_ID of its own (--domain, default 89).
 
-    .venv/bin/python benches/bridge_throughput.py                 # N = 5000 single, 1000 vector
-    .venv/bin/python benches/bridge_throughput.py --single 2000 --vector 500 --runs 3
-Progress goes to stderr, the table to stdout. The machine may be shared: the load average is
-printed with the figures.
+    .venv/bin/python benches/bridge_throughput.py                 # 5 rounds, N = 4000 single, 2000 vector
+    .venv/bin/python benches/bridge_throughput.py --rounds 3 --single 2000 --vector 500 --plot docs/benchmark/bridge_throughput.png
+Progress goes to stderr, the table to stdout; load average and CPU steal are printed with it.
 """
 
 from __future__ import annotations
@@ -31,18 +36,21 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import shutil
 import signal
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[1]
-VENV = ROOT / ".venv"
-REEXEC_MARK = "SORTING_LINE_BRIDGE_BENCH_IN_NETNS"
+sys.path.insert(0, str(ROOT / "tests" / "python"))
+sys.path.insert(0, str(ROOT / "benches"))
+import ros_harness as h  # noqa: E402
+
 TARGET_ONE_LINE = 3000.0
 TARGET_SCALING = 10.0
 WARMUP = 200
@@ -52,70 +60,6 @@ def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-# ------------------------------------------------------------------------------------------
-# Isolation and environment
-
-
-def interfaces() -> list[tuple[str, bool]]:
-    """(name, is up) of every interface of this network namespace."""
-    out = subprocess.run(["ip", "-o", "link"], capture_output=True, text=True, check=True).stdout
-    result = []
-    for line in out.splitlines():
-        parts = line.split(":", 2)
-        if len(parts) >= 3:
-            flags = parts[2].split(">")[0]
-            result.append((parts[1].strip().split("@")[0], "UP" in flags.split("<")[-1].split(",")))
-    return result
-
-
-def ensure_isolated() -> None:
-    """Returns only inside a loopback-only network namespace with lo up; re-execs under unshare -n
-    (as root) or exits otherwise."""
-    if shutil.which("ip") is None:
-        sys.exit("bridge_throughput.py: refusing to run: `ip` (iproute2) is needed to check the network namespace")
-    links = interfaces()
-    others = [name for name, _ in links if name != "lo"]
-    if not others:
-        if not all(up for name, up in links if name == "lo"):
-            if os.geteuid() != 0:
-                sys.exit("bridge_throughput.py: refusing to run: lo is down in this network namespace (not root)")
-            subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
-        return
-    if os.environ.get(REEXEC_MARK) == "1":
-        sys.exit(f"bridge_throughput.py: refusing to run: still not isolated after unshare -n ({', '.join(others)})")
-    if os.geteuid() == 0 and shutil.which("unshare"):
-        progress(f"not in an isolated network namespace (interfaces {', '.join(others)}): "
-                 "re-executing under `unshare -n` with lo up")
-        env = dict(os.environ, **{REEXEC_MARK: "1"})
-        argv = ["unshare", "-n", "--", python_for_run(), os.path.abspath(__file__), *sys.argv[1:]]
-        os.execvpe("unshare", argv, env)
-    sys.exit(f"bridge_throughput.py: refusing to run: not in an isolated network namespace (interfaces "
-             f"{', '.join(others)} besides lo) and cannot create one (needs root and unshare). Run it inside "
-             "`unshare -n` with `ip link set lo up`.")
-
-
-def python_for_run() -> str:
-    """The project's .venv interpreter (what `source launch_scripts/env.sh` activates), if it exists."""
-    venv_python = VENV / "bin" / "python"
-    return str(venv_python) if venv_python.exists() else sys.executable
-
-
-def ensure_venv() -> None:
-    if Path(sys.prefix).resolve() != VENV.resolve() and (VENV / "bin" / "python").exists():
-        progress(f"re-executing with {VENV / 'bin' / 'python'}")
-        os.execv(str(VENV / "bin" / "python"), [str(VENV / "bin" / "python"), os.path.abspath(__file__), *sys.argv[1:]])
-
-
-def ros_environment(domain: int) -> dict[str, str]:
-    """What launch_scripts/env.sh exports, plus our own ROS_DOMAIN_ID; before rclpy is imported."""
-    os.environ["RMW_IMPLEMENTATION"] = "rmw_fastrtps_cpp"
-    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(ROOT / "launch_scripts" / "fastdds_profile.xml")
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    keys = ["ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "FASTRTPS_DEFAULT_PROFILES_FILE", "ROS_AUTOMATIC_DISCOVERY_RANGE"]
-    return {k: os.environ[k] for k in keys}
-
-
 def node_binary() -> Path:
     path = Path(os.environ.get("SORTING_LINE_BIN") or ROOT / "target" / "release" / "sorting_line")
     if not path.is_file():
@@ -123,8 +67,19 @@ def node_binary() -> Path:
     return path
 
 
-def load() -> str:
-    return "/".join(f"{x:.2f}" for x in os.getloadavg())
+def steal_percent(seconds: float = 0.5) -> float:
+    def sample():
+        fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+        return sum(fields), fields[7]
+
+    t0, s0 = sample()
+    time.sleep(seconds)
+    t1, s1 = sample()
+    return 100.0 * (s1 - s0) / max(1, t1 - t0)
+
+
+def conditions() -> str:
+    return f"load {'/'.join(f'{x:.2f}' for x in os.getloadavg())}, steal {steal_percent():.1f} %"
 
 
 # ------------------------------------------------------------------------------------------
@@ -230,154 +185,242 @@ class RawLine:
 
 
 # ------------------------------------------------------------------------------------------
-# Measurements
+# Subjects: something that makes one call (a step, or a round trip of N lines) at a time
 
 
-def timed_runs(label: str, runs: int, n: int, one, per_unit: int = 1) -> list[float]:
-    """`runs` timed runs of `n` calls of one(i); the rate of each run in units (x per_unit) per s."""
-    rates = []
-    for run in range(runs):
+@dataclass
+class Subject:
+    """What one timed run drives: ``one(i)`` makes call i (a step, or a round trip of
+    ``per_call`` lines); ``close`` stops it and its node."""
+
+    key: str
+    label: str
+    n: int
+    per_call: int
+    one: Callable[[int], object]
+    close: Callable[[], None]
+
+    def warm_up(self) -> None:
+        for i in range(WARMUP):
+            self.one(i)
+
+    def timed_run(self) -> float:
+        """env-steps/s of n calls."""
         start = time.perf_counter()
-        for i in range(n):
-            one(i)
-        elapsed = time.perf_counter() - start
-        rates.append(n * per_unit / elapsed)
-        progress(f"  {label}: run {run + 1}/{runs}: {rates[-1]:,.0f} env-steps/s ({n} calls in {elapsed:.2f} s, "
-                 f"load {load()})")
-    return rates
+        for i in range(self.n):
+            self.one(i)
+        return self.n * self.per_call / (time.perf_counter() - start)
 
 
-def measure_raw(n: int, runs: int, log_dir: Path) -> list[float]:
+@dataclass
+class Row:
+    """One subject's figures over the rounds."""
+
+    key: str
+    label: str = ""
+    per_call: int = 1
+    rates: list[float] = field(default_factory=list)
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.rates)
+
+
+def raw_subject(n: int, log_dir: Path) -> Subject:
     line = RawLine(log_dir)
     try:
         line.connect()
-        for _ in range(WARMUP):
-            line.round_trip()
-        return timed_runs("(a) raw rclpy lock-step", runs, n, lambda i: line.round_trip())
-    finally:
+    except BaseException:
         line.close()
+        raise
+    return Subject("raw", "(a) raw rclpy lock-step loop, 1 line (per-line topics)", n, 1, lambda i: line.round_trip(), line.close)
 
 
-def measure_env_direct(n: int, runs: int) -> list[float]:
+def direct_subject(n: int) -> Subject:
     from sorting_line_gym import SortingLineEnv
 
     env = SortingLineEnv(setup="A", variant="basic", max_episode_steps=1_000_000)
-    try:
-        env.reset(seed=1)
-        for i in range(WARMUP):
-            env.step(i % 10)
+    env.reset(seed=1)
 
-        def one(i):
-            _, _, terminated, truncated, _ = env.step(i % 10)
-            if terminated or truncated:
-                raise RuntimeError("an episode ended during the no-reset measurement")
+    def one(i):
+        _, _, terminated, truncated, _ = env.step(i % 10)
+        if terminated or truncated:
+            raise RuntimeError("an episode ended during the no-reset measurement")
 
-        return timed_runs("(b) SortingLineEnv direct, no episode ends", runs, n, one)
-    finally:
-        env.close()
+    return Subject("direct", "(b) SortingLineEnv(max_episode_steps=1e6), no resets", n, 1, one, env.close)
 
 
-def measure_env_make(n: int, runs: int) -> list[float]:
+def make_subject(n: int) -> Subject:
     import gymnasium
 
     env = gymnasium.make("sorting_line_gym:SortingLine-v0", setup="A")
-    try:
-        env.reset(seed=1)
+    env.reset(seed=1)
 
-        def one(i):
-            _, _, terminated, truncated, _ = env.step(i % 10)
-            if terminated or truncated:
-                env.reset()
+    def one(i):
+        _, _, terminated, truncated, _ = env.step(i % 10)
+        if terminated or truncated:
+            env.reset()
 
-        for i in range(WARMUP):
-            one(i)
-        return timed_runs("(b) gymnasium.make, 50-step episodes", runs, n, one)
-    finally:
-        env.close()
+    return Subject("make", "(b) gymnasium.make(SortingLine-v0), 50-step episodes", n, 1, one, env.close)
 
 
-def measure_vector(lines: int, n: int, runs: int, max_episode_steps: int) -> list[float]:
+def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
     import numpy as np
     from sorting_line_gym.vector import SortingLineVectorEnv
 
     env = SortingLineVectorEnv(num_envs=lines, setup="A", variant="basic", max_episode_steps=max_episode_steps)
-    try:
-        env.reset(seed=1)
-        actions = [np.full(lines, k % 10, dtype=np.int64) for k in range(10)]
-
-        def one(i):
-            env.step(actions[i % 10])
-
-        for i in range(WARMUP):
-            one(i)
-        label = f"(c) VectorEnv {lines:>2} lines, " + ("50-step episodes" if max_episode_steps == 50 else "no episode ends")
-        return timed_runs(label, runs, n, one, per_unit=lines)
-    finally:
-        env.close()
+    env.reset(seed=1)
+    actions = [np.full(lines, k % 10, dtype=np.int64) for k in range(10)]
+    tag = "ep50" if max_episode_steps == 50 else "noend"
+    label = f"(c) SortingLineVectorEnv({lines:>2} lines), " + ("50-step episodes" if max_episode_steps == 50 else "no episode ends")
+    return Subject(f"{tag}_{lines}", label, n, lines, lambda i: env.step(actions[i % 10]), env.close)
 
 
 # ------------------------------------------------------------------------------------------
+# Report
+
+
+def paired_ratio(numerator: Row, denominator: Row) -> tuple[float, list[float]]:
+    """Median of the per-round ratios, and the ratios."""
+    ratios = [a / b for a, b in zip(numerator.rates, denominator.rates)]
+    return statistics.median(ratios), ratios
+
+
+def plot(subjects: list[Row], by_key: dict[str, Row], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.8), layout="constrained")
+    labels = [s.label.split(") ", 1)[1].replace("max_episode_steps=1e6", "1e6").replace("SortingLineVectorEnv", "VectorEnv") for s in subjects]
+    medians = [s.median for s in subjects]
+    colors = ["0.6" if s.key == "raw" else ("tab:blue" if s.key in ("direct", "make") else "tab:orange") for s in subjects]
+    y = range(len(subjects))
+    ax.barh(y, medians, color=colors)
+    for yi, s in zip(y, subjects):
+        ax.plot(s.rates, [yi] * len(s.rates), "k|", markersize=10)
+        ax.text(s.median, yi, f"  {s.median:,.0f}", va="center", fontsize=8)
+    ax.set_yticks(list(y), labels, fontsize=8)
+    ax.invert_yaxis()
+    single = by_key["direct"].median
+    ax.axvline(TARGET_SCALING * single, color="tab:red", linestyle="--", linewidth=1)
+    ax.text(TARGET_SCALING * single, len(subjects) - 0.5, f" 10x SortingLineEnv", color="tab:red", fontsize=8, va="bottom")
+    ax.axvline(TARGET_ONE_LINE, color="tab:green", linestyle=":", linewidth=1)
+    ax.text(TARGET_ONE_LINE, -0.6, " 3,000 (one line)", color="tab:green", fontsize=8, va="bottom")
+    ax.set_xlabel("env-steps/s (bar: median; ticks: each round)")
+    ax.set_title(title, fontsize=9)
+    fig.savefig(path, dpi=120)
+    fig.savefig(path.with_suffix(".svg"))
+    plt.close(fig)
+
+
+def build(key: str, single: int, vector: int, log_dir: Path) -> Subject:
+    if key == "raw":
+        return raw_subject(single, log_dir)
+    if key == "direct":
+        return direct_subject(single)
+    if key == "make":
+        return make_subject(single)
+    tag, lines = key.split("_")
+    return vector_subject(int(lines), vector, 50 if tag == "ep50" else 1_000_000)
+
+
+def measure_here(key: str, single: int, vector: int) -> None:
+    """The child's part (--subject): one subject started, warmed up, timed once and stopped; prints
+    ``label<TAB>per_call<TAB>env-steps/s``."""
+    with tempfile.TemporaryDirectory(prefix="sl_bridge_bench_") as tmp:
+        subject = build(key, single, vector, Path(tmp))
+        try:
+            subject.warm_up()
+            rate = subject.timed_run()
+        finally:
+            subject.close()
+    print(f"{subject.label}\t{subject.per_call}\t{rate!r}", flush=True)
+
+
+def measure_in_child(key: str, args) -> tuple[str, int, float]:
+    command = [sys.executable, os.path.abspath(__file__), "--subject", key, "--single", str(args.single),
+               "--vector", str(args.vector), "--domain", str(args.domain)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    if result.returncode != 0:
+        sys.exit(f"bridge_throughput.py: measuring {key} failed (exit {result.returncode}):\n{result.stderr[-3000:]}")
+    label, per_call, rate = result.stdout.strip().splitlines()[-1].split("\t")
+    return label, int(per_call), float(rate)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--single", type=int, default=5000, help="steps per run for (a) and (b) (default 5000)")
-    parser.add_argument("--vector", type=int, default=1000, help="round trips per run for (c) (default 1000)")
-    parser.add_argument("--runs", type=int, default=3, help="timed runs per measurement; the median is reported")
+    parser.add_argument("--single", type=int, default=4000, help="steps per timed run for (a) and (b) (default 4000)")
+    parser.add_argument("--vector", type=int, default=2000, help="round trips per timed run for (c) (default 2000)")
+    parser.add_argument("--rounds", "--runs", type=int, default=5, help="interleaved rounds; medians reported (default 5)")
     parser.add_argument("--lines", type=int, nargs="+", default=[1, 4, 16], help="vector line counts (default 1 4 16)")
     parser.add_argument("--domain", type=int, default=89, help="ROS_DOMAIN_ID of the benchmark (default 89)")
+    parser.add_argument("--plot", type=Path, help="also draw the medians to this PNG (and the same name .svg)")
+    parser.add_argument("--subject", help=argparse.SUPPRESS)  # internal: measure one subject once, in this process
     args = parser.parse_args()
+    for name in ("single", "vector", "rounds"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} {getattr(args, name)} is out of range: allowed >= 1")
+    if any(not 1 <= k <= 64 for k in args.lines):
+        parser.error(f"--lines {args.lines}: each must be in 1 ..= 64")
+    if not 0 <= args.domain <= 232:
+        parser.error(f"--domain {args.domain} is out of range: allowed 0 ..= 232")
 
-    ensure_venv()
-    ensure_isolated()
-    env = ros_environment(args.domain)
-    node_binary()
+    h.run_isolated(__file__, "SORTING_LINE_BRIDGE_BENCH_IN_NETNS")
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain)
+    env = h.ros_environment()
+    if args.subject:
+        measure_here(args.subject, args.single, args.vector)
+        return 0
     progress(f"node {node_binary()}; python {sys.executable}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
-    load_before = load()
+    before = conditions()
 
-    rows: list[tuple[str, str, list[float]]] = []  # (key, label, rates)
-    with tempfile.TemporaryDirectory(prefix="sl_bridge_bench_") as tmp:
-        progress(f"(a) raw lock-step ceiling: {args.runs} x {args.single} round trips")
-        rows.append(("raw", "(a) raw rclpy lock-step loop, 1 line (per-line topics)", measure_raw(args.single, args.runs, Path(tmp))))
-    progress(f"(b) SortingLineEnv: {args.runs} x {args.single} steps")
-    rows.append(("direct", "(b) SortingLineEnv(max_episode_steps=1e6), no resets", measure_env_direct(args.single, args.runs)))
-    rows.append(("make", "(b) gymnasium.make(SortingLine-v0), 50-step episodes", measure_env_make(args.single, args.runs)))
-    for steps, tag in ((50, "ep50"), (1_000_000, "noend")):
-        for lines in args.lines:
-            progress(f"(c) SortingLineVectorEnv, {lines} lines, max_episode_steps={steps}: "
-                     f"{args.runs} x {args.vector} round trips")
-            label = f"(c) SortingLineVectorEnv({lines:>2} lines), " + ("50-step episodes" if steps == 50 else "no episode ends")
-            rows.append((f"{tag}_{lines}", label, measure_vector(lines, args.vector, args.runs, steps)))
-    load_after = load()
+    keys = ["raw", "direct", "make"] + [f"{tag}_{lines}" for tag in ("ep50", "noend") for lines in args.lines]
+    rows = {key: Row(key) for key in keys}
+    for r in range(args.rounds):
+        progress(f"round {r + 1}/{args.rounds} ({conditions()})")
+        for key in keys:
+            row = rows[key]
+            row.label, row.per_call, rate = measure_in_child(key, args)
+            row.rates.append(rate)
+            progress(f"  {row.label}: {rate:,.0f} env-steps/s")
+    subjects = list(rows.values())
+    after = conditions()
 
-    med = {key: statistics.median(rates) for key, _, rates in rows}
-    print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.runs} runs; N = {args.single} steps single, "
-          f"{args.vector} round trips vector); {os.cpu_count()} CPUs; load average (1/5/15 min) "
-          f"{load_before} before, {load_after} after")
-    width = max(len(label) for _, label, _ in rows)
-    header = f"{'measurement':<{width}} | {'env-steps/s':>11} | {'round trips/s':>13} | {'runs (env-steps/s)':>26}"
+    by_key = {s.key: s for s in subjects}
+    print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "
+          f"steps single, {args.vector} round trips vector); {os.cpu_count()} CPUs; {before} before, {after} after")
+    width = max(len(s.label) for s in subjects)
+    header = f"{'measurement':<{width}} | {'env-steps/s':>11} | {'round trips/s':>13} | rounds (env-steps/s)"
     print(header)
     print("-" * len(header))
-    for key, label, rates in rows:
-        lines = int(key.split("_")[1]) if "_" in key else 1
-        runs_text = " / ".join(f"{r:,.0f}" for r in rates)
-        print(f"{label:<{width}} | {med[key]:>11,.0f} | {med[key] / lines:>13,.0f} | {runs_text:>26}")
+    for s in subjects:
+        rounds = " / ".join(f"{r:,.0f}" for r in s.rates)
+        print(f"{s.label:<{width}} | {s.median:>11,.0f} | {s.median / s.per_call:>13,.0f} | {rounds}")
 
-    print("\nratios and targets")
-    raw = med["raw"]
-    for key, name in (("direct", "SortingLineEnv direct"), ("make", "gymnasium.make, 50-step episodes")):
-        print(f"  (b) / (a): {name}: {med[key]:,.0f} / {raw:,.0f} = {med[key] / raw:.2f} of the raw lock-step ceiling")
-    for tag, name in (("ep50", "50-step episodes"), ("noend", "no episode ends")):
-        if f"{tag}_1" in med and f"{tag}_16" in med:
-            ratio = med[f"{tag}_16"] / med[f"{tag}_1"]
-            print(f"  16 lines / 1 line, VectorEnv, {name}: {med[f'{tag}_16']:,.0f} / {med[f'{tag}_1']:,.0f} = "
-                  f"{ratio:.1f}x (target >= {TARGET_SCALING:.0f}x) {'OK' if ratio >= TARGET_SCALING else 'MISSED'}")
-    for key, name in (("direct", "SortingLineEnv direct"), ("make", "gymnasium.make, 50-step episodes"),
-                      ("ep50_1", "VectorEnv 1 line, 50-step episodes")):
-        if key in med:
-            ok = med[key] >= TARGET_ONE_LINE
-            print(f"  one line, {name}: {med[key]:,.0f} env-steps/s (target >= {TARGET_ONE_LINE:,.0f}) "
-                  f"{'OK' if ok else 'MISSED'}")
+    print("\ntargets (ratios: median of the per-round ratios)")
+    for key, name in (("direct", "SortingLineEnv, no resets"), ("make", "gymnasium.make, 50-step episodes")):
+        ok = by_key[key].median >= TARGET_ONE_LINE
+        print(f"  one line, {name}: {by_key[key].median:,.0f} env-steps/s (target >= {TARGET_ONE_LINE:,.0f}) {'OK' if ok else 'MISSED'}")
+    for tag, single, name in (("noend", "direct", "no episode ends"), ("ep50", "make", "50-step episodes")):
+        if f"{tag}_16" in by_key:
+            ratio, ratios = paired_ratio(by_key[f"{tag}_16"], by_key[single])
+            print(f"  16 lines (VectorEnv) / single-line env ({by_key[single].label[4:].split(',')[0]}), {name}: {ratio:.1f}x "
+                  f"(target >= {TARGET_SCALING:.0f}x) {'OK' if ratio >= TARGET_SCALING else 'MISSED'}; "
+                  f"rounds {' / '.join(f'{x:.1f}' for x in ratios)}")
+    print("\nother ratios")
+    for tag, name in (("noend", "no episode ends"), ("ep50", "50-step episodes")):
+        if f"{tag}_16" in by_key and f"{tag}_1" in by_key:
+            ratio, _ = paired_ratio(by_key[f"{tag}_16"], by_key[f"{tag}_1"])
+            print(f"  16 lines / 1 line, both VectorEnv, {name}: {ratio:.1f}x")
+    for key in ("direct", "make"):
+        ratio, _ = paired_ratio(by_key[key], by_key["raw"])
+        print(f"  {by_key[key].label[4:]} / raw lock-step loop (a): {ratio:.2f}")
+    if args.plot:
+        args.plot.parent.mkdir(parents=True, exist_ok=True)
+        plot(subjects, by_key, args.plot, f"sorting_line_gym env-steps/s, median of {args.rounds} rounds, {os.cpu_count()} CPUs ({after})")
+        print(f"\nplot: {args.plot} and {args.plot.with_suffix('.svg')}")
     return 0
 
 

