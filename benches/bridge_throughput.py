@@ -286,29 +286,32 @@ def paired_ratio(numerator: Row, denominator: Row) -> tuple[float, list[float]]:
     return statistics.median(ratios), ratios
 
 
-def plot(subjects: list[Row], by_key: dict[str, Row], path: Path, title: str) -> None:
+def plot(rows: list[Row], by_key: dict[str, Row], path: Path, title: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import StrMethodFormatter
 
     fig, ax = plt.subplots(figsize=(9, 4.8), layout="constrained")
-    labels = [s.label.split(") ", 1)[1].replace("max_episode_steps=1e6", "1e6").replace("SortingLineVectorEnv", "VectorEnv") for s in subjects]
-    medians = [s.median for s in subjects]
-    colors = ["0.6" if s.key == "raw" else ("tab:blue" if s.key in ("direct", "make") else "tab:orange") for s in subjects]
-    y = range(len(subjects))
-    ax.barh(y, medians, color=colors)
-    for yi, s in zip(y, subjects):
-        ax.plot(s.rates, [yi] * len(s.rates), "k|", markersize=10)
-        ax.text(s.median, yi, f"  {s.median:,.0f}", va="center", fontsize=8)
-    ax.set_yticks(list(y), labels, fontsize=8)
+    labels = [r.label.split(") ", 1)[1].replace("(max_episode_steps=1e6)", "").replace("SortingLineVectorEnv", "VectorEnv") for r in rows]
+    colors = ["0.6" if r.key == "raw" else ("tab:blue" if r.key in ("direct", "make") else "tab:orange") for r in rows]
+    y = list(range(len(rows)))
+    ax.barh(y, [r.median for r in rows], color=colors)
+    for yi, r in zip(y, rows):
+        ax.plot(r.rates, [yi] * len(r.rates), "k|", markersize=9)
+        ax.text(max(r.rates), yi, f"   {r.median:,.0f}", va="center", fontsize=8)
+    ax.set_yticks(y, labels, fontsize=8)
     ax.invert_yaxis()
-    single = by_key["direct"].median
-    ax.axvline(TARGET_SCALING * single, color="tab:red", linestyle="--", linewidth=1)
-    ax.text(TARGET_SCALING * single, len(subjects) - 0.5, f" 10x SortingLineEnv", color="tab:red", fontsize=8, va="bottom")
+    ax.xaxis.set_major_formatter(StrMethodFormatter("{x:,.0f}"))
+    bottom = len(rows) - 0.45
+    scaled = TARGET_SCALING * by_key["direct"].median
+    ax.axvline(scaled, color="tab:red", linestyle="--", linewidth=1)
+    ax.text(scaled, bottom, " 10x SortingLineEnv", color="tab:red", fontsize=8, va="bottom")
     ax.axvline(TARGET_ONE_LINE, color="tab:green", linestyle=":", linewidth=1)
-    ax.text(TARGET_ONE_LINE, -0.6, " 3,000 (one line)", color="tab:green", fontsize=8, va="bottom")
-    ax.set_xlabel("env-steps/s (bar: median; ticks: each round)")
+    ax.text(TARGET_ONE_LINE, bottom, " 3,000", color="tab:green", fontsize=8, va="bottom")
+    ax.set_xlim(0, max(max(r.rates) for r in rows) * 1.15)
+    ax.set_xlabel("env-steps/s (bar: median; ticks: the rounds)")
     ax.set_title(title, fontsize=9)
     fig.savefig(path, dpi=120)
     fig.savefig(path.with_suffix(".svg"))
@@ -385,17 +388,17 @@ def main() -> int:
             row.label, row.per_call, rate = measure_in_child(key, args)
             row.rates.append(rate)
             progress(f"  {row.label}: {rate:,.0f} env-steps/s")
-    subjects = list(rows.values())
+    ordered = list(rows.values())
     after = conditions()
 
-    by_key = {s.key: s for s in subjects}
+    by_key = {s.key: s for s in ordered}
     print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "
           f"steps single, {args.vector} round trips vector); {os.cpu_count()} CPUs; {before} before, {after} after")
-    width = max(len(s.label) for s in subjects)
+    width = max(len(s.label) for s in ordered)
     header = f"{'measurement':<{width}} | {'env-steps/s':>11} | {'round trips/s':>13} | rounds (env-steps/s)"
     print(header)
     print("-" * len(header))
-    for s in subjects:
+    for s in ordered:
         rounds = " / ".join(f"{r:,.0f}" for r in s.rates)
         print(f"{s.label:<{width}} | {s.median:>11,.0f} | {s.median / s.per_call:>13,.0f} | {rounds}")
 
@@ -419,7 +422,7 @@ def main() -> int:
         print(f"  {by_key[key].label[4:]} / raw lock-step loop (a): {ratio:.2f}")
     if args.plot:
         args.plot.parent.mkdir(parents=True, exist_ok=True)
-        plot(subjects, by_key, args.plot, f"sorting_line_gym env-steps/s, median of {args.rounds} rounds, {os.cpu_count()} CPUs ({after})")
+        plot(ordered, by_key, args.plot, f"sorting_line_gym env-steps/s, median of {args.rounds} rounds, {os.cpu_count()} CPUs ({after})")
         print(f"\nplot: {args.plot} and {args.plot.with_suffix('.svg')}")
     return 0
 
