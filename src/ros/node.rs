@@ -127,7 +127,8 @@ fn node_options(params: &NodeParams) -> NodeOptions {
             serde_yaml::Value::Bool(b) => ParameterValue::Boolean(b),
             serde_yaml::Value::Number(n) if n.is_f64() => ParameterValue::Double(n.as_f64().unwrap_or_default()),
             serde_yaml::Value::Number(n) => {
-                ParameterValue::Integer(n.as_i64().unwrap_or_else(|| n.as_u64().map_or(i64::MAX, |u| u as i64)))
+                // Every integer parameter fits an i64: NodeParams::validate keeps the seed within it.
+                ParameterValue::Integer(n.as_i64().unwrap_or(i64::MAX))
             }
             other => ParameterValue::String(other.as_str().unwrap_or_default().to_string()),
         };

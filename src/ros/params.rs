@@ -49,7 +49,7 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("action_penalty", "0.0 ..= 10.0"),
     ("threshold", "0.0 ..< 1.0"),
     ("max_steps", "1 ..= 1000000"),
-    ("seed", "0 ..= 18446744073709551615"),
+    ("seed", "0 ..= 9223372036854775807 (a ROS integer parameter is 64-bit signed; seed + k for k < lines included)"),
     ("mode", "lockstep or realtime"),
     ("rate", "0.0 <.. 100000.0 (ticks per second)"),
     ("lines", "1 ..= 64"),
@@ -136,8 +136,11 @@ impl NodeParams {
         if !(self.tick_period >= 1e-6 && self.tick_period <= 3600.0) {
             return out_of_range("tick_period", self.tick_period.to_string());
         }
-        if self.seed.checked_add(u64::from(self.lines - 1)).is_none() {
-            return out_of_range("seed", format!("{} (with {} lines, seed + k overflows)", self.seed, self.lines));
+        // The seed is declared as a ROS parameter, an int64: a larger one would read back negative.
+        match self.seed.checked_add(u64::from(self.lines - 1)) {
+            Some(last) if last <= i64::MAX as u64 => {}
+            _ if self.lines > 1 => return out_of_range("seed", format!("{} (with {} lines, up to seed + {})", self.seed, self.lines, self.lines - 1)),
+            _ => return out_of_range("seed", self.seed.to_string()),
         }
         Ok(())
     }
@@ -283,5 +286,20 @@ mod tests {
         assert!(e.contains("is not valid YAML"), "{e}");
         let e = NodeParams::resolve(&NodeArgs::default(), &[], &[Path::new("/nonexistent.yaml")], &names("/")).unwrap_err();
         assert!(e.contains("cannot read params file /nonexistent.yaml"), "{e}");
+    }
+
+    #[test]
+    fn seeds_stay_within_a_ros_integer_parameter() {
+        let resolve = |seed: u64, lines: u32| {
+            let args = NodeArgs { seed: Some(seed), lines: Some(lines), ..NodeArgs::default() };
+            NodeParams::resolve(&args, &[], &[] as &[&Path], &names("/"))
+        };
+        let max = i64::MAX as u64;
+        assert_eq!(resolve(max, 1).unwrap().seed, max);
+        assert_eq!(resolve(max - 3, 4).unwrap().seed, max - 3);
+        let e = resolve(max + 1, 1).unwrap_err();
+        assert!(e.contains("seed = 9223372036854775808 is out of range: allowed 0 ..= 9223372036854775807"), "{e}");
+        let e = resolve(max - 2, 4).unwrap_err();
+        assert!(e.contains("(with 4 lines, up to seed + 3)"), "{e}");
     }
 }
