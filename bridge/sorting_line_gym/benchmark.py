@@ -16,6 +16,8 @@ writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Tab
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
 ``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent) and the seed-42
 dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
+Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
+cells that finished are kept.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import signal
 import statistics
 import sys
 import time
@@ -233,6 +236,55 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Kills the pool's workers at once (their nodes get SIGTERM through their parent-death
+    signal): a worker would otherwise finish its cell, a training of several minutes, and rclpy's
+    own SIGTERM handler keeps it from dying of the signal."""
+    for child in multiprocessing.active_children():
+        child.kill()
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
+def run_all(todo: list[Cell], args, finished, bar) -> None:
+    """Runs the cells, ``args.jobs`` at a time; ``finished(cell, record or exception)`` for each."""
+    if args.jobs == 1:
+        # In this process, with SB3's progress bar for each training.
+        for cell in todo:
+            bar.set_postfix_str(cell.name)
+            try:
+                outcome = run_cell(cell, args.out, args.timesteps, args.n_envs, True)
+            except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
+                outcome = e
+            finished(cell, outcome)
+        return
+    # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+        try:
+            pending = {}
+            queue = list(todo)
+            while queue or pending:
+                while queue and len(pending) < args.jobs:
+                    cell = queue.pop(0)
+                    pending[pool.submit(run_cell, cell, args.out, args.timesteps, args.n_envs, False)] = cell
+                    bar.set_postfix_str(", ".join(c.name for c in pending.values()))
+                complete, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in complete:
+                    cell = pending.pop(future)
+                    try:
+                        outcome = future.result()
+                    except Exception as e:  # noqa: BLE001
+                        outcome = e
+                    finished(cell, outcome)
+        except KeyboardInterrupt:
+            _stop_workers(pool)  # before the with-block's shutdown, which would wait for the cells
+            raise
+
+
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
@@ -249,6 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, {args.jobs} at a time -> {args.out}", file=sys.stderr)
     failures = []
     if todo:
+        signal.signal(signal.SIGTERM, _interrupt)
         bar = tqdm(total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True)
 
         def finished(cell: Cell, outcome) -> None:
@@ -261,34 +314,13 @@ def main(argv: list[str] | None = None) -> int:
                 bar.write(f"{cell.name}: {r['reward_mean']:.2f} +- {r['reward_std']:.2f} ({outcome['wall_s']:.0f} s)")
             bar.update(1)
 
-        if args.jobs == 1:
-            # In this process, with SB3's progress bar for each training.
-            for cell in todo:
-                bar.set_postfix_str(cell.name)
-                try:
-                    outcome = run_cell(cell, args.out, args.timesteps, args.n_envs, True)
-                except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
-                    outcome = e
-                finished(cell, outcome)
-        else:
-            # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
-            context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-                pending = {}
-                queue = list(todo)
-                while queue or pending:
-                    while queue and len(pending) < args.jobs:
-                        cell = queue.pop(0)
-                        pending[pool.submit(run_cell, cell, args.out, args.timesteps, args.n_envs, False)] = cell
-                        bar.set_postfix_str(", ".join(c.name for c in pending.values()))
-                    complete, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for future in complete:
-                        cell = pending.pop(future)
-                        try:
-                            outcome = future.result()
-                        except Exception as e:  # noqa: BLE001
-                            outcome = e
-                        finished(cell, outcome)
+        try:
+            run_all(todo, args, finished, bar)
+        except KeyboardInterrupt:
+            bar.close()
+            print(f"sorting-line-benchmark: interrupted; {len(done)} of {len(cells)} cells are saved in {args.out}: "
+                  "the same command goes on from there", file=sys.stderr)
+            return 130
         bar.close()
     records = [done[c] for c in cells if c in done]
     if not records:

@@ -201,3 +201,59 @@ def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     assert benchmark.main(argv) == 0
     assert "2 already done, 0 to run" in capsys.readouterr().err
     assert (out / "table.md").read_text() == table
+
+
+def children(pid: int) -> list[int]:
+    """The live child processes of `pid` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                found.append(int(entry.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
+    """A stopped benchmark takes its workers and their nodes with it, at once, not after their
+    trainings (rclpy's signal handler keeps a worker from dying of SIGTERM by itself)."""
+    import signal
+    import time
+
+    env = dict(os.environ, **h.ros_environment())
+    bench = subprocess.Popen(
+        [script("sorting-line-benchmark"), "--setups", "A", "--variants", "basic", "--agents", "ppo",
+         "--train-seeds", "42", "43", "--timesteps", "200000", "--jobs", "2", "--out", str(tmp_path / "bench")],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 90
+        nodes: list[int] = []
+        while time.monotonic() < deadline and len(nodes) < 2:
+            workers = children(bench.pid)
+            nodes = [n for w in workers for n in children(w) if "sorting_line" in Path(f"/proc/{n}/cmdline").read_bytes().decode(errors="replace")]
+            time.sleep(0.5)
+        assert len(nodes) == 2, f"no two training nodes under the benchmark within 90 s: workers {children(bench.pid)}"
+        time.sleep(2)  # the trainings are under way
+        bench.send_signal(signal.SIGTERM)
+        _, err = bench.communicate(timeout=20)
+        assert bench.returncode == 130, err[-2000:]
+        assert "interrupted; 0 of 2 cells are saved" in err, err[-2000:]
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(alive(p) for p in workers + nodes):
+            time.sleep(0.2)
+        assert not any(alive(p) for p in workers + nodes), f"left running: {[p for p in workers + nodes if alive(p)]}"
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+            bench.communicate()
