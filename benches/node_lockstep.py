@@ -33,10 +33,8 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import shutil
 import signal
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -57,25 +55,6 @@ TARGET_IDLE_CPU = 1.0  # percent: "near 0"
 
 def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
-
-
-# ------------------------------------------------------------------------------------------
-# Isolation
-
-
-def ensure_isolated() -> None:
-    """Returns inside a loopback-only network namespace: re-executes the running script (this one,
-    or another benchmark that imports this function) under `unshare -n` as root, else exits."""
-    if os.environ.get(REEXEC_MARK) == "1":
-        subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
-    problem = h.isolation_problem()
-    if problem is None:
-        return
-    if os.environ.get(REEXEC_MARK) != "1" and os.geteuid() == 0 and shutil.which("unshare") and shutil.which("ip"):
-        progress("not in an isolated network namespace: re-executing under `unshare -n` (lo up)")
-        env = dict(os.environ, **{REEXEC_MARK: "1"})
-        os.execvpe("unshare", ["unshare", "-n", "--", sys.executable, os.path.abspath(sys.argv[0]), *sys.argv[1:]], env)
-    sys.exit(f"{os.path.basename(sys.argv[0])}: refusing to run: {problem}")
 
 
 # ------------------------------------------------------------------------------------------
@@ -369,7 +348,7 @@ def main() -> int:
     parser.add_argument("--idle", type=float, default=5.0, help="seconds of idle-CPU sampling (0: skip)")
     args = parser.parse_args()
 
-    ensure_isolated()
+    h.run_isolated(__file__, REEXEC_MARK)
     env = h.ros_environment(default_domain="88")
     h.node_binary()
     progress(f"node {h.node_binary()}; " + ", ".join(f"{k}={v}" for k, v in env.items()))

@@ -21,7 +21,7 @@ per-window series as JSON (``--json``) and a plot of throughput and RSS over the
     .venv/bin/python benches/soak.py --plot docs/reliability_soak.png --json /tmp/soak.json
 
 Like the other benchmarks it refuses to run outside a loopback-only network namespace and, as root,
-re-executes itself under ``unshare -n`` (node_lockstep.ensure_isolated); ROS_DOMAIN_ID is its own
+re-executes itself under ``unshare -n`` (ros_harness.run_isolated); ROS_DOMAIN_ID is its own
 (--domain, default 91). The exit code is 1 when anything was lost, misaligned or wrong.
 """
 
@@ -329,9 +329,7 @@ def main() -> int:
     parser.add_argument("--plot", type=Path, help="write a PNG of throughput and RSS over the run here")
     args = parser.parse_args()
 
-    from node_lockstep import ensure_isolated
-
-    ensure_isolated()
+    h.run_isolated(__file__, "SORTING_LINE_SOAK_IN_NETNS")
     os.environ["ROS_DOMAIN_ID"] = str(args.domain)
     env = h.ros_environment()
     progress(f"soak: node {h.node_binary()}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
