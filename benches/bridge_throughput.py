@@ -67,21 +67,6 @@ def node_binary() -> Path:
     return path
 
 
-def steal_percent(seconds: float = 0.5) -> float:
-    def sample():
-        fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
-        return sum(fields), fields[7]
-
-    t0, s0 = sample()
-    time.sleep(seconds)
-    t1, s1 = sample()
-    return 100.0 * (s1 - s0) / max(1, t1 - t0)
-
-
-def conditions() -> str:
-    return f"load {'/'.join(f'{x:.2f}' for x in os.getloadavg())}, steal {steal_percent():.1f} %"
-
-
 # ------------------------------------------------------------------------------------------
 # (a) the raw lock-step loop
 
@@ -377,19 +362,19 @@ def main() -> int:
         measure_here(args.subject, args.single, args.vector)
         return 0
     progress(f"node {node_binary()}; python {sys.executable}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
-    before = conditions()
+    before = h.machine_conditions()
 
     keys = ["raw", "direct", "make"] + [f"{tag}_{lines}" for tag in ("ep50", "noend") for lines in args.lines]
     rows = {key: Row(key) for key in keys}
     for r in range(args.rounds):
-        progress(f"round {r + 1}/{args.rounds} ({conditions()})")
+        progress(f"round {r + 1}/{args.rounds} ({h.machine_conditions()})")
         for key in keys:
             row = rows[key]
             row.label, row.per_call, rate = measure_in_child(key, args)
             row.rates.append(rate)
             progress(f"  {row.label}: {rate:,.0f} env-steps/s")
     ordered = list(rows.values())
-    after = conditions()
+    after = h.machine_conditions()
 
     by_key = {s.key: s for s in ordered}
     print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "

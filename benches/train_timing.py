@@ -45,21 +45,6 @@ def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def cpu_steal_percent(seconds: float = 1.0) -> float:
-    def sample():
-        fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
-        return sum(fields), fields[7]
-
-    t0, s0 = sample()
-    time.sleep(seconds)
-    t1, s1 = sample()
-    return 100.0 * (s1 - s0) / max(1, t1 - t0)
-
-
-def conditions() -> str:
-    return f"load {'/'.join(f'{x:.2f}' for x in os.getloadavg())}, steal {cpu_steal_percent():.1f} %"
-
-
 def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path) -> float:
     """Seconds of ``model.learn`` on the reference env, trained as its utils/benchmark.py does."""
     import torch
@@ -123,16 +108,16 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="train_timing_") as tmp:
         tmp = Path(tmp)
         for r in range(args.rounds):
-            progress(f"round {r + 1}/{args.rounds}: reference env, {args.algo} {args.timesteps} steps ({conditions()})")
+            progress(f"round {r + 1}/{args.rounds}: reference env, {args.algo} {args.timesteps} steps ({h.machine_conditions()})")
             theirs.append(time_reference(args.reference, args.algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb"))
             progress(f"  reference: {theirs[-1]:.1f} s")
-            progress(f"round {r + 1}/{args.rounds}: through ROS ({conditions()})")
+            progress(f"round {r + 1}/{args.rounds}: through ROS ({h.machine_conditions()})")
             ours.append(time_ours(args.algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb", tmp / "models"))
             progress(f"  through ROS: {ours[-1]:.1f} s")
     ref_s, our_s = statistics.median(theirs), statistics.median(ours)
     ratio = our_s / ref_s
     print(f"\n{args.algo.upper()} {args.timesteps} steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
-          f"{args.rounds} round(s), medians ({conditions()}):")
+          f"{args.rounds} round(s), medians ({h.machine_conditions()}):")
     print(f"  reference in-process env: {ref_s:8.1f} s  ({args.timesteps / ref_s:6.0f} steps/s)  runs {[round(x, 1) for x in theirs]}")
     print(f"  through ROS (this repo):  {our_s:8.1f} s  ({args.timesteps / our_s:6.0f} steps/s)  runs {[round(x, 1) for x in ours]}")
     print(f"  ratio ours/reference: {ratio:.2f}x (target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})")

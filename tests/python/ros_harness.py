@@ -112,6 +112,20 @@ def run_isolated(script: str, mark: str = "SORTING_LINE_IN_NETNS") -> None:
     sys.exit(f"{os.path.basename(script)}: refusing to run: {problem}")
 
 
+def machine_conditions(steal_window: float = 0.5) -> str:
+    """Load average and the CPU time the hypervisor took from this VM (steal, sampled over
+    ``steal_window`` s), printed beside benchmark figures: they are only comparable at low steal."""
+    def sample():
+        fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+        return sum(fields), fields[7]
+
+    t0, s0 = sample()
+    time.sleep(steal_window)
+    t1, s1 = sample()
+    steal = 100.0 * (s1 - s0) / max(1, t1 - t0)
+    return f"load {'/'.join(f'{x:.2f}' for x in os.getloadavg())}, steal {steal:.1f} %"
+
+
 def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]:
     """Sets (if unset) what launch_scripts/env.sh sets, plus ROS_DOMAIN_ID; returns the values.
 
