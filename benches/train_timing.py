@@ -20,7 +20,6 @@ under ``unshare -n``.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import tempfile
