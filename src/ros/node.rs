@@ -238,10 +238,10 @@ impl Shared {
         true
     }
 
+    /// `batch/state`, when a vectorised client reads it (per-line clients and realtime lines
+    /// without one would otherwise get every line's state built and sent each tick for nothing).
     fn publish_batch_state(&self, runtimes: &[LineRuntime]) {
-        if let Err(e) = self.batch_state.publish(batch_states(runtimes)) {
-            log("WARN", format!("cannot publish batch/state: {e:?}"));
-        }
+        self.offer(&self.batch_state, &|| "batch/state".to_string(), || batch_states(runtimes));
     }
 }
 
