@@ -46,13 +46,9 @@ def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _line_info(info: dict[str, np.ndarray], k: int) -> dict[str, Any]:
-    """Line k's entry of a batched info, as the single-line env reports it."""
-    return {key: (tuple(int(x) for x in v[k]) if key == "containers" else v[k].item()) for key, v in info.items()}
-
-
 def _line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-    """Every line's entry of a batched info (as ``_line_info``), converting each array once."""
+    """Every line's entry of a batched info, as the single-line env reports it (Python scalars,
+    containers as a tuple), converting each array once."""
     columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
     keys = list(columns)
     return [dict(zip(keys, values)) for values in zip(*columns.values())]
@@ -161,8 +157,9 @@ class SortingLineVectorEnv(VectorEnv):
         done = np.flatnonzero(truncated).tolist()
         if done:
             fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
+            final_infos = _line_infos(info)
             for k in done:
-                infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": _line_info(info, k)}, k)
+                infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": final_infos[k]}, k)
                 obs[k] = fresh[k]
         return obs, rewards, terminated, truncated, infos
 
