@@ -178,7 +178,6 @@ class Subject:
     """What one timed run drives: ``one(i)`` makes call i (a step, or a round trip of
     ``per_call`` lines); ``close`` stops it and its node."""
 
-    key: str
     label: str
     n: int
     per_call: int
@@ -218,7 +217,7 @@ def raw_subject(n: int, log_dir: Path) -> Subject:
     except BaseException:
         line.close()
         raise
-    return Subject("raw", "(a) raw rclpy lock-step loop, 1 line (per-line topics)", n, 1, lambda i: line.round_trip(), line.close)
+    return Subject("(a) raw rclpy lock-step loop, 1 line (per-line topics)", n, 1, lambda i: line.round_trip(), line.close)
 
 
 def direct_subject(n: int) -> Subject:
@@ -232,7 +231,7 @@ def direct_subject(n: int) -> Subject:
         if terminated or truncated:
             raise RuntimeError("an episode ended during the no-reset measurement")
 
-    return Subject("direct", "(b) SortingLineEnv(max_episode_steps=1e6), no resets", n, 1, one, env.close)
+    return Subject("(b) SortingLineEnv(max_episode_steps=1e6), no resets", n, 1, one, env.close)
 
 
 def make_subject(n: int) -> Subject:
@@ -246,7 +245,7 @@ def make_subject(n: int) -> Subject:
         if terminated or truncated:
             env.reset()
 
-    return Subject("make", "(b) gymnasium.make(SortingLine-v0), 50-step episodes", n, 1, one, env.close)
+    return Subject("(b) gymnasium.make(SortingLine-v0), 50-step episodes", n, 1, one, env.close)
 
 
 def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
@@ -256,9 +255,8 @@ def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
     env = SortingLineVectorEnv(num_envs=lines, setup="A", variant="basic", max_episode_steps=max_episode_steps)
     env.reset(seed=1)
     actions = [np.full(lines, k % 10, dtype=np.int64) for k in range(10)]
-    tag = "ep50" if max_episode_steps == 50 else "noend"
     label = f"(c) SortingLineVectorEnv({lines:>2} lines), " + ("50-step episodes" if max_episode_steps == 50 else "no episode ends")
-    return Subject(f"{tag}_{lines}", label, n, lines, lambda i: env.step(actions[i % 10]), env.close)
+    return Subject(label, n, lines, lambda i: env.step(actions[i % 10]), env.close)
 
 
 # ------------------------------------------------------------------------------------------

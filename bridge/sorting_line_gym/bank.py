@@ -232,7 +232,7 @@ class LineBank:
         self.batch.check_started()
         self.batch.send(speed_indices, modes)
         self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
-        return self.batch.last
+        return self.batch.position
 
     def close(self) -> None:
         if self._closed:

@@ -421,7 +421,6 @@ class BatchLink:
         self.unstarted = set(range(n))
         #: The newest batch showing every line's current tick (after a reset: the reply's states).
         self.position: SimpleNamespace | None = None
-        self.last: SimpleNamespace | None = None
         self._next_step = None
         self._speeds = np.array(SPEEDS)
 
@@ -493,7 +492,7 @@ class BatchLink:
         batch = self._find(self._next_step)
         if batch is None:
             return False
-        self.position = self.last = batch
+        self.position = batch
         return True
 
     def describe_wait(self) -> str:

@@ -81,6 +81,10 @@ class _Lines:
     def next_seed(self, k: int) -> int:
         return int(self.rngs[k].integers(0, SEED_BOUND))
 
+    def restart(self, lines: list[int]) -> dict[int, np.ndarray]:
+        """Autoreset: resets ``lines`` with seeds drawn from their generators."""
+        return self.reset({k: self.next_seed(k) for k in lines})
+
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
         responses = self.bank.reset(seeds)
         for k, r in responses.items():
@@ -156,7 +160,7 @@ class SortingLineVectorEnv(VectorEnv):
             infos[f"_{key}"] = self._all_lines
         done = np.flatnonzero(truncated).tolist()
         if done:
-            fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
+            fresh = self._lines.restart(done)
             final_infos = _line_infos(info)
             for k in done:
                 infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": final_infos[k]}, k)
@@ -218,7 +222,7 @@ def _make_sb3_vec_env():
             infos = _line_infos(info)
             done = np.flatnonzero(truncated).tolist()
             if done:
-                fresh = self._lines.reset({k: self._lines.next_seed(k) for k in done})
+                fresh = self._lines.restart(done)
                 for k in done:
                     infos[k]["terminal_observation"] = obs[k].copy()
                     infos[k]["TimeLimit.truncated"] = True
