@@ -9,6 +9,7 @@ pub mod input;
 pub mod line;
 pub mod material;
 pub mod observation;
+pub mod oracle;
 pub mod rba;
 pub mod reward;
 pub mod rng;
