@@ -1,5 +1,5 @@
-//! The `sorting_line` command line: `eval`, `table`, `policy` and `trace` run the simulation
-//! library offline, `node` runs the line as a ROS 2 node.
+//! The `sorting_line` command line: `eval`, `oracle`, `table`, `policy` and `trace` run the
+//! simulation library offline, `node` runs the line as a ROS 2 node.
 
 use std::io::{self, IsTerminal, Write};
 use std::process::ExitCode;
@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use sorting_line::eval::{evaluate, EvalSummary};
+use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::rba::{analysis, RbaTable};
@@ -22,8 +22,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Evaluate an agent offline on the simulation library (no ROS).
+    /// Evaluate an agent offline on the simulation library (no ROS), beside the oracle.
     Eval(EvalArgs),
+    /// The clairvoyant optimum of each episode seed: the highest reward any action sequence
+    /// reaches knowing the seed's random streams (the ceiling for the optimality gap).
+    Oracle(OracleArgs),
     /// Print the expected-reward analysis behind the rule-based agent as CSV.
     Table(TableArgs),
     /// Print the decision tables of `rba` and `rba-hold` for a setup as one JSON object (what a
@@ -73,6 +76,32 @@ struct EvalArgs {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     json: bool,
+    /// Skip the oracle (by default each episode's optimum and the agent's gap to it are reported).
+    #[arg(long)]
+    no_oracle: bool,
+}
+
+#[derive(Args)]
+struct OracleArgs {
+    /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
+    #[arg(long)]
+    setup: Setup,
+    #[arg(long, default_value = "basic")]
+    variant: Variant,
+    /// Number of episodes; episode i is reset with seed SEED + i (as `eval`).
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    #[arg(long, default_value_t = 42)]
+    seed: u64,
+    /// Steps per episode (advanced line: at most 2000).
+    #[arg(long, default_value_t = 50)]
+    max_steps: u32,
+    /// Print one JSON object (per-episode optimal actions included) instead of a summary.
+    #[arg(long)]
+    json: bool,
+    /// Also print each episode's optimal actions, ready for `sorting_line trace --actions`.
+    #[arg(long)]
+    actions: bool,
 }
 
 #[derive(Args)]
@@ -99,6 +128,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse_from(args);
     let result = match cli.command {
         Command::Eval(args) => run_eval(args),
+        Command::Oracle(args) => run_oracle(args),
         Command::Table(args) => run_table(args),
         Command::Policy(args) => run_policy(args),
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
@@ -126,17 +156,50 @@ fn run_eval(args: EvalArgs) -> Result<(), String> {
     } else {
         ProgressBar::hidden()
     };
-    let summary = evaluate(&config, args.agent, args.episodes, args.seed, |_| bar.inc(1))?;
+    let mut summary = evaluate(&config, args.agent, args.episodes, args.seed, |_| bar.inc(1))?;
     bar.finish_and_clear();
+    if !args.no_oracle {
+        add_oracle(&mut summary).map_err(|e| format!("{e} (--no-oracle evaluates without it)"))?;
+    }
     let mut out = io::stdout().lock();
-    let written = if args.json {
-        serde_json::to_writer(&mut out, &summary).map_err(|e| e.to_string()).and_then(|_| {
-            writeln!(out).map_err(|e| e.to_string())
-        })
+    if args.json {
+        print_json(&mut out, &summary)
     } else {
         print_summary(&mut out, args.setup, &summary).map_err(|e| e.to_string())
+    }
+}
+
+fn print_json(out: &mut impl Write, summary: &EvalSummary) -> Result<(), String> {
+    serde_json::to_writer(&mut *out, summary).map_err(|e| e.to_string())?;
+    writeln!(out).map_err(|e| e.to_string())
+}
+
+fn run_oracle(args: OracleArgs) -> Result<(), String> {
+    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
+    let started = std::time::Instant::now();
+    let summary = evaluate_oracle(&config, args.episodes, args.seed, |_| {})?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let mut out = io::stdout().lock();
+    if args.json {
+        return print_json(&mut out, &summary);
+    }
+    let write = |out: &mut io::StdoutLock| -> io::Result<()> {
+        print_summary(out, args.setup, &summary)?;
+        writeln!(
+            out,
+            "solved in     {:.1} ms ({:.3} ms per episode, replays checked)",
+            elapsed * 1e3,
+            elapsed * 1e3 / summary.episodes as f64
+        )?;
+        if args.actions {
+            for e in &summary.per_episode {
+                let actions: Vec<String> = e.actions.iter().flatten().map(usize::to_string).collect();
+                writeln!(out, "seed {} reward {} actions {}", e.seed, e.reward, actions.join(","))?;
+            }
+        }
+        Ok(())
     };
-    written
+    write(&mut out).map_err(|e| e.to_string())
 }
 
 fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Result<()> {
@@ -149,7 +212,11 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
     writeln!(out, "mean speed    {:.1} %", s.speed_mean * 100.0)?;
     writeln!(out, "mean accuracy {:.3}", s.accuracy_mean)?;
     writeln!(out, "purity        {:.1} %", s.purity_mean * 100.0)?;
-    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)
+    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)?;
+    if let (Some(oracle), Some(gap)) = (s.oracle_mean, s.gap_mean) {
+        writeln!(out, "oracle        {oracle:.2} (mean gap to the agent {gap:.2})")?;
+    }
+    Ok(())
 }
 
 fn run_table(args: TableArgs) -> Result<(), String> {
