@@ -4,6 +4,7 @@
 
 pub mod accuracy;
 pub mod agent;
+pub mod bayes;
 pub mod config;
 pub mod input;
 pub mod line;
