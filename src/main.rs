@@ -55,11 +55,9 @@ struct TraceArgs {
     actions: Vec<String>,
 }
 
+/// The episodes `eval` and `oracle` run: episode i is reset with seed SEED + i.
 #[derive(Args)]
-struct EvalArgs {
-    /// rba, rba-hold, random, constant:K, constant:K:cat or constant:K:M (K = 0..9, M = 0..2).
-    #[arg(long)]
-    agent: AgentSpec,
+struct EpisodeArgs {
     /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
     #[arg(long)]
     setup: Setup,
@@ -70,12 +68,27 @@ struct EvalArgs {
     episodes: usize,
     #[arg(long, default_value_t = 42)]
     seed: u64,
-    /// Steps per episode.
+    /// Steps per episode (the advanced oracle: at most 2000).
     #[arg(long, default_value_t = 50)]
     max_steps: u32,
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     json: bool,
+}
+
+impl EpisodeArgs {
+    fn config(&self) -> LineConfig {
+        LineConfig { max_steps: self.max_steps, ..LineConfig::for_setup(self.setup, self.variant) }
+    }
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// rba, rba-hold, bayes, random, constant:K, constant:K:cat or constant:K:M (K = 0..9, M = 0..2).
+    #[arg(long)]
+    agent: AgentSpec,
+    #[command(flatten)]
+    run: EpisodeArgs,
     /// Skip the oracle (by default each episode's optimum and the agent's gap to it are reported).
     #[arg(long)]
     no_oracle: bool,
@@ -83,23 +96,10 @@ struct EvalArgs {
 
 #[derive(Args)]
 struct OracleArgs {
-    /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
-    #[arg(long)]
-    setup: Setup,
-    #[arg(long, default_value = "basic")]
-    variant: Variant,
-    /// Number of episodes; episode i is reset with seed SEED + i (as `eval`).
-    #[arg(long, default_value_t = 10)]
-    episodes: usize,
-    #[arg(long, default_value_t = 42)]
-    seed: u64,
-    /// Steps per episode (advanced line: at most 2000).
-    #[arg(long, default_value_t = 50)]
-    max_steps: u32,
-    /// Print one JSON object (per-episode optimal actions included) instead of a summary.
-    #[arg(long)]
-    json: bool,
-    /// Also print each episode's optimal actions, ready for `sorting_line trace --actions`.
+    #[command(flatten)]
+    run: EpisodeArgs,
+    /// Also print each episode's optimal actions, ready for `sorting_line trace --actions`
+    /// (`--json` always lists them).
     #[arg(long)]
     actions: bool,
 }
@@ -144,28 +144,29 @@ fn main() -> ExitCode {
 }
 
 fn run_eval(args: EvalArgs) -> Result<(), String> {
-    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
-    let bar = if io::stderr().is_terminal() && args.episodes >= 20 {
-        let bar = ProgressBar::new(args.episodes as u64);
+    let run = &args.run;
+    let config = run.config();
+    let bar = if io::stderr().is_terminal() && run.episodes >= 20 {
+        let bar = ProgressBar::new(run.episodes as u64);
         bar.set_style(
             ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} episodes, {per_sec}, eta {eta}")
                 .expect("a valid template"),
         );
-        bar.set_message(format!("{} on {:?} {}", args.agent, args.setup, args.variant));
+        bar.set_message(format!("{} on {:?} {}", args.agent, run.setup, run.variant));
         bar
     } else {
         ProgressBar::hidden()
     };
-    let mut summary = evaluate(&config, args.agent, args.episodes, args.seed, |_| bar.inc(1))?;
+    let mut summary = evaluate(&config, args.agent, run.episodes, run.seed, |_| bar.inc(1))?;
     bar.finish_and_clear();
     if !args.no_oracle {
         add_oracle(&mut summary).map_err(|e| format!("{e} (--no-oracle evaluates without it)"))?;
     }
     let mut out = io::stdout().lock();
-    if args.json {
+    if run.json {
         print_json(&mut out, &summary)
     } else {
-        print_summary(&mut out, args.setup, &summary).map_err(|e| e.to_string())
+        print_summary(&mut out, run.setup, &summary).map_err(|e| e.to_string())
     }
 }
 
@@ -175,16 +176,16 @@ fn print_json(out: &mut impl Write, summary: &EvalSummary) -> Result<(), String>
 }
 
 fn run_oracle(args: OracleArgs) -> Result<(), String> {
-    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
+    let run = &args.run;
     let started = std::time::Instant::now();
-    let summary = evaluate_oracle(&config, args.episodes, args.seed, |_| {})?;
+    let summary = evaluate_oracle(&run.config(), run.episodes, run.seed, |_| {})?;
     let elapsed = started.elapsed().as_secs_f64();
     let mut out = io::stdout().lock();
-    if args.json {
+    if run.json {
         return print_json(&mut out, &summary);
     }
     let write = |out: &mut io::StdoutLock| -> io::Result<()> {
-        print_summary(out, args.setup, &summary)?;
+        print_summary(out, run.setup, &summary)?;
         writeln!(
             out,
             "solved in     {:.1} ms ({:.3} ms per episode, replays checked)",
