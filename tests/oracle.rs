@@ -3,7 +3,7 @@
 //!   bit for bit, on every setup and variant; on full episodes no single changed action beats it;
 //! - a ceiling: no built-in agent scores more on any seed 42..51 of any setup and variant;
 //! - the library's own number: its actions replayed through `Line::step`, and through
-//!   `sorting_line trace` from its `--json` output, give exactly its reward.
+//!   `sorting_line trace` from its `--json` output, give exactly its reward; `eval --gap` reports it.
 
 use std::process::Command;
 
@@ -162,15 +162,16 @@ fn cli_oracle_actions_replay_through_trace_and_eval_reports_the_gap() {
             assert_eq!(last["cumulative_reward"].as_f64().unwrap(), rewards[i], "{setup} {variant} seed {seed}");
             assert_eq!(last["step"]["truncated"], Value::Bool(true));
         }
-        let (ok, stdout, stderr) = sorting_line(&["eval", "--agent", "rba-hold", "--setup", setup, "--variant", variant, "--episodes", "3", "--json"]);
+        let (ok, stdout, stderr) = sorting_line(&["eval", "--agent", "rba-hold", "--setup", setup, "--variant", variant, "--episodes", "3", "--json", "--gap"]);
         assert!(ok, "{stderr}");
         let eval: Value = serde_json::from_str(&stdout).unwrap();
         assert_eq!(eval["oracle_mean"].as_f64().unwrap(), mean);
         let gap = eval["gap_mean"].as_f64().unwrap();
         assert!((gap - (mean - eval["reward_mean"].as_f64().unwrap())).abs() < 1e-9, "{gap}");
         assert!(eval["per_episode"][0]["gap"].as_f64().unwrap() >= 0.0);
-        let (ok, stdout, _) = sorting_line(&["eval", "--agent", "rba", "--setup", setup, "--variant", variant, "--episodes", "1", "--json", "--no-oracle"]);
-        assert!(ok && !stdout.contains("oracle"), "{stdout}");
+        // Without --gap the JSON keeps exactly the fields the ROS-side evaluation reports.
+        let (ok, stdout, _) = sorting_line(&["eval", "--agent", "rba", "--setup", setup, "--variant", variant, "--episodes", "1", "--json"]);
+        assert!(ok && !stdout.contains("oracle") && !stdout.contains("gap"), "{stdout}");
     }
 }
 
@@ -179,12 +180,9 @@ fn cli_oracle_refuses_what_it_cannot_solve_naming_the_range() {
     let (ok, _, stderr) = sorting_line(&["oracle", "--setup", "A", "--variant", "advanced", "--max-steps", "5000"]);
     assert!(!ok);
     assert!(stderr.contains("max_steps = 5000 is out of range for the advanced oracle: allowed 1 ..= 2000"), "{stderr}");
-    let (ok, _, stderr) = sorting_line(&["eval", "--agent", "rba", "--setup", "A", "--variant", "advanced", "--max-steps", "5000"]);
-    assert!(!ok && stderr.contains("--no-oracle"), "{stderr}");
-    let (ok, stdout, stderr) =
-        sorting_line(&["eval", "--agent", "rba", "--setup", "A", "--variant", "advanced", "--max-steps", "5000", "--episodes", "1", "--no-oracle"]);
-    assert!(ok, "{stderr}");
-    assert!(stdout.contains("agent rba"), "{stdout}");
+    let (ok, _, stderr) =
+        sorting_line(&["eval", "--agent", "rba", "--setup", "A", "--variant", "advanced", "--max-steps", "5000", "--gap"]);
+    assert!(!ok && stderr.contains("--gap: max_steps = 5000 is out of range"), "{stderr}");
     let (ok, _, stderr) = sorting_line(&["oracle", "--setup", "A", "--episodes", "0"]);
     assert!(!ok && stderr.contains("episodes = 0 is out of range"), "{stderr}");
 }
