@@ -170,6 +170,8 @@ BAD_START = [
     # A ROS integer parameter is an int64: a larger seed would read back negative.
     (["--seed", "9223372036854775808"], {}, ["seed = 9223372036854775808", "allowed 0 ..= 9223372036854775807"]),
     (["--variant", "fancy"], {}, ["'fancy'", "basic", "advanced"]),
+    (["--setup", "E"], {}, ["'E'", "allowed A, B, C, D"]),
+    (["--ros-args", "-p", "setup:=E"], {}, ["setup = E", "--ros-args -p", "allowed A, B, C or D"]),
     (["--mode", "sometimes"], {}, ["'sometimes'", "lockstep", "realtime"]),
     (["--no-such-flag"], {}, ["--no-such-flag"]),
     (["--params-file", "/nonexistent/p.yaml"], {}, ["cannot read params file /nonexistent/p.yaml"]),
@@ -369,6 +371,21 @@ def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_pat
     states = [c.step(0.5, 0) for _ in range(30)]
     assert [s.truncated for s in states] == [False] * 29 + [True]
     assert states[-1].step == 30
+
+
+def test_a_setup_is_a_preset_that_explicit_values_override(ros, start_node, client_factory, probe, namespace):
+    from rcl_interfaces.srv import GetParameters
+
+    ns = namespace()
+    node = start_node("--setup", "D", "--obs-noise", "0.1", *ns_args(ns))
+    c = client_factory(ns, "basic", node_proc=node)
+    c.wait_connected()
+    names = ["setup", "input", "obs_noise", "action_penalty", "threshold"]
+    get = probe.create_client(GetParameters, f"{ns}/sorting_line/get_parameters")
+    reply = ros.call_service(get, GetParameters.Request(names=names), f"{ns}/sorting_line/get_parameters",
+                             context=c.context)
+    got = [v.string_value or v.double_value for v in reply.values]
+    assert got == ["D", "seasonal", 0.1, 0.5, 0.7], got
 
 
 # ------------------------------------------------------------------------------------------
