@@ -1,5 +1,5 @@
-//! The `sorting_line` command line: `eval`, `oracle`, `table`, `policy` and `trace` run the
-//! simulation library offline, `node` runs the line as a ROS 2 node.
+//! The `sorting_line` command line: `eval`, `oracle`, `table`, `policy`, `trace` and `vocabulary`
+//! run the simulation library offline, `node` runs the line as a ROS 2 node.
 
 use std::io::{self, IsTerminal, Write};
 use std::process::ExitCode;
@@ -37,6 +37,10 @@ enum Command {
     /// Print the library's trajectory for a seed and an action list, one JSON object per step
     /// (the reference other paths are compared with).
     Trace(TraceArgs),
+    /// Print the line's vocabulary as one JSON object: setups, variants, inputs, speeds, sort
+    /// modes, start speed, threshold and episode lengths (what other languages' copies are
+    /// checked against).
+    Vocabulary,
 }
 
 #[derive(Args)]
@@ -134,6 +138,7 @@ fn main() -> ExitCode {
         Command::Policy(args) => run_policy(args),
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
         Command::Trace(args) => run_trace(args),
+        Command::Vocabulary => run_vocabulary(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -302,4 +307,45 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
         }))?;
     }
     Ok(())
+}
+
+/// `{"variants", "inputs", "setups": {name: {input, obs_noise, action_penalty}}, "speeds",
+/// "start_speed_index", "modes"/"categories": {name: number}, "threshold", "episode_steps",
+/// "max_episode_steps"}`, every value taken from the library's own constants.
+fn run_vocabulary() -> Result<(), String> {
+    use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, SETUPS, VARIANTS};
+    use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
+    use sorting_line::sim::speed::{SPEEDS, START_SPEED_INDEX};
+    let setups: serde_json::Map<String, serde_json::Value> = SETUPS
+        .iter()
+        .map(|&s| {
+            let c = LineConfig::for_setup(s, Variant::Basic);
+            let value = serde_json::json!({"input": c.input, "obs_noise": c.obs_noise, "action_penalty": c.action_penalty});
+            (s.to_string(), value)
+        })
+        .collect();
+    // name -> wire number, the name as serde writes it (the form of `trace` and parameter files).
+    fn numbered<T: serde::Serialize>(values: impl Iterator<Item = (T, usize)>) -> serde_json::Value {
+        let map: serde_json::Map<String, serde_json::Value> = values
+            .map(|(v, i)| (serde_json::json!(v).as_str().unwrap_or_default().to_owned(), serde_json::json!(i)))
+            .collect();
+        map.into()
+    }
+    let modes = numbered(SORT_MODES.iter().map(|&m| (m, m.index())));
+    let categories = numbered(CATEGORIES.iter().map(|&c| (c, c.index())));
+    let defaults = LineConfig::default();
+    let vocabulary = serde_json::json!({
+        "variants": VARIANTS,
+        "inputs": INPUT_KINDS,
+        "setups": setups,
+        "speeds": SPEEDS,
+        "start_speed_index": START_SPEED_INDEX,
+        "modes": modes,
+        "categories": categories,
+        "threshold": defaults.threshold,
+        "episode_steps": defaults.max_steps,
+        "max_episode_steps": MAX_EPISODE_STEPS,
+    });
+    let mut out = io::stdout().lock();
+    writeln!(out, "{vocabulary}").map_err(|e| e.to_string())
 }
