@@ -27,6 +27,7 @@ from .transport import (
     Waiter,
     acquire_rclpy,
     fork_error,
+    joining_graph,
     private_namespace,
     release_rclpy,
     stamp_key,
@@ -191,10 +192,19 @@ class LineBank:
         their :class:`ResetResult`. The first reset is a handshake: its reply and the step-0 state
         after it must both arrive. Either can be lost right after discovery (the node may match
         our request writer before our reply reader, or our state reader), so the handshake is
-        retried; with explicit seeds a repeated reset gives the same episode."""
-        self.open()
+        retried; with explicit seeds a repeated reset gives the same episode.
+
+        Joining the DDS graph (rclpy's participant, the node's, discovery of the node's endpoints)
+        happens one bank at a time per host and domain (:func:`joining_graph`): participants that
+        join together lose endpoint announcements for good (README, "Many envs per host")."""
         if self._connected:
+            self._check_usable()
             return self._reset_once(seeds)
+        with joining_graph(self.startup_timeout):
+            self.open()
+            return self._handshake(seeds)
+
+    def _handshake(self, seeds: dict[int, int | None]):
         self._connect()
         if self.batch is not None:
             first_state = self.batch.saw_current_ticks

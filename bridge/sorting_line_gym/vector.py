@@ -105,6 +105,9 @@ class _Lines:
             obs = quantity[:, None]
         return obs, b.reward, b.truncated, batch_info(b, self.episode_start)
 
+    def action_masks(self) -> np.ndarray:
+        return np.ones((len(self.rngs), action_space(self.variant).n), dtype=bool)
+
     def close(self):
         self.bank.close()
 
@@ -166,6 +169,10 @@ class SortingLineVectorEnv(VectorEnv):
                 infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": final_infos[k]}, k)
                 obs[k] = fresh[k]
         return obs, rewards, terminated, truncated, infos
+
+    def action_masks(self) -> np.ndarray:
+        """Which actions are valid now, per line (num_envs x actions): all of them today."""
+        return self._lines.action_masks()
 
     def close_extras(self, **kwargs):
         self._lines.close()
@@ -239,7 +246,15 @@ def _make_sb3_vec_env():
         def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
             setattr(self, attr_name, value)
 
+        def action_masks(self) -> np.ndarray:
+            """Which actions are valid now, per line: all of them today (sb3-contrib's MaskablePPO
+            asks through ``env_method("action_masks")``)."""
+            return self._lines.action_masks()
+
         def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+            if method_name == "action_masks":
+                masks = self._lines.action_masks()
+                return [masks[k] for k in self._get_indices(indices)]
             raise AttributeError(f"the lines of SortingLineSB3VecEnv have no per-line method {method_name!r}")
 
         def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
