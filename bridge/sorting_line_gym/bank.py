@@ -44,8 +44,10 @@ SETUPS = {
 #: Longest episode the node accepts; used when truncation is left to a TimeLimit wrapper.
 UNLIMITED_STEPS = 1_000_000
 
-#: How often the first reset is retried when its step-0 state does not arrive (late matching).
-HANDSHAKE_ATTEMPTS = 3
+#: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
+#: retried: the first exchange after discovery is lost now and then (late matching), and a short
+#: first attempt keeps that from costing every env seconds of start-up.
+HANDSHAKE_TIMEOUTS = (0.2, 0.4, 0.8, 1.6, 2.0)
 
 _bank_ids = itertools.count()
 
@@ -210,13 +212,14 @@ class LineBank:
             first_state = self.batch.saw_current_ticks
         else:
             first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
-        for attempt in range(HANDSHAKE_ATTEMPTS):
+        for attempt, limit in enumerate(HANDSHAKE_TIMEOUTS):
+            timeout = min(limit, self.step_timeout)
             try:
-                responses = self._reset_once(seeds, timeout=min(2.0, self.step_timeout))
-                self.waiter.until(first_state, min(2.0, self.step_timeout), lambda: f"the first state of {self.namespace} after reset")
+                responses = self._reset_once(seeds, timeout=timeout)
+                self.waiter.until(first_state, timeout, lambda: f"the first state of {self.namespace} after reset")
                 return responses
             except BridgeError:
-                if attempt == HANDSHAKE_ATTEMPTS - 1 or (self.process and not self.process.alive()):
+                if attempt == len(HANDSHAKE_TIMEOUTS) - 1 or (self.process and not self.process.alive()):
                     raise
         raise AssertionError("unreachable")
 
