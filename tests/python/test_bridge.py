@@ -556,6 +556,7 @@ def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
 def test_attach_to_a_running_node(make_env):
     """node="attach" drives the line of a node started by someone else (here: another env)."""
     owner = make_env(None, setup="B", variant="basic")
+    owner.reset(seed=0)  # envs start their node at the first reset
     guest = make_env(BASIC, setup="B", node="attach", namespace=owner.namespace)
     actions = [2, 3, 9, 0]
     want = trace("B", "basic", 8, actions)
