@@ -199,12 +199,15 @@ def joining_graph(timeout: float):
 # The node process
 # --------------------------------------------------------------------------------------------
 def find_node_binary() -> str:
-    """The `sorting_line` binary: $SORTING_LINE_BIN, this checkout's release build, or PATH."""
-    candidates = [os.environ.get("SORTING_LINE_BIN")]
+    """The `sorting_line` binary, the one lookup of bridge, tests and benchmarks: $SORTING_LINE_BIN
+    (which must then exist), else this checkout's release build, else PATH."""
+    chosen = os.environ.get("SORTING_LINE_BIN")
+    if chosen:
+        if not (os.path.isfile(chosen) and os.access(chosen, os.X_OK)):
+            raise BridgeError(f"SORTING_LINE_BIN = {chosen} is not an executable file")
+        return chosen
     repo = Path(__file__).resolve().parents[2]
-    candidates.append(str(repo / "target" / "release" / "sorting_line"))
-    candidates.append(shutil.which("sorting_line"))
-    for c in candidates:
+    for c in (str(repo / "target" / "release" / "sorting_line"), shutil.which("sorting_line")):
         if c and os.path.isfile(c) and os.access(c, os.X_OK):
             return c
     raise BridgeError(
