@@ -27,7 +27,8 @@ import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import SortingLineEnv
-from sorting_line_gym.vector import SortingLineSB3VecEnv, SortingLineVectorEnv
+from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
+from sorting_line_gym.vector import SortingLineVectorEnv
 from test_bridge import assert_obs, assert_step, fixed_actions, node_binary, trace
 
 ROOT = Path(__file__).resolve().parents[2]
