@@ -129,7 +129,7 @@ def measure_here(key: str, steps: int, raw_steps: int) -> dict:
             env.step(actions[i % 10])
         rate = steps * n / (time.perf_counter() - t0)
         me = os.getpid()
-        memory = rss_mb([me, *descendants(me), *server_pids()])
+        memory = rss_mb(sorted({me, *descendants(me), *server_pids()}))  # servers may be our descendants too
     finally:
         env.close()
     return {"rate": rate, "envs": n, "start_s": start_s, "rss_mb": memory}
@@ -172,7 +172,7 @@ def main() -> int:
     raw = results["raw"]["rate"]
     print(f"\nsorting_line_gym, many envs on one host ({args.steps} vector steps per subject, 50-step episodes; "
           f"raw loop {args.raw_steps} round trips); {os.cpu_count()} CPUs; {before} before, {after} after")
-    header = f"{'subject':<44} | {'env-steps/s':>11} | {'/ raw':>6} | {'start-up s':>10} | {'RSS MB':>7} | {'MB/env':>6}"
+    header = f"{'subject':<48} | {'env-steps/s':>11} | {'/ raw':>6} | {'start-up s':>10} | {'RSS MB':>7} | {'MB/env':>6}"
     print(header)
     print("-" * len(header))
     names = {"sync": "SyncVectorEnv, node='shared'", "async": "AsyncVectorEnv (fork), node='shared'",
@@ -180,11 +180,11 @@ def main() -> int:
     base = results["sync_1"]["rss_mb"]
     for key, r in results.items():
         if key == "raw":
-            print(f"{'raw one-line rclpy lock-step loop (round trips)':<44} | {raw:>11,.0f} | {1:>6.2f} | {'':>10} | {'':>7} | {'':>6}")
+            print(f"{'raw one-line rclpy lock-step loop (round trips)':<48} | {raw:>11,.0f} | {1:>6.2f} | {'':>10} | {'':>7} | {'':>6}")
             continue
         kind, n = key.split("_")
         per_env = f"{(r['rss_mb'] - base) / (int(n) - 1):>6.1f}" if kind == "sync" and int(n) > 1 else f"{'':>6}"
-        print(f"{names[kind] + f', {n} envs':<44} | {r['rate']:>11,.0f} | {r['rate'] / raw:>6.2f} | "
+        print(f"{names[kind] + f', {n} envs':<48} | {r['rate']:>11,.0f} | {r['rate'] / raw:>6.2f} | "
               f"{r['start_s']:>10.2f} | {r['rss_mb']:>7.0f} | {per_env}")
     s64 = results["sync_64"]
     mb = (s64["rss_mb"] - base) / 63
