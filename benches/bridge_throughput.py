@@ -61,10 +61,7 @@ def progress(msg: str) -> None:
 
 
 def node_binary() -> Path:
-    path = Path(os.environ.get("SORTING_LINE_BIN") or ROOT / "target" / "release" / "sorting_line")
-    if not path.is_file():
-        sys.exit(f"bridge_throughput.py: {path} not found: build it with `cargo build --release`")
-    return path
+    return h.node_binary()
 
 
 # ------------------------------------------------------------------------------------------

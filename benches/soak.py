@@ -183,7 +183,6 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
     cpu_before = cpu_times()
     env = SortingLineVectorEnv(num_envs=lines, setup=setup, variant=variant, max_episode_steps=EPISODE_STEPS,
                                step_timeout=step_timeout)
-    node_pid = env._lines.bank.process.process.pid  # the node process the env spawned
     n_actions = int(env.single_action_space.n)
     actions_rng = np.random.default_rng(seed + 1_000_003)
     bar = None
@@ -199,6 +198,7 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
             return mirrors, ledgers
 
         mirrors, ledgers = start(seed)
+        node_pid = env._lines.bank.process.process.pid  # the node the env spawned at its first reset
         result.rss_node_start, result.rss_bridge_start = rss_mb(node_pid), rss_mb(os.getpid())
         if show_progress:
             from tqdm import tqdm

@@ -38,7 +38,7 @@ SORTING_LINE_FUZZ_CASES="$FUZZ_CASES" cargo test --release --locked --test fuzz 
 step "Python/ROS reliability tests (loopback-only network namespace; a 200-tick topic-level flood)"
 export SORTING_LINE_FLOOD_TICKS=200
 export ROS_DOMAIN_ID="${SORTING_LINE_TEST_DOMAIN:-$((100 + $$ % 100))}"
-export NODE_BIN="$ROOT/target/release/sorting_line"
+export SORTING_LINE_BIN="$ROOT/target/release/sorting_line"
 unshare -n bash -c '
   set -euo pipefail
   ip link set lo up

@@ -29,7 +29,7 @@ if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
 fi
 # A domain id of its own per run: derived from the PID, within 100..199.
 export ROS_DOMAIN_ID="${SORTING_LINE_TEST_DOMAIN:-$((100 + $$ % 100))}"
-export NODE_BIN="$ROOT/target/release/sorting_line"
+export SORTING_LINE_BIN="$ROOT/target/release/sorting_line"
 # unshare -n needs root (CI and the dev machines run as root); say so rather than fail obscurely.
 if ! unshare -n true 2>/dev/null; then
   echo "test.sh: cannot create a network namespace (unshare -n needs root); refusing to run DDS tests on the host network" >&2

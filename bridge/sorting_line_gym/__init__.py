@@ -5,12 +5,15 @@
     env = gymnasium.make("sorting_line_gym:SortingLineAdvanced-v0", setup="D")  # speed x sort mode
 
 By default each environment starts, owns and stops its own node process (``node="spawn"``) in a
-namespace of its own; ``node="attach"`` uses a node already serving ``namespace``. Under the hood
-every step is a lock-step round trip over ROS 2 topics (see ``transport``).
+namespace of its own; ``node="shared"`` leases a line of this host's line server (many envs per
+host); ``node="attach"`` uses a node already serving ``namespace``. Nothing starts before the
+first ``reset()``. Under the hood every step is a lock-step round trip over ROS 2 topics (see
+``transport``).
 
-Modules: ``transport`` (rclpy plumbing, the node process, waiting with timeouts), ``env`` (the
-single-line environment), ``vector`` (N lines of one node as a Gymnasium VectorEnv and an SB3
-VecEnv), ``render`` (the dashboard).
+Modules: ``transport`` (rclpy plumbing, the node process, waiting with timeouts, the fork rule),
+``line_server`` and ``line_supervisor`` (line servers and leases), ``env`` (the single-line
+environment), ``vector`` (N lines of one node as a Gymnasium VectorEnv), ``sb3_vec_env`` (the same
+as an SB3 VecEnv), ``zoo`` (RL Zoo conf files), ``render`` (the dashboard).
 """
 
 from gymnasium.envs.registration import register

@@ -17,6 +17,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
+from . import line_server
 from .transport import (
     QOS,
     BatchLink,
@@ -25,6 +26,8 @@ from .transport import (
     NodeProcess,
     Waiter,
     acquire_rclpy,
+    fork_error,
+    joining_graph,
     private_namespace,
     release_rclpy,
     stamp_key,
@@ -41,8 +44,10 @@ SETUPS = {
 #: Longest episode the node accepts; used when truncation is left to a TimeLimit wrapper.
 UNLIMITED_STEPS = 1_000_000
 
-#: How often the first reset is retried when its step-0 state does not arrive (late matching).
-HANDSHAKE_ATTEMPTS = 3
+#: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
+#: retried: the first exchange after discovery is lost now and then (late matching), and a short
+#: first attempt keeps that from costing every env seconds of start-up.
+HANDSHAKE_TIMEOUTS = (0.2, 0.4, 0.8, 1.6, 2.0)
 
 _bank_ids = itertools.count()
 
@@ -71,8 +76,13 @@ class LineBank:
             raise ValueError(f"variant = {variant!r} is not valid: allowed 'basic', 'advanced'")
         if setup not in SETUPS:
             raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
-        if node not in ("spawn", "attach"):
-            raise ValueError(f"node = {node!r} is not valid: allowed 'spawn' (start a node) or 'attach'")
+        if node not in ("spawn", "shared", "attach"):
+            raise ValueError(
+                f"node = {node!r} is not valid: allowed 'spawn' (start a node), 'shared' (lease a line of "
+                "this host's line server) or 'attach'"
+            )
+        if node == "shared" and (lines != 1 or batch):
+            raise ValueError("node='shared' leases one line: it is for single-line environments")
         if not 1 <= lines <= 64:
             raise ValueError(f"lines = {lines} is out of range: allowed 1 ..= 64")
         if step_timeout <= 0 or startup_timeout <= 0:
@@ -87,12 +97,38 @@ class LineBank:
         self.namespace = namespace or private_namespace()
         self.process: NodeProcess | None = None
         self._closed = False
+        self._opened_in: int | None = None  # the pid that opened the bank (see open())
+        self._node_mode = node
+        self._lines = lines
+        self._node_options = dict(SETUPS[setup], variant=variant, threshold=threshold, lines=lines)
+        self._node_options["max_steps"] = max_steps if max_steps is not None else UNLIMITED_STEPS
+        self._watch_sensors = watch_sensors
+        self._batch = batch
+        self.links: list[LineLink] = []
+        self.batch: BatchLink | None = None
+        self._connected = False
+
+    def open(self) -> None:
+        """Starts the node process (``node="spawn"``), rclpy and this bank's endpoints: what the
+        constructor leaves to the first reset, so that an environment costs nothing until it is
+        used (Gymnasium's AsyncVectorEnv builds one in the parent only to read its spaces, then
+        forks) and a forked child never inherits a live rclpy context."""
+        if self._opened_in is not None:
+            if self._opened_in != os.getpid():
+                raise fork_error() or BridgeError(f"{self.namespace}: this bank was opened in pid {self._opened_in}")
+            return
+        if self._closed:
+            raise BridgeError(f"{self.namespace}: the environment is closed")
         acquire_rclpy()
+        self._opened_in = os.getpid()
+        lines = self._lines
         try:
-            if node == "spawn":
-                options = dict(SETUPS[setup], variant=variant, threshold=threshold, lines=lines)
-                options["max_steps"] = max_steps if max_steps is not None else UNLIMITED_STEPS
-                self.process = NodeProcess(self.namespace, options)
+            if self._node_mode == "spawn":
+                self.process = NodeProcess(self.namespace, self._node_options)
+            elif self._node_mode == "shared":
+                options = {k: v for k, v in self._node_options.items() if k != "lines"}
+                self.process = line_server.lease(options, self.startup_timeout)
+                self.namespace = self.process.namespace
             # No parameter services or rosout: every entity is one more thing each wait scans.
             self.node = rclpy.create_node(
                 f"sorting_line_gym_{os.getpid()}_{next(_bank_ids)}",
@@ -105,16 +141,15 @@ class LineBank:
             spaces = [base] if lines == 1 else [f"{base}/line_{k}" for k in range(lines)]
             # The single-line env uses the line's own topics (the documented per-line protocol);
             # vector envs the batch topics, two messages per round trip whatever the number of lines.
-            per_line = not batch
+            per_line = not self._batch
             self.links = [LineLink(self.node, ns, self.advanced, per_line_topics=per_line) for ns in spaces]
             self.batch = None if per_line else BatchLink(self.node, self.namespace, self.links)
             self.waiter = Waiter(self.executor, self.process)
             self.sensors: list[dict[str, dict]] = [{"input": {}, "belt": {}} for _ in spaces]
-            if watch_sensors:
+            if self._watch_sensors:
                 for k, ns in enumerate(spaces):
                     self.node.create_subscription(MaterialInput, f"{ns}/input", self._keep(k, "input"), QOS)
                     self.node.create_subscription(BeltOccupancy, f"{ns}/belt/occupancy", self._keep(k, "belt"), QOS)
-            self._connected = False
         except BaseException:
             self.close()
             raise
@@ -130,7 +165,7 @@ class LineBank:
         return keep
 
     def __len__(self) -> int:
-        return len(self.links)
+        return self._lines
 
     def sensor_readings(self, k: int, key: tuple[int, int], timeout: float = 2.0) -> tuple[MaterialInput, BeltOccupancy]:
         """Line k's ``input`` and ``belt/occupancy`` messages of the tick stamped ``key`` (needs
@@ -159,21 +194,32 @@ class LineBank:
         their :class:`ResetResult`. The first reset is a handshake: its reply and the step-0 state
         after it must both arrive. Either can be lost right after discovery (the node may match
         our request writer before our reply reader, or our state reader), so the handshake is
-        retried; with explicit seeds a repeated reset gives the same episode."""
+        retried; with explicit seeds a repeated reset gives the same episode.
+
+        Joining the DDS graph (rclpy's participant, the node's, discovery of the node's endpoints)
+        happens one bank at a time per host and domain (:func:`joining_graph`): participants that
+        join together lose endpoint announcements for good (README, "Many envs per host")."""
         if self._connected:
+            self._check_usable()
             return self._reset_once(seeds)
+        with joining_graph(self.startup_timeout):
+            self.open()
+            return self._handshake(seeds)
+
+    def _handshake(self, seeds: dict[int, int | None]):
         self._connect()
         if self.batch is not None:
             first_state = self.batch.saw_current_ticks
         else:
             first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
-        for attempt in range(HANDSHAKE_ATTEMPTS):
+        for attempt, limit in enumerate(HANDSHAKE_TIMEOUTS):
+            timeout = min(limit, self.step_timeout)
             try:
-                responses = self._reset_once(seeds, timeout=min(2.0, self.step_timeout))
-                self.waiter.until(first_state, min(2.0, self.step_timeout), lambda: f"the first state of {self.namespace} after reset")
+                responses = self._reset_once(seeds, timeout=timeout)
+                self.waiter.until(first_state, timeout, lambda: f"the first state of {self.namespace} after reset")
                 return responses
             except BridgeError:
-                if attempt == HANDSHAKE_ATTEMPTS - 1 or (self.process and not self.process.alive()):
+                if attempt == len(HANDSHAKE_TIMEOUTS) - 1 or (self.process and not self.process.alive()):
                     raise
         raise AssertionError("unreachable")
 
@@ -194,6 +240,7 @@ class LineBank:
 
     def step(self, actions: Sequence[tuple[int, int]]) -> list[LineState]:
         """Sends (speed index, mode) to every line and waits for each line's next state."""
+        self._check_usable()
         if len(actions) != len(self.links):
             raise ValueError(f"{len(actions)} actions for {len(self.links)} lines")
         for link in self.links:
@@ -227,6 +274,7 @@ class LineBank:
     def step_batch(self, speed_indices, modes):
         """Steps every line through ``batch/cmd`` and returns the ``batch/state`` message (arrays,
         entry k = line k)."""
+        self._check_usable()
         if self.batch is None:
             raise BridgeError("a single-line bank steps with step()")
         self.batch.check_started()
@@ -234,10 +282,20 @@ class LineBank:
         self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
         return self.batch.position
 
+    def _check_usable(self) -> None:
+        if self._opened_in is None:
+            raise BridgeError(f"{self.namespace}: step() before reset()")
+        if self._opened_in != os.getpid():
+            raise fork_error() or BridgeError(f"{self.namespace}: this bank was opened in pid {self._opened_in}")
+
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
+        if self._opened_in is None:
+            return  # never opened: nothing was started
+        if self._opened_in != os.getpid():
+            return  # a forked copy: the rclpy entities and the node process belong to the parent
         node = getattr(self, "node", None)
         if node is not None:
             self.executor.remove_node(node)

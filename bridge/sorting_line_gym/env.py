@@ -23,6 +23,12 @@ If the accuracy of the batch is below the threshold (0.7): -0.1. Otherwise
 0.5 * (accuracy - 0.7) / 0.3 + 0.5 * (speed - 0.1) / 0.9 - penalty, where the penalty (0.5 in
 setups B, D) is charged when the belt speed changes.
 
+## Connecting
+Constructing the env starts nothing: the node process (or lease) and rclpy come at the first
+`reset()`, so a dummy env made only to read the spaces (Gymnasium's AsyncVectorEnv does this in
+its parent before it forks) costs nothing. rclpy is not fork-safe: an env used in a process
+forked after rclpy went live there raises `BridgeError` saying so, instead of blocking.
+
 ## Starting state
 Fixed line contents (input 30/50, belt 40/20, machine 75/25, speed 0.6); `reset(seed=s)` restarts
 the node's random streams from s, so the same seed and actions give the same trajectory as
@@ -35,8 +41,8 @@ of 50 steps (`max_episode_steps=250` for training); constructing the class direc
 
 ## Arguments
 `setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "spawn" (default: start,
-own and stop a node process in a namespace of its own) or "attach" (use the node serving
-`namespace`); `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
+own and stop a node process in a namespace of its own), "shared" (lease a line of this host's line
+server, `line_server`: for many envs per host) or "attach" (use the node serving `namespace`); `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
 `startup_timeout`; `render_mode` "rgb_array" or "human".
 
 ## Info
@@ -144,9 +150,18 @@ class SortingLineEnv(gym.Env):
             startup_timeout=startup_timeout,
             watch_sensors=render_mode is not None,
         )
-        self.namespace = self.bank.namespace
         self._history = None
         self._live = None
+
+    @property
+    def namespace(self) -> str:
+        """The line's namespace (with ``node="shared"``, known from the first reset on)."""
+        return self.bank.namespace
+
+    def action_masks(self) -> np.ndarray:
+        """Which actions are valid now (sb3-contrib's MaskablePPO reads this): all of them on
+        today's lines."""
+        return np.ones(self.action_space.n, dtype=bool)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

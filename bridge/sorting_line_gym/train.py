@@ -65,7 +65,7 @@ def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int)
 
         venv = DummyVecEnv([lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps)])
     else:
-        from .vector import SortingLineSB3VecEnv
+        from .sb3_vec_env import SortingLineSB3VecEnv
 
         venv = SortingLineSB3VecEnv(num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps)
     return VecMonitor(venv)

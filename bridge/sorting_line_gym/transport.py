@@ -13,6 +13,9 @@ Rules this module keeps (shared/platform/ros2-without-a-ros-install.md explains 
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import hashlib
 import itertools
 import os
 import shutil
@@ -62,16 +65,67 @@ class BridgeTimeout(BridgeError, TimeoutError):
 
 
 # --------------------------------------------------------------------------------------------
-# rclpy, once per process
+# rclpy, once per process, and never across a fork
 # --------------------------------------------------------------------------------------------
 _rclpy_lock = threading.Lock()
 _rclpy_users = 0
 _rclpy_ours = False
+#: In a forked child: the pid of the parent, when rclpy (so DDS: Fast DDS's threads, sockets and
+#: locks) was live there at the fork. Set by the fork hooks below, inherited by the child.
+_forked_from_live: int | None = None
+
+
+def _default_context_live() -> bool:
+    """Whether rclpy's default context is initialised. Reads the attribute without rclpy's lock
+    (this runs in a fork hook)."""
+    import rclpy.utilities
+
+    context = getattr(rclpy.utilities, "g_default_context", None)
+    return context is not None and context.handle is not None
+
+
+def _before_fork() -> None:
+    global _forked_from_live
+    if _forked_from_live is None and (_rclpy_users > 0 or _default_context_live()):
+        _forked_from_live = os.getpid()
+
+
+def _after_fork_in_parent() -> None:
+    global _forked_from_live
+    if _forked_from_live == os.getpid():
+        _forked_from_live = None
+
+
+os.register_at_fork(before=_before_fork, after_in_parent=_after_fork_in_parent)
+
+
+def fork_error() -> BridgeError | None:
+    """The error to raise when this process was forked from one where rclpy was live, else None.
+
+    rclpy over Fast DDS is not fork-safe: the child inherits the context's memory but not the
+    threads that serve it, so its first wait blocks forever on a lock a vanished thread held."""
+    if _forked_from_live is None or _forked_from_live == os.getpid():
+        return None
+    return BridgeError(
+        f"rclpy/DDS is not fork-safe: a context initialised in pid {_forked_from_live} cannot be used in pid "
+        f"{os.getpid()}, a process forked from it. Make the environments in the child (sorting_line_gym "
+        "envs connect at their first reset(), so constructing them before the fork is fine as long as "
+        "nothing used rclpy yet), or start the children with the multiprocessing context 'spawn' or "
+        "'forkserver' (e.g. AsyncVectorEnv(..., context='spawn'), SubprocVecEnv(..., start_method='spawn'))"
+    )
+
+
+def check_not_forked() -> None:
+    error = fork_error()
+    if error is not None:
+        raise error
 
 
 def acquire_rclpy() -> None:
-    """Initialises rclpy if nobody has; paired with :func:`release_rclpy`."""
+    """Initialises rclpy if nobody has; paired with :func:`release_rclpy`. Raises instead of
+    blocking when this process was forked from one where rclpy was live (:func:`fork_error`)."""
     global _rclpy_users, _rclpy_ours
+    check_not_forked()
     with _rclpy_lock:
         if _rclpy_users == 0 and not rclpy.ok():
             rclpy.init()
@@ -82,6 +136,8 @@ def acquire_rclpy() -> None:
 def release_rclpy() -> None:
     """Shuts rclpy down when the last user that needed it to be initialised is gone."""
     global _rclpy_users, _rclpy_ours
+    if fork_error() is not None:
+        return  # the inherited context is not ours to shut down here
     with _rclpy_lock:
         _rclpy_users = max(0, _rclpy_users - 1)
         if _rclpy_users == 0 and _rclpy_ours and rclpy.ok():
@@ -90,15 +146,68 @@ def release_rclpy() -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# Joining the graph, one at a time
+# --------------------------------------------------------------------------------------------
+def host_state_directory() -> Path:
+    """Where this host's bridges coordinate (line servers, joining the graph), per user."""
+    path = Path(tempfile.gettempdir()) / f"sorting_line_gym-{os.getuid()}"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def network_namespace() -> str:
+    """This process's network namespace: DDS traffic does not cross it, files do."""
+    try:
+        return os.readlink("/proc/self/ns/net")
+    except OSError:
+        return "host"
+
+
+@contextlib.contextmanager
+def joining_graph(timeout: float):
+    """Holds this host's lock for joining the DDS graph of ``ROS_DOMAIN_ID`` (per network
+    namespace) while a bank starts its participant and node and discovers the node's endpoints.
+
+    Measured (benches/discovery.py, README "Many envs per host"): when several client and node
+    participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast
+    DDS and RustDDS lose some endpoint announcements between them for good (a node's reset
+    service never becomes ready for its client, even after 60 s); one participant pair joining at
+    a time discovers completely, whatever the number of participants. Waiting for the lock counts
+    against ``timeout``; a holder that dies frees it at once (flock)."""
+    digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
+    path = host_state_directory() / f"join-{digest}.lock"
+    deadline = time.monotonic() + timeout
+    with open(path, "a+") as f:
+        while True:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise BridgeTimeout(
+                        f"timed out after {timeout:g} s waiting for other environments of this host to join "
+                        f"the DDS graph (lock {path})"
+                    ) from None
+                time.sleep(0.01)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+# --------------------------------------------------------------------------------------------
 # The node process
 # --------------------------------------------------------------------------------------------
 def find_node_binary() -> str:
-    """The `sorting_line` binary: $SORTING_LINE_BIN, this checkout's release build, or PATH."""
-    candidates = [os.environ.get("SORTING_LINE_BIN")]
+    """The `sorting_line` binary, the one lookup of bridge, tests and benchmarks: $SORTING_LINE_BIN
+    (which must then exist), else this checkout's release build, else PATH."""
+    chosen = os.environ.get("SORTING_LINE_BIN")
+    if chosen:
+        if not (os.path.isfile(chosen) and os.access(chosen, os.X_OK)):
+            raise BridgeError(f"SORTING_LINE_BIN = {chosen} is not an executable file")
+        return chosen
     repo = Path(__file__).resolve().parents[2]
-    candidates.append(str(repo / "target" / "release" / "sorting_line"))
-    candidates.append(shutil.which("sorting_line"))
-    for c in candidates:
+    for c in (str(repo / "target" / "release" / "sorting_line"), shutil.which("sorting_line")):
         if c and os.path.isfile(c) and os.access(c, os.X_OK):
             return c
     raise BridgeError(

@@ -5,8 +5,8 @@ trip steps every line. Two faces over the same bank of lines:
   vectorization_mode="vector_entry_point")``), autoreset mode SAME_STEP: a line whose episode ends
   is reset within the same step; its last observation and info are in ``infos["final_obs"]`` and
   ``infos["final_info"]``.
-- :class:`SortingLineSB3VecEnv`, a Stable-Baselines3 ``VecEnv`` with SB3's conventions: same-step
-  reset, ``terminal_observation`` and ``TimeLimit.truncated`` in each line's info.
+- ``sb3_vec_env.SortingLineSB3VecEnv``, a Stable-Baselines3 ``VecEnv`` with SB3's conventions
+  (a module of its own: it imports SB3 and torch).
 
 Seeding: ``reset(seed=s)`` seeds line k with s + k (as the node seeds line k of ``--seed s``);
 every later reset of a line draws its node seed from that line's generator, so one seed reproduces
@@ -46,7 +46,7 @@ def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+def line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     """Every line's entry of a batched info, as the single-line env reports it (Python scalars,
     containers as a tuple), converting each array once."""
     columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
@@ -54,7 +54,7 @@ def _line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     return [dict(zip(keys, values)) for values in zip(*columns.values())]
 
 
-class _Lines:
+class Lines:
     """The bank plus per-line seed generators: what both vector faces share."""
 
     def __init__(self, num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout):
@@ -105,6 +105,9 @@ class _Lines:
             obs = quantity[:, None]
         return obs, b.reward, b.truncated, batch_info(b, self.episode_start)
 
+    def action_masks(self) -> np.ndarray:
+        return np.ones((len(self.rngs), action_space(self.variant).n), dtype=bool)
+
     def close(self):
         self.bank.close()
 
@@ -134,7 +137,7 @@ class SortingLineVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
-        self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        self._lines = Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
         # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
         self._all_lines = np.ones(num_envs, dtype=bool)
         self._all_lines.flags.writeable = False
@@ -161,97 +164,15 @@ class SortingLineVectorEnv(VectorEnv):
         done = np.flatnonzero(truncated).tolist()
         if done:
             fresh = self._lines.restart(done)
-            final_infos = _line_infos(info)
+            final_infos = line_infos(info)
             for k in done:
                 infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": final_infos[k]}, k)
                 obs[k] = fresh[k]
         return obs, rewards, terminated, truncated, infos
 
+    def action_masks(self) -> np.ndarray:
+        """Which actions are valid now, per line (num_envs x actions): all of them today."""
+        return self._lines.action_masks()
+
     def close_extras(self, **kwargs):
         self._lines.close()
-
-
-def _make_sb3_vec_env():
-    """Builds SortingLineSB3VecEnv on first use: its base class is SB3's, and importing SB3
-    pulls in torch (about 500 MB and seconds of start-up) that users of the Gymnasium faces
-    never need."""
-    from stable_baselines3.common.vec_env import VecEnv  # SB3 is an optional dependency
-
-    class SortingLineSB3VecEnv(VecEnv):
-        """Stable-Baselines3 VecEnv over the lines of one node (see the module docstring)."""
-
-        def __init__(
-            self,
-            num_envs: int = 4,
-            setup: str = "A",
-            variant: str = "basic",
-            namespace: str | None = None,
-            node: str = "spawn",
-            max_episode_steps: int | None = 50,
-            step_timeout: float = 2.0,
-            startup_timeout: float = 20.0,
-            seed: int | None = None,
-        ):
-            self._lines = _Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
-            self.render_mode = None
-            super().__init__(num_envs, observation_space(variant), action_space(variant))
-            self._actions = None
-            if seed is not None:
-                self.seed(seed)  # line k starts from seed + k, as with VecEnv.seed() and PPO(seed=...)
-
-        def reset(self):
-            # seed() sets self._seeds = [s + k]: those lines start from those seeds and their generators.
-            seeds = {}
-            for k in range(self.num_envs):
-                if self._seeds[k] is not None:
-                    self._lines.rngs[k] = np.random.default_rng(self._seeds[k])
-                    seeds[k] = int(self._seeds[k])
-                else:
-                    seeds[k] = self._lines.next_seed(k)
-            obs = self._lines.reset(seeds)
-            self.reset_infos = [{"seed": seeds[k]} for k in range(self.num_envs)]
-            self._reset_seeds()
-            self._reset_options()
-            return np.stack([obs[k] for k in range(self.num_envs)])
-
-        def step_async(self, actions: np.ndarray) -> None:
-            self._actions = actions
-
-        def step_wait(self):
-            obs, rewards, truncated, info = self._lines.step(self._actions)
-            infos = _line_infos(info)
-            done = np.flatnonzero(truncated).tolist()
-            if done:
-                fresh = self._lines.restart(done)
-                for k in done:
-                    infos[k]["terminal_observation"] = obs[k].copy()
-                    infos[k]["TimeLimit.truncated"] = True
-                    obs[k] = fresh[k]
-            return obs, rewards.astype(np.float32), truncated.copy(), infos
-
-        def close(self) -> None:
-            self._lines.close()
-
-        # The lines are not separate Python envs: attribute access answers for this object.
-        def get_attr(self, attr_name: str, indices=None) -> list[Any]:
-            return [getattr(self, attr_name) for _ in self._get_indices(indices)]
-
-        def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-            setattr(self, attr_name, value)
-
-        def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-            raise AttributeError(f"the lines of SortingLineSB3VecEnv have no per-line method {method_name!r}")
-
-        def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
-            return [False for _ in self._get_indices(indices)]
-
-    SortingLineSB3VecEnv.__module__ = __name__
-    SortingLineSB3VecEnv.__qualname__ = "SortingLineSB3VecEnv"  # as if defined at module level (repr, pickle)
-    return SortingLineSB3VecEnv
-
-
-def __getattr__(name: str):
-    if name == "SortingLineSB3VecEnv":
-        cls = globals()[name] = _make_sb3_vec_env()
-        return cls
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -141,11 +141,11 @@ def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]
 
 
 def node_binary() -> Path:
-    """NODE_BIN, else the release build."""
-    path = Path(os.environ.get("NODE_BIN") or ROOT / "target" / "release" / "sorting_line")
-    if not path.is_file():
-        raise RuntimeError(f"node binary {path} not found: run `cargo build --release` or set NODE_BIN")
-    return path
+    """The node binary the bridge uses too (``sorting_line_gym.transport.find_node_binary``:
+    $SORTING_LINE_BIN, else this checkout's release build, else PATH)."""
+    from sorting_line_gym.transport import find_node_binary  # here: rclpy loads after ros_environment()
+
+    return Path(find_node_binary())
 
 
 def stamp_ns(stamp) -> int:

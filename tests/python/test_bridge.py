@@ -36,7 +36,8 @@ import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
-from sorting_line_gym.vector import SortingLineSB3VecEnv, SortingLineVectorEnv
+from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
+from sorting_line_gym.vector import SortingLineVectorEnv
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -59,9 +60,9 @@ INFO_KEYS = {
 
 
 def node_binary() -> Path:
-    path = Path(os.environ.get("NODE_BIN") or ROOT / "target" / "release" / "sorting_line")
-    assert path.is_file(), f"node binary {path} not found: run `cargo build --release`"
-    return path
+    from ros_harness import node_binary as harness_node_binary
+
+    return harness_node_binary()
 
 
 def trace(setup: str, variant: str, seed: int, actions, max_steps: int = UNLIMITED) -> list[dict]:
@@ -556,6 +557,7 @@ def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
 def test_attach_to_a_running_node(make_env):
     """node="attach" drives the line of a node started by someone else (here: another env)."""
     owner = make_env(None, setup="B", variant="basic")
+    owner.reset(seed=0)  # envs start their node at the first reset
     guest = make_env(BASIC, setup="B", node="attach", namespace=owner.namespace)
     actions = [2, 3, 9, 0]
     want = trace("B", "basic", 8, actions)

@@ -1,0 +1,5 @@
+"""RL Zoo conf file (``--conf-file sorting_line_gym.zoo.dqn``): see ``sorting_line_gym.zoo``."""
+
+from . import zoo_hyperparams
+
+hyperparams = zoo_hyperparams("dqn")

@@ -1,0 +1,331 @@
+"""The envs under the vectorizers users bring, at scale, against the REAL node (issue 13).
+
+- Gymnasium's AsyncVectorEnv with its default context (fork on Linux): the envs connect at their
+  first reset, so the forked workers never inherit a live rclpy context; and a child forked from a
+  process where rclpy IS live gets a clear error at once (cause and fix), not a futex;
+- many envs per host through line servers (``node="shared"``): SyncVectorEnv of 64 envs in one
+  process, SB3's SubprocVecEnv of 16 worker processes, two vector envs in two processes at once;
+- every env's episode equals `sorting_line trace` for its seed, number for number;
+- action_masks() on every env, and sb3-contrib's MaskablePPO training on them;
+- RL Baselines3 Zoo: rl_zoo3.train with our conf file, then rl_zoo3.enjoy on the model.
+
+Workloads that fork or need a fresh interpreter run as scripts in subprocesses, each bounded by a
+timeout. Episodes are short (10-30 steps; 200 for the fork test) to keep CI cost low.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
+from sorting_line_gym import SortingLineEnv
+from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
+from sorting_line_gym.vector import SortingLineVectorEnv
+from test_bridge import assert_obs, assert_step, fixed_actions, node_binary, trace
+
+ROOT = Path(__file__).resolve().parents[2]
+BASIC = "sorting_line_gym:SortingLine-v0"
+ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
+
+# Records every env's episode as JSON lines: what the comparison with the trace needs.
+RECORDER = r'''
+import json
+import numpy as np
+
+KEYS = ("accuracy", "purity", "containers", "speed_changes", "occupancy", "cumulative_reward", "speed_index", "mode", "step")
+
+
+def plain(value):
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return list(value) if isinstance(value, tuple) else value
+
+
+def record_step(episodes, obs, rewards, info_of):
+    for k, episode in enumerate(episodes):
+        episode["steps"].append({"obs": plain(obs[k]), "reward": float(rewards[k]),
+                                 "info": {key: plain(info_of(k)[key]) for key in KEYS}})
+'''
+
+
+def run_script(tmp_path: Path, name: str, code: str, args=(), timeout: float = 240.0) -> dict:
+    """Runs ``code`` (after RECORDER) as a script in a fresh interpreter, bounded by ``timeout``;
+    returns the JSON object its last stdout line holds."""
+    script = tmp_path / f"{name}.py"
+    script.write_text(RECORDER + code)
+    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    try:
+        r = subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True,
+                           timeout=timeout, env=env, cwd=tmp_path)
+    except subprocess.TimeoutExpired as e:
+        pytest.fail(f"{name} did not finish within {timeout:g} s (a hang):\n{(e.stderr or '')[-3000:]}")
+    assert r.returncode == 0, f"{name} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-4000:]}"
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, actions: list[int], max_steps: int,
+                         where: str) -> None:
+    want = trace(setup, variant, seed, actions, max_steps=max_steps)
+    assert_obs(np.array(episode["obs"], dtype=np.float32), variant, want[0]["reset"]["observation"], f"{where} reset")
+    assert len(episode["steps"]) == len(actions), f"{where}: {len(episode['steps'])} steps for {len(actions)} actions"
+    for t, step in enumerate(episode["steps"]):
+        obs = np.array(step["obs"], dtype=np.float32)
+        assert_step(variant, obs, step["reward"], step["info"], want[t + 1], f"{where} step {t + 1}")
+
+
+# --------------------------------------------------------------------------------------------
+# fork
+
+
+ASYNC_DEFAULT_CONTEXT = r'''
+import sys
+import gymnasium as gym
+from gymnasium.vector import AsyncVectorEnv
+import sorting_line_gym
+
+env_id, setup, seed, steps, n = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+actions = json.loads(sys.argv[6])
+
+
+def make():
+    return gym.make(env_id, setup=setup, max_episode_steps=steps)
+
+
+if __name__ == "__main__":
+    envs = AsyncVectorEnv([make] * n)  # the default context: fork on Linux; the dummy env starts nothing
+    obs, _ = envs.reset(seed=[seed + k for k in range(n)])
+    episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
+    for t in range(steps):
+        obs, rewards, terminated, truncated, info = envs.step(np.array(actions[t]))
+        record_step(episodes, obs, rewards, lambda k: {key: info[key][k] for key in KEYS})
+    print(json.dumps({"episodes": episodes, "truncated": truncated.tolist()}))
+    envs.close()
+'''
+
+
+def test_async_vector_env_with_the_default_fork_context_matches_the_library(tmp_path):
+    """AsyncVectorEnv (fork) of 4 envs, each spawning its node in its worker: 200 steps, env k ==
+    `trace --seed S+k`, the last step truncated by the TimeLimit."""
+    n, steps, seed, variant = 4, 200, 4100, "basic"
+    per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
+    by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
+    out = run_script(tmp_path, "async_fork", ASYNC_DEFAULT_CONTEXT, [BASIC, "B", seed, steps, n, json.dumps(by_step)])
+    assert out["truncated"] == [True] * n
+    for k, episode in enumerate(out["episodes"]):
+        assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"worker {k}")
+
+
+FORK_WITH_LIVE_CONTEXT = r'''
+import os, sys, time
+import gymnasium as gym
+import sorting_line_gym
+from sorting_line_gym import BridgeError
+
+env = gym.make(sys.argv[1], setup="A")
+env.reset(seed=1)
+env.step(0)  # rclpy is live in this process now
+read_end, write_end = os.pipe()
+child = os.fork()
+if child == 0:
+    os.close(read_end)
+    out = {"pid": os.getpid()}
+    started = time.monotonic()
+    for what, use in (("inherited env", lambda: env.step(1)),
+                      ("new env", lambda: gym.make(sys.argv[1], setup="A").reset(seed=2))):
+        try:
+            use()
+            out[what] = "no error"
+        except BridgeError as e:
+            out[what] = str(e)
+    out["seconds"] = time.monotonic() - started
+    os.write(write_end, json.dumps(out).encode())
+    os._exit(0)
+os.close(write_end)
+with os.fdopen(read_end) as f:
+    child_out = json.loads(f.read())
+os.waitpid(child, 0)
+env.step(2)  # the parent's env is unharmed
+env.close()
+print(json.dumps({"parent": os.getpid(), **child_out}))
+'''
+
+
+def test_forked_child_with_an_inherited_live_context_gets_a_clear_error(tmp_path):
+    """A process forked after its parent used an env: the inherited env and a new one both raise
+    at once, naming the cause (rclpy/DDS not fork-safe, both pids) and the fix."""
+    out = run_script(tmp_path, "fork_live", FORK_WITH_LIVE_CONTEXT, [BASIC], timeout=90)
+    for what in ("inherited env", "new env"):
+        message = out[what]
+        assert "not fork-safe" in message, f"{what}: {message}"
+        assert f"pid {out['parent']}" in message and f"pid {out['pid']}" in message, f"{what}: {message}"
+        assert "'spawn'" in message and "'forkserver'" in message, f"{what}: {message}"
+
+
+# --------------------------------------------------------------------------------------------
+# many envs per host: line servers
+
+
+def test_sync_vector_env_of_64_shared_envs_matches_the_library():
+    """gymnasium.make_vec(sync) of 64 envs on line servers (4 node processes of 16 lines): env k ==
+    `trace --seed S+k` for 10 steps."""
+    n, steps, seed, variant = 64, 10, 6400, "advanced"
+    envs = gymnasium.make_vec(ADVANCED, num_envs=n, vectorization_mode="sync", setup="C", node="shared")
+    try:
+        per_env = [fixed_actions(30, steps, seed + k) for k in range(n)]
+        obs, _ = envs.reset(seed=seed)
+        namespaces = [e.unwrapped.namespace for e in envs.envs]
+        assert len(set(namespaces)) == n, f"two envs on one line: {namespaces}"
+        episodes = [{"obs": obs[k].tolist(), "steps": []} for k in range(n)]
+        for t in range(steps):
+            obs, rewards, _, _, info = envs.step(np.array([per_env[k][t] for k in range(n)]))
+            for k in range(n):
+                step_info = {key: info[key][k] for key in info if not key.startswith("_")}
+                episodes[k]["steps"].append({"obs": obs[k].tolist(), "reward": float(rewards[k]), "info": step_info})
+    finally:
+        envs.close()
+    for k, episode in enumerate(episodes):
+        assert_matches_trace(episode, "C", variant, seed + k, per_env[k], 1_000_000, f"env {k} ({namespaces[k]})")
+
+
+SUBPROC_16 = r'''
+import sys
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import SubprocVecEnv
+import sorting_line_gym
+
+env_id, setup, seed, steps, n, start = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5]), sys.argv[6]
+actions = json.loads(sys.argv[7])
+
+if __name__ == "__main__":
+    vec = make_vec_env(env_id, n_envs=n, seed=seed, vec_env_cls=SubprocVecEnv, env_kwargs={"setup": setup, "node": "shared"},
+                       vec_env_kwargs={"start_method": start})
+    obs = vec.reset()  # env k reset with seed + k
+    namespaces = vec.get_attr("namespace")
+    episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
+    for t in range(steps):
+        obs, rewards, dones, infos = vec.step(np.array(actions[t]))
+        record_step(episodes, obs, rewards, lambda k: infos[k])
+    print(json.dumps({"episodes": episodes, "namespaces": namespaces}))
+    vec.close()
+'''
+
+
+def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
+    """SB3's SubprocVecEnv with 16 worker processes, each an rclpy participant leasing a line:
+    env k == `trace --seed S+k` for 20 steps. (fork: the workers share the parent's imports, which
+    keeps CI cost low; the envs connect inside the workers.)"""
+    n, steps, seed, variant = 16, 20, 1600, "basic"
+    per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
+    by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
+    out = run_script(tmp_path, "subproc16", SUBPROC_16, [BASIC, "D", seed, steps, n, "fork", json.dumps(by_step)])
+    assert len(set(out["namespaces"])) == n, out["namespaces"]
+    for k, episode in enumerate(out["episodes"]):
+        assert_matches_trace(episode, "D", variant, seed + k, per_env[k], 1_000_000, f"worker {k}")
+
+
+SYNC_IN_A_PROCESS = r'''
+import sys
+import gymnasium as gym
+import sorting_line_gym
+
+env_id, setup, seed, steps, n = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+actions = json.loads(sys.argv[6])
+envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", setup=setup, node="shared")
+obs, _ = envs.reset(seed=seed)
+episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
+for t in range(steps):
+    obs, rewards, terminated, truncated, info = envs.step(np.array(actions[t]))
+    record_step(episodes, obs, rewards, lambda k: {key: info[key][k] for key in KEYS})
+print(json.dumps({"episodes": episodes, "namespaces": [e.unwrapped.namespace for e in envs.envs]}))
+envs.close()
+'''
+
+
+def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_path):
+    """Two training scripts on one host at once, 8 envs each on the same line servers: distinct
+    lines, and every env's episode == `trace --seed S+k` of its own script's seed."""
+    n, steps, variant = 8, 30, "basic"
+    seeds = (2000, 3000)
+    per_env = {s: [fixed_actions(10, steps, s + k) for k in range(n)] for s in seeds}
+    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    procs = []
+    for s in seeds:
+        script = tmp_path / f"sync_{s}.py"
+        script.write_text(RECORDER + SYNC_IN_A_PROCESS)
+        by_step = [[per_env[s][k][t] for k in range(n)] for t in range(steps)]
+        procs.append(subprocess.Popen([sys.executable, str(script), BASIC, "A", str(s), str(steps), str(n), json.dumps(by_step)],
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+    outs = []
+    for p in procs:
+        try:
+            stdout, stderr = p.communicate(timeout=240)
+        except subprocess.TimeoutExpired:
+            for q in procs:
+                q.kill()
+            pytest.fail("a vector env process did not finish within 240 s (a hang)")
+        assert p.returncode == 0, f"vector env process failed ({p.returncode}):\n{stderr[-4000:]}"
+        outs.append(json.loads(stdout.strip().splitlines()[-1]))
+    assert not set(outs[0]["namespaces"]) & set(outs[1]["namespaces"]), "both processes drove the same line"
+    for s, out in zip(seeds, outs):
+        for k, episode in enumerate(out["episodes"]):
+            assert_matches_trace(episode, "A", variant, s + k, per_env[s][k], 1_000_000, f"process seed {s} env {k}")
+
+
+# --------------------------------------------------------------------------------------------
+# action masks
+
+
+def test_action_masks_on_every_env_face():
+    """All actions valid today, in the shape each consumer expects; asking starts nothing."""
+    single = gymnasium.make(ADVANCED, setup="B")
+    vector = SortingLineVectorEnv(num_envs=3, variant="basic")
+    try:
+        assert np.array_equal(single.unwrapped.action_masks(), np.ones(30, dtype=bool))
+        assert vector.action_masks().shape == (3, 10) and vector.action_masks().all()
+    finally:
+        single.close()
+        vector.close()
+
+
+def test_maskable_ppo_trains_2048_steps_on_4_envs():
+    from sb3_contrib import MaskablePPO
+    from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_supported
+
+    vec = SortingLineSB3VecEnv(num_envs=4, setup="B", variant="advanced", seed=7)
+    try:
+        assert is_masking_supported(vec)
+        masks = get_action_masks(vec)
+        assert masks.shape == (4, 30) and masks.all()
+        model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=2, seed=7, device="cpu")
+        model.learn(2048)
+        assert model.num_timesteps >= 2048
+    finally:
+        vec.close()
+
+
+# --------------------------------------------------------------------------------------------
+# RL Baselines3 Zoo
+
+
+def test_rl_zoo_trains_with_our_conf_file_and_enjoy_replays_the_model(tmp_path):
+    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    common = ["--algo", "ppo", "--env", "SortingLine-v0", "--gym-packages", "sorting_line_gym", "-f", str(tmp_path / "logs")]
+    train = [sys.executable, "-m", "rl_zoo3.train", *common, "--conf-file", "sorting_line_gym.zoo.ppo", "-n", "512",
+             "--seed", "3", "--eval-freq", "-1", "-params", "n_steps:256", "batch_size:64", "n_epochs:1"]
+    r = subprocess.run(train, capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
+    assert r.returncode == 0, f"rl_zoo3.train failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    assert "'gamma', 0.85" in r.stdout and "'max_episode_steps': 250" in r.stdout, r.stdout[-3000:]
+    model = tmp_path / "logs" / "ppo" / "SortingLine-v0_1" / "SortingLine-v0.zip"
+    assert model.is_file(), f"no model at {model}: {sorted(p.name for p in (tmp_path / 'logs').rglob('*'))}"
+    enjoy = [sys.executable, "-m", "rl_zoo3.enjoy", *common, "-n", "260", "--no-render", "--deterministic"]
+    r = subprocess.run(enjoy, capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
+    assert r.returncode == 0, f"rl_zoo3.enjoy failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    assert "Episode Length 250" in r.stdout, r.stdout[-3000:]
