@@ -164,11 +164,18 @@ impl Spinner {
     let ros_discovery_stream = ros_discovery_reader.async_stream();
     pin_mut!(ros_discovery_stream);
 
-    let ros_clock_reader = self
-      .ros_context
-      .create_subscription::<builtin_interfaces::Time>(&self.clock_topic, None)?;
-    let ros_clock_stream = ros_clock_reader.async_stream();
-    pin_mut!(ros_clock_stream);
+    // [sorting_line patch] Like rclcpp's TimeSource, subscribe /clock only when the node uses
+    // sim time: a node that publishes /clock itself must not also announce a reader there.
+    let ros_clock_reader = if self.parameters.use_sim_time() {
+      Some(
+        self
+          .ros_context
+          .create_subscription::<builtin_interfaces::Time>(&self.clock_topic, None)?,
+      )
+    } else {
+      None
+    };
+    let mut ros_clock_stream = ros_clock_reader.as_ref().map(|r| Box::pin(r.async_stream()).fuse());
 
     // These are Option< impl Stream<_>>
     let mut get_parameters_stream_opt = self
@@ -204,7 +211,7 @@ impl Spinner {
           break;
         }
 
-        clock_msg = ros_clock_stream.select_next_some() => {
+        clock_msg = next_if_some(&mut ros_clock_stream).fuse() => {
           match clock_msg {
             Ok((time,_msg_info)) => {
               // Simulated time is updated internally unconditionally.
@@ -573,6 +580,7 @@ impl Node {
       options.parameter_validator.take(),
       options.parameter_set_action.take(),
     )
+    .map(|store| store.with_descriptors(std::mem::take(&mut options.parameter_descriptors)))
     .map_err(NodeCreateError::BadParameter)?;
 
     let mut node = Node {
@@ -713,7 +721,9 @@ impl Node {
 
     let clock_topic = self.create_topic(
       &Name::new("/", "clock").unwrap(),
-      MessageTypeName::new("builtin_interfaces", "Time"),
+      // [sorting_line patch] ROS's /clock type. rosgraph_msgs/Clock is a struct holding one
+      // builtin_interfaces/Time, so the CDR is the same and the reader still decodes a Time.
+      MessageTypeName::new("rosgraph_msgs", "Clock"),
       &DEFAULT_SUBSCRIPTION_QOS,
     )?;
 

@@ -198,6 +198,7 @@ impl From<SetParametersResult> for raw::SetParametersResult {
 }
 
 /// Documentation and constraints for a [`Parameter`]
+#[derive(Clone, Debug)] // [sorting_line patch] stored per parameter, see NodeOptions::describe_parameter
 pub struct ParameterDescriptor {
   pub name: String,
   pub param_type: ParameterType, // ParameterType.msg defines enum
@@ -237,6 +238,7 @@ impl ParameterDescriptor {
 }
 
 /// Optional Limits for a numeric [`Parameter`]
+#[derive(Clone, Debug)] // [sorting_line patch]
 pub enum NumericRange {
   NotSpecified,
   IntegerRange {
@@ -351,6 +353,8 @@ pub(crate) struct ParameterStore {
   validator: Option<Mutex<Box<ParameterFunc>>>,
   set_action: Option<Mutex<Box<ParameterFunc>>>,
   use_sim_time: AtomicBool,
+  // [sorting_line patch] Descriptors given by the node, by parameter name.
+  descriptors: BTreeMap<String, ParameterDescriptor>,
 }
 
 impl ParameterStore {
@@ -384,12 +388,21 @@ impl ParameterStore {
       validator: validator.map(Mutex::new),
       set_action: set_action.map(Mutex::new),
       use_sim_time: AtomicBool::new(false),
+      descriptors: BTreeMap::new(),
     };
     for (name, value) in &initial {
       store.check_value(name, value)?;
       store.run_set_action(name, value)?;
     }
     Ok(store)
+  }
+
+  /// [sorting_line patch] Use these descriptors (description, read-only flag, range) in
+  /// `describe` instead of the placeholder made from the value. The type always follows the
+  /// current value. They document; enforcing them is the validator's job.
+  pub fn with_descriptors(mut self, descriptors: impl IntoIterator<Item = ParameterDescriptor>) -> Self {
+    self.descriptors = descriptors.into_iter().map(|d| (d.name.clone(), d)).collect();
+    self
   }
 
   pub fn allow_undeclared(&self) -> bool {
@@ -429,7 +442,13 @@ impl ParameterStore {
     names
       .iter()
       .map(|name| match values.get(name) {
-        Some(value) => ParameterDescriptor::from_value(name, value),
+        Some(value) => match self.descriptors.get(name) {
+          Some(given) => ParameterDescriptor {
+            param_type: value.to_parameter_type(),
+            ..given.clone()
+          },
+          None => ParameterDescriptor::from_value(name, value),
+        },
         None => ParameterDescriptor::unknown(name),
       })
       .collect()
