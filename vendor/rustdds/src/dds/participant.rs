@@ -64,6 +64,10 @@ use crate::{
 #[cfg(not(feature = "security"))]
 use crate::no_security::SecurityPluginsHandle;
 
+/// [sorting_line patch] Computes the USER_DATA of a local endpoint from its
+/// topic's type name, see [`DomainParticipantBuilder::with_endpoint_user_data`].
+pub type EndpointUserData = Arc<dyn Fn(&str) -> Vec<u8> + Send + Sync>;
+
 /// Builder object to create a [`DomainParticipant`] with non-default
 /// configuration.
 ///
@@ -77,6 +81,11 @@ pub struct DomainParticipantBuilder {
                                        * and multicast setup */
 
   same_host_loopback: bool, // prefer loopback for same-host peers + localhost SPDP discovery peers
+
+  // [sorting_line patch] ROS 2 discovery range and static peers, endpoint USER_DATA.
+  multicast: bool,
+  static_peers: Vec<IpAddr>,
+  endpoint_user_data: Option<EndpointUserData>,
 
   socket_receive_buffer_size: usize,
   socket_send_buffer_size: usize,
@@ -93,6 +102,9 @@ impl DomainParticipantBuilder {
       domain_id,
       only_networks: None,
       same_host_loopback: true,
+      multicast: true,
+      static_peers: Vec::new(),
+      endpoint_user_data: None,
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
       socket_send_buffer_size: Self::DEFAULT_SOCKET_SEND_BUFFER_SIZE,
       #[cfg(feature = "security")]
@@ -126,6 +138,33 @@ impl DomainParticipantBuilder {
   /// `src/rtps/loopback_same_host_design.md`.
   pub fn same_host_loopback(mut self, enabled: bool) -> Self {
     self.same_host_loopback = enabled;
+    self
+  }
+
+  /// [sorting_line patch] Enable/disable multicast (default: enabled). When
+  /// disabled, no multicast group is joined, no multicast locator is advertised
+  /// and nothing is sent to a multicast address, so discovery reaches only the
+  /// localhost peers (see [`Self::same_host_loopback`]), the static peers and
+  /// participants that contact this one. ROS 2's
+  /// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` and `OFF` need this.
+  pub fn multicast(mut self, enabled: bool) -> Self {
+    self.multicast = enabled;
+    self
+  }
+
+  /// [sorting_line patch] Hosts that SPDP is also sent to, by unicast, on the
+  /// well-known discovery ports of participant ids `0..SPDP_LOCALHOST_PEER_COUNT`
+  /// (ROS 2's `ROS_STATIC_PEERS`, Fast DDS's initial peers).
+  pub fn with_static_peers(mut self, peers: impl IntoIterator<Item = IpAddr>) -> Self {
+    self.static_peers = peers.into_iter().collect();
+    self
+  }
+
+  /// [sorting_line patch] USER_DATA announced in the discovery data (SEDP) of
+  /// every local DataReader and DataWriter, computed from its topic's type name.
+  /// ROS 2 Jazzy puts `typehash=RIHS01_<hex>;` there.
+  pub fn with_endpoint_user_data(mut self, user_data: EndpointUserData) -> Self {
+    self.endpoint_user_data = Some(user_data);
     self
   }
 
@@ -344,9 +383,13 @@ impl DomainParticipantBuilder {
       self.socket_send_buffer_size,
       self.only_networks,
       self.same_host_loopback,
+      self.multicast,
+      self.static_peers,
       dp_waker,
       discovery_sample_sender,
     )?;
+    let mut dp = dp;
+    dp.endpoint_user_data = self.endpoint_user_data;
 
     // outer DP wrapper
     let dp = DomainParticipant {
@@ -539,6 +582,13 @@ impl DomainParticipant {
 
   pub(crate) fn only_networks(&self) -> Option<Arc<[IpAddr]>> {
     self.dpi.lock().ok().and_then(|g| g.only_networks())
+  }
+
+  /// [sorting_line patch] USER_DATA for a local endpoint of this type (empty
+  /// unless set with `DomainParticipantBuilder::with_endpoint_user_data`).
+  pub(crate) fn endpoint_user_data(&self, type_name: &str) -> Vec<u8> {
+    let f = self.dpi.lock().ok().and_then(|g| g.endpoint_user_data.clone());
+    f.map(|f| f(type_name)).unwrap_or_default()
   }
 
   /// Gets all DiscoveredTopics from DDS network
@@ -958,6 +1008,7 @@ pub(crate) struct DomainParticipantDisc {
   discovery_join_handle: std::sync::mpsc::Receiver<JoinHandle<()>>,
   // This allows deterministic generation of EntityIds for DataReader, DataWriter, etc.
   entity_id_generator: atomic::AtomicU32,
+  endpoint_user_data: Option<EndpointUserData>, // [sorting_line patch]
 }
 
 impl DomainParticipantDisc {
@@ -977,6 +1028,8 @@ impl DomainParticipantDisc {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    multicast: bool,
+    static_peers: Vec<IpAddr>,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
@@ -994,6 +1047,8 @@ impl DomainParticipantDisc {
       socket_send_buffer_size,
       only_networks,
       same_host_loopback,
+      multicast,
+      static_peers,
       dp_waker,
       discovery_sample_sender,
     )?;
@@ -1003,6 +1058,7 @@ impl DomainParticipantDisc {
       discovery_command_sender,
       discovery_join_handle,
       entity_id_generator: atomic::AtomicU32::new(0),
+      endpoint_user_data: None,
     })
   }
 
@@ -1236,6 +1292,8 @@ impl DomainParticipantInner {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    multicast: bool,
+    static_peers: Vec<IpAddr>,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
@@ -1243,6 +1301,9 @@ impl DomainParticipantInner {
     let _dummy = _qos_policies; // to make clippy happy
 
     let only_networks: Option<Arc<[IpAddr]>> = only_networks.map(|v| v.into());
+    // [sorting_line patch] Multicast off = no interface to join or send multicast on.
+    let multicast_networks: Option<Arc<[IpAddr]>> =
+      if multicast { only_networks.clone() } else { Some(Arc::from(Vec::new())) };
 
     let mut listeners = HashMap::new();
 
@@ -1251,7 +1312,7 @@ impl DomainParticipantInner {
       spdp_well_known_multicast_port(domain_id),
       Ipv4Addr::new(239, 255, 0, 1),
       socket_receive_buffer_size,
-      only_networks.as_deref(),
+      multicast_networks.as_deref(),
     ) {
       Ok(l) => {
         listeners.insert(DISCOVERY_MUL_LISTENER_TOKEN, l);
@@ -1293,7 +1354,7 @@ impl DomainParticipantInner {
       user_traffic_multicast_port(domain_id),
       Ipv4Addr::new(239, 255, 0, 1),
       socket_receive_buffer_size,
-      only_networks.as_deref(),
+      multicast_networks.as_deref(),
     ) {
       Ok(l) => {
         listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
@@ -1377,7 +1438,7 @@ impl DomainParticipantInner {
     // Launch the background thread for DomainParticipant
     let disc_db_clone = discovery_db.clone();
     let security_plugins_clone = security_plugins_handle.clone();
-    let only_networks_for_ev_loop = only_networks.clone();
+    let only_networks_for_ev_loop = multicast_networks; // only chooses the multicast senders
     let ev_loop_handle = thread::Builder::new()
       .name(format!("RustDDS Participant {participant_id} event loop"))
       .spawn(move || {
@@ -1412,6 +1473,7 @@ impl DomainParticipantInner {
           only_networks_for_ev_loop,
           socket_send_buffer_size,
           same_host_loopback,
+          static_peers,
           reader_ready_rx,
           writer_ready_rx,
           dp_waker,

@@ -498,7 +498,7 @@ impl ParameterListable for DiscoveredReaderData {
           security_info,
         },
       content_filter,
-      user_data: _,
+      user_data,
     } = self;
 
     let mut pl = ParameterList::new();
@@ -579,6 +579,12 @@ impl ParameterListable for DiscoveredReaderData {
       security_info,
       EndpointSecurityInfo
     );
+
+    // [sorting_line patch] USER_DATA (sequence<octet>) of a local endpoint, see
+    // DomainParticipantBuilder::with_endpoint_user_data.
+    if !user_data.is_empty() {
+      emit!(PID_USER_DATA, user_data, Vec<u8>);
+    }
 
     Ok(pl)
   }
@@ -810,7 +816,7 @@ impl DiscoveredWriterData {
       last_updated: Instant::now(),
       writer_proxy,
       publication_topic_data,
-      user_data: Vec::new(),
+      user_data: dp.endpoint_user_data(topic.get_type().name()), // [sorting_line patch]
     }
   }
 }
@@ -956,7 +962,7 @@ impl ParameterListable for DiscoveredWriterData {
           #[cfg(feature = "security")]
           security_info,
         },
-      user_data: _,
+      user_data,
     } = self;
 
     let mut pl = ParameterList::new();
@@ -1032,6 +1038,12 @@ impl ParameterListable for DiscoveredWriterData {
       security_info,
       EndpointSecurityInfo
     );
+
+    // [sorting_line patch] USER_DATA (sequence<octet>) of a local endpoint, see
+    // DomainParticipantBuilder::with_endpoint_user_data.
+    if !user_data.is_empty() {
+      emit!(PID_USER_DATA, user_data, Vec<u8>);
+    }
 
     Ok(pl)
   }

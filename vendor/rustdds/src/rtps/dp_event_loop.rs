@@ -140,6 +140,8 @@ pub struct DPEventLoop {
   // route same-host peers over loopback. See
   // `src/rtps/loopback_same_host_design.md`.
   same_host_loopback: bool,
+  // [sorting_line patch] Hosts the SPDP writer also announces to (ROS_STATIC_PEERS).
+  static_peers: Vec<IpAddr>,
 }
 
 impl DPEventLoop {
@@ -164,6 +166,7 @@ impl DPEventLoop {
     only_networks: Option<Arc<[IpAddr]>>,
     socket_send_buffer_size: usize,
     same_host_loopback: bool,
+    static_peers: Vec<IpAddr>,
     reader_ready: ReadyReceiver<EntityId>,
     writer_ready: ReadyReceiver<EntityId>,
     waker: LoopWaker,
@@ -257,6 +260,7 @@ impl DPEventLoop {
       participant_status_sender,
       discovery_command_sender,
       same_host_loopback,
+      static_peers,
     })
   }
 
@@ -1113,14 +1117,25 @@ impl DPEventLoop {
     // - every writer may route a confirmed same-host peer over loopback.
     // See `src/rtps/loopback_same_host_design.md`.
     new_writer.set_prefer_loopback_same_host(self.same_host_loopback);
-    if self.same_host_loopback
-      && new_writer.guid().entity_id == EntityId::SPDP_BUILTIN_PARTICIPANT_WRITER
-    {
-      new_writer.set_extra_unicast_destinations(localhost_spdp_peer_locators(
-        self.domain_info.domain_id,
-        self.domain_info.participant_id,
-        SPDP_LOCALHOST_PEER_COUNT,
-      ));
+    if new_writer.guid().entity_id == EntityId::SPDP_BUILTIN_PARTICIPANT_WRITER {
+      let mut peers = Vec::new();
+      if self.same_host_loopback {
+        peers = localhost_spdp_peer_locators(
+          self.domain_info.domain_id,
+          self.domain_info.participant_id,
+          SPDP_LOCALHOST_PEER_COUNT,
+        );
+      }
+      // [sorting_line patch] Static peers: every participant id's SPDP port on each.
+      for ip in &self.static_peers {
+        peers.extend((0..SPDP_LOCALHOST_PEER_COUNT).map(|pid| {
+          crate::structure::locator::Locator::from(std::net::SocketAddr::new(
+            *ip,
+            crate::network::constant::spdp_well_known_unicast_port(self.domain_info.domain_id, pid),
+          ))
+        }));
+      }
+      new_writer.set_extra_unicast_destinations(peers);
     }
 
     // The doorbell is a shared ready-queue plus the poll waker, not a
@@ -1344,6 +1359,7 @@ mod tests {
         None,
         0,
         true,
+        Vec::new(),
         reader_ready,
         writer_ready,
         waker,
