@@ -14,8 +14,8 @@
 //! Unlike rcl, which warns and falls back to LOCALHOST, a value outside these fails at start
 //! with the variable, the value and what is allowed (a typo must not silently change which
 //! machines the simulator talks to). OFF is as close as RustDDS gets: the node announces
-//! itself to nobody and advertises only loopback, but it still answers a same-host participant
-//! that announces itself to it (Fast DDS under OFF runs no discovery at all).
+//! itself to nobody and advertises only loopback, but RustDDS cannot ignore a participant that
+//! announces itself to the node's discovery port (Fast DDS under OFF runs no discovery at all).
 
 use std::net::{IpAddr, Ipv4Addr, ToSocketAddrs};
 use std::sync::Arc;

@@ -159,3 +159,33 @@ def test_a_running_peer_stops_listing_the_endpoints(ros, start_node, namespace):
                        lambda probe, ns: probe.get_publishers_info_by_topic(f"{ns}/state")
                        or probe.get_subscriptions_info_by_topic(f"{ns}/cmd/speed"))
     print(f"\nSIGINT: the peer stopped listing the endpoints after {took:.3f} s")
+
+
+@pytest.mark.parametrize("env,expected", [
+    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "localhost"},
+     "ROS_AUTOMATIC_DISCOVERY_RANGE = localhost is not valid: allowed SUBNET, LOCALHOST, OFF, SYSTEM_DEFAULT"),
+    ({"ROS_STATIC_PEERS": "::1"}, "ROS_STATIC_PEERS: peer '::1' is IPv6"),
+], ids=["range", "peer"])
+def test_bad_discovery_variables_fail_at_start(env, expected):
+    code, stderr = h.run_node_expecting_failure([], env=env)
+    assert code == 2 and expected in stderr, f"exit {code}:\n{stderr}"
+
+
+@pytest.mark.parametrize("range_,visible", [("SUBNET", True), ("LOCALHOST", True), ("SYSTEM_DEFAULT", True),
+                                            ("OFF", False)])
+def test_the_node_follows_the_discovery_range(ros, start_node, namespace, range_, visible):
+    """Same host, the peer (rclpy) under LOCALHOST: every range but OFF finds it (the multi-host
+    cases need a second network namespace: the veth test)."""
+    ns = namespace(range_.lower())
+    node = start_node("--ros-args", "-r", f"__ns:={ns}", env={"ROS_AUTOMATIC_DISCOVERY_RANGE": range_})
+    probe = ros.make_node("range_probe")
+    try:
+        seen = lambda: probe.get_publishers_info_by_topic(f"{ns}/state")
+        if visible:
+            ros.spin_until(seen, 10.0, f"{ns}/state under {range_}", node.describe)
+        else:
+            ros.spin_for(3.0)
+            assert not seen(), f"found under {range_}\n{node.describe()}"
+        assert f"discovery range {range_}" in node.log(), node.describe()
+    finally:
+        ros.destroy_node(probe)
