@@ -1207,6 +1207,10 @@ impl Drop for DomainParticipantDisc {
         .join()
         .unwrap_or_else(|e| warn!("Failed to join discovery thread: {e:?}"));
       debug!("Joined Discovery.");
+      // [sorting_line patch] Discovery has just written the disposes of this participant and
+      // its endpoints; the event loop sends them on its next wake, which the Stop command that
+      // follows (DomainParticipantInner::drop) would otherwise win. Give them a moment.
+      thread::sleep(Duration::from_millis(200));
     }
   }
 }

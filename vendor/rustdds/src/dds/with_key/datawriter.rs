@@ -818,15 +818,11 @@ where
     key: &<D as Keyed>::K,
     source_timestamp: Option<Timestamp>,
   ) -> WriteResult<(), ()> {
-    let send_buffer = SA::key_to_bytes(key).map_err(|e| WriteError::Serialization {
-      reason: format!("{e}"),
-      data: (),
-    })?; // serialize key
-
-    let ddsdata = DDSData::new_disposed_by_key(
-      ChangeKind::NotAliveDisposed,
-      SerializedPayload::new_from_bytes(SA::output_encoding(), send_buffer),
-    );
+    // [sorting_line patch] Dispose by key hash (PID_KEY_HASH in the inline QoS), not by a
+    // serialized key: Fast DDS finds the instance of a disposed discovery (SEDP/SPDP) sample
+    // only by its key hash, so without it peers kept a departed participant's endpoints until
+    // its lease expired. RTPS allows either form.
+    let ddsdata = DDSData::new_disposed_by_key_hash(ChangeKind::NotAliveDisposed, crate::dds::key::Key::hash_key(key, false));
     let timeout = self.qos().reliable_max_blocking_time().map(|d| d.to_std());
     match self
       .send_buffer
