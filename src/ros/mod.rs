@@ -2,20 +2,27 @@
 //! the ROS conventions ros2-client leaves to us (`--ros-args`, parameters, `ROS_DOMAIN_ID`).
 //!
 //! - `options`: the `node` subcommand's flags; `ros_args`: `--ros-args`; `params`: all of them
-//!   merged and validated; `names`: namespaces and remaps.
+//!   merged and validated; `param_descriptors`: what `ros2 param describe` says; `names`:
+//!   namespaces and remaps.
+//! - `discovery`: the DDS participant as ROS 2's discovery variables ask; `type_hash`: the
+//!   RIHS01 type hashes every endpoint announces.
 //! - `protocol`: lock-step/realtime command handling of one line, without I/O.
 //! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire.
 //! - `node`: the DDS participant and the event loop.
 
 pub mod clock;
 pub mod diagnostics;
+pub mod discovery;
 pub mod messages;
 pub mod names;
 pub mod node;
 pub mod options;
+pub mod param_descriptors;
 pub mod params;
 pub mod protocol;
 pub mod qos;
 pub mod ros_args;
+pub mod type_hash;
+pub mod type_hash_table;
 
 pub use node::run;

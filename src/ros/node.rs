@@ -1,9 +1,8 @@
-//! The running node: one DDS participant (loopback-only, on `ROS_DOMAIN_ID`), one ROS node, and
+//! The running node: one DDS participant (set up from ROS 2's discovery variables), one ROS node, and
 //! for each hosted line its publishers, subscriptions and `reset` service. A single async task
 //! waits on all inputs at once (commands, service requests, the realtime timer, the diagnostics
 //! timer, SIGINT/SIGTERM), so an idle node in lock-step uses no CPU.
 
-use std::net::{IpAddr, Ipv4Addr};
 use std::time::{Duration, Instant};
 
 use async_signal::{Signal, Signals};
@@ -12,14 +11,15 @@ use ros2_client::{
     Context, Gid, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
     Server, ServiceMapping, Subscription,
 };
-use rustdds::DomainParticipantBuilder;
 use serde::Serialize;
 
 use super::clock::SimClock;
 use super::diagnostics::LineCounters;
+use super::discovery::Discovery;
 use super::messages::*;
 use super::names::{Names, NODE_NAME};
 use super::options::{NodeArgs, TickMode};
+use super::param_descriptors::descriptors;
 use super::params::NodeParams;
 use super::protocol::{batch_commands, batch_resets, Accepted, Client, Command, HostedLine, Rejection, TimerTick};
 use super::qos::default_profile;
@@ -29,25 +29,8 @@ use crate::sim::{Observation, Variant};
 /// How often /diagnostics is published (wall time).
 const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 
-/// Highest ROS_DOMAIN_ID DDS allows with the default port mapping.
-const MAX_DOMAIN_ID: u16 = 232;
-
 fn log(level: &str, message: impl AsRef<str>) {
     eprintln!("[{level}] [{NODE_NAME}]: {}", message.as_ref());
-}
-
-/// `ROS_DOMAIN_ID`, which ros2-client's `Context::new` would ignore.
-fn domain_id() -> Result<u16, String> {
-    match std::env::var("ROS_DOMAIN_ID") {
-        Err(_) => Ok(0),
-        Ok(v) if v.trim().is_empty() => Ok(0),
-        Ok(v) => v
-            .trim()
-            .parse::<u16>()
-            .ok()
-            .filter(|d| *d <= MAX_DOMAIN_ID)
-            .ok_or_else(|| format!("ROS_DOMAIN_ID = {v} is out of range: allowed 0 ..= {MAX_DOMAIN_ID}")),
-    }
 }
 
 /// Runs the node until SIGINT or SIGTERM.
@@ -55,16 +38,16 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let ros = RosArgs::parse(&ros_args, NODE_NAME)?;
     let names = Names::new(&ros)?;
     let params = NodeParams::resolve(&args, &ros.params, &ros.params_files, &names)?;
-    let domain = domain_id()?;
+    let discovery = Discovery::from_env()?;
+    for warning in &discovery.warnings {
+        log("WARN", warning);
+    }
     // Before any DDS thread exists, so a signal during start-up is ours to handle.
     let signals = Signals::new([Signal::Int, Signal::Term]).map_err(|e| format!("cannot catch signals: {e}"))?;
 
-    // Loopback only: test and benchmark traffic must not leave the machine, and a simulator has
-    // no business on the plant network unless someone builds that deliberately.
-    let participant = DomainParticipantBuilder::new(domain)
-        .with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)])
-        .build()
-        .map_err(|e| format!("cannot create the DDS participant on domain {domain}: {e:?}"))?;
+    // Whatever the environment asks, as any rcl node would: keeping a test on this machine is
+    // the test's business (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, network namespaces).
+    let participant = discovery.participant()?;
     let context = Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
     let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
     let mut node = context.new_node(node_name, node_options(&params)).map_err(|e| format!("cannot create the node: {e:?}"))?;
@@ -91,9 +74,10 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     log(
         "INFO",
         format!(
-            "{}/{} up on ROS_DOMAIN_ID {domain}: {} {} line(s), {} input, {:?}, seed {}{}",
+            "{}/{} up on {}: {} {} line(s), {} input, {:?}, seed {}{}",
             names.namespace.trim_end_matches('/'),
             names.node_name,
+            discovery.summary(),
             params.lines,
             params.line.variant,
             params.line.input,
@@ -134,6 +118,9 @@ fn node_options(params: &NodeParams) -> NodeOptions {
         };
         declared.push((name, value.clone()));
         options = options.declare_parameter(name, value);
+    }
+    for descriptor in descriptors() {
+        options = options.describe_parameter(descriptor);
     }
     // The validator also sees the declarations themselves: those pass, any change is refused.
     options.parameter_validator(Box::new(move |name: &str, value: &ParameterValue| {

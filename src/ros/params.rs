@@ -49,6 +49,15 @@ impl Default for NodeParams {
 /// Most lines one process hosts (memory and message rate stay bounded).
 pub const MAX_LINES: u32 = 64;
 
+/// Highest realtime rate, ticks per second (the lower bound, 0, is open).
+pub const MAX_RATE: f64 = 100_000.0;
+
+/// Simulated seconds per tick, inclusive bounds.
+pub const TICK_PERIOD_RANGE: (f64, f64) = (1e-6, 3600.0);
+
+/// Highest seed: a ROS integer parameter is an int64.
+pub const MAX_SEED: u64 = i64::MAX as u64;
+
 /// Every parameter the node declares, with what it accepts.
 pub const PARAMETERS: &[(&str, &str)] = &[
     ("variant", "basic or advanced"),
@@ -149,18 +158,18 @@ impl NodeParams {
         let out_of_range = |name: &str, value: String| {
             Err(format!("parameter {name} = {value} is out of range: allowed {}", allowed(name)))
         };
-        if !(self.rate > 0.0 && self.rate <= 100_000.0) {
+        if !(self.rate > 0.0 && self.rate <= MAX_RATE) {
             return out_of_range("rate", self.rate.to_string());
         }
         if !(1..=MAX_LINES).contains(&self.lines) {
             return out_of_range("lines", self.lines.to_string());
         }
-        if !(self.tick_period >= 1e-6 && self.tick_period <= 3600.0) {
+        if !(self.tick_period >= TICK_PERIOD_RANGE.0 && self.tick_period <= TICK_PERIOD_RANGE.1) {
             return out_of_range("tick_period", self.tick_period.to_string());
         }
         // The seed is declared as a ROS parameter, an int64: a larger one would read back negative.
         match self.seed.checked_add(u64::from(self.lines - 1)) {
-            Some(last) if last <= i64::MAX as u64 => {}
+            Some(last) if last <= MAX_SEED => {}
             _ if self.lines > 1 => return out_of_range("seed", format!("{} (with {} lines, up to seed + {})", self.seed, self.lines, self.lines - 1)),
             _ => return out_of_range("seed", self.seed.to_string()),
         }

@@ -108,6 +108,12 @@ fn check_range(
 /// Largest accepted episode length: keeps step counters and per-episode series bounded.
 pub const MAX_EPISODE_STEPS: u32 = 1_000_000;
 
+/// The bounds `validate` accepts (`threshold`'s upper bound is open), named once so that the
+/// node's parameter descriptors state exactly what is enforced.
+pub const OBS_NOISE_RANGE: (f64, f64) = (0.0, 1.0);
+pub const ACTION_PENALTY_RANGE: (f64, f64) = (0.0, 10.0);
+pub const THRESHOLD_RANGE: (f64, f64) = (0.0, 1.0);
+
 impl LineConfig {
     /// The configuration of one of the paper's setups (threshold 0.7, 50-step episodes).
     pub fn for_setup(setup: Setup, variant: Variant) -> Self {
@@ -121,9 +127,12 @@ impl LineConfig {
     }
 
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check_range("obs_noise", self.obs_noise, 0.0, 1.0, false, "0.0 ..= 1.0")?;
-        check_range("action_penalty", self.action_penalty, 0.0, 10.0, false, "0.0 ..= 10.0")?;
-        check_range("threshold", self.threshold, 0.0, 1.0, true, "0.0 ..< 1.0")?;
+        let (lo, hi) = OBS_NOISE_RANGE;
+        check_range("obs_noise", self.obs_noise, lo, hi, false, "0.0 ..= 1.0")?;
+        let (lo, hi) = ACTION_PENALTY_RANGE;
+        check_range("action_penalty", self.action_penalty, lo, hi, false, "0.0 ..= 10.0")?;
+        let (lo, hi) = THRESHOLD_RANGE;
+        check_range("threshold", self.threshold, lo, hi, true, "0.0 ..< 1.0")?;
         if !(1..=MAX_EPISODE_STEPS).contains(&self.max_steps) {
             return Err(ConfigError {
                 field: "max_steps",

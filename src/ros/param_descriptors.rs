@@ -1,0 +1,114 @@
+//! What `ros2 param describe` (the DescribeParameters service) says about each parameter:
+//! a description, read-only (the values are fixed for the run), and the numeric range the
+//! validator enforces, taken from the same constants the validator uses
+//! (`crate::sim::config` for the line, [`super::params`] for the node).
+
+use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
+
+use super::params::{MAX_LINES, MAX_RATE, MAX_SEED, PARAMETERS, TICK_PERIOD_RANGE};
+use crate::sim::config::{ACTION_PENALTY_RANGE, MAX_EPISODE_STEPS, OBS_NOISE_RANGE, THRESHOLD_RANGE};
+
+/// What each parameter is for, in the order of [`PARAMETERS`].
+const DESCRIPTIONS: &[(&str, &str)] = &[
+    ("variant", "Line variant: basic (belt speed only) or advanced (speed and sort mode, ratio sensor)"),
+    ("input", "Input material stream: random, seasonal (9 patterns) or seasonal3"),
+    ("obs_noise", "Noise of the observed input quantity (0 = exact)"),
+    ("action_penalty", "Reward penalty per change of the belt speed"),
+    ("threshold", "Purity threshold of the reward"),
+    ("max_steps", "Episode length in ticks"),
+    ("seed", "Seed of line 0's random streams; line k uses seed + k"),
+    ("mode", "lockstep (a tick when its commands have arrived) or realtime (ticks at `rate`)"),
+    ("rate", "Realtime mode: ticks per second of wall time"),
+    ("lines", "Lines hosted by this node (more than one: <namespace>/line_<k>)"),
+    ("tick_period", "Simulated seconds per tick (the step of /clock and of every stamp)"),
+    ("use_sim_time", "Ignored: this node is the clock, it publishes /clock"),
+];
+
+/// The numeric range of a parameter, if it has one.
+fn range(name: &str) -> NumericRange {
+    let float = |(from_value, to_value): (f64, f64)| NumericRange::FloatingPointRange { from_value, to_value, step: 0.0 };
+    let int = |from_value: i64, to_value: i64| NumericRange::IntegerRange { from_value, to_value, step: 1 };
+    match name {
+        "obs_noise" => float(OBS_NOISE_RANGE),
+        "action_penalty" => float(ACTION_PENALTY_RANGE),
+        // Upper bound open: stated in additional_constraints ("0.0 ..< 1.0").
+        "threshold" => float(THRESHOLD_RANGE),
+        "max_steps" => int(1, i64::from(MAX_EPISODE_STEPS)),
+        "seed" => int(0, MAX_SEED as i64),
+        // Lower bound open: stated in additional_constraints ("0.0 <.. 100000.0").
+        "rate" => float((0.0, MAX_RATE)),
+        "lines" => int(1, i64::from(MAX_LINES)),
+        "tick_period" => float(TICK_PERIOD_RANGE),
+        _ => NumericRange::NotSpecified,
+    }
+}
+
+/// The descriptor of every parameter the node declares.
+pub fn descriptors() -> Vec<ParameterDescriptor> {
+    PARAMETERS
+        .iter()
+        .map(|(name, allowed)| ParameterDescriptor {
+            name: name.to_string(),
+            // ros2-client answers with the type of the current value.
+            param_type: ParameterType::NotSet,
+            description: DESCRIPTIONS.iter().find(|(n, _)| n == name).map(|(_, d)| d.to_string()).unwrap_or_default(),
+            additional_constraints: format!("{allowed}; fixed for the run: restart the node to change it"),
+            read_only: true,
+            dynamic_typing: false,
+            range: range(name),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros::params::NodeParams;
+    use serde_yaml::Value;
+
+    fn accepts(name: &str, value: Value) -> bool {
+        NodeParams::default().set(name, &value, "test").is_ok()
+    }
+
+    #[test]
+    fn every_parameter_is_described_and_read_only() {
+        let all = descriptors();
+        assert_eq!(all.len(), PARAMETERS.len());
+        for d in &all {
+            assert!(!d.description.is_empty(), "{} has no description", d.name);
+            assert!(d.read_only, "{}", d.name);
+        }
+    }
+
+    /// The advertised range is the enforced one: its bounds pass (unless stated open) and the
+    /// values just beyond them are refused.
+    #[test]
+    fn ranges_are_what_the_validator_enforces() {
+        let mut checked = 0;
+        for d in descriptors() {
+            let name = d.name.as_str();
+            match d.range {
+                NumericRange::FloatingPointRange { from_value, to_value, .. } => {
+                    let open_low = d.additional_constraints.contains(" <..");
+                    let open_high = d.additional_constraints.contains("..<");
+                    assert_eq!(accepts(name, Value::from(from_value)), !open_low, "{name} = {from_value}");
+                    assert_eq!(accepts(name, Value::from(to_value)), !open_high, "{name} = {to_value}");
+                    assert!(!accepts(name, Value::from(from_value.next_down())), "{name} below {from_value}");
+                    assert!(!accepts(name, Value::from(to_value.next_up())), "{name} above {to_value}");
+                    checked += 1;
+                }
+                NumericRange::IntegerRange { from_value, to_value, .. } => {
+                    assert!(accepts(name, Value::from(from_value)), "{name} = {from_value}");
+                    assert!(accepts(name, Value::from(to_value)), "{name} = {to_value}");
+                    if from_value > 0 {
+                        assert!(!accepts(name, Value::from(from_value - 1)), "{name} below {from_value}");
+                    }
+                    assert!(!accepts(name, Value::from(to_value as u64 + 1)), "{name} above {to_value}");
+                    checked += 1;
+                }
+                NumericRange::NotSpecified => {}
+            }
+        }
+        assert_eq!(checked, 8, "every numeric parameter has a range");
+    }
+}
