@@ -1,11 +1,17 @@
 //! Offline evaluation: an agent on a line, episode by episode, with the paper's protocol
 //! (episode i reset with seed S + i, reward summed over the episode, mean and population std).
 //! Pure computation; the CLI prints and draws the progress bar.
+//!
+//! With an evolution schedule the line evolves across the evaluation (eval episode k is the
+//! line's episode k: the line is built, then reset for each episode). The agent is built for the
+//! starting setup and is not told of changes; while the line has no ratio sensor it is shown
+//! category basic (0), which is what the basic line's agents decide with.
 
 use serde::Serialize;
 
 use crate::sim::agent::{Agent, AgentSpec};
-use crate::sim::{Line, LineConfig};
+use crate::sim::evolution::{At, Schedule};
+use crate::sim::{Category, Line, LineConfig, Observation};
 
 /// What one episode produced.
 #[derive(Clone, Debug, Serialize)]
@@ -20,6 +26,9 @@ pub struct EpisodeStats {
     /// Container purity at the end of the episode (correct / all sorted).
     pub purity: f64,
     pub speed_changes: u32,
+    /// Indices of the evolution events applied in this episode (at its reset or its ticks).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub evolution_events: Vec<usize>,
 }
 
 /// Mean and spread over the episodes of an evaluation.
@@ -39,15 +48,31 @@ pub struct EvalSummary {
     pub purity_mean: f64,
     pub speed_changes_mean: f64,
     pub per_episode: Vec<EpisodeStats>,
+    /// The evolution schedule the line followed (absent when it did not evolve).
+    #[serde(skip_serializing_if = "Schedule::is_empty")]
+    pub evolution: Schedule,
+}
+
+/// What an agent is shown: the reading, and the ratio category only if the line has the sensor.
+fn agent_view(line: &Line, observation: Observation) -> Observation {
+    Observation { category: line.category_reading().unwrap_or(Category::Basic), ..observation }
 }
 
 /// Runs one episode from a seeded reset until the time limit.
 pub fn run_episode(line: &mut Line, agent: &mut Agent, seed: u64) -> EpisodeStats {
     let mut observation = line.reset(Some(seed));
     agent.reseed(seed);
+    let evolving = !line.evolution().is_empty();
+    let mut evolution_events: Vec<usize> = Vec::new();
+    if evolving {
+        evolution_events.extend(line.evolution().events_at(At::Episode(line.episode())).map(|(i, _)| i));
+    }
     let (mut reward, mut speed, mut accuracy, mut steps) = (0.0, 0.0, 0.0, 0u32);
     loop {
-        let action = agent.act(observation, line.speed_index());
+        let action = agent.act(agent_view(line, observation), line.speed_index());
+        if evolving {
+            evolution_events.extend(line.evolution().events_at(At::Tick(line.tick())).map(|(i, _)| i));
+        }
         let out = line.step(action);
         reward += out.reward;
         speed += action.speed();
@@ -65,6 +90,7 @@ pub fn run_episode(line: &mut Line, agent: &mut Agent, seed: u64) -> EpisodeStat
         accuracy_mean: accuracy / f64::from(steps),
         purity: line.containers().purity(),
         speed_changes: line.speed_changes(),
+        evolution_events,
     }
 }
 
@@ -72,10 +98,11 @@ fn mean(values: impl Iterator<Item = f64>, n: usize) -> f64 {
     values.sum::<f64>() / n as f64
 }
 
-/// Evaluates `spec` over `episodes` episodes seeded `seed`, `seed + 1`, ...; `progress` is called
-/// after each episode.
+/// Evaluates `spec` over `episodes` episodes seeded `seed`, `seed + 1`, ... on a line evolving by
+/// `evolution` (empty: a fixed line); `progress` is called after each episode.
 pub fn evaluate(
     config: &LineConfig,
+    evolution: &Schedule,
     spec: AgentSpec,
     episodes: usize,
     seed: u64,
@@ -85,8 +112,9 @@ pub fn evaluate(
         return Err("episodes = 0 is out of range: allowed 1 or more".into());
     }
     config.validate().map_err(|e| e.to_string())?;
+    evolution.validate().map_err(|e| e.to_string())?;
     let mut agent = Agent::new(spec, config, seed)?;
-    let mut line = Line::new(config.clone(), seed);
+    let mut line = Line::with_evolution(config.clone(), seed, evolution.clone());
     let mut per_episode = Vec::with_capacity(episodes);
     for i in 0..episodes as u64 {
         let stats = run_episode(&mut line, &mut agent, seed + i);
@@ -109,5 +137,6 @@ pub fn evaluate(
         purity_mean: mean(per_episode.iter().map(|e| e.purity), n),
         speed_changes_mean: mean(per_episode.iter().map(|e| f64::from(e.speed_changes)), n),
         per_episode,
+        evolution: evolution.clone(),
     })
 }
