@@ -170,7 +170,19 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
     writeln!(out, "mean speed    {:.1} %", s.speed_mean * 100.0)?;
     writeln!(out, "mean accuracy {:.3}", s.accuracy_mean)?;
     writeln!(out, "purity        {:.1} %", s.purity_mean * 100.0)?;
-    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)
+    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)?;
+    if !s.evolution.is_empty() {
+        let episodes: Vec<String> = s
+            .per_episode
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| !e.evolution_events.is_empty())
+            .map(|(k, e)| format!("{} (events {:?})", k + 1, e.evolution_events))
+            .collect();
+        let applied = if episodes.is_empty() { "none in these episodes".to_string() } else { episodes.join(", ") };
+        writeln!(out, "evolution     {} events; applied in episode {applied}", s.evolution.events.len())?;
+    }
+    Ok(())
 }
 
 fn run_table(args: TableArgs) -> Result<(), String> {

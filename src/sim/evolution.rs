@@ -342,29 +342,28 @@ impl Timeline {
 
     /// The events due at the start of `tick` (and any skipped before it), consumed.
     pub(crate) fn take_due_at_tick(&mut self, tick: u64) -> Vec<Event> {
-        let mut due = Vec::new();
-        while let Some(&i) = self.by_tick.get(self.next_tick) {
-            match self.schedule.events[i].at {
-                At::Tick(t) if t <= tick => due.push(self.schedule.events[i].clone()),
-                _ => break,
-            }
-            self.next_tick += 1;
-        }
-        due
+        let reached = |at| matches!(at, At::Tick(t) if t <= tick);
+        take_due(&self.schedule.events, &self.by_tick, &mut self.next_tick, reached)
     }
 
     /// The events due when `episode` starts (and any skipped before it), consumed.
     pub(crate) fn take_due_at_episode(&mut self, episode: u32) -> Vec<Event> {
-        let mut due = Vec::new();
-        while let Some(&i) = self.by_episode.get(self.next_episode) {
-            match self.schedule.events[i].at {
-                At::Episode(e) if e <= episode => due.push(self.schedule.events[i].clone()),
-                _ => break,
-            }
-            self.next_episode += 1;
-        }
-        due
+        let reached = |at| matches!(at, At::Episode(e) if e <= episode);
+        take_due(&self.schedule.events, &self.by_episode, &mut self.next_episode, reached)
     }
+}
+
+/// The events of `order` from `*next` on whose point is `reached`; `*next` moves past them.
+fn take_due(events: &[Event], order: &[usize], next: &mut usize, reached: impl Fn(At) -> bool) -> Vec<Event> {
+    let mut due = Vec::new();
+    while let Some(&i) = order.get(*next) {
+        if !reached(events[i].at) {
+            break;
+        }
+        due.push(events[i].clone());
+        *next += 1;
+    }
+    due
 }
 
 /// A fault in progress.
