@@ -2,12 +2,19 @@
 //! (episode i reset with seed S + i, reward summed over the episode, mean and population std),
 //! and the clairvoyant oracle of the same episodes as the agent's ceiling (the optimality gap).
 //! Pure computation; the CLI prints and draws the progress bar.
+//!
+//! With an evolution schedule the line evolves across the evaluation (eval episode k is the
+//! line's episode k: the line is built, then reset for each episode). The agent is built for the
+//! starting setup and is not told of changes; while the line has no ratio sensor it is shown
+//! category basic (0), which is what the basic line's agents decide with. The oracle models a
+//! fixed line only, so it refuses an evolving one.
 
 use serde::Serialize;
 
 use crate::sim::agent::{Agent, AgentSpec};
+use crate::sim::evolution::{At, Schedule};
 use crate::sim::oracle;
-use crate::sim::{Action, Line, LineConfig, Observation};
+use crate::sim::{Action, Category, Line, LineConfig, Observation};
 
 /// What one episode produced.
 #[derive(Clone, Debug, Serialize)]
@@ -32,6 +39,9 @@ pub struct EpisodeStats {
     /// `sorting_line trace --actions` can replay them).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub actions: Option<Vec<usize>>,
+    /// Indices of the evolution events applied in this episode (at its reset or its ticks).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub evolution_events: Vec<usize>,
 }
 
 /// Mean and spread over the episodes of an evaluation.
@@ -57,6 +67,14 @@ pub struct EvalSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gap_mean: Option<f64>,
     pub per_episode: Vec<EpisodeStats>,
+    /// The evolution schedule the line followed (absent when it did not evolve).
+    #[serde(skip_serializing_if = "Schedule::is_empty")]
+    pub evolution: Schedule,
+}
+
+/// What an agent is shown: the reading, and the ratio category only if the line has the sensor.
+fn agent_view(line: &Line, observation: Observation) -> Observation {
+    Observation { category: line.category_reading().unwrap_or(Category::Basic), ..observation }
 }
 
 /// Runs one episode from a seeded reset until the time limit.
@@ -69,9 +87,17 @@ pub fn run_episode(line: &mut Line, agent: &mut Agent, seed: u64) -> EpisodeStat
 /// each action.
 fn run_policy(line: &mut Line, seed: u64, mut policy: impl FnMut(Observation, usize) -> Action) -> EpisodeStats {
     let mut observation = line.reset(Some(seed));
+    let evolving = !line.evolution().is_empty();
+    let mut evolution_events: Vec<usize> = Vec::new();
+    if evolving {
+        evolution_events.extend(line.evolution().events_at(At::Episode(line.episode())).map(|(i, _)| i));
+    }
     let (mut reward, mut speed, mut accuracy, mut steps) = (0.0, 0.0, 0.0, 0u32);
     loop {
-        let action = policy(observation, line.speed_index());
+        let action = policy(agent_view(line, observation), line.speed_index());
+        if evolving {
+            evolution_events.extend(line.evolution().events_at(At::Tick(line.tick())).map(|(i, _)| i));
+        }
         let out = line.step(action);
         reward += out.reward;
         speed += action.speed();
@@ -92,6 +118,7 @@ fn run_policy(line: &mut Line, seed: u64, mut policy: impl FnMut(Observation, us
         oracle: None,
         gap: None,
         actions: None,
+        evolution_events,
     }
 }
 
@@ -106,25 +133,29 @@ fn check_episodes(config: &LineConfig, episodes: usize) -> Result<(), String> {
     config.validate().map_err(|e| e.to_string())
 }
 
-/// Evaluates `spec` over `episodes` episodes seeded `seed`, `seed + 1`, ...; `progress` is called
-/// after each episode.
+/// Evaluates `spec` over `episodes` episodes seeded `seed`, `seed + 1`, ... on a line evolving by
+/// `evolution` (empty: a fixed line); `progress` is called after each episode.
 pub fn evaluate(
     config: &LineConfig,
+    evolution: &Schedule,
     spec: AgentSpec,
     episodes: usize,
     seed: u64,
     mut progress: impl FnMut(&EpisodeStats),
 ) -> Result<EvalSummary, String> {
     check_episodes(config, episodes)?;
+    evolution.validate().map_err(|e| e.to_string())?;
     let mut agent = Agent::new(spec, config, seed)?;
-    let mut line = Line::new(config.clone(), seed);
+    let mut line = Line::with_evolution(config.clone(), seed, evolution.clone());
     let mut per_episode = Vec::with_capacity(episodes);
     for i in 0..episodes as u64 {
         let stats = run_episode(&mut line, &mut agent, seed + i);
         progress(&stats);
         per_episode.push(stats);
     }
-    Ok(summarize(spec.to_string(), config, seed, per_episode))
+    let mut summary = summarize(spec.to_string(), config, seed, per_episode);
+    summary.evolution = evolution.clone();
+    Ok(summary)
 }
 
 /// The clairvoyant oracle (`sim::oracle`) over the episodes `evaluate` would run: each episode's
@@ -160,6 +191,9 @@ pub fn evaluate_oracle(
 
 /// Adds the oracle's reward and the gap to every episode of `summary` and their means.
 pub fn add_oracle(summary: &mut EvalSummary) -> Result<(), String> {
+    if !summary.evolution.is_empty() {
+        return Err("the oracle models a fixed line: --gap cannot be used with --evolution".into());
+    }
     for episode in &mut summary.per_episode {
         let best = oracle::solve(&summary.config, episode.seed)?.reward;
         episode.oracle = Some(best);
@@ -190,5 +224,6 @@ fn summarize(agent: String, config: &LineConfig, seed: u64, per_episode: Vec<Epi
         oracle_mean: None,
         gap_mean: None,
         per_episode,
+        evolution: Schedule::default(),
     }
 }

@@ -2,6 +2,7 @@
 //! run the simulation library offline, `node` runs the line as a ROS 2 node.
 
 use std::io::{self, IsTerminal, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
@@ -10,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
+use sorting_line::sim::evolution::{category_code, At, Schedule};
 use sorting_line::sim::rba::{analysis, RbaTable};
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
@@ -54,9 +56,15 @@ struct TraceArgs {
     #[arg(long, default_value_t = 50)]
     max_steps: u32,
     /// Comma-separated Gymnasium actions (basic: speed index; advanced: speed index * 3 + mode);
-    /// `r` resets without a seed, `r<N>` resets with seed N.
+    /// `r` resets without a seed, `r<N>` resets with seed N. With --evolution, actions are
+    /// always advanced ones (speed index * 3 + mode), as SortingLineEvolving-v0 takes them.
     #[arg(long, value_delimiter = ',')]
     actions: Vec<String>,
+    /// An evolution schedule (YAML, see the README): each JSON line then also carries `tick`,
+    /// the `evolution` events applied there, the line's `settings` and its `category_reading`
+    /// (3 = unknown: no ratio sensor).
+    #[arg(long, value_name = "FILE")]
+    evolution: Option<PathBuf>,
 }
 
 /// The episodes `eval` and `oracle` run: episode i is reset with seed SEED + i.
@@ -78,6 +86,10 @@ struct EpisodeArgs {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     json: bool,
+    /// An evolution schedule (YAML, see the README): the line evolves across the episodes
+    /// (episode k of the evaluation is the line's episode k).
+    #[arg(long, value_name = "FILE")]
+    evolution: Option<PathBuf>,
 }
 
 impl EpisodeArgs {
@@ -149,9 +161,17 @@ fn main() -> ExitCode {
     }
 }
 
+/// Reads and validates `--evolution FILE` (none: the empty schedule).
+fn load_evolution(file: Option<&Path>) -> Result<Schedule, String> {
+    let Some(file) = file else { return Ok(Schedule::default()) };
+    let text = std::fs::read_to_string(file).map_err(|e| format!("--evolution {}: {e}", file.display()))?;
+    Schedule::from_yaml(&text).map_err(|e| format!("--evolution {}: {e}", file.display()))
+}
+
 fn run_eval(args: EvalArgs) -> Result<(), String> {
     let run = &args.run;
     let config = run.config();
+    let evolution = load_evolution(run.evolution.as_deref())?;
     let bar = if io::stderr().is_terminal() && run.episodes >= 20 {
         let bar = ProgressBar::new(run.episodes as u64);
         bar.set_style(
@@ -163,7 +183,7 @@ fn run_eval(args: EvalArgs) -> Result<(), String> {
     } else {
         ProgressBar::hidden()
     };
-    let mut summary = evaluate(&config, args.agent, run.episodes, run.seed, |_| bar.inc(1))?;
+    let mut summary = evaluate(&config, &evolution, args.agent, run.episodes, run.seed, |_| bar.inc(1))?;
     bar.finish_and_clear();
     if args.gap {
         add_oracle(&mut summary).map_err(|e| format!("--gap: {e}"))?;
@@ -183,6 +203,9 @@ fn print_json(out: &mut impl Write, summary: &EvalSummary) -> Result<(), String>
 
 fn run_oracle(args: OracleArgs) -> Result<(), String> {
     let run = &args.run;
+    if run.evolution.is_some() {
+        return Err("--evolution: the oracle models a fixed line; it cannot solve an evolving one".into());
+    }
     let started = std::time::Instant::now();
     let summary = evaluate_oracle(&run.config(), run.episodes, run.seed, |_| {})?;
     let elapsed = started.elapsed().as_secs_f64();
@@ -222,6 +245,17 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
     writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)?;
     if let (Some(oracle), Some(gap)) = (s.oracle_mean, s.gap_mean) {
         writeln!(out, "oracle        {oracle:.2} (mean gap to the agent {gap:.2})")?;
+    }
+    if !s.evolution.is_empty() {
+        let episodes: Vec<String> = s
+            .per_episode
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| !e.evolution_events.is_empty())
+            .map(|(k, e)| format!("{} (events {:?})", k + 1, e.evolution_events))
+            .collect();
+        let applied = if episodes.is_empty() { "none in these episodes".to_string() } else { episodes.join(", ") };
+        writeln!(out, "evolution     {} events; applied in episode {applied}", s.evolution.events.len())?;
     }
     Ok(())
 }
@@ -283,28 +317,62 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
     use sorting_line::sim::{Action, Line};
     let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
     config.validate().map_err(|e| e.to_string())?;
-    let mut line = Line::new(config, args.seed);
+    let evolution = load_evolution(args.evolution.as_deref())?;
+    let evolving = args.evolution.is_some();
+    // The evolving line takes advanced actions throughout (its modes may come and go).
+    let encoding = if evolving { Variant::Advanced } else { args.variant };
+    let mut line = Line::with_evolution(config, args.seed, evolution);
     let mut out = io::stdout().lock();
     let mut emit = |value: serde_json::Value| writeln!(out, "{value}").map_err(|e| e.to_string());
-    emit(serde_json::json!({"reset": {"seed": line.seed(), "episode": line.episode(), "observation": line.observation()}}))?;
+    // What an evolving line adds to a record: the events applied at `at`, and the line now.
+    let evolution_fields = |line: &Line, at: At, record: &mut serde_json::Value| {
+        if evolving {
+            let applied: Vec<serde_json::Value> = line
+                .evolution()
+                .events_at(at)
+                .map(|(index, event)| {
+                    let mut e = serde_json::to_value(event).expect("an event serialises");
+                    e["index"] = index.into();
+                    e
+                })
+                .collect();
+            record["tick"] = line.tick().into();
+            record["evolution"] = applied.into();
+            record["settings"] = serde_json::to_value(line.settings()).expect("settings serialise");
+            record["category_reading"] = category_code(line.category_reading()).into();
+        }
+    };
+    let reset_record = |line: &Line| {
+        let mut record = serde_json::json!({"reset": {"seed": line.seed(), "episode": line.episode(), "observation": line.observation()}});
+        evolution_fields(line, At::Episode(line.episode()), &mut record);
+        record
+    };
+    emit(reset_record(&line))?;
     for token in &args.actions {
         if let Some(seed) = token.strip_prefix('r') {
             let seed = if seed.is_empty() { None } else { Some(seed.parse::<u64>().map_err(|_| format!("bad reset '{token}'"))?) };
-            let observation = line.reset(seed);
-            emit(serde_json::json!({"reset": {"seed": line.seed(), "episode": line.episode(), "observation": observation}}))?;
+            line.reset(seed);
+            emit(reset_record(&line))?;
             continue;
         }
         let action = token
             .parse::<usize>()
             .ok()
-            .and_then(|a| Action::from_discrete(args.variant, a))
-            .ok_or_else(|| format!("action '{token}' is out of range for the {} line", args.variant))?;
+            .and_then(|a| Action::from_discrete(encoding, a))
+            .ok_or_else(|| format!("action '{token}' is out of range for the {} line", encoding))?;
+        let tick = line.tick();
         let outcome = line.step(action);
         let c = line.containers();
-        emit(serde_json::json!({
+        let mut record = serde_json::json!({
             "step": outcome, "episode": line.episode(), "cumulative_reward": line.cumulative_reward(),
             "containers": c, "purity": c.purity(), "speed_changes": line.speed_changes(),
-        }))?;
+        });
+        evolution_fields(&line, At::Tick(tick), &mut record);
+        // `tick` of a step record is the tick the step was (the line's counter is past it now).
+        if evolving {
+            record["tick"] = tick.into();
+        }
+        emit(record)?;
     }
     Ok(())
 }

@@ -14,13 +14,14 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
     ("input", "Input material stream: random, seasonal (9 patterns) or seasonal3"),
     ("obs_noise", "Noise of the observed input quantity (0 = exact)"),
     ("action_penalty", "Reward penalty per change of the belt speed"),
-    ("threshold", "Purity threshold of the reward"),
+    ("threshold", "Sorting accuracy below which a step earns the flat -0.1 reward"),
     ("max_steps", "Episode length in ticks"),
     ("seed", "Seed of line 0's random streams; line k uses seed + k"),
     ("mode", "lockstep (a tick when its commands have arrived) or realtime (ticks at `rate`)"),
     ("rate", "Realtime mode: ticks per second of wall time"),
     ("lines", "Lines hosted by this node (more than one: <namespace>/line_<k>)"),
     ("tick_period", "Simulated seconds per tick (the step of /clock and of every stamp)"),
+    ("setup", "The paper's setup A, B, C or D (empty: none); sets input, obs_noise and action_penalty unless given explicitly"),
     ("use_sim_time", "Ignored: this node is the clock, it publishes /clock"),
 ];
 

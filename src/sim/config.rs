@@ -126,13 +126,26 @@ impl LineConfig {
         LineConfig { variant, input, obs_noise, action_penalty, ..LineConfig::default() }
     }
 
+    /// The allowed range of `obs_noise`: the one check for every source of the value (flags,
+    /// parameter files, ROS parameters, evolution schedules).
+    pub fn check_obs_noise(value: f64) -> Result<(), ConfigError> {
+        check_range("obs_noise", value, OBS_NOISE_RANGE.0, OBS_NOISE_RANGE.1, false, "0.0 ..= 1.0")
+    }
+
+    /// The allowed range of `action_penalty` (see [`LineConfig::check_obs_noise`]).
+    pub fn check_action_penalty(value: f64) -> Result<(), ConfigError> {
+        check_range("action_penalty", value, ACTION_PENALTY_RANGE.0, ACTION_PENALTY_RANGE.1, false, "0.0 ..= 10.0")
+    }
+
+    /// The allowed range of `threshold` (see [`LineConfig::check_obs_noise`]).
+    pub fn check_threshold(value: f64) -> Result<(), ConfigError> {
+        check_range("threshold", value, THRESHOLD_RANGE.0, THRESHOLD_RANGE.1, true, "0.0 ..< 1.0")
+    }
+
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let (lo, hi) = OBS_NOISE_RANGE;
-        check_range("obs_noise", self.obs_noise, lo, hi, false, "0.0 ..= 1.0")?;
-        let (lo, hi) = ACTION_PENALTY_RANGE;
-        check_range("action_penalty", self.action_penalty, lo, hi, false, "0.0 ..= 10.0")?;
-        let (lo, hi) = THRESHOLD_RANGE;
-        check_range("threshold", self.threshold, lo, hi, true, "0.0 ..< 1.0")?;
+        Self::check_obs_noise(self.obs_noise)?;
+        Self::check_action_penalty(self.action_penalty)?;
+        Self::check_threshold(self.threshold)?;
         if !(1..=MAX_EPISODE_STEPS).contains(&self.max_steps) {
             return Err(ConfigError {
                 field: "max_steps",

@@ -55,8 +55,19 @@ impl InputGenerator {
     /// Restarts the stream from `seed`; seasonal generators choose their first pattern at once.
     pub fn reseed(&mut self, seed: u64) {
         self.rng = stream(seed, Stream::Input);
+        self.start(self.kind);
+    }
+
+    /// Becomes a generator of `kind` that carries on drawing from the same stream (an evolving
+    /// line's new input); a seasonal one chooses its first pattern at once, as on reseeding.
+    pub fn switch(&mut self, kind: InputKind) {
+        self.start(kind);
+    }
+
+    fn start(&mut self, kind: InputKind) {
+        self.kind = kind;
         self.pattern = 0;
-        if self.kind != InputKind::Random {
+        if kind != InputKind::Random {
             self.select_pattern();
         }
     }

@@ -18,13 +18,20 @@
 //! 7. step += 1; `truncated` once step >= max_steps. `terminated` is never set.
 //!
 //! A reset draws one observation-noise value (for the fixed first input batch) and nothing else.
+//!
+//! # Evolution
+//! A line may carry an evolution schedule (`evolution.rs`): events due at a tick apply before
+//! step 1 of that tick, events due at an episode at its reset before the seed is used. The
+//! line's hardware (sort modes, ratio sensor) starts as its variant has it. With the empty
+//! schedule the line is exactly the line without one (the golden trajectories pin this).
 
 use serde::{Deserialize, Serialize};
 
 use super::accuracy::{noiseless_accuracy, with_noise, ModeEffect, START_ACCURACY};
 use super::config::{LineConfig, Variant};
+use super::evolution::{ActiveFault, Event, Schedule, Settings, Timeline};
 use super::input::InputGenerator;
-use super::material::{Batch, Category, SortMode};
+use super::material::{Batch, Category, SortMode, SORT_MODES};
 use super::reward::reward;
 use super::rng::{stream, uniform, SimRng, Stream};
 use super::round::round2;
@@ -180,6 +187,17 @@ pub struct Line {
     last: Option<StepOutcome>,
     /// Units that entered the line this episode (start contents included): for conservation checks.
     entered: u64,
+    /// Steps taken since the line was built, over all episodes.
+    tick: u64,
+    /// The machine upgrade: whether the sorting machine has modes.
+    sort_modes: bool,
+    /// The sensor upgrade: whether the ratio sensor is fitted.
+    ratio_sensor: bool,
+    /// The input-sensor fault in progress.
+    fault: Option<ActiveFault>,
+    timeline: Timeline,
+    /// `timeline.due_tick()`, kept at hand: the only evolution cost of a step without events.
+    due_tick: u64,
 }
 
 impl Line {
@@ -188,7 +206,19 @@ impl Line {
     /// # Panics
     /// If the configuration is invalid: validate configurations from users first.
     pub fn new(config: LineConfig, seed: u64) -> Self {
+        Self::with_evolution(config, seed, Schedule::default())
+    }
+
+    /// A line seeded with `seed` that evolves by `schedule`, already reset (episode 0, with the
+    /// schedule's episode-0 events applied: it starts like a new line of the setup they make).
+    ///
+    /// # Panics
+    /// If the configuration or the schedule is invalid: validate those from users first.
+    pub fn with_evolution(config: LineConfig, seed: u64, schedule: Schedule) -> Self {
         config.validate().expect("a valid line configuration");
+        schedule.validate().expect("a valid evolution schedule");
+        let advanced = config.variant == Variant::Advanced;
+        let timeline = Timeline::new(schedule);
         let mut line = Line {
             generator: InputGenerator::new(config.input, seed),
             noise: stream(seed, Stream::Noise),
@@ -209,7 +239,19 @@ impl Line {
             speed_changes: 0,
             last: None,
             entered: 0,
+            tick: 0,
+            sort_modes: advanced,
+            ratio_sensor: advanced,
+            fault: None,
+            due_tick: timeline.due_tick(),
+            timeline,
         };
+        let initial_input = line.config.input;
+        line.apply_episode_events();
+        if line.config.input != initial_input {
+            // As if built with that input: the generator starts from the seed.
+            line.generator.reseed(seed);
+        }
         line.restart();
         line
     }
@@ -217,13 +259,57 @@ impl Line {
     /// Starts a new episode. With a seed, both streams restart from it; without one they carry
     /// on, so a run of several episodes is reproduced by its first seed.
     pub fn reset(&mut self, seed: Option<u64>) -> Observation {
+        self.episode += 1;
+        self.apply_episode_events();
         if let Some(seed) = seed {
             self.seed = seed;
             self.generator.reseed(seed);
             self.noise = stream(seed, Stream::Noise);
         }
-        self.episode += 1;
         self.restart()
+    }
+
+    fn apply_episode_events(&mut self) {
+        for event in self.timeline.take_due_at_episode(self.episode) {
+            self.apply(&event);
+        }
+    }
+
+    #[cold]
+    fn apply_tick_events(&mut self) {
+        for event in self.timeline.take_due_at_tick(self.tick) {
+            self.apply(&event);
+        }
+        self.due_tick = self.timeline.due_tick();
+    }
+
+    /// Applies one event's changes (no random draws: see the evolution module's stream rules).
+    fn apply(&mut self, event: &Event) {
+        if let Some(v) = event.obs_noise {
+            self.config.obs_noise = v;
+        }
+        if let Some(v) = event.action_penalty {
+            self.config.action_penalty = v;
+        }
+        if let Some(v) = event.threshold {
+            self.config.threshold = v;
+        }
+        if let Some(kind) = event.input {
+            if kind != self.config.input {
+                self.config.input = kind;
+                self.generator.switch(kind);
+            }
+        }
+        if let Some(on) = event.sort_modes {
+            self.sort_modes = on;
+        }
+        if let Some(on) = event.ratio_sensor {
+            self.ratio_sensor = on;
+        }
+        if let Some(fault) = event.input_fault {
+            let stuck_at = self.observation.quantity;
+            self.fault = Some(ActiveFault { kind: fault.kind, remaining: fault.ticks, stuck_at });
+        }
     }
 
     fn restart(&mut self) -> Observation {
@@ -252,6 +338,9 @@ impl Line {
     /// half-stepped.
     pub fn step(&mut self, action: Action) -> StepOutcome {
         assert!(action.speed_index < SPEED_COUNT, "speed index {} out of 0..=9", action.speed_index);
+        if self.tick == self.due_tick {
+            self.apply_tick_events();
+        }
         // 1. Sort the machine's batch.
         let correct_a = (f64::from(self.machine.a) * self.sorter_accuracy) as u32;
         let correct_b = (f64::from(self.machine.b) * self.sorter_accuracy) as u32;
@@ -270,10 +359,7 @@ impl Line {
         // 3. Set speed and mode.
         let speed_changed = action.speed_index != self.speed_index;
         self.speed_index = action.speed_index;
-        self.mode = match self.config.variant {
-            Variant::Basic => SortMode::Basic,
-            Variant::Advanced => action.mode,
-        };
+        self.mode = if self.sort_modes { action.mode } else { SortMode::Basic };
         self.speed_changes += u32::from(speed_changed);
 
         // 4. Accuracy of the belt batch.
@@ -294,7 +380,14 @@ impl Line {
 
         // 6. Observe the new input; 7. count the step.
         self.observation = self.observe();
+        if let Some(fault) = &mut self.fault {
+            fault.remaining -= 1;
+            if fault.remaining == 0 {
+                self.fault = None;
+            }
+        }
         self.step += 1;
+        self.tick += 1;
         let outcome = StepOutcome {
             step: self.step,
             action: Action { speed_index: self.speed_index, mode: self.mode },
@@ -311,20 +404,70 @@ impl Line {
     }
 
     fn mode_effect(&self) -> ModeEffect {
-        ModeEffect::of(self.config.variant, self.mode, self.belt.category())
+        // A machine without sort modes (the basic line, or an advanced one before its upgrade)
+        // sorts every batch as the basic line does.
+        let machine = if self.sort_modes { Variant::Advanced } else { Variant::Basic };
+        ModeEffect::of(machine, self.mode, self.belt.category())
     }
 
-    /// Reads the input sensor (one noise-stream draw).
+    /// Reads the input sensor (one noise-stream draw, taken even when a fault replaces the
+    /// reading, so that a fault shifts no stream).
     fn observe(&mut self) -> Observation {
         let amount = self.input.occupancy();
         let n = self.config.obs_noise;
         let u = uniform(&mut self.noise, -n, n);
-        let quantity = round2((amount + amount * u).clamp(0.0, 1.0));
+        let mut quantity = round2((amount + amount * u).clamp(0.0, 1.0));
+        if let Some(fault) = &self.fault {
+            quantity = fault.reading();
+        }
         Observation { quantity, category: self.input.category() }
     }
 
+    /// The configuration now: the one the line was built with, as its evolution events changed
+    /// it (`variant` stays the built one: see [`Line::sort_modes`] and [`Line::ratio_sensor`]).
     pub fn config(&self) -> &LineConfig {
         &self.config
+    }
+    /// The line's evolution schedule (empty for a line that does not evolve).
+    pub fn evolution(&self) -> &Schedule {
+        self.timeline.schedule()
+    }
+    /// Steps taken since the line was built, over all episodes: the next step is this tick.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+    /// Whether the sorting machine has its modes (advanced variant, or the machine upgrade).
+    pub fn sort_modes(&self) -> bool {
+        self.sort_modes
+    }
+    /// Whether the ratio sensor is fitted (advanced variant, or the sensor upgrade).
+    pub fn ratio_sensor(&self) -> bool {
+        self.ratio_sensor
+    }
+    /// What the ratio sensor reads of the next batch: its category, or `None` (unknown) while
+    /// the line has no ratio sensor.
+    pub fn category_reading(&self) -> Option<Category> {
+        self.ratio_sensor.then_some(self.observation.category)
+    }
+    /// Whether `mode` is a valid command now: any mode with sort modes, only mode 0 without.
+    pub fn mode_allowed(&self, mode: SortMode) -> bool {
+        self.sort_modes || mode == SortMode::Basic
+    }
+    /// The valid actions of the advanced action space (`speed_index * 3 + mode`) now.
+    pub fn action_mask(&self) -> [bool; SPEED_COUNT * 3] {
+        std::array::from_fn(|a| self.mode_allowed(SORT_MODES[a % 3]))
+    }
+    /// Everything events can change, as it is now.
+    pub fn settings(&self) -> Settings {
+        Settings {
+            obs_noise: self.config.obs_noise,
+            action_penalty: self.config.action_penalty,
+            threshold: self.config.threshold,
+            input: self.config.input,
+            sort_modes: self.sort_modes,
+            ratio_sensor: self.ratio_sensor,
+            input_fault: self.fault,
+        }
     }
     /// The seed the current streams started from.
     pub fn seed(&self) -> u64 {
