@@ -55,7 +55,7 @@ def rt_line(tmp_path_factory):
     ns = f"/cli_rt_{os.getpid()}"
     log = tmp_path_factory.mktemp("rt_line") / "node.log"
     node = h.NodeProcess(["--variant", "advanced", "--mode", "realtime", "--rate", str(RATE), "--seed", "5",
-                          "--max-steps", "1000", "--ros-args", "-r", f"__ns:={ns}"], log)
+                          "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}"], log)
     line = Line(ns, node)
     yield line
     alive = node.running()
@@ -105,6 +105,8 @@ def test_node_list_and_info(ros2, rt_line):
         assert pubs.get(rt_line.name(rel)) == LINE_TYPES[rel], f"{rel} in\n{info}"
     for topic, type_name in NODE_TYPES.items():
         assert pubs.get(topic) == type_name, f"{topic} (exactly one type) in\n{info}"
+    # Nothing of the node announces /clock with another type (a subscription included).
+    assert subs.get("/clock", NODE_TYPES["/clock"]) == NODE_TYPES["/clock"], f"/clock subscription in\n{info}"
     assert servers.get(rt_line.name("reset")) == "sorting_line_interfaces/srv/ResetLine", info
     for srv in ["describe_parameters", "get_parameters", "list_parameters", "set_parameters"]:
         assert f"{rt_line.fqn}/{srv}" in servers, f"{srv} in\n{info}"
@@ -172,7 +174,8 @@ def test_echo_once_every_topic(ros2, rt_line):
     state = results[rt_line.name("state")]
     assert set(state) >= {"header", "episode", "step", "seed", "speed", "mode", "occupancy", "reward", "purity",
                           "container_a", "terminated", "truncated"}, state
-    assert state["seed"] == 5 and state["episode"] >= 1 and state["speed"] == 0.6, state  # nobody commanded it
+    assert state["seed"] == 5 and state["speed"] == 0.6, state  # nobody commands this line
+    assert state["step"] == state["header"]["stamp"]["sec"], state  # first episode: tick k = step k, 1 s a tick
     assert 0.0 <= state["occupancy"] <= 1.0 and state["mode"] in (0, 1, 2), state
     sample = results[rt_line.name("input")]
     assert 0.0 <= sample["quantity"] <= 1.0 and sample["occupancy"] == (sample["amount_a"] + sample["amount_b"]) / 100
@@ -267,7 +270,7 @@ def test_param_list_get_dump(ros2, rt_line):
     assert got == f"Double value is: {RATE}", got
     dump = yaml.safe_load(ros2.run("param", "dump", rt_line.fqn, timeout=20).stdout)
     assert dump == {rt_line.fqn: {"ros__parameters": {
-        "action_penalty": 0.0, "input": "random", "lines": 1, "max_steps": 1000, "mode": "realtime",
+        "action_penalty": 0.0, "input": "random", "lines": 1, "max_steps": 1000000, "mode": "realtime",
         "obs_noise": 0.0, "rate": RATE, "seed": 5, "threshold": 0.7, "tick_period": 1.0, "use_sim_time": False,
         "variant": "advanced"}}}, dump
 
