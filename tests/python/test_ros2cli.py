@@ -259,6 +259,40 @@ def test_type_hashes_equal_rclpy_endpoints(ros2, rt_line, ros, probe):
             probe.destroy_publisher(pub)
 
 
+def test_service_endpoint_type_hashes_equal_rclpy_clients(rt_line, ros, probe):
+    """The node's service endpoints (request reader, reply writer) announce the hash rclpy's client
+    endpoints of the same service announce. The CLI has no verbose service info, so this asks the
+    graph through rclpy, by DDS topic name (rq/...Request, rr/...Reply)."""
+    from rcl_interfaces.srv import DescribeParameters, GetParameters
+    from sorting_line_interfaces.srv import ResetLine
+
+    services = {rt_line.name("reset"): ResetLine, f"{rt_line.fqn}/get_parameters": GetParameters,
+                f"{rt_line.fqn}/describe_parameters": DescribeParameters}
+    clients = [probe.create_client(kind, name) for name, kind in services.items()]
+    me, problems = probe.get_name(), []
+    try:
+        for name in services:
+            for dds_topic, role in [(f"rq{name}Request", "subscriptions"), (f"rr{name}Reply", "publishers")]:
+                opposite = "publishers" if role == "subscriptions" else "subscriptions"
+
+                def endpoints():
+                    node_side = [e for e in getattr(probe, f"get_{role}_info_by_topic")(dds_topic, no_mangle=True)
+                                 if e.node_name == "sorting_line"]
+                    ours = [e for e in getattr(probe, f"get_{opposite}_info_by_topic")(dds_topic, no_mangle=True)
+                            if e.node_name == me]
+                    return (node_side, ours) if node_side and ours else None
+
+                node_side, ours = ros.spin_until(endpoints, 15.0, f"the node's and our endpoints on {dds_topic}")
+                want = {str(e.topic_type_hash) for e in ours}
+                got = {str(e.topic_type_hash) for e in node_side}
+                if got != want or not all(HASH.search(x) for x in want):
+                    problems.append(f"{dds_topic}: node {sorted(got)}, rclpy {sorted(want)}")
+    finally:
+        for c in clients:
+            probe.destroy_client(c)
+    assert not problems, "\n".join(problems)
+
+
 # ------------------------------------------------------------------------------------------
 # Parameters
 
