@@ -418,6 +418,22 @@ def test_topic_pub_speed_command_on_a_realtime_line(ros2, ros, start_node, clien
     assert set(speeds[:changed]) == {0.6} and set(speeds[changed:]) == {0.3}, speeds
 
 
+def test_the_daemon_stops_listing_a_stopped_node_at_once(ros2, start_node, namespace):
+    """A peer that was already running (the ros2 daemon) drops the node soon after SIGINT or
+    SIGTERM, not after the DDS lease (tens of seconds). Issue 12 asks for 2 s; the bound here
+    adds the start of a `ros2` process on a busy machine and still cannot be met by the lease."""
+    ns = namespace("leave")
+    nodes = {sig: (start_node("--ros-args", "-r", f"__ns:={ns}", "-r", f"__node:=by_{sig.name.lower()}"),
+                   f"{ns}/by_{sig.name.lower()}") for sig in (signal.SIGINT, signal.SIGTERM)}
+    names = {fqn for _, fqn in nodes.values()}
+    poll(ros2, ["node", "list"], lambda out: names <= set(out.split()), f"nodes {sorted(names)}")
+    for sig, (node, _) in nodes.items():
+        assert node.stop(sig, timeout=5.0) == 0, node.describe()
+    stopped = time.monotonic()
+    poll(ros2, ["node", "list"], lambda out: not names & set(out.split()), "the stopped nodes gone", timeout=6.0)
+    print(f"the daemon dropped both nodes {time.monotonic() - stopped:.1f} s after they exited")
+
+
 # ------------------------------------------------------------------------------------------
 # ros2 launch
 
