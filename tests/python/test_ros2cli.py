@@ -14,24 +14,14 @@ import re
 import signal
 import subprocess
 import time
-from pathlib import Path
 
 import pytest
 import yaml
 
 import ros_harness as h
-from ros_harness import stamp_ns
+from ros_harness import LINE_TYPES
 
 RATE = 10.0  # ticks per second of the realtime lines here
-LINE_TYPES = {
-    "input": "sorting_line_interfaces/msg/MaterialInput",
-    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
-    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
-    "state": "sorting_line_interfaces/msg/LineState",
-    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
-    "cmd/speed": "sorting_line_interfaces/msg/SpeedCommand",
-    "cmd/sort_mode": "sorting_line_interfaces/msg/SortModeCommand",
-}
 NODE_TYPES = {"/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
 PARAMETERS = ["action_penalty", "input", "lines", "max_steps", "mode", "obs_noise", "rate", "seed", "threshold",
               "tick_period", "use_sim_time", "variant"]
