@@ -49,18 +49,23 @@ def ros():
 
 @pytest.fixture(scope="session")
 def ros2(tmp_path_factory):
-    """The real `ros2` command line (tests/python/ros2_cli.py), with the ros2 daemon running in this
-    test network namespace for the session (stopped before the namespace goes away); skips with the
-    reason when there is none."""
+    """The real `ros2` command line (tests/python/ros2_cli.py); skips with the reason when there is none."""
     base = tmp_path_factory.mktemp("ros2cli")
     cli, origin = ros2_cli.locate(base / "overlay", base / "log")
     if cli is None:
         print(f"\n{origin}", file=sys.stderr)
         pytest.skip(origin)
-    cli.run("daemon", "stop", timeout=30, check=False)  # a daemon of an earlier run has another environment
-    cli.run("daemon", "start", timeout=30)
-    yield cli
-    cli.run("daemon", "stop", timeout=30)
+    return cli
+
+
+@pytest.fixture(scope="module")
+def ros2_daemon(ros2):
+    """The ros2 daemon, running in this test network namespace for one test module (stopped before
+    the namespace goes away, and before later modules run)."""
+    ros2.run("daemon", "stop", timeout=30, check=False)  # one of an earlier module has another environment
+    ros2.run("daemon", "start", timeout=30)
+    yield ros2
+    ros2.run("daemon", "stop", timeout=30)
 
 
 _NAMESPACES = itertools.count()

@@ -2,8 +2,8 @@
 (tests/python/ros2_cli.py says where they come from), not our own clients.
 
 Every command runs with a timeout. Graph queries (`node list`, `topic list`, `topic info`) go
-through the ros2 daemon (started by the `ros2` fixture in this test network namespace, stopped at
-the end of the session) and are repeated until the answer appears or their time is up, because
+through the ros2 daemon (the `ros2_daemon` fixture runs it in this test network namespace for this
+module) and are repeated until the answer appears or their time is up, because
 discovery is asynchronous for every ROS client. Checks on the answers are exact.
 """
 
@@ -20,6 +20,8 @@ import yaml
 
 import ros_harness as h
 from ros_harness import LINE_TYPES
+
+pytestmark = pytest.mark.usefixtures("ros2_daemon")
 
 RATE = 10.0  # ticks per second of the realtime lines here
 NODE_TYPES = {"/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
