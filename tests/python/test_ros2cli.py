@@ -78,10 +78,9 @@ def yaml_docs(text: str) -> list:
 # Graph: node, topics, interfaces
 
 
-def test_node_list_and_info(ros2, rt_line):
-    poll(ros2, ["node", "list"], lambda out: rt_line.fqn in out.split(), f"node {rt_line.fqn}")
-    info = poll(ros2, ["node", "info", rt_line.fqn], lambda out: "  Service Servers:" in out, "the node's info")
-    section = {}
+def node_info_sections(info: str) -> dict[str, dict[str, str]]:
+    """`ros2 node info` parsed: section ("Subscribers", ...) -> {name: types}."""
+    section: dict[str, dict[str, str]] = {}
     current = None
     for line in info.splitlines():
         if line.startswith("  ") and not line.startswith("    ") and line.strip().endswith(":"):
@@ -90,18 +89,35 @@ def test_node_list_and_info(ros2, rt_line):
         elif current and line.startswith("    "):
             name, _, types = line.strip().partition(": ")
             section[current][name] = types
+    return section
+
+
+def test_node_list_and_info(ros2, rt_line):
+    poll(ros2, ["node", "list"], lambda out: rt_line.fqn in out.split(), f"node {rt_line.fqn}")
+    published = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
+    parameter_services = ["describe_parameters", "get_parameters", "list_parameters", "set_parameters"]
+    expected = {"Subscribers": [rt_line.name("cmd/speed"), rt_line.name("cmd/sort_mode")],
+                "Publishers": [rt_line.name(rel) for rel in published] + list(NODE_TYPES),
+                "Service Servers": [rt_line.name("reset")] + [f"{rt_line.fqn}/{s}" for s in parameter_services]}
+
+    def complete(out):
+        found = node_info_sections(out)
+        return all(name in found.get(kind, {}) for kind, names in expected.items() for name in names)
+
+    info = poll(ros2, ["node", "info", rt_line.fqn], complete, "the node's endpoints")
+    section = node_info_sections(info)
     subs, pubs, servers = section["Subscribers"], section["Publishers"], section["Service Servers"]
     for rel in ["cmd/speed", "cmd/sort_mode"]:
         assert subs.get(rt_line.name(rel)) == LINE_TYPES[rel], f"{rel} in\n{info}"
-    for rel in ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]:
+    for rel in published:
         assert pubs.get(rt_line.name(rel)) == LINE_TYPES[rel], f"{rel} in\n{info}"
     for topic, type_name in NODE_TYPES.items():
         assert pubs.get(topic) == type_name, f"{topic} (exactly one type) in\n{info}"
     # Nothing of the node announces /clock with another type (a subscription included).
     assert subs.get("/clock", NODE_TYPES["/clock"]) == NODE_TYPES["/clock"], f"/clock subscription in\n{info}"
     assert servers.get(rt_line.name("reset")) == "sorting_line_interfaces/srv/ResetLine", info
-    for srv in ["describe_parameters", "get_parameters", "list_parameters", "set_parameters"]:
-        assert f"{rt_line.fqn}/{srv}" in servers, f"{srv} in\n{info}"
+    for srv in parameter_services:
+        assert servers[f"{rt_line.fqn}/{srv}"].startswith("rcl_interfaces/srv/"), f"{srv} in\n{info}"
 
 
 def test_topic_list_with_types(ros2, rt_line):
