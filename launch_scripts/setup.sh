@@ -6,12 +6,13 @@
 #   3. msg/ (ROS package sorting_line_interfaces) compiled with plain CMake and installed INTO .venv/,
 #      so `.venv/bin/python -c "from sorting_line_interfaces.msg import LineState"` works with nothing
 #      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
-#   4. `cargo build --release` when Cargo.toml exists
-# Steps already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
+#   4. bridge/ (Python package sorting_line_gym) installed editable into .venv/
+#   5. `cargo build --release` (cargo's own checks make it a no-op when nothing changed)
+# Steps 2-4 already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
 #
 # Usage: launch_scripts/setup.sh [--force] [--no-cargo]
-#   --force      redo steps 2 and 3 even if their stamps match
-#   --no-cargo   skip step 4 (same as SORTING_LINE_SKIP_CARGO=1)
+#   --force      redo steps 2, 3 and 4 even if their stamps match
+#   --no-cargo   skip step 5 (same as SORTING_LINE_SKIP_CARGO=1)
 # Environment (all optional):
 #   SORTING_LINE_PYTHON      interpreter for a new venv (default: python3.11; must be CPython 3.11 with
 #                            its headers, e.g. Debian packages python3.11-venv python3.11-dev)
@@ -56,6 +57,16 @@ fi
 
 sha() { sha256sum | cut -c1-16; }
 
+# Stamps: step NAME is done when $STATE/NAME.stamp holds the hash of its inputs (KEY); --force
+# ignores them.
+stamp_matches() { # NAME KEY
+  [[ $FORCE == 0 && -f "$STATE/$1.stamp" && "$(cat "$STATE/$1.stamp")" == "$2" ]]
+}
+write_stamp() { # NAME KEY
+  mkdir -p "$STATE"
+  echo "$2" >"$STATE/$1.stamp"
+}
+
 # ---------------------------------------------------------------------------------------------
 # 1. venv
 # ---------------------------------------------------------------------------------------------
@@ -89,7 +100,7 @@ pip_key() { { echo "recipe=$RECIPE"; echo "python=$PY_ID"; cat "$REQ" "$REQ_BRID
 install_wheels() {
   local key
   key="$(pip_key)"
-  if [[ $FORCE == 0 && -f "$STATE/pip.stamp" && "$(cat "$STATE/pip.stamp")" == "$key" ]]; then
+  if stamp_matches pip "$key"; then
     say "wheels: up to date (requirements-ros.txt, requirements-bridge.txt unchanged)"
     return
   fi
@@ -97,8 +108,7 @@ install_wheels() {
   rm -f "$STATE/pip.stamp" "$STATE/interfaces.stamp"
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
     die "pip install -r $REQ -r $REQ_BRIDGE failed"
-  mkdir -p "$STATE"
-  echo "$key" >"$STATE/pip.stamp"
+  write_stamp pip "$key"
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -154,8 +164,7 @@ uninstall_interfaces() {
 build_interfaces() {
   local key build logs jobs
   key="$(iface_key)"
-  if [[ $FORCE == 0 && -f "$STATE/interfaces.stamp" && "$(cat "$STATE/interfaces.stamp")" == "$key" ]] &&
-    iface_installed; then
+  if stamp_matches interfaces "$key" && iface_installed; then
     say "interfaces: up to date (msg/ unchanged)"
     return
   fi
@@ -203,40 +212,32 @@ build_interfaces() {
   env -u PYTHONPATH -u AMENT_PREFIX_PATH -u LD_LIBRARY_PATH -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
     "$VENV/bin/python" -c 'from sorting_line_interfaces.msg import LineState; from sorting_line_interfaces.srv import ResetLine' ||
     die "interfaces: installed, but the import check failed"
-  echo "$key" >"$STATE/interfaces.stamp"
+  write_stamp interfaces "$key"
   say "interfaces: sorting_line_interfaces installed"
 }
 
 # ---------------------------------------------------------------------------------------------
-# 4. Rust (only when the crate exists)
-# ---------------------------------------------------------------------------------------------
-# ---------------------------------------------------------------------------------------------
 # 4. the bridge package (bridge/, sorting_line_gym), editable so the tests run the source tree
 # ---------------------------------------------------------------------------------------------
 install_bridge() {
-  if [[ ! -f "$BRIDGE/pyproject.toml" ]]; then
-    say "bridge: no bridge/pyproject.toml, skipped"
-    return
-  fi
   local key
   key="$( { echo "$ROOT"; cat "$BRIDGE/pyproject.toml"; } | sha)"
-  if [[ $FORCE == 0 && -f "$STATE/bridge.stamp" && "$(cat "$STATE/bridge.stamp")" == "$key" ]]; then
+  if stamp_matches bridge "$key"; then
     say "bridge: up to date"
     return
   fi
   say "bridge: pip install -e bridge (dependencies come from the pinned requirements)"
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q --no-deps --no-build-isolation -e "$BRIDGE" ||
     die "pip install -e $BRIDGE failed"
-  echo "$key" >"$STATE/bridge.stamp"
+  write_stamp bridge "$key"
 }
 
+# ---------------------------------------------------------------------------------------------
+# 5. Rust
+# ---------------------------------------------------------------------------------------------
 build_rust() {
   if [[ $CARGO == 0 ]]; then
     say "cargo: skipped (--no-cargo)"
-    return
-  fi
-  if [[ ! -f "$ROOT/Cargo.toml" ]]; then
-    say "cargo: no Cargo.toml, skipped"
     return
   fi
   command -v cargo >/dev/null 2>&1 || die "cargo not found: install the Rust toolchain (rustup) first"

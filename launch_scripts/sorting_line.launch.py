@@ -19,6 +19,7 @@ DEFAULT_BIN = os.path.join(REPO, "target", "release", "sorting_line")
 
 # Launch arguments that become node parameters when given (empty = the node's default).
 PARAMETERS = [
+    ("setup", "the paper's setup A..D (input, obs_noise, action_penalty; those given override it)"),
     ("variant", "basic or advanced"),
     ("input", "random, seasonal or seasonal3"),
     ("obs_noise", "relative input-sensor noise, 0.0..1.0"),

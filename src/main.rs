@@ -1,5 +1,5 @@
-//! The `sorting_line` command line: `eval`, `table`, `policy` and `trace` run the simulation
-//! library offline, `node` runs the line as a ROS 2 node.
+//! The `sorting_line` command line: `eval`, `oracle`, `table`, `policy`, `trace` and `vocabulary`
+//! run the simulation library offline, `node` runs the line as a ROS 2 node.
 
 use std::io::{self, IsTerminal, Write};
 use std::process::ExitCode;
@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use sorting_line::eval::{evaluate, EvalSummary};
+use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::rba::{analysis, RbaTable};
@@ -22,8 +22,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Evaluate an agent offline on the simulation library (no ROS).
+    /// Evaluate an agent offline on the simulation library (no ROS); `--gap` adds the oracle.
     Eval(EvalArgs),
+    /// The clairvoyant optimum of each episode seed: the highest reward any action sequence
+    /// reaches knowing the seed's random streams (the ceiling for the optimality gap).
+    Oracle(OracleArgs),
     /// Print the expected-reward analysis behind the rule-based agent as CSV.
     Table(TableArgs),
     /// Print the decision tables of `rba` and `rba-hold` for a setup as one JSON object (what a
@@ -34,6 +37,10 @@ enum Command {
     /// Print the library's trajectory for a seed and an action list, one JSON object per step
     /// (the reference other paths are compared with).
     Trace(TraceArgs),
+    /// Print the line's vocabulary as one JSON object: setups, variants, inputs, speeds, sort
+    /// modes, start speed, threshold and episode lengths (what other languages' copies are
+    /// checked against).
+    Vocabulary,
 }
 
 #[derive(Args)]
@@ -52,11 +59,9 @@ struct TraceArgs {
     actions: Vec<String>,
 }
 
+/// The episodes `eval` and `oracle` run: episode i is reset with seed SEED + i.
 #[derive(Args)]
-struct EvalArgs {
-    /// rba, rba-hold, random, constant:K, constant:K:cat or constant:K:M (K = 0..9, M = 0..2).
-    #[arg(long)]
-    agent: AgentSpec,
+struct EpisodeArgs {
     /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
     #[arg(long)]
     setup: Setup,
@@ -67,12 +72,41 @@ struct EvalArgs {
     episodes: usize,
     #[arg(long, default_value_t = 42)]
     seed: u64,
-    /// Steps per episode.
+    /// Steps per episode (the advanced oracle: at most 2000).
     #[arg(long, default_value_t = 50)]
     max_steps: u32,
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     json: bool,
+}
+
+impl EpisodeArgs {
+    fn config(&self) -> LineConfig {
+        LineConfig { max_steps: self.max_steps, ..LineConfig::for_setup(self.setup, self.variant) }
+    }
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// rba, rba-hold, bayes, random, constant:K, constant:K:cat or constant:K:M (K = 0..9, M = 0..2).
+    #[arg(long)]
+    agent: AgentSpec,
+    #[command(flatten)]
+    run: EpisodeArgs,
+    /// Also solve the clairvoyant oracle of each episode seed and report it and the agent's gap
+    /// to it (`oracle_mean`, `gap_mean`; `oracle`, `gap` per episode).
+    #[arg(long)]
+    gap: bool,
+}
+
+#[derive(Args)]
+struct OracleArgs {
+    #[command(flatten)]
+    run: EpisodeArgs,
+    /// Also print each episode's optimal actions, ready for `sorting_line trace --actions`
+    /// (`--json` always lists them).
+    #[arg(long)]
+    actions: bool,
 }
 
 #[derive(Args)]
@@ -99,10 +133,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse_from(args);
     let result = match cli.command {
         Command::Eval(args) => run_eval(args),
+        Command::Oracle(args) => run_oracle(args),
         Command::Table(args) => run_table(args),
         Command::Policy(args) => run_policy(args),
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
         Command::Trace(args) => run_trace(args),
+        Command::Vocabulary => run_vocabulary(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -114,29 +150,63 @@ fn main() -> ExitCode {
 }
 
 fn run_eval(args: EvalArgs) -> Result<(), String> {
-    let config = LineConfig { max_steps: args.max_steps, ..LineConfig::for_setup(args.setup, args.variant) };
-    let bar = if io::stderr().is_terminal() && args.episodes >= 20 {
-        let bar = ProgressBar::new(args.episodes as u64);
+    let run = &args.run;
+    let config = run.config();
+    let bar = if io::stderr().is_terminal() && run.episodes >= 20 {
+        let bar = ProgressBar::new(run.episodes as u64);
         bar.set_style(
             ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} episodes, {per_sec}, eta {eta}")
                 .expect("a valid template"),
         );
-        bar.set_message(format!("{} on {:?} {}", args.agent, args.setup, args.variant));
+        bar.set_message(format!("{} on {:?} {}", args.agent, run.setup, run.variant));
         bar
     } else {
         ProgressBar::hidden()
     };
-    let summary = evaluate(&config, args.agent, args.episodes, args.seed, |_| bar.inc(1))?;
+    let mut summary = evaluate(&config, args.agent, run.episodes, run.seed, |_| bar.inc(1))?;
     bar.finish_and_clear();
+    if args.gap {
+        add_oracle(&mut summary).map_err(|e| format!("--gap: {e}"))?;
+    }
     let mut out = io::stdout().lock();
-    let written = if args.json {
-        serde_json::to_writer(&mut out, &summary).map_err(|e| e.to_string()).and_then(|_| {
-            writeln!(out).map_err(|e| e.to_string())
-        })
+    if run.json {
+        print_json(&mut out, &summary)
     } else {
-        print_summary(&mut out, args.setup, &summary).map_err(|e| e.to_string())
+        print_summary(&mut out, run.setup, &summary).map_err(|e| e.to_string())
+    }
+}
+
+fn print_json(out: &mut impl Write, summary: &EvalSummary) -> Result<(), String> {
+    serde_json::to_writer(&mut *out, summary).map_err(|e| e.to_string())?;
+    writeln!(out).map_err(|e| e.to_string())
+}
+
+fn run_oracle(args: OracleArgs) -> Result<(), String> {
+    let run = &args.run;
+    let started = std::time::Instant::now();
+    let summary = evaluate_oracle(&run.config(), run.episodes, run.seed, |_| {})?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let mut out = io::stdout().lock();
+    if run.json {
+        return print_json(&mut out, &summary);
+    }
+    let write = |out: &mut io::StdoutLock| -> io::Result<()> {
+        print_summary(out, run.setup, &summary)?;
+        writeln!(
+            out,
+            "solved in     {:.1} ms ({:.3} ms per episode, replays checked)",
+            elapsed * 1e3,
+            elapsed * 1e3 / summary.episodes as f64
+        )?;
+        if args.actions {
+            for e in &summary.per_episode {
+                let actions: Vec<String> = e.actions.iter().flatten().map(usize::to_string).collect();
+                writeln!(out, "seed {} reward {} actions {}", e.seed, e.reward, actions.join(","))?;
+            }
+        }
+        Ok(())
     };
-    written
+    write(&mut out).map_err(|e| e.to_string())
 }
 
 fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Result<()> {
@@ -149,7 +219,11 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
     writeln!(out, "mean speed    {:.1} %", s.speed_mean * 100.0)?;
     writeln!(out, "mean accuracy {:.3}", s.accuracy_mean)?;
     writeln!(out, "purity        {:.1} %", s.purity_mean * 100.0)?;
-    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)
+    writeln!(out, "speed changes {:.1} per episode", s.speed_changes_mean)?;
+    if let (Some(oracle), Some(gap)) = (s.oracle_mean, s.gap_mean) {
+        writeln!(out, "oracle        {oracle:.2} (mean gap to the agent {gap:.2})")?;
+    }
+    Ok(())
 }
 
 fn run_table(args: TableArgs) -> Result<(), String> {
@@ -233,4 +307,45 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
         }))?;
     }
     Ok(())
+}
+
+/// `{"variants", "inputs", "setups": {name: {input, obs_noise, action_penalty}}, "speeds",
+/// "start_speed_index", "modes"/"categories": {name: number}, "threshold", "episode_steps",
+/// "max_episode_steps"}`, every value taken from the library's own constants.
+fn run_vocabulary() -> Result<(), String> {
+    use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, SETUPS, VARIANTS};
+    use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
+    use sorting_line::sim::speed::{SPEEDS, START_SPEED_INDEX};
+    let setups: serde_json::Map<String, serde_json::Value> = SETUPS
+        .iter()
+        .map(|&s| {
+            let c = LineConfig::for_setup(s, Variant::Basic);
+            let value = serde_json::json!({"input": c.input, "obs_noise": c.obs_noise, "action_penalty": c.action_penalty});
+            (s.to_string(), value)
+        })
+        .collect();
+    // name -> wire number, the name as serde writes it (the form of `trace` and parameter files).
+    fn numbered<T: serde::Serialize>(values: impl Iterator<Item = (T, usize)>) -> serde_json::Value {
+        let map: serde_json::Map<String, serde_json::Value> = values
+            .map(|(v, i)| (serde_json::json!(v).as_str().unwrap_or_default().to_owned(), serde_json::json!(i)))
+            .collect();
+        map.into()
+    }
+    let modes = numbered(SORT_MODES.iter().map(|&m| (m, m.index())));
+    let categories = numbered(CATEGORIES.iter().map(|&c| (c, c.index())));
+    let defaults = LineConfig::default();
+    let vocabulary = serde_json::json!({
+        "variants": VARIANTS,
+        "inputs": INPUT_KINDS,
+        "setups": setups,
+        "speeds": SPEEDS,
+        "start_speed_index": START_SPEED_INDEX,
+        "modes": modes,
+        "categories": categories,
+        "threshold": defaults.threshold,
+        "episode_steps": defaults.max_steps,
+        "max_episode_steps": MAX_EPISODE_STEPS,
+    });
+    let mut out = io::stdout().lock();
+    writeln!(out, "{vocabulary}").map_err(|e| e.to_string())
 }

@@ -1,6 +1,7 @@
 //! Fuzzing of everything the node takes from outside, at the message level and without DDS
 //! (proptest): commands (speeds, sort modes, stamps, senders) through the command protocol of a
-//! hosted line, parameter files (structured and random YAML) through the parameter loader, and
+//! hosted line, batch commands and batch resets (malformed lengths, bad entries, other lines'
+//! owners) through the batch rules, parameter files (structured and random YAML) through the parameter loader, and
 //! `--ros-args` through its parser.
 //!
 //! Properties:
@@ -9,6 +10,10 @@
 //!   the trajectory of a line that receives only the good ones, every bad command is rejected with
 //!   the reason an independent oracle expects, every rejection is counted by the per-line counters
 //!   that /diagnostics publishes, and after the flood a clean seeded episode equals the library's;
+//! - batches: a malformed `batch/cmd` changes no line and counts one malformed rejection; every
+//!   entry of a well-formed one meets the same oracle as the per-line commands, and the lines
+//!   follow lines fed only the accepted commands; a `batch/reset` is refused exactly when its
+//!   lists differ in length or a line is out of range or repeated;
 //! - parameters and `--ros-args`: a failure is an error message that names what was wrong (the
 //!   file, the key or the argument), never a panic, and an accepted set of parameters is valid.
 //!
@@ -24,11 +29,13 @@ use proptest::sample::select;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 use sorting_line::ros::clock::SimClock;
 use sorting_line::ros::diagnostics::LineCounters;
-use sorting_line::ros::messages::Time;
+use sorting_line::ros::messages::{LineCommands, ResetLinesRequest, Time};
 use sorting_line::ros::names::Names;
 use sorting_line::ros::options::{NodeArgs, TickMode};
 use sorting_line::ros::params::{load_params_file, NodeParams, PARAMETERS};
-use sorting_line::ros::protocol::{Accepted, Client, HostedLine, Rejection, TimerTick, REJECTIONS};
+use sorting_line::ros::protocol::{
+    batch_commands, batch_resets, Accepted, BatchReset, Client, Command, HostedLine, Rejection, TimerTick, REJECTIONS,
+};
 use sorting_line::ros::ros_args::RosArgs;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
 use sorting_line::sim::{Line, LineConfig, SortMode, Variant};
@@ -362,6 +369,207 @@ fn fuzz_lockstep_commands() {
 #[test]
 fn fuzz_realtime_commands() {
     report_commands("realtime", fuzz_commands(false));
+}
+
+// ------------------------------------------------------------------------------------------
+// Batches
+
+/// One line's entry of a fuzzed `batch/cmd`.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    stranger: bool,
+    stamp: StampKind,
+    speed: f64,
+    mode: u8,
+}
+
+/// A `batch/cmd`: its entries (the first `lines` are used) and, if `Some((list, longer))`, one
+/// list (0 stamp_sec, 1 stamp_nanosec, 2 speeds, 3 modes) made one entry longer or shorter.
+#[derive(Clone, Debug)]
+struct Batch {
+    entries: Vec<Entry>,
+    misshapen: Option<(usize, bool)>,
+}
+
+fn entry() -> impl Strategy<Value = Entry> {
+    let good = (0usize..10, 0u8..3).prop_map(|(i, mode)| Entry {
+        stranger: false,
+        stamp: StampKind::Current,
+        speed: (i + 1) as f64 / 10.0,
+        mode,
+    });
+    let bad = (prop::bool::weighted(0.3), stamp_kind(), speed_value(), prop_oneof![3 => 0u8..3, 1 => any::<u8>()])
+        .prop_map(|(stranger, stamp, speed, mode)| Entry { stranger, stamp, speed, mode });
+    prop_oneof![2 => good, 1 => bad]
+}
+
+fn batches() -> impl Strategy<Value = Vec<Batch>> {
+    let misshapen = prop_oneof![4 => Just(None), 1 => (0usize..4, any::<bool>()).prop_map(Some)];
+    let batch = (prop::collection::vec(entry(), 4), misshapen).prop_map(|(entries, misshapen)| Batch { entries, misshapen });
+    prop::collection::vec(batch, 1..40)
+}
+
+/// The message for `batch` on `hosts`, each entry's stamp taken relative to its own line.
+fn batch_message(batch: &Batch, hosts: &[HostedLine]) -> LineCommands {
+    let entries = &batch.entries[..hosts.len()];
+    let stamps: Vec<Time> = entries.iter().zip(hosts).map(|(e, h)| stamp_of(e.stamp, h)).collect();
+    let mut cmd = LineCommands {
+        stamp_sec: stamps.iter().map(|t| t.sec).collect(),
+        stamp_nanosec: stamps.iter().map(|t| t.nanosec).collect(),
+        speeds: entries.iter().map(|e| e.speed).collect(),
+        modes: entries.iter().map(|e| e.mode).collect(),
+        ..LineCommands::default()
+    };
+    if let Some((list, longer)) = batch.misshapen {
+        // On the basic line an empty `modes` is allowed: make that list longer, never empty.
+        let longer = longer || (list == 3 && hosts.len() == 1);
+        match (list, longer) {
+            (0, true) => cmd.stamp_sec.push(0),
+            (0, false) => drop(cmd.stamp_sec.pop()),
+            (1, true) => cmd.stamp_nanosec.push(0),
+            (1, false) => drop(cmd.stamp_nanosec.pop()),
+            (2, true) => cmd.speeds.push(0.5),
+            (2, false) => drop(cmd.speeds.pop()),
+            (_, true) => cmd.modes.push(0),
+            (_, false) => drop(cmd.modes.pop()),
+        }
+    }
+    cmd
+}
+
+#[test]
+fn fuzz_batch_commands() {
+    let strategy = (select(SETUPS.to_vec()), select(VARIANTS.to_vec()), 1usize..=4, any::<u64>(), batches());
+    let totals = std::cell::RefCell::new((0u32, 0u64, BTreeMap::<Rejection, u64>::new()));
+    runner()
+        .run(&strategy, |(setup, variant, lines, seed, batches)| {
+            let config = LineConfig::for_setup(setup, variant);
+            let advanced = variant == Variant::Advanced;
+            let clock = SimClock::new(PERIOD);
+            let new_lines = || -> Vec<HostedLine> {
+                (0..lines).map(|k| HostedLine::new(config.clone(), seed + k as u64, clock, TickMode::Lockstep)).collect()
+            };
+            let (mut clean, mut noisy) = (new_lines(), new_lines());
+            let mut counters: Vec<LineCounters> = (0..lines).map(|k| LineCounters::new(format!("/fuzz/line_{k}"))).collect();
+            let mut tallies: Vec<Tally> =
+                (0..lines).map(|_| Tally { commands: 0, rejected: BTreeMap::new(), skipped: 0 }).collect();
+            // Per line: whether a speed and a mode already wait for the current tick.
+            let mut pending = vec![(false, false); lines];
+            for batch in &batches {
+                let cmd = batch_message(batch, &noisy);
+                let entries = match batch_commands(&cmd, lines, variant) {
+                    Err(detail) => {
+                        prop_assert!(batch.misshapen.is_some(), "a well-formed batch was refused: {detail}");
+                        prop_assert!(detail.contains(&format!("for {lines} lines")), "{detail}");
+                        // No line sees any of it; the node counts it once, on line 0.
+                        *tallies[0].rejected.entry(Rejection::Malformed).or_default() += 1;
+                        counters[0].reject(Rejection::Malformed, "batch/cmd", &detail);
+                        continue;
+                    }
+                    Ok(entries) => entries,
+                };
+                prop_assert!(batch.misshapen.is_none(), "a misshapen batch was accepted: {cmd:?}");
+                for (k, entry) in entries.iter().enumerate() {
+                    let from = if batch.entries[k].stranger { STRANGER } else { OWNER };
+                    for command in entry.commands() {
+                        let (is_speed, valid) = match command {
+                            Command::Speed(speed) => (true, valid_speed(speed)),
+                            Command::Mode(mode) => (false, mode < 3),
+                        };
+                        let waiting = if is_speed { pending[k].0 } else { pending[k].1 };
+                        let allowed = expected(&noisy[k], advanced, true, from, entry.stamp, is_speed, valid, waiting);
+                        let got = noisy[k].command_from(from, entry.stamp, command);
+                        tallies[k].commands += 1;
+                        match (allowed, got) {
+                            (None, Ok(accepted)) => {
+                                prop_assert_eq!(clean[k].command_from(from, entry.stamp, command), Ok(accepted));
+                                match accepted {
+                                    Accepted::Stepped(_) => pending[k] = (false, false),
+                                    Accepted::Stored if is_speed => pending[k].0 = true,
+                                    Accepted::Stored => pending[k].1 = true,
+                                }
+                            }
+                            (Some(allowed), Err(reason)) => {
+                                prop_assert!(allowed.contains(&reason), "line {k}, {command} at {:?}: {reason:?}, expected one of {allowed:?}", entry.stamp);
+                                *tallies[k].rejected.entry(reason).or_default() += 1;
+                                counters[k].reject(reason, "batch/cmd", "fuzz");
+                            }
+                            (allowed, got) => {
+                                return Err(TestCaseError::fail(format!(
+                                    "line {k}, {command} at {:?} from {from:?}: got {got:?}, expected {allowed:?}",
+                                    entry.stamp
+                                )))
+                            }
+                        }
+                    }
+                }
+                for k in 0..lines {
+                    prop_assert_eq!(clean[k].tick(), noisy[k].tick());
+                    prop_assert_eq!(clean[k].line().last_step(), noisy[k].line().last_step(), "line {}", k);
+                }
+            }
+            let mut t = totals.borrow_mut();
+            t.0 += 1;
+            for (c, tally) in counters.iter_mut().zip(&tallies) {
+                check_counters(c, tally)?;
+                t.1 += tally.commands;
+                for (reason, n) in &tally.rejected {
+                    *t.2.entry(*reason).or_default() += n;
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    let (cases, commands, by_reason) = totals.into_inner();
+    let reasons: Vec<String> = by_reason.iter().map(|(r, n)| format!("{} {n}", r.key())).collect();
+    eprintln!("fuzz batch commands: {cases} cases, {commands} entries' commands judged as expected ({})", reasons.join(", "));
+    if cases >= 64 {
+        for reason in [Rejection::Malformed, Rejection::InvalidSpeed, Rejection::UnknownMode, Rejection::Stale,
+                       Rejection::UnknownTick, Rejection::NotOwner, Rejection::Duplicate] {
+            assert!(by_reason.contains_key(&reason), "the batch fuzz never produced a {} rejection", reason.key());
+        }
+    }
+}
+
+#[test]
+fn fuzz_batch_resets() {
+    let list = |max: u32| prop::collection::vec(prop_oneof![4 => 0..max, 1 => any::<u32>()], 0..6);
+    let strategy = (1usize..=5, list(6), prop::collection::vec(any::<bool>(), 0..6), prop::collection::vec(any::<u64>(), 0..6));
+    let refused = std::cell::Cell::new(0u32);
+    runner()
+        .run(&strategy, |(lines, mut ids, mut has_seed, mut seeds)| {
+            // Mostly well-shaped: trim the three lists to one length two times in three.
+            if ids.len() % 3 != 0 {
+                let n = ids.len().min(has_seed.len()).min(seeds.len());
+                ids.truncate(n);
+                has_seed.truncate(n);
+                seeds.truncate(n);
+            }
+            let request = ResetLinesRequest { lines: ids.clone(), has_seed: has_seed.clone(), seeds: seeds.clone() };
+            let same_length = ids.len() == has_seed.len() && ids.len() == seeds.len();
+            let mut sorted = ids.clone();
+            sorted.sort_unstable();
+            sorted.dedup();
+            let valid = same_length && sorted.len() == ids.len() && ids.iter().all(|&k| (k as usize) < lines);
+            match batch_resets(&request, lines) {
+                Ok(resets) => {
+                    prop_assert!(valid, "{request:?} on {lines} lines was accepted");
+                    let want: Vec<BatchReset> = (0..ids.len())
+                        .map(|i| BatchReset { line: ids[i] as usize, seed: has_seed[i].then_some(seeds[i]) })
+                        .collect();
+                    prop_assert_eq!(resets, want);
+                }
+                Err(e) => {
+                    prop_assert!(!valid, "{request:?} on {lines} lines was refused: {e}");
+                    let named = if same_length { e.contains("out of range or repeated") } else { e.contains("same length") };
+                    prop_assert!(named, "{e}");
+                    refused.set(refused.get() + 1);
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    eprintln!("fuzz batch resets: {} cases, {} refused naming why", cases(), refused.get());
 }
 
 // ------------------------------------------------------------------------------------------

@@ -38,16 +38,21 @@ from typing import Sequence
 import numpy as np
 
 from .transport import find_node_binary
+from .vocabulary import (
+    ACTION_COUNTS,
+    CATEGORIES,
+    MODES,
+    SPEED_COUNT,
+    START_SPEED_INDEX,  # noqa: F401  (re-exported: the belt's speed index after a reset)
+    check,
+    check_setup,
+    check_variant,
+    decode_action,
+    encode_actions,
+)
 
-#: Speed index of the belt right after a reset (speed 0.6; src/sim/speed.rs START_SPEED_INDEX).
-START_SPEED_INDEX = 5
-SPEED_COUNT = 10
-MODE_COUNT = 3
 #: Reading levels 0.00, 0.01, ..., 1.00 of the input sensor (the rows of the rule table).
 LEVELS = 101
-
-VARIANTS = ("basic", "advanced")
-SETUPS = ("A", "B", "C", "D")
 
 
 def level(quantity: float) -> int:
@@ -68,10 +73,8 @@ def load_policy(setup: str, variant: str) -> dict:
     """The decision tables of ``sorting_line policy --setup SETUP --variant VARIANT``, read once per
     (setup, variant) and process. Keys: setup, variant, levels, rba (``[speed_index, mode]`` per
     cell ``level * 3 + category``), rba_hold (per cell, one pair per current speed 0..9), config."""
-    if setup not in SETUPS:
-        raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
-    if variant not in VARIANTS:
-        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(VARIANTS)}")
+    check_setup(setup)
+    check_variant(variant)
     argv = [find_node_binary(), "policy", "--setup", setup, "--variant", variant]
     result = subprocess.run(argv, capture_output=True, text=True, timeout=120)
     if result.returncode != 0:
@@ -110,13 +113,7 @@ class Agent:
         quantity = float(obs[0])
         category = int(round(float(obs[1]))) if self.variant == "advanced" else 0
         speed_index, mode = self.act(quantity, category, current_speed_index)
-        return speed_index * MODE_COUNT + mode if self.variant == "advanced" else speed_index
-
-
-def _check_variant(variant: str) -> str:
-    if variant not in VARIANTS:
-        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(VARIANTS)}")
-    return variant
+        return encode_actions(self.variant, speed_index, mode)
 
 
 class RuleBasedAgent(Agent):
@@ -127,7 +124,7 @@ class RuleBasedAgent(Agent):
     ``current_speed_index``; ``rba-hold`` needs the belt's current speed."""
 
     def __init__(self, setup: str, variant: str, hold: bool = False):
-        self.setup, self.variant, self.hold = setup, _check_variant(variant), hold
+        self.setup, self.variant, self.hold = setup, check_variant(variant), hold
         policy = load_policy(setup, variant)
         self.config = policy["config"]
         self._rba = policy["rba"]
@@ -140,8 +137,8 @@ class RuleBasedAgent(Agent):
     def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
         if self.variant == "basic":
             category = 0  # the basic line has no ratio sensor: its table has one category slot
-        elif category not in (0, 1, 2):
-            raise ValueError(f"category = {category!r} is not valid: allowed 0, 1, 2")
+        else:
+            check("category", category, CATEGORIES.values())
         cell = level(quantity) * 3 + category
         if not self.hold:
             return self._rba[cell]
@@ -155,10 +152,10 @@ class ConstantAgent(Agent):
     matching the observed ratio category (``sorting_line eval --agent constant:K[:M|:cat]``)."""
 
     def __init__(self, variant: str, speed_index: int, mode: int | str = 0):
-        self.variant = _check_variant(variant)
+        self.variant = check_variant(variant)
         if not 0 <= speed_index < SPEED_COUNT:
             raise ValueError(f"speed_index = {speed_index!r} is not valid: allowed 0..9")
-        if mode != "cat" and mode not in range(MODE_COUNT):
+        if mode != "cat" and mode not in MODES.values():
             raise ValueError(f"mode = {mode!r} is not valid: allowed 0, 1, 2 or 'cat'")
         if variant == "basic" and mode != 0:
             raise ValueError("a sort mode needs the advanced line")
@@ -176,7 +173,7 @@ class RandomAgent(Agent):
     the agent each episode), ``reset()`` carries on."""
 
     def __init__(self, variant: str, seed: int | None = None):
-        self.variant = _check_variant(variant)
+        self.variant = check_variant(variant)
         self.rng = np.random.default_rng(seed)
 
     def reset(self, seed: int | None = None) -> None:
@@ -184,9 +181,7 @@ class RandomAgent(Agent):
             self.rng = np.random.default_rng(seed)
 
     def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
-        n = SPEED_COUNT * MODE_COUNT if self.variant == "advanced" else SPEED_COUNT
-        a = int(self.rng.integers(n))
-        return (a // MODE_COUNT, a % MODE_COUNT) if self.variant == "advanced" else (a, 0)
+        return decode_action(self.variant, self.rng.integers(ACTION_COUNTS[self.variant]))
 
 
 class TrainedAgent(Agent):
@@ -197,7 +192,7 @@ class TrainedAgent(Agent):
         from .env import action_space
         from .hyperparams import algorithm_class
 
-        self.variant = _check_variant(variant)
+        self.variant = check_variant(variant)
         self.name = f"{algo}:{path}"
         cls = algorithm_class(algo)
         try:
@@ -214,8 +209,7 @@ class TrainedAgent(Agent):
 
     def act(self, quantity: float, category: int, current_speed_index: int) -> tuple[int, int]:
         obs = [quantity, category] if self.variant == "advanced" else [quantity]
-        a = self.predict(obs, current_speed_index)
-        return (a // MODE_COUNT, a % MODE_COUNT) if self.variant == "advanced" else (a, 0)
+        return decode_action(self.variant, self.predict(obs, current_speed_index))
 
 
 def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> Agent:

@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Optional
 
-from .agents import SETUPS, VARIANTS
+from .vocabulary import SETUPS, VARIANTS
 from .hyperparams import ALGOS
 
 BASELINES = ("random", "rba", "rba-hold")
@@ -225,7 +225,7 @@ def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agent
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sorting-line-benchmark", description="The paper's Table 1 and Figure 7 through ROS 2; resumable.")
     p.add_argument("--out", type=Path, default=Path("results/benchmark"), help="results directory (default results/benchmark)")
-    p.add_argument("--setups", nargs="+", default=list(SETUPS), choices=SETUPS)
+    p.add_argument("--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS))
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS)
     p.add_argument("--train-seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS), help="training seeds of the RL agents (default 42)")

@@ -16,8 +16,8 @@ import sys
 import gymnasium as gym
 import numpy as np
 
-from .env import ENV_IDS
 from .transport import BridgeError
+from .vocabulary import ENV_IDS, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
 
 
 def parse_agent(text: str, variant: str):
@@ -30,20 +30,20 @@ def parse_agent(text: str, variant: str):
             raise ValueError
         speed = int(parts[1])
         mode = int(parts[2]) if len(parts) == 3 else 0
-        if not (0 <= speed <= 9 and 0 <= mode <= 2) or (mode and variant == "basic"):
+        if speed not in range(SPEED_COUNT) or mode not in MODES.values() or (mode and variant == "basic"):
             raise ValueError
     except ValueError:
         raise SystemExit(
             f"sorting-line-bridge: agent {text!r} is not valid: allowed random, constant:K (K = 0..9) "
             "or, on the advanced line, constant:K:M (M = 0..2)"
         )
-    return speed * 3 + mode if variant == "advanced" else speed
+    return encode_actions(variant, speed, mode)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="sorting-line-bridge", description=__doc__.split("\n\n")[0])
-    p.add_argument("--setup", choices="ABCD", default="A")
-    p.add_argument("--variant", choices=["basic", "advanced"], default="basic")
+    p.add_argument("--setup", choices=list(SETUPS), default="A")
+    p.add_argument("--variant", choices=VARIANTS, default="basic")
     p.add_argument("--episodes", type=int, default=3)
     p.add_argument("--seed", type=int, default=42, help="episode i is reset with seed + i")
     p.add_argument("--agent", default="random", help="random, constant:K or constant:K:M")

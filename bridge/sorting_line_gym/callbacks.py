@@ -17,9 +17,11 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from .vocabulary import THRESHOLD
+
 
 class LineKpiCallback(BaseCallback):
-    def __init__(self, threshold: float = 0.7, verbose: int = 0):
+    def __init__(self, threshold: float = THRESHOLD, verbose: int = 0):
         super().__init__(verbose)
         self.threshold = threshold
         self.episodes = 0

@@ -46,7 +46,8 @@ from rclpy.utilities import remove_ros_args
 from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
 
 from .agents import Agent, RuleBasedAgent
-from .transport import QOS, SPEEDS, publish_commands
+from .transport import QOS, publish_commands
+from .vocabulary import SETUPS, SPEEDS, VARIANTS, speed_index_of
 
 NS_PER_S = 1_000_000_000
 #: Ticks whose readings are still incomplete that the controller keeps; older ones are dropped.
@@ -59,12 +60,6 @@ SPIN_PERIOD = 0.1
 
 def stamp_ns(stamp) -> int:
     return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-def speed_index_of(speed: float) -> int | None:
-    """The index of one of the ten belt speeds 0.1..1.0, or None for anything else."""
-    i = round(float(speed) * 10) - 1
-    return i if 0 <= i < len(SPEEDS) and abs(SPEEDS[i] - speed) < 1e-9 else None
 
 
 @dataclass
@@ -249,8 +244,8 @@ def main(argv: list[str] | None = None) -> int:
                                 epilog="ROS arguments go after --ros-args (e.g. --ros-args -r __ns:=/plant).")
     p.add_argument("--namespace", default=None,
                    help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)")
-    p.add_argument("--setup", choices="ABCD", required=True, help="the setup of the node's line (A..D)")
-    p.add_argument("--variant", choices=["basic", "advanced"], default="basic")
+    p.add_argument("--setup", choices=list(SETUPS), required=True, help="the setup of the node's line (A..D)")
+    p.add_argument("--variant", choices=VARIANTS, default="basic")
     p.add_argument("--agent", choices=["rba", "rba-hold"], default="rba")
     p.add_argument("--node-name", default="sorting_line_controller")
     p.add_argument("--decision-log", default=None, metavar="FILE",

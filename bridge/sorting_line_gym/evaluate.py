@@ -28,12 +28,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
 
-from .agents import SETUPS, START_SPEED_INDEX, VARIANTS, Agent, make_agent
+from .agents import Agent, make_agent
+from .vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
 
-#: The paper's evaluation protocol.
+#: The paper's evaluation protocol (episodes of EPISODE_STEPS steps).
 FIRST_SEED = 42
 EPISODES = 10
-EPISODE_STEPS = 50
 
 
 @dataclass
@@ -151,10 +151,8 @@ def evaluate(
     ``dashboard`` if given."""
     from .env import SortingLineEnv
 
-    if setup not in SETUPS:
-        raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
-    if variant not in VARIANTS:
-        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(VARIANTS)}")
+    check_setup(setup)
+    check_variant(variant)
     if episodes < 1 or steps < 1:
         raise ValueError(f"episodes = {episodes}, steps = {steps}: both must be 1 or more")
     agent = make_agent(agent_spec, setup, variant, seed)
@@ -202,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Evaluate an agent on a sorting line through ROS 2 (seeds 42..51, 50 steps, deterministic).",
     )
     p.add_argument("--agent", required=True, help="random, rba, rba-hold, constant:K[:M|:cat], or ppo:PATH / dqn:PATH / a2c:PATH")
-    p.add_argument("--setup", required=True, choices=SETUPS)
+    p.add_argument("--setup", required=True, choices=list(SETUPS))
     p.add_argument("--variant", default="basic", choices=VARIANTS)
     p.add_argument("--episodes", type=int, default=EPISODES, help=f"episodes, seeded seed, seed+1, ... (default {EPISODES})")
     p.add_argument("--seed", type=int, default=FIRST_SEED, help=f"seed of the first episode (default {FIRST_SEED})")

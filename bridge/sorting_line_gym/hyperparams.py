@@ -22,7 +22,7 @@ from typing import Any, Callable, Iterable
 
 import yaml
 
-from .env import ENV_IDS  # the keys of the hyperparameter files
+from .vocabulary import ENV_IDS, check_variant  # ENV_IDS: the keys of the hyperparameter files
 
 #: The algorithms sorting-line-train knows, by their command-line name.
 ALGOS = ("ppo", "dqn", "a2c")
@@ -59,9 +59,7 @@ def load(algo: str, variant: str, path: str | Path | None = None, overrides: Ite
     """The hyperparameters of ``algo`` for the line ``variant``: the entry for its Gymnasium id in
     ``path`` (default: the packaged file), then ``overrides`` applied."""
     check_algo(algo)
-    env_id = ENV_IDS.get(variant)
-    if env_id is None:
-        raise ValueError(f"variant = {variant!r} is not valid: allowed {', '.join(ENV_IDS)}")
+    env_id = ENV_IDS[check_variant(variant)]
     if path is None:
         source = f"sorting_line_gym/hyperparams/{algo}.yml"
         text = importlib.resources.files("sorting_line_gym").joinpath("hyperparams", f"{algo}.yml").read_text()

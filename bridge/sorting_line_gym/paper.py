@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from .vocabulary import SETUPS, VARIANTS
+
 #: (setup, variant, algorithm) -> (speed %, purity %, reward), as printed in the paper's Table 1.
 TABLE_1: dict[tuple[str, str, str], tuple[float, float, float]] = {
     ("A", "basic", "rba"): (55, 85, 26.56),
@@ -50,8 +52,8 @@ TABLE_1: dict[tuple[str, str, str], tuple[float, float, float]] = {
 #: Row labels of Table 1 ("A1" ... "D8"), in the paper's order.
 TABLE_1_INDEX: dict[tuple[str, str, str], str] = {
     (setup, variant, algo): f"{setup}{i + 1 + (4 if variant == 'advanced' else 0)}"
-    for setup in "ABCD"
-    for variant in ("basic", "advanced")
+    for setup in SETUPS
+    for variant in VARIANTS
     for i, algo in enumerate(("rba", "dqn", "ppo", "a2c"))
 }
 

@@ -8,7 +8,9 @@
   in black; reward against accuracy per speed; the expected-reward heat map with the best speed
   per occupancy marked.
 
-Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths.
+Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths. Figures are drawn on their
+own ``Figure`` and Agg canvas (as ``render`` does), never through pyplot: importing this module
+leaves the caller's matplotlib backend and open windows alone.
 """
 
 from __future__ import annotations
@@ -20,14 +22,13 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")  # files only; never a window
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-
-from .agents import SETUPS, VARIANTS  # noqa: E402
-from .transport import SPEEDS, find_node_binary  # noqa: E402
+from .transport import find_node_binary
+from .vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
 
 AGENT_COLORS = {
     "random": "#9e9e9e",
@@ -37,15 +38,20 @@ AGENT_COLORS = {
     "ppo": "#2ca02c",
     "a2c": "#d62728",
 }
-THRESHOLD = 0.7
 
 
-def _save(fig, stem: Path) -> list[Path]:
+def _figure(**kwargs) -> Figure:
+    """A figure on an Agg canvas of its own (files only; never a window)."""
+    fig = Figure(layout="constrained", **kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, stem: Path) -> list[Path]:
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = [stem.with_suffix(".png"), stem.with_suffix(".svg")]
     fig.savefig(paths[0], dpi=120)
     fig.savefig(paths[1])
-    plt.close(fig)
     return paths
 
 
@@ -55,7 +61,8 @@ def benchmark_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Pat
 
     agents = [a for a in AGENT_COLORS if any(k[2] == a for k in rows)]
     groups = [(s, v) for s in SETUPS for v in VARIANTS if any((s, v, a) in rows for a in agents)]
-    fig, ax = plt.subplots(figsize=(13, 5.2), layout="constrained")
+    fig = _figure(figsize=(13, 5.2))
+    ax = fig.subplots()
     width = 0.8 / max(1, len(agents))
     x = np.arange(len(groups))
     for i, agent in enumerate(agents):
@@ -104,9 +111,10 @@ def analysis_figure(stem: Path) -> list[Path]:
         acc[i, j] = float(r["expected_accuracy"])
         reward[i, j] = float(r["expected_reward"])
     occ = np.array(occupancies)
-    cmap = plt.get_cmap("viridis")
+    cmap = matplotlib.colormaps["viridis"]
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9.5), layout="constrained")
+    fig = _figure(figsize=(13, 9.5))
+    axes = fig.subplots(2, 2)
     ax = axes[0, 0]
     for i, s in enumerate(speeds):
         ax.plot(occ, acc[i], color=cmap(i / (len(speeds) - 1)), label=f"{s:.1f}")
@@ -140,5 +148,5 @@ def analysis_figure(stem: Path) -> list[Path]:
     fig.colorbar(im, ax=ax, label="expected step reward")
     ax.set(xlabel="belt occupancy", ylabel="belt speed", title="Expected reward per speed and occupancy")
     ax.legend(loc="upper right", fontsize=8)
-    fig.suptitle("The basic line's dynamics (sorting_line table; threshold 0.7)")
+    fig.suptitle(f"The basic line's dynamics (sorting_line table; threshold {THRESHOLD})")
     return _save(fig, stem)

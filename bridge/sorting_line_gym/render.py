@@ -28,6 +28,11 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+# MODE_NAMES: the advanced line's sort modes by number. START_SPEED: the belt speed after a reset,
+# which the first step's speed is compared with (as the line's penalty does).
+from .vocabulary import MODE_LABELS as MODE_NAMES
+from .vocabulary import START_SPEED, VARIANTS
+
 __all__ = [
     "DashboardFrame",
     "LiveDashboard",
@@ -38,10 +43,6 @@ __all__ = [
     "save_dashboard",
 ]
 
-# Sort modes of the advanced line (action = speed_index * 3 + mode).
-MODE_NAMES = {0: "basic", 1: "positive (A-rich)", 2: "negative (B-rich)"}
-# Belt speed after reset; the first step's speed is compared with it (as the line's penalty does).
-START_SPEED = 0.6
 
 # Reference pixel size: every size below is tuned for 1600 x 800 and scales with the output.
 BASE_WIDTH_PX = 1600
@@ -240,7 +241,7 @@ def count_speed_changes(history_speed: Sequence[float], start_speed: float = STA
 
 
 def _build_figure(frame: DashboardFrame, width_px: int, height_px: int) -> Figure:
-    if frame.variant not in ("basic", "advanced"):
+    if frame.variant not in VARIANTS:
         raise ValueError(f"DashboardFrame.variant must be 'basic' or 'advanced', not {frame.variant!r}")
     width_px, height_px = int(width_px), int(height_px)
     if width_px < 16 or height_px < 8:

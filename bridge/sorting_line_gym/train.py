@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from . import hyperparams
-from .agents import SETUPS, VARIANTS
+from .vocabulary import SETUPS, VARIANTS, check_setup
 
 
 @dataclass
@@ -104,8 +104,7 @@ def train(
 
     from .callbacks import LineKpiCallback
 
-    if setup not in SETUPS:
-        raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
+    check_setup(setup)
     params = params if params is not None else hyperparams.load(algo, variant)
     own, kwargs = hyperparams.split(params)
     # Small MLPs on 2 cores: one torch thread leaves the other core to the node and the bridge.
@@ -159,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2 (the paper's settings by default).",
     )
     p.add_argument("--algo", required=True, choices=hyperparams.ALGOS)
-    p.add_argument("--setup", required=True, choices=SETUPS, help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty")
+    p.add_argument("--setup", required=True, choices=list(SETUPS), help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty")
     p.add_argument("--variant", default="basic", choices=VARIANTS)
     p.add_argument("--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)")
     p.add_argument("--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)")

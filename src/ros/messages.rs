@@ -1,9 +1,13 @@
-//! Rust mirrors of every message the node sends or receives. CDR is positional: each struct
-//! lists the fields of its .msg file (msg/msg, msg/srv) in the same order with the same types;
-//! constants in a .msg file are not fields. `MessageTypeName`s are next to the types.
+//! Rust mirrors of every message the node sends or receives, and the builders that describe a
+//! hosted line in them (`LineState::of(host)` ...). CDR is positional: each struct lists the
+//! fields of its .msg file (msg/msg, msg/srv) in the same order with the same types; constants in
+//! a .msg file are not fields. `MessageTypeName`s are next to the types.
 
 use ros2_client::{Message, MessageTypeName, ServiceTypeName};
 use serde::{Deserialize, Serialize};
+
+use super::protocol::HostedLine;
+use crate::sim::Observation;
 
 /// The interface package built from msg/.
 pub const INTERFACES: &str = "sorting_line_interfaces";
@@ -301,6 +305,139 @@ pub fn reset_service_type() -> ServiceTypeName {
 /// The ResetLines service type.
 pub fn batch_reset_service_type() -> ServiceTypeName {
     ServiceTypeName::new(INTERFACES, "ResetLines")
+}
+
+// ------------------------------------------------------------------------------------------
+// What a hosted line's current tick looks like in each message
+
+impl Header {
+    /// The header of a line's current tick.
+    pub fn of(host: &HostedLine) -> Self {
+        Header { stamp: host.stamp(), frame_id: String::new() }
+    }
+}
+
+impl MaterialInput {
+    /// `input`: the batch entering the line and the sensor's reading of it.
+    pub fn of(host: &HostedLine) -> Self {
+        let line = host.line();
+        let input = line.input();
+        MaterialInput {
+            header: Header::of(host),
+            episode: line.episode(),
+            step: line.step_count(),
+            quantity: line.observation().quantity,
+            amount_a: input.a,
+            amount_b: input.b,
+            occupancy: input.occupancy(),
+        }
+    }
+}
+
+impl BeltOccupancy {
+    /// `belt/occupancy`.
+    pub fn of(host: &HostedLine) -> Self {
+        let line = host.line();
+        let belt = line.belt();
+        BeltOccupancy {
+            header: Header::of(host),
+            episode: line.episode(),
+            step: line.step_count(),
+            occupancy: belt.occupancy(),
+            speed: line.speed(),
+            amount_a: belt.a,
+            amount_b: belt.b,
+        }
+    }
+}
+
+impl MaterialRatio {
+    /// `sensors/ratio` (advanced line).
+    pub fn of(host: &HostedLine) -> Self {
+        let line = host.line();
+        let input = line.input();
+        MaterialRatio {
+            header: Header::of(host),
+            episode: line.episode(),
+            step: line.step_count(),
+            ratio: input.ratio(),
+            category: input.category() as u8,
+        }
+    }
+}
+
+impl ResetEvent {
+    /// `events/reset`: the episode that just started, and whether its reset named a seed.
+    pub fn of(host: &HostedLine, seeded: bool) -> Self {
+        let line = host.line();
+        ResetEvent { header: Header::of(host), episode: line.episode(), seed: line.seed(), seeded }
+    }
+}
+
+impl LineState {
+    /// The `state` message of a line's current tick. Right after a reset no step has happened:
+    /// it reports the start state with reward 0.
+    pub fn of(host: &HostedLine) -> Self {
+        let line = host.line();
+        let containers = line.containers();
+        let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+        let observation = line.observation();
+        let (occupancy, accuracy, reward) = match line.last_step() {
+            Some(o) => (o.occupancy, o.accuracy, o.reward),
+            None => (line.belt().occupancy(), line.belt_accuracy(), 0.0),
+        };
+        LineState {
+            header: Header::of(host),
+            episode: line.episode(),
+            step: line.step_count(),
+            seed: line.seed(),
+            speed: line.speed(),
+            speed_index: line.speed_index() as u8,
+            mode: line.mode() as u8,
+            occupancy,
+            accuracy,
+            reward,
+            cumulative_reward: line.cumulative_reward(),
+            purity: containers.purity(),
+            recall_a: containers.recall_a(),
+            recall_b: containers.recall_b(),
+            container_a: count(containers.a),
+            container_a_false: count(containers.a_false),
+            container_b: count(containers.b),
+            container_b_false: count(containers.b_false),
+            speed_changes: line.speed_changes(),
+            observation_quantity: observation.quantity,
+            observation_category: observation.category as u8,
+            terminated: false,
+            truncated: line.truncated(),
+        }
+    }
+}
+
+impl LineStates {
+    /// `batch/state`: every hosted line's current state, stamped with the newest line's stamp.
+    pub fn of<'a>(hosts: impl Iterator<Item = &'a HostedLine>) -> Self {
+        let states: Vec<LineState> = hosts.map(LineState::of).collect();
+        let stamp = states.iter().map(|s| s.header.stamp).max().unwrap_or_default();
+        LineStates::from_states(Header { stamp, frame_id: String::new() }, &states)
+    }
+}
+
+impl ResetLineResponse {
+    /// The answer of a line's `reset` service after the reset.
+    pub fn of(host: &HostedLine, observation: Observation, seeded: bool) -> Self {
+        let line = host.line();
+        let how = if seeded { "seeded with" } else { "continuing the streams of seed" };
+        ResetLineResponse {
+            success: true,
+            message: format!("episode {} started, {how} {}", line.episode(), line.seed()),
+            seed: line.seed(),
+            episode: line.episode(),
+            stamp: host.stamp(),
+            quantity: observation.quantity,
+            category: observation.category as u8,
+        }
+    }
 }
 
 #[cfg(test)]

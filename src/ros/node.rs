@@ -21,7 +21,7 @@ use super::messages::*;
 use super::names::{Names, NODE_NAME};
 use super::options::{NodeArgs, TickMode};
 use super::params::NodeParams;
-use super::protocol::{Accepted, Client, HostedLine, Rejection, TimerTick};
+use super::protocol::{batch_commands, batch_resets, Accepted, Client, Command, HostedLine, Rejection, TimerTick};
 use super::qos::default_profile;
 use super::ros_args::RosArgs;
 use crate::sim::{Observation, Variant};
@@ -268,63 +268,34 @@ impl LineEndpoints {
     /// of the same tick are out.
     fn publish_tick(&self, shared: &Shared, r: &mut LineRuntime) {
         let host = &r.host;
-        let line = host.line();
-        let header = Header { stamp: host.stamp(), frame_id: String::new() };
-        let (episode, step) = (line.episode(), line.step_count());
-        let (input, belt, observation) = (line.input(), line.belt(), line.observation());
         let topic = |relative: &'static str| move || format!("{}/{relative}", self.namespace.trim_end_matches('/'));
         let counters = &mut r.counters;
-        counters.count_published(shared.offer(&self.input, &topic("input"), || MaterialInput {
-            header: header.clone(),
-            episode,
-            step,
-            quantity: observation.quantity,
-            amount_a: input.a,
-            amount_b: input.b,
-            occupancy: input.occupancy(),
-        }));
-        counters.count_published(shared.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy {
-            header: header.clone(),
-            episode,
-            step,
-            occupancy: belt.occupancy(),
-            speed: line.speed(),
-            amount_a: belt.a,
-            amount_b: belt.b,
-        }));
+        counters.count_published(shared.offer(&self.input, &topic("input"), || MaterialInput::of(host)));
+        counters.count_published(shared.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy::of(host)));
         if let Some(ratio) = &self.ratio {
-            counters.count_published(shared.offer(ratio, &topic("sensors/ratio"), || MaterialRatio {
-                header: header.clone(),
-                episode,
-                step,
-                ratio: input.ratio(),
-                category: input.category() as u8,
-            }));
+            counters.count_published(shared.offer(ratio, &topic("sensors/ratio"), || MaterialRatio::of(host)));
         }
-        counters.count_published(shared.offer(&self.state, &topic("state"), || line_state(host)));
+        counters.count_published(shared.offer(&self.state, &topic("state"), || LineState::of(host)));
     }
 
     fn publish_reset_event(&self, shared: &Shared, r: &mut LineRuntime, seeded: bool) {
-        let line = r.host.line();
         let topic = || format!("{}/events/reset", self.namespace.trim_end_matches('/'));
-        let sent = shared.offer(&self.reset_event, &topic, || ResetEvent {
-            header: Header { stamp: r.host.stamp(), frame_id: String::new() },
-            episode: line.episode(),
-            seed: line.seed(),
-            seeded,
-        });
+        let sent = shared.offer(&self.reset_event, &topic, || ResetEvent::of(&r.host, seeded));
         r.counters.count_published(sent);
     }
 
     /// The tagged input streams of this line.
     fn events(&self, k: usize) -> Vec<LocalBoxStream<'_, Event>> {
         let err = |e| format!("{e:?}");
+        let speed = |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
+        let mode = |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
         let mut streams = vec![
-            self.speed_cmd.async_stream().map(move |r| Event::Speed(k, r.map_err(err))).boxed_local(),
+            self.speed_cmd.async_stream().map(move |r| Event::Command(k, "cmd/speed", r.map(speed).map_err(err))).boxed_local(),
             self.reset.receive_request_stream().map(move |r| Event::Reset(k, r.map_err(err))).boxed_local(),
         ];
         if let Some(mode_cmd) = &self.mode_cmd {
-            streams.push(mode_cmd.async_stream().map(move |r| Event::Mode(k, r.map_err(err))).boxed_local());
+            let stream = mode_cmd.async_stream().map(move |r| Event::Command(k, "cmd/sort_mode", r.map(mode).map_err(err)));
+            streams.push(stream.boxed_local());
         }
         streams
     }
@@ -332,55 +303,15 @@ impl LineEndpoints {
 
 /// Every line's current state, as arrays.
 fn batch_states(runtimes: &[LineRuntime]) -> LineStates {
-    let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
-    let states: Vec<LineState> = runtimes.iter().map(|r| line_state(&r.host)).collect();
-    LineStates::from_states(Header { stamp, frame_id: String::new() }, &states)
-}
-
-/// The `state` message of a line's current tick. Right after a reset no step has happened: it
-/// reports the start state with reward 0.
-fn line_state(host: &HostedLine) -> LineState {
-    let line = host.line();
-    let containers = line.containers();
-    let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-    let observation = line.observation();
-    let (occupancy, accuracy, reward) = match line.last_step() {
-        Some(o) => (o.occupancy, o.accuracy, o.reward),
-        None => (line.belt().occupancy(), line.belt_accuracy(), 0.0),
-    };
-    LineState {
-        header: Header { stamp: host.stamp(), frame_id: String::new() },
-        episode: line.episode(),
-        step: line.step_count(),
-        seed: line.seed(),
-        speed: line.speed(),
-        speed_index: line.speed_index() as u8,
-        mode: line.mode() as u8,
-        occupancy,
-        accuracy,
-        reward,
-        cumulative_reward: line.cumulative_reward(),
-        purity: containers.purity(),
-        recall_a: containers.recall_a(),
-        recall_b: containers.recall_b(),
-        container_a: count(containers.a),
-        container_a_false: count(containers.a_false),
-        container_b: count(containers.b),
-        container_b_false: count(containers.b_false),
-        speed_changes: line.speed_changes(),
-        observation_quantity: observation.quantity,
-        observation_category: observation.category as u8,
-        terminated: false,
-        truncated: line.truncated(),
-    }
+    LineStates::of(runtimes.iter().map(|r| &r.host))
 }
 
 /// Everything from DDS that can wake the node.
 enum Event {
     Batch(Result<(LineCommands, MessageInfo), String>),
     BatchReset(Result<(RmwRequestId, ResetLinesRequest), String>),
-    Speed(usize, Result<(SpeedCommand, MessageInfo), String>),
-    Mode(usize, Result<(SortModeCommand, MessageInfo), String>),
+    /// A command on line k's own topic (named), with its sender and stamp.
+    Command(usize, &'static str, Result<(Client, Time, Command), String>),
     Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
 }
 
@@ -430,21 +361,12 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         publish_clock(runtimes);
                     }
                 }
-                Event::Speed(k, received) => {
+                Event::Command(k, topic, received) => {
                     let result = match received {
-                        Ok((cmd, info)) => apply_speed(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.speed),
+                        Ok((client, stamp, command)) => apply(&mut runtimes[k], client, stamp, command),
                         Err(error) => Err(malformed(&error)),
                     };
-                    if settle(&endpoints[k], &mut runtimes[k], shared, "cmd/speed", result) {
-                        publish_clock(runtimes);
-                    }
-                }
-                Event::Mode(k, received) => {
-                    let result = match received {
-                        Ok((cmd, info)) => apply_mode(&mut runtimes[k], client_of(&info), cmd.header.stamp, cmd.mode),
-                        Err(error) => Err(malformed(&error)),
-                    };
-                    if settle(&endpoints[k], &mut runtimes[k], shared, "cmd/sort_mode", result) {
+                    if settle(&endpoints[k], &mut runtimes[k], shared, topic, result) {
                         publish_clock(runtimes);
                     }
                 }
@@ -452,7 +374,8 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     let response = match batch_reset(endpoints, runtimes, shared, &request) {
                         Ok(message) => ResetLinesResponse { success: true, message, states: batch_states(runtimes) },
                         Err(message) => {
-                            log("WARN", format!("batch/reset refused: {message}"));
+                            // Counted like a malformed batch/cmd (on line 0), logged by the counters.
+                            settle(&endpoints[0], &mut runtimes[0], shared, "batch/reset", Err((Rejection::Malformed, format!("request ({message})"))));
                             ResetLinesResponse { success: false, message, states: batch_states(runtimes) }
                         }
                     };
@@ -466,7 +389,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 Event::Reset(k, Ok((request_id, request))) => {
                     let (e, r) = (&endpoints[k], &mut runtimes[k]);
                     let observation = reset_line(e, r, shared, request.has_seed.then_some(request.seed));
-                    let response = reset_response(&r.host, observation, request.has_seed);
+                    let response = ResetLineResponse::of(&r.host, observation, request.has_seed);
                     if let Err(error) = e.reset.async_send_response(request_id, response).await {
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
                     }
@@ -513,48 +436,29 @@ fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, seed: Opt
     observation
 }
 
-/// Resets the lines a `batch/reset` request names; refuses the whole request if it is malformed.
+/// Resets the lines a `batch/reset` request names; refuses the whole request if it is malformed
+/// (`protocol::batch_resets`).
 fn batch_reset(
     endpoints: &[LineEndpoints],
     runtimes: &mut [LineRuntime],
     shared: &Shared,
     request: &ResetLinesRequest,
 ) -> Result<String, String> {
-    let n = request.lines.len();
-    if request.has_seed.len() != n || request.seeds.len() != n {
-        return Err(format!(
-            "{} lines, {} has_seed, {} seeds: the three lists must have the same length",
-            n,
-            request.has_seed.len(),
-            request.seeds.len()
-        ));
+    let resets = batch_resets(request, runtimes.len())?;
+    for reset in &resets {
+        reset_line(&endpoints[reset.line], &mut runtimes[reset.line], shared, reset.seed);
     }
-    let mut seen = vec![false; runtimes.len()];
-    for &k in &request.lines {
-        let ok = (k as usize) < runtimes.len() && !seen[k as usize];
-        if !ok {
-            return Err(format!("line {k} is out of range or repeated: allowed each of 0 ..= {} once", runtimes.len() - 1));
-        }
-        seen[k as usize] = true;
-    }
-    for i in 0..n {
-        let k = request.lines[i] as usize;
-        let seed = request.has_seed[i].then_some(request.seeds[i]);
-        reset_line(&endpoints[k], &mut runtimes[k], shared, seed);
-    }
-    Ok(format!("{n} line(s) reset"))
+    Ok(format!("{} line(s) reset", resets.len()))
 }
 
-/// Applies a batch command line by line, through the same rules as the per-line topics (mode
-/// first, then speed). Returns whether any line stepped.
+/// Applies a batch command line by line, through the same rules as the per-line topics
+/// (`protocol::batch_commands`). Returns whether any line stepped.
 fn handle_batch(
     endpoints: &[LineEndpoints],
     runtimes: &mut [LineRuntime],
     shared: &Shared,
     received: Result<(LineCommands, MessageInfo), String>,
 ) -> bool {
-    let n = runtimes.len();
-    let advanced = shared.params.line.variant == Variant::Advanced;
     let (cmd, client) = match received {
         Ok((cmd, info)) => (cmd, client_of(&info)),
         Err(error) => {
@@ -562,26 +466,19 @@ fn handle_batch(
             return false;
         }
     };
-    let modes_ok = cmd.modes.len() == n || (!advanced && cmd.modes.is_empty());
-    if cmd.stamp_sec.len() != n || cmd.stamp_nanosec.len() != n || cmd.speeds.len() != n || !modes_ok {
-        let detail = format!(
-            "batch of {} stamps, {} speeds, {} modes for {n} lines",
-            cmd.stamp_sec.len(),
-            cmd.speeds.len(),
-            cmd.modes.len()
-        );
-        settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err((Rejection::Malformed, detail)));
-        return false;
-    }
+    let entries = match batch_commands(&cmd, runtimes.len(), shared.params.line.variant) {
+        Ok(entries) => entries,
+        Err(detail) => {
+            settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err((Rejection::Malformed, detail)));
+            return false;
+        }
+    };
     let mut stepped = false;
-    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
-        let stamp = Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] };
-        if advanced {
-            let result = apply_mode(r, client, stamp, cmd.modes[k]);
+    for ((e, r), entry) in endpoints.iter().zip(runtimes.iter_mut()).zip(entries) {
+        for command in entry.commands() {
+            let result = apply(r, client, entry.stamp, command);
             stepped |= settle(e, r, shared, "batch/cmd", result);
         }
-        let result = apply_speed(r, client, stamp, cmd.speeds[k]);
-        stepped |= settle(e, r, shared, "batch/cmd", result);
     }
     stepped
 }
@@ -612,14 +509,9 @@ fn command_detail(host: &HostedLine, client: Client, what: String) -> String {
     }
 }
 
-fn apply_speed(r: &mut LineRuntime, client: Client, stamp: Time, speed: f64) -> Result<Accepted, Refusal> {
-    let result = r.host.speed_from(client, stamp, speed);
-    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("speed {speed} for stamp {}", show_stamp(stamp)))))
-}
-
-fn apply_mode(r: &mut LineRuntime, client: Client, stamp: Time, mode: u8) -> Result<Accepted, Refusal> {
-    let result = r.host.sort_mode_from(client, stamp, mode);
-    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("sort mode {mode} for stamp {}", show_stamp(stamp)))))
+fn apply(r: &mut LineRuntime, client: Client, stamp: Time, command: Command) -> Result<Accepted, Refusal> {
+    let result = r.host.command_from(client, stamp, command);
+    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("{command} for stamp {}", show_stamp(stamp)))))
 }
 
 fn malformed(error: &str) -> Refusal {
@@ -646,20 +538,6 @@ fn settle(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, topic: &str, 
             }
             false
         }
-    }
-}
-
-fn reset_response(host: &HostedLine, observation: Observation, seeded: bool) -> ResetLineResponse {
-    let line = host.line();
-    let how = if seeded { "seeded with" } else { "continuing the streams of seed" };
-    ResetLineResponse {
-        success: true,
-        message: format!("episode {} started, {how} {}", line.episode(), line.seed()),
-        seed: line.seed(),
-        episode: line.episode(),
-        stamp: host.stamp(),
-        quantity: observation.quantity,
-        category: observation.category as u8,
     }
 }
 

@@ -4,7 +4,7 @@
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 
-use crate::sim::{InputKind, Variant};
+use crate::sim::{InputKind, Setup, Variant};
 
 /// How the node advances time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum, serde::Serialize, serde::Deserialize)]
@@ -20,6 +20,10 @@ pub enum TickMode {
 /// `sorting_line node` options. `None` means "not given": the parameter file or default decides.
 #[derive(Args, Clone, Debug, Default)]
 pub struct NodeArgs {
+    /// One of the paper's setups, A..D: sets input, obs_noise and action_penalty
+    /// (`LineConfig::for_setup`); any of those three given explicitly, from any source, overrides it.
+    #[arg(long)]
+    pub setup: Option<Setup>,
     #[arg(long)]
     pub variant: Option<Variant>,
     #[arg(long)]

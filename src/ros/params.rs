@@ -2,6 +2,11 @@
 //! (ours, then those in `--ros-args`), `--ros-args -p`, and finally explicit command-line flags.
 //! Every value goes through one setter, so a wrong type or an out-of-range value fails at start
 //! with the parameter, the value, where it came from and what is allowed.
+//!
+//! `setup` (A..D) is a preset, not a value of its own: it is applied first, from whichever source
+//! gives it with the highest precedence, and `input`, `obs_noise` and `action_penalty` given
+//! explicitly anywhere override it. So `--setup B --obs-noise 0.1` and a file with `setup: B`
+//! plus `-p obs_noise:=0.1` mean the same line.
 
 use std::path::Path;
 
@@ -9,11 +14,13 @@ use serde_yaml::Value;
 
 use super::names::Names;
 use super::options::{NodeArgs, TickMode};
-use crate::sim::LineConfig;
+use crate::sim::{LineConfig, Setup};
 
 /// Everything the node needs to know before it starts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeParams {
+    /// The paper's setup the line started from, if one was named (see the module's doc).
+    pub setup: Option<Setup>,
     pub line: LineConfig,
     /// Seed of line 0; line k uses seed + k.
     pub seed: u64,
@@ -28,6 +35,7 @@ pub struct NodeParams {
 impl Default for NodeParams {
     fn default() -> Self {
         NodeParams {
+            setup: None,
             line: LineConfig::default(),
             seed: 42,
             mode: TickMode::Lockstep,
@@ -54,6 +62,7 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("rate", "0.0 <.. 100000.0 (ticks per second)"),
     ("lines", "1 ..= 64"),
     ("tick_period", "0.000001 ..= 3600.0 (seconds)"),
+    ("setup", "A, B, C or D (sets input, obs_noise and action_penalty; those given explicitly override it)"),
     ("use_sim_time", "true or false (ignored: this node is the clock)"),
 ];
 
@@ -64,17 +73,19 @@ fn allowed(name: &str) -> &'static str {
 impl NodeParams {
     /// Resolves the parameters from every source, in precedence order.
     pub fn resolve(args: &NodeArgs, ros_params: &[(String, Value)], ros_files: &[impl AsRef<Path>], names: &Names) -> Result<Self, String> {
-        let mut p = NodeParams::default();
+        // (name, value, source), lowest precedence first.
+        let mut given: Vec<(String, Value, String)> = Vec::new();
         for file in args.params_file.iter().map(|f| f.as_path()).chain(ros_files.iter().map(|f| f.as_ref())) {
-            for (name, value) in load_params_file(file, names)? {
-                p.set(&name, &value, &format!("params file {}", file.display()))?;
-            }
+            let source = format!("params file {}", file.display());
+            given.extend(load_params_file(file, names)?.into_iter().map(|(n, v)| (n, v, source.clone())));
         }
-        for (name, value) in ros_params {
-            p.set(name, value, "--ros-args -p")?;
-        }
-        for (name, value) in explicit_flags(args) {
-            p.set(name, &value, &format!("--{}", name.replace('_', "-")))?;
+        given.extend(ros_params.iter().map(|(n, v)| (n.clone(), v.clone(), "--ros-args -p".to_string())));
+        given.extend(explicit_flags(args).into_iter().map(|(n, v)| (n.to_string(), v, format!("--{}", n.replace('_', "-")))));
+        // The preset first, so that every explicit value overrides it whatever its source.
+        let (presets, values): (Vec<_>, Vec<_>) = given.iter().partition(|(name, _, _)| name == "setup");
+        let mut p = NodeParams::default();
+        for (name, value, source) in presets.into_iter().chain(values) {
+            p.set(name, value, source)?;
         }
         p.validate()?;
         Ok(p)
@@ -92,6 +103,17 @@ impl NodeParams {
         let float = || value.as_f64().filter(|v| v.is_finite()).ok_or_else(bad);
         let text = || value.as_str().ok_or_else(bad);
         match name {
+            "setup" => {
+                let setup: Setup = text()?.parse().map_err(|_| bad())?;
+                let preset = LineConfig::for_setup(setup, self.line.variant);
+                self.line = LineConfig {
+                    input: preset.input,
+                    obs_noise: preset.obs_noise,
+                    action_penalty: preset.action_penalty,
+                    ..self.line.clone()
+                };
+                self.setup = Some(setup);
+            }
             "variant" => self.line.variant = text()?.parse().map_err(|_| bad())?,
             "input" => self.line.input = text()?.parse().map_err(|_| bad())?,
             "obs_noise" => self.line.obs_noise = float()?,
@@ -149,6 +171,8 @@ impl NodeParams {
     pub fn as_values(&self) -> Vec<(&'static str, Value)> {
         let l = &self.line;
         vec![
+            // Empty when no setup was named; the three values it set are declared on their own.
+            ("setup", Value::from(self.setup.map(|s| s.to_string()).unwrap_or_default())),
             ("variant", Value::from(l.variant.to_string())),
             ("input", Value::from(l.input.to_string())),
             ("obs_noise", Value::from(l.obs_noise)),
@@ -176,6 +200,7 @@ fn explicit_flags(a: &NodeArgs) -> Vec<(&'static str, Value)> {
             v.push((name, value));
         }
     };
+    push("setup", a.setup.map(|x| Value::from(x.to_string())));
     push("variant", a.variant.map(|x| Value::from(x.to_string())));
     push("input", a.input.map(|x| Value::from(x.to_string())));
     push("obs_noise", a.obs_noise.map(Value::from));
@@ -286,6 +311,35 @@ mod tests {
         assert!(e.contains("is not valid YAML"), "{e}");
         let e = NodeParams::resolve(&NodeArgs::default(), &[], &[Path::new("/nonexistent.yaml")], &names("/")).unwrap_err();
         assert!(e.contains("cannot read params file /nonexistent.yaml"), "{e}");
+    }
+
+    #[test]
+    fn a_setup_is_the_papers_and_explicit_values_override_it_from_any_source() {
+        use crate::sim::InputKind;
+        let none = &[] as &[&Path];
+        let flags = |setup, obs_noise| NodeArgs { setup, obs_noise, ..NodeArgs::default() };
+        let d = NodeParams::resolve(&flags(Some(Setup::D), None), &[], none, &names("/")).unwrap();
+        assert_eq!(d.line, LineConfig::for_setup(Setup::D, Variant::Basic));
+        assert_eq!(d.setup, Some(Setup::D));
+        assert!(d.as_values().contains(&("setup", Value::from("D"))));
+        // A flag overrides the setup, and so does a value of lower precedence than the setup's own.
+        let p = NodeParams::resolve(&flags(Some(Setup::D), Some(0.1)), &[], none, &names("/")).unwrap();
+        assert_eq!((p.line.input, p.line.obs_noise, p.line.action_penalty), (InputKind::Seasonal, 0.1, 0.5));
+        let f = write("obs_noise: 0.2\nvariant: advanced\n");
+        let p = NodeParams::resolve(&flags(Some(Setup::B), None), &[], &[&f], &names("/")).unwrap();
+        assert_eq!((p.line.input, p.line.obs_noise, p.line.variant), (InputKind::Seasonal, 0.2, Variant::Advanced));
+        // As a parameter: the highest-precedence setup is the preset.
+        let f = write("setup: C\n");
+        let ros = vec![("setup".to_string(), Value::from("B")), ("input".to_string(), Value::from("random"))];
+        let p = NodeParams::resolve(&NodeArgs::default(), &ros, &[&f], &names("/")).unwrap();
+        assert_eq!((p.setup, p.line.input, p.line.obs_noise, p.line.action_penalty), (Some(Setup::B), InputKind::Random, 0.0, 0.5));
+        // None named: the defaults, declared as an empty setup.
+        let p = NodeParams::resolve(&NodeArgs::default(), &[], none, &names("/")).unwrap();
+        assert_eq!((p.setup, &p.line), (None, &LineConfig::default()));
+        assert!(p.as_values().contains(&("setup", Value::from(""))));
+        let bad = vec![("setup".to_string(), Value::from("E"))];
+        let e = NodeParams::resolve(&NodeArgs::default(), &bad, none, &names("/")).unwrap_err();
+        assert!(e.contains("parameter setup = E (from --ros-args -p) is not valid: allowed A, B, C or D"), "{e}");
     }
 
     #[test]

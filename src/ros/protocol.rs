@@ -21,9 +21,18 @@
 //! silently, while a client that died is replaced by anyone who resets the line (its stale DDS
 //! endpoints may linger for a minute, so the rule cannot wait for them to disappear). Who resets
 //! does not matter: a test may reset a line that a controller process then drives.
+//!
+//! The batch topics carry every line at once. A `batch/cmd` whose lists do not all have one entry
+//! per line (modes may be empty on the basic line) is malformed and no line sees any of it;
+//! otherwise each line's entry goes through that line's rules above, exactly as if it had come on
+//! the line's own topics (sort mode first, then speed). A `batch/reset` must name each line at
+//! most once, with one seed flag and one seed per line, or it is refused as a whole.
+//! [`batch_commands`] and [`batch_resets`] are those rules.
+
+use std::fmt;
 
 use super::clock::SimClock;
-use super::messages::Time;
+use super::messages::{LineCommands, ResetLinesRequest, Time};
 use super::options::TickMode;
 use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
 use crate::sim::{Action, Line, LineConfig, Observation, SortMode, StepOutcome, Variant};
@@ -100,6 +109,24 @@ impl Rejection {
 /// Who sent a command: the GUID prefix of its DDS writer, i.e. the sending participant (one rclpy
 /// context, or one process of ros2-client). Opaque to the protocol: only compared.
 pub type Client = [u8; 12];
+
+/// What one command asks of a line (its stamp and sender travel beside it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command {
+    /// `cmd/speed`: a belt speed, one of 0.1, ..., 1.0.
+    Speed(f64),
+    /// `cmd/sort_mode`: 0 basic, 1 positive, 2 negative (advanced line).
+    Mode(u8),
+}
+
+impl fmt::Display for Command {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Command::Speed(speed) => write!(f, "speed {speed}"),
+            Command::Mode(mode) => write!(f, "sort mode {mode}"),
+        }
+    }
+}
 
 /// Indices of the per-kind realtime watermarks.
 const SPEED: usize = 0;
@@ -187,6 +214,14 @@ impl HostedLine {
     pub fn sort_mode_from(&mut self, client: Client, stamp: Time, mode: u8) -> Result<Accepted, Rejection> {
         self.admit(client)?;
         self.on_sort_mode(stamp, mode).inspect(|_| self.owner = Some(client))
+    }
+
+    /// A command from a client: [`Self::speed_from`] or [`Self::sort_mode_from`].
+    pub fn command_from(&mut self, client: Client, stamp: Time, command: Command) -> Result<Accepted, Rejection> {
+        match command {
+            Command::Speed(speed) => self.speed_from(client, stamp, speed),
+            Command::Mode(mode) => self.sort_mode_from(client, stamp, mode),
+        }
     }
 
     fn admit(&self, client: Client) -> Result<(), Rejection> {
@@ -297,6 +332,79 @@ pub enum TimerTick {
     Reset(Observation),
 }
 
+/// One line's entry of a `batch/cmd`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatchEntry {
+    pub stamp: Time,
+    pub speed: f64,
+    /// None on the basic line (its modes are ignored, or absent).
+    pub mode: Option<u8>,
+}
+
+impl BatchEntry {
+    /// The entry's commands in the order the line takes them: sort mode first, then speed (the
+    /// speed completes a lock-step tick either way).
+    pub fn commands(&self) -> impl Iterator<Item = Command> {
+        self.mode.map(Command::Mode).into_iter().chain([Command::Speed(self.speed)])
+    }
+}
+
+/// The per-line entries of a `batch/cmd` for `lines` lines of `variant`, or (for a
+/// [`Rejection::Malformed`]) what is wrong with its shape: every list needs one entry per line,
+/// except `modes`, which the basic line ignores and which may then be empty.
+pub fn batch_commands(cmd: &LineCommands, lines: usize, variant: Variant) -> Result<Vec<BatchEntry>, String> {
+    let advanced = variant == Variant::Advanced;
+    let modes_ok = cmd.modes.len() == lines || (!advanced && cmd.modes.is_empty());
+    if cmd.stamp_sec.len() != lines || cmd.stamp_nanosec.len() != lines || cmd.speeds.len() != lines || !modes_ok {
+        return Err(format!(
+            "batch of {} stamp_sec, {} stamp_nanosec, {} speeds, {} modes for {lines} lines",
+            cmd.stamp_sec.len(),
+            cmd.stamp_nanosec.len(),
+            cmd.speeds.len(),
+            cmd.modes.len()
+        ));
+    }
+    Ok((0..lines)
+        .map(|k| BatchEntry {
+            stamp: Time { sec: cmd.stamp_sec[k], nanosec: cmd.stamp_nanosec[k] },
+            speed: cmd.speeds[k],
+            mode: advanced.then(|| cmd.modes[k]),
+        })
+        .collect())
+}
+
+/// One line to reset from a `batch/reset`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchReset {
+    pub line: usize,
+    /// None: the line's random streams carry on.
+    pub seed: Option<u64>,
+}
+
+/// The resets a `batch/reset` asks for on a node of `lines` lines, or why it is refused as a
+/// whole: the three lists differ in length, or a line is out of range or named twice.
+pub fn batch_resets(request: &ResetLinesRequest, lines: usize) -> Result<Vec<BatchReset>, String> {
+    let n = request.lines.len();
+    if request.has_seed.len() != n || request.seeds.len() != n {
+        return Err(format!(
+            "{n} lines, {} has_seed, {} seeds: the three lists must have the same length",
+            request.has_seed.len(),
+            request.seeds.len()
+        ));
+    }
+    let mut seen = vec![false; lines];
+    let mut resets = Vec::with_capacity(n);
+    for (i, &k) in request.lines.iter().enumerate() {
+        let line = k as usize;
+        if line >= lines || seen[line] {
+            return Err(format!("line {k} is out of range or repeated: allowed each of 0 ..= {} once", lines.saturating_sub(1)));
+        }
+        seen[line] = true;
+        resets.push(BatchReset { line, seed: request.has_seed[i].then_some(request.seeds[i]) });
+    }
+    Ok(resets)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -386,6 +494,61 @@ mod tests {
         assert_eq!(r.speed_from(b, r.stamp(), 0.5), Err(Rejection::NotOwner));
         while !matches!(r.timer_tick(), TimerTick::Reset(_)) {}
         assert_eq!(r.speed_from(b, r.stamp(), 0.5), Ok(Accepted::Stored));
+    }
+
+    fn batch(stamps: &[Time], speeds: &[f64], modes: &[u8]) -> LineCommands {
+        LineCommands {
+            stamp_sec: stamps.iter().map(|t| t.sec).collect(),
+            stamp_nanosec: stamps.iter().map(|t| t.nanosec).collect(),
+            speeds: speeds.to_vec(),
+            modes: modes.to_vec(),
+            ..LineCommands::default()
+        }
+    }
+
+    #[test]
+    fn a_batch_command_needs_one_entry_per_line_in_every_list() {
+        let t = Time { sec: 1, nanosec: 0 };
+        let ok = batch_commands(&batch(&[t, t], &[0.3, 0.5], &[1, 2]), 2, Variant::Advanced).unwrap();
+        assert_eq!(ok[1], BatchEntry { stamp: t, speed: 0.5, mode: Some(2) });
+        assert_eq!(ok[0].commands().collect::<Vec<_>>(), [Command::Mode(1), Command::Speed(0.3)], "mode first");
+        // The basic line ignores modes: absent or one per line.
+        for modes in [&[][..], &[7, 7]] {
+            let basic = batch_commands(&batch(&[t, t], &[0.3, 0.5], modes), 2, Variant::Basic).unwrap();
+            assert_eq!(basic[0].commands().collect::<Vec<_>>(), [Command::Speed(0.3)]);
+        }
+        let mut wrong_nanos = batch(&[t, t], &[0.3, 0.5], &[1, 2]);
+        wrong_nanos.stamp_nanosec.pop();
+        for (cmd, variant) in [
+            (batch(&[t], &[0.3, 0.5], &[1, 2]), Variant::Advanced),
+            (batch(&[t, t], &[0.3], &[1, 2]), Variant::Advanced),
+            (batch(&[t, t], &[0.3, 0.5], &[]), Variant::Advanced),
+            (batch(&[t, t], &[0.3, 0.5], &[1]), Variant::Basic),
+            (batch(&[t, t, t], &[0.3, 0.5, 0.1], &[0, 0, 0]), Variant::Basic),
+            (wrong_nanos, Variant::Advanced),
+        ] {
+            let e = batch_commands(&cmd, 2, variant).unwrap_err();
+            assert!(e.starts_with("batch of ") && e.ends_with("for 2 lines"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_batch_reset_names_each_line_once_with_a_seed_flag_and_a_seed() {
+        let req = |lines: &[u32], has_seed: &[bool], seeds: &[u64]| ResetLinesRequest {
+            lines: lines.to_vec(),
+            has_seed: has_seed.to_vec(),
+            seeds: seeds.to_vec(),
+        };
+        let ok = batch_resets(&req(&[2, 0], &[true, false], &[9, 9]), 3).unwrap();
+        assert_eq!(ok, [BatchReset { line: 2, seed: Some(9) }, BatchReset { line: 0, seed: None }]);
+        assert_eq!(batch_resets(&req(&[], &[], &[]), 3).unwrap(), []);
+        let e = batch_resets(&req(&[0, 1], &[true], &[1, 2]), 3).unwrap_err();
+        assert!(e.contains("2 lines, 1 has_seed, 2 seeds"), "{e}");
+        for lines in [&[3u32][..], &[1, 1], &[u32::MAX]] {
+            let n = lines.len();
+            let e = batch_resets(&req(lines, &vec![false; n], &vec![0; n]), 3).unwrap_err();
+            assert!(e.contains("is out of range or repeated: allowed each of 0 ..= 2 once"), "{e}");
+        }
     }
 
     #[test]

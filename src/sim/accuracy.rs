@@ -6,6 +6,8 @@
 //! *subtracted*: U(0.10, 0.15), or U(0, 0.05) when the mode matches. The clamp before the noise is
 //! the reference's; it caps what the +0.15 match bonus can make up for at 0.05 of excess.
 
+use super::config::Variant;
+use super::material::{Category, SortMode};
 use super::speed::OCCUPANCY_LIMITS;
 
 /// Accuracy lost per unit of occupancy above the speed's limit.
@@ -31,6 +33,15 @@ pub enum ModeEffect {
 }
 
 impl ModeEffect {
+    /// How a sort mode acts on a batch of `category` on a line of `variant`.
+    pub fn of(variant: Variant, mode: SortMode, category: Category) -> Self {
+        match variant {
+            Variant::Basic => ModeEffect::NoMode,
+            Variant::Advanced if mode.matches(category) => ModeEffect::Matched,
+            Variant::Advanced => ModeEffect::Mismatched,
+        }
+    }
+
     /// The range of the subtracted noise under this effect.
     pub fn noise_range(self) -> (f64, f64) {
         match self {

@@ -1,9 +1,11 @@
 //! The non-learning agents used by `sorting_line eval`, the benchmark and the tests:
-//! `rba`, `rba-hold`, a seeded `random`, and `constant:K[:M|:cat]`.
+//! `rba`, `rba-hold`, `bayes` (the Bayes-optimal policy, basic line with exact readings), a
+//! seeded `random`, and `constant:K[:M|:cat]`.
 
 use std::fmt;
 use std::str::FromStr;
 
+use super::bayes::BayesAgent;
 use super::config::{LineConfig, Variant};
 use super::line::{Action, Observation};
 use super::material::SortMode;
@@ -24,6 +26,7 @@ pub enum ModeChoice {
 pub enum AgentSpec {
     Rba,
     RbaHold,
+    Bayes,
     Random,
     Constant { speed_index: usize, mode: ModeChoice },
 }
@@ -32,10 +35,11 @@ impl FromStr for AgentSpec {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        let usage = "allowed: rba, rba-hold, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
+        let usage = "allowed: rba, rba-hold, bayes, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
         match s {
             "rba" => return Ok(AgentSpec::Rba),
             "rba-hold" => return Ok(AgentSpec::RbaHold),
+            "bayes" => return Ok(AgentSpec::Bayes),
             "random" => return Ok(AgentSpec::Random),
             _ => {}
         }
@@ -67,6 +71,7 @@ impl fmt::Display for AgentSpec {
         match self {
             AgentSpec::Rba => f.write_str("rba"),
             AgentSpec::RbaHold => f.write_str("rba-hold"),
+            AgentSpec::Bayes => f.write_str("bayes"),
             AgentSpec::Random => f.write_str("random"),
             AgentSpec::Constant { speed_index, mode: ModeChoice::Observed } => write!(f, "constant:{speed_index}:cat"),
             AgentSpec::Constant { speed_index, mode: ModeChoice::Fixed(SortMode::Basic) } => {
@@ -84,6 +89,7 @@ impl fmt::Display for AgentSpec {
 pub enum Agent {
     Rba(RbaTable),
     RbaHold(RbaTable),
+    Bayes(BayesAgent),
     Random { rng: SimRng, variant: Variant },
     Constant { speed_index: usize, mode: ModeChoice },
 }
@@ -94,6 +100,7 @@ impl Agent {
         Ok(match spec {
             AgentSpec::Rba => Agent::Rba(RbaTable::build(config)),
             AgentSpec::RbaHold => Agent::RbaHold(RbaTable::build(config)),
+            AgentSpec::Bayes => Agent::Bayes(BayesAgent::new(config)?),
             AgentSpec::Random => Agent::Random { rng: stream(seed, Stream::Agent), variant: config.variant },
             AgentSpec::Constant { mode, .. }
                 if config.variant == Variant::Basic && mode != ModeChoice::Fixed(SortMode::Basic) =>
@@ -104,10 +111,13 @@ impl Agent {
         })
     }
 
-    /// Restarts the random agent's stream (each evaluation episode reseeds its agent).
+    /// Starts an episode: restarts the random agent's stream (each evaluation episode reseeds its
+    /// agent) and the Bayes agent's step count and belief.
     pub fn reseed(&mut self, seed: u64) {
-        if let Agent::Random { rng, .. } = self {
-            *rng = stream(seed, Stream::Agent);
+        match self {
+            Agent::Random { rng, .. } => *rng = stream(seed, Stream::Agent),
+            Agent::Bayes(agent) => agent.restart(),
+            _ => {}
         }
     }
 
@@ -116,6 +126,7 @@ impl Agent {
         match self {
             Agent::Rba(table) => table.decide(observation),
             Agent::RbaHold(table) => table.decide_holding(observation, current_speed),
+            Agent::Bayes(agent) => agent.act(observation, current_speed),
             Agent::Random { rng, variant } => {
                 let n = match variant {
                     Variant::Basic => SPEED_COUNT,
@@ -140,7 +151,7 @@ mod tests {
 
     #[test]
     fn specs_parse_and_print() {
-        for s in ["rba", "rba-hold", "random", "constant:3", "constant:9:cat", "constant:0:2"] {
+        for s in ["rba", "rba-hold", "bayes", "random", "constant:3", "constant:9:cat", "constant:0:2"] {
             assert_eq!(s.parse::<AgentSpec>().unwrap().to_string(), s);
         }
         assert!("constant:10".parse::<AgentSpec>().unwrap_err().contains("allowed 0..9"));

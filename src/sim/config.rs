@@ -40,6 +40,7 @@ pub enum Setup {
 
 pub const SETUPS: [Setup; 4] = [Setup::A, Setup::B, Setup::C, Setup::D];
 pub const VARIANTS: [Variant; 2] = [Variant::Basic, Variant::Advanced];
+pub const INPUT_KINDS: [InputKind; 3] = [InputKind::Random, InputKind::Seasonal, InputKind::Seasonal3];
 
 /// Everything that defines the dynamics of one line. Seeds, timing and transport are not here:
 /// they belong to whoever runs the line.

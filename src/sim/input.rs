@@ -23,6 +23,12 @@ use super::round::round2;
 /// Largest total a batch can have, in units (an occupancy of 1.0).
 pub const MAX_TOTAL: usize = 100;
 
+/// Totals of random input: a uniform integer in `low..high` (5..=95).
+const RANDOM_TOTAL: (u32, u32) = (5, 96);
+
+/// Length of a seasonal pattern in batches: a uniform integer in `low..high` (10, 11 or 12).
+pub const PATTERN_LENGTH: (u32, u32) = (10, 13);
+
 /// A seeded input generator of one line.
 #[derive(Clone, Debug)]
 pub struct InputGenerator {
@@ -71,7 +77,7 @@ impl InputGenerator {
     fn select_pattern(&mut self) {
         let count = self.pattern_count();
         self.pattern = integer(&mut self.rng, 1, count + 1) as u8;
-        self.pattern_length = integer(&mut self.rng, 10, 13);
+        self.pattern_length = integer(&mut self.rng, PATTERN_LENGTH.0, PATTERN_LENGTH.1);
         self.step_in_pattern = 0;
     }
 
@@ -79,7 +85,7 @@ impl InputGenerator {
     pub fn next_batch(&mut self) -> Batch {
         match self.kind {
             InputKind::Random => {
-                let total = integer(&mut self.rng, 5, 96);
+                let total = integer(&mut self.rng, RANDOM_TOTAL.0, RANDOM_TOTAL.1);
                 let a = integer(&mut self.rng, 0, total + 1);
                 Batch::new(a, total - a)
             }
@@ -99,6 +105,17 @@ impl InputGenerator {
                 split_by_ratio(total, ratio)
             }
         }
+    }
+}
+
+/// The amount classes of a generator: the bands of batch totals (`low..high`) its patterns draw
+/// from, one per class. Random input is one class (5..=95); the seasonal generators have three
+/// (little, medium, much input) and a new pattern falls in each with probability 1/3.
+pub fn amount_bands(kind: InputKind) -> Vec<(u32, u32)> {
+    match kind {
+        InputKind::Random => vec![RANDOM_TOTAL],
+        InputKind::Seasonal => [1, 4, 7].map(|p| total_band(kind, p)).to_vec(),
+        InputKind::Seasonal3 => [1, 2, 3].map(|p| total_band(kind, p)).to_vec(),
     }
 }
 

@@ -311,11 +311,7 @@ impl Line {
     }
 
     fn mode_effect(&self) -> ModeEffect {
-        match self.config.variant {
-            Variant::Basic => ModeEffect::NoMode,
-            Variant::Advanced if self.mode.matches(self.belt.category()) => ModeEffect::Matched,
-            Variant::Advanced => ModeEffect::Mismatched,
-        }
+        ModeEffect::of(self.config.variant, self.mode, self.belt.category())
     }
 
     /// Reads the input sensor (one noise-stream draw).

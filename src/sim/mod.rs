@@ -4,11 +4,13 @@
 
 pub mod accuracy;
 pub mod agent;
+pub mod bayes;
 pub mod config;
 pub mod input;
 pub mod line;
 pub mod material;
 pub mod observation;
+pub mod oracle;
 pub mod rba;
 pub mod reward;
 pub mod rng;

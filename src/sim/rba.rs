@@ -56,18 +56,10 @@ fn options(variant: Variant) -> Vec<Action> {
     (0..SPEED_COUNT).flat_map(|s| modes.iter().map(move |&m| Action::new(s, m))).collect()
 }
 
-fn effect(variant: Variant, mode: SortMode, category: Category) -> ModeEffect {
-    match variant {
-        Variant::Basic => ModeEffect::NoMode,
-        Variant::Advanced if mode.matches(category) => ModeEffect::Matched,
-        Variant::Advanced => ModeEffect::Mismatched,
-    }
-}
-
 /// The expected value of `action` on a batch of `total` units and `category` (noiseless table).
 fn value_at(config: &LineConfig, total: usize, category: Category, action: Action) -> Value {
     let occupancy = total as f64 / 100.0;
-    let e = effect(config.variant, action.mode, category);
+    let e = ModeEffect::of(config.variant, action.mode, category);
     let c = noiseless_accuracy(occupancy, action.speed_index, e);
     let law = accuracy_law(c, e, config.threshold);
     Value { reward: expected_reward(&law, config.threshold, action.speed_index, 0.0), p_above: law.p_above }
@@ -218,7 +210,7 @@ pub fn analysis(config: &LineConfig) -> Vec<AnalysisRow> {
             let values: Vec<Value> = options.iter().map(|&a| value_at(config, total, category, a)).collect();
             let chosen = argmax(&options, &values, None, 0.0, 1.0);
             for (&action, value) in options.iter().zip(&values) {
-                let e = effect(config.variant, action.mode, category);
+                let e = ModeEffect::of(config.variant, action.mode, category);
                 let c = noiseless_accuracy(total as f64 / 100.0, action.speed_index, e);
                 rows.push(AnalysisRow {
                     variant: config.variant,

@@ -34,7 +34,16 @@ pub fn stream(seed: u64, which: Stream) -> SimRng {
 /// A uniform draw from `[low, high)`, computed as NumPy's `uniform` does (`low + (high - low) * u`)
 /// so degenerate ranges such as `(-0.0, 0.0)` still consume exactly one draw.
 pub fn uniform(rng: &mut SimRng, low: f64, high: f64) -> f64 {
-    let u: f64 = rng.random();
+    scale(unit(rng), low, high)
+}
+
+/// One raw draw from `[0, 1)`: what every [`uniform`] draw consumes (one 64-bit word).
+pub fn unit(rng: &mut SimRng) -> f64 {
+    rng.random()
+}
+
+/// The value [`uniform`] makes of a raw draw `u`, bit for bit (the oracle replays recorded draws).
+pub fn scale(u: f64, low: f64, high: f64) -> f64 {
     low + (high - low) * u
 }
 

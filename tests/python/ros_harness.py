@@ -45,12 +45,12 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
+from sorting_line_gym import vocabulary
+from sorting_line_gym.vocabulary import CATEGORIES, MODES, SETUPS, SPEEDS
+
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
 NS_PER_S = 1_000_000_000
-
-CATEGORIES = {"basic": 0, "positive": 1, "negative": 2}
-MODES = {"basic": 0, "positive": 1, "negative": 2}
 
 # Every topic of one line (relative to its namespace) and its type.
 LINE_TYPES = {
@@ -315,20 +315,18 @@ def run_trace(setup: str, variant: str, seed: int, actions: Iterable[Any], max_s
     return [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
 
 
-# Node options equivalent to the trace's --setup (threshold 0.7 is the default of both).
+# Node options equivalent to the trace's --setup (threshold 0.7 is the default of both), spelled
+# out as flags: the tests that use them check the node's separate options, not its --setup.
 SETUP_FLAGS = {
-    "A": ["--input", "random", "--obs-noise", "0", "--action-penalty", "0"],
-    "B": ["--input", "seasonal", "--obs-noise", "0", "--action-penalty", "0.5"],
-    "C": ["--input", "random", "--obs-noise", "0.3", "--action-penalty", "0"],
-    "D": ["--input", "seasonal", "--obs-noise", "0.3", "--action-penalty", "0.5"],
+    name: ["--input", s["input"], "--obs-noise", str(s["obs_noise"]), "--action-penalty", str(s["action_penalty"])]
+    for name, s in SETUPS.items()
 }
 
 
 def decode_action(variant: str, action: int) -> tuple[float, Optional[int]]:
     """Gymnasium action -> (speed, mode): basic = speed index, advanced = speed index * 3 + mode."""
-    if variant == "basic":
-        return round((action + 1) / 10, 1), None
-    return round((action // 3 + 1) / 10, 1), action % 3
+    speed_index, mode = vocabulary.decode_action(variant, action)
+    return SPEEDS[speed_index], (mode if variant == "advanced" else None)
 
 
 def trace_reset_view(entry: dict) -> dict:

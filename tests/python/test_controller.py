@@ -37,8 +37,7 @@ from ros_harness import NS_PER_S, show_ns, stamp_ns
 from sorting_line_gym import SortingLineEnv
 from sorting_line_gym.agents import (START_SPEED_INDEX, ConstantAgent, RandomAgent, RuleBasedAgent, level,
                                      load_policy, make_agent)
-
-SPEEDS = tuple(round(0.1 * (i + 1), 1) for i in range(10))
+from sorting_line_gym.vocabulary import SPEEDS
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),
 # but once, while other jobs loaded this shared 2-core machine, 38 of 60 ticks were late
@@ -53,7 +52,7 @@ def ns_args(ns: str) -> list[str]:
 
 def speed_index(speed: float) -> int:
     i = round(speed * 10) - 1
-    assert 0 <= i < 10 and abs(SPEEDS[i] - speed) < 1e-12, f"speed {speed} is not one of the ten speeds"
+    assert 0 <= i < len(SPEEDS) and abs(SPEEDS[i] - speed) < 1e-12, f"speed {speed} is not one of the ten speeds"
     return i
 
 

@@ -8,6 +8,7 @@ and readiness is always proven by a real reply or message, never by a match coun
 from __future__ import annotations
 
 import math
+import os
 import signal
 import time
 
@@ -160,6 +161,8 @@ BAD_START = [
     # A ROS integer parameter is an int64: a larger seed would read back negative.
     (["--seed", "9223372036854775808"], {}, ["seed = 9223372036854775808", "allowed 0 ..= 9223372036854775807"]),
     (["--variant", "fancy"], {}, ["'fancy'", "basic", "advanced"]),
+    (["--setup", "E"], {}, ["'E'", "allowed A, B, C, D"]),
+    (["--ros-args", "-p", "setup:=E"], {}, ["setup = E", "--ros-args -p", "allowed A, B, C or D"]),
     (["--mode", "sometimes"], {}, ["'sometimes'", "lockstep", "realtime"]),
     (["--no-such-flag"], {}, ["--no-such-flag"]),
     (["--params-file", "/nonexistent/p.yaml"], {}, ["cannot read params file /nonexistent/p.yaml"]),
@@ -361,6 +364,21 @@ def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_pat
     assert states[-1].step == 30
 
 
+def test_a_setup_is_a_preset_that_explicit_values_override(ros, start_node, client_factory, probe, namespace):
+    from rcl_interfaces.srv import GetParameters
+
+    ns = namespace()
+    node = start_node("--setup", "D", "--obs-noise", "0.1", *ns_args(ns))
+    c = client_factory(ns, "basic", node_proc=node)
+    c.wait_connected()
+    names = ["setup", "input", "obs_noise", "action_penalty", "threshold"]
+    get = probe.create_client(GetParameters, f"{ns}/sorting_line/get_parameters")
+    reply = ros.call_service(get, GetParameters.Request(names=names), f"{ns}/sorting_line/get_parameters",
+                             context=c.context)
+    got = [v.string_value or v.double_value for v in reply.values]
+    assert got == ["D", "seasonal", 0.1, 0.5, 0.7], got
+
+
 # ------------------------------------------------------------------------------------------
 # Bad commands
 
@@ -504,6 +522,86 @@ def test_four_lines_are_independent_and_seeded_seed_plus_k(ros, start_node, clie
     for k in range(4):
         values = h.diagnostic_values(array, f"{ns}/line_{k}")
         assert (values["seed"], values["episodes"], values["commands_rejected"]) == (str(seed + k), "1", "0")
+
+
+def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, start_node, probe, namespace):
+    """batch/reset and batch/cmd from rclpy: a refused reset answers success=false naming why and
+    resets nothing; malformed lists, bad entries, stale and future stamps and another client's
+    batch are rejected, counted per reason and line on /diagnostics, and the lines then follow the
+    library's trajectory of the valid commands alone."""
+    import rclpy
+    from sorting_line_interfaces.msg import LineCommands, LineStates
+    from sorting_line_interfaces.srv import ResetLines
+
+    ns, setup, variant, seed = namespace(), "A", "advanced", 5
+    node = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--lines", "2", "--seed", str(seed), *ns_args(ns))
+    diag = diagnostics_recorder(ros, probe)
+    states = h.TopicRecorder(ros, probe, f"{ns}/batch/state", LineStates)
+    commands = probe.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
+    resets = probe.create_client(ResetLines, f"{ns}/batch/reset")
+    wait_diagnostics(diag, f"{ns}/line_1", {"episodes": "0"}, timeout=15.0)
+
+    def reset(lines, has_seed, seeds):
+        request = ResetLines.Request(lines=lines, has_seed=has_seed, seeds=seeds)
+        return ros.call_service(resets, request, f"{ns}/batch/reset")
+
+    first = reset([0, 1], [True, True], [1, 2])
+    assert first.success and list(first.states.seed) == [1, 2], first
+    stamps = [s * NS_PER_S + n for s, n in zip(first.states.stamp_sec, first.states.stamp_nanosec)]
+    for request, reason in [(([0, 1], [True], [1, 2]), "same length"), (([2], [False], [0]), "out of range"),
+                            (([1, 1], [False, False], [0, 0]), "repeated")]:
+        refused = reset(*request)
+        assert not refused.success and reason in refused.message, refused
+        assert [s * NS_PER_S + n for s, n in zip(refused.states.stamp_sec, refused.states.stamp_nanosec)] == stamps
+
+    ros.spin_until(lambda: commands.get_subscription_count() > 0, 10.0, f"{ns}/batch/cmd to match")
+
+    def send(stamps_ns, speeds, modes, publisher=commands):
+        publisher.publish(LineCommands(stamp_sec=[t // NS_PER_S for t in stamps_ns],
+                                       stamp_nanosec=[t % NS_PER_S for t in stamps_ns], speeds=speeds, modes=modes))
+
+    def step(actions):
+        """Sends the valid batch for `actions` and returns the batch state of the next tick."""
+        speeds, modes = zip(*(h.decode_action(variant, a) for a in actions))
+        want = [t + NS_PER_S for t in stamps]
+        send(stamps, list(speeds), list(modes))
+        got = states.wait_for(lambda m: [s * NS_PER_S + n for s, n in zip(m.stamp_sec, m.stamp_nanosec)] == want,
+                              10.0, f"batch/state at {want}")
+        stamps[:] = want
+        return got
+
+    period = NS_PER_S
+    send(stamps, [0.5], [1, 1])  # one speed for two lines
+    send(stamps, [0.5, 0.5], [1])  # one mode for two lines
+    send(stamps, [math.nan, 0.55], [7, 9])  # unknown modes, off-grid speeds
+    send([t - period for t in stamps], [0.5, 0.5], [1, 1])  # stale: the reset left that tick
+    send([t + period for t in stamps], [0.5, 0.5], [1, 1])  # a tick that does not exist yet
+    plan = [[4, 20], [13, 2]]
+    after = [step([plan[0][0], plan[1][0]])]  # this client now owns both lines' episodes
+
+    # Another client (its own rclpy context, so another DDS participant) is refused.
+    other_context = rclpy.Context()
+    rclpy.init(context=other_context)
+    try:
+        other = rclpy.create_node(f"other_client_{os.getpid()}", context=other_context)
+        other_pub = other.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
+        ros.spin_until(lambda: other_pub.get_subscription_count() > 0, 10.0, "the other client's batch/cmd to match")
+        send(stamps, [0.1, 0.1], [0, 0], publisher=other_pub)
+        wait_diagnostics(diag, f"{ns}/line_1", {"rejected_not_owner": "2"})
+    finally:
+        rclpy.shutdown(context=other_context)
+    after.append(step([plan[0][1], plan[1][1]]))
+
+    for k in range(2):
+        trace = h.run_trace(setup, variant, seed + k, [f"r{k + 1}", *plan[k]])
+        for entry, batch in zip(trace[2:], after, strict=True):
+            want = h.trace_step_view(entry)
+            got = {key: getattr(batch, key)[k] for key in want if hasattr(batch, key)}
+            assert got == {key: want[key] for key in got}, f"line {k}"
+    want = {"ticks": "2", "rejected_malformed": "5", "rejected_unknown_mode": "1", "rejected_invalid_speed": "1",
+            "rejected_stale": "2", "rejected_unknown_tick": "2", "rejected_not_owner": "2"}
+    wait_diagnostics(diag, f"{ns}/line_0", want)
+    wait_diagnostics(diag, f"{ns}/line_1", {**want, "rejected_malformed": "0"})
 
 
 def test_truncation_then_episode_over_then_reset(ros, start_node, client_factory, probe, namespace):

@@ -18,14 +18,13 @@ import numpy as np
 import pytest
 
 from sorting_line_gym import render
+from sorting_line_gym.vocabulary import SPEEDS
 
 DashboardFrame = render.DashboardFrame
 LiveDashboard = render.LiveDashboard
 count_speed_changes = render.count_speed_changes
 render_dashboard = render.render_dashboard
 save_dashboard = render.save_dashboard
-
-SPEEDS = [round(0.1 * (i + 1), 1) for i in range(10)]
 
 
 def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> DashboardFrame:

@@ -25,7 +25,7 @@ from typing import Callable
 
 from rclpy.duration import Duration
 
-from .bagfile import BagError, open_bag, topics_of
+from .bagfile import Bag, BagError, BagMessage, open_bag, topics_of
 from .rosnode import ToolNode
 from .schema import COMMANDS, LINE_TYPES, decode, join, relative_to, stamp_ns
 
@@ -54,92 +54,150 @@ def play(path, *, rate: float = 1.0, topics: list[str] | None = None, namespace:
     """Plays the bag at ``path``. ``rate``: speed factor (2 = twice as fast; 0 = as fast as
     possible). ``topics``: absolute or relative to the recorded line (default: all but the
     commands). ``lockstep``: tick by tick, each after the controller's answer (see the module's
-    docstring). Raises BagError for bad input, TimeoutError when nobody subscribes in time."""
+    docstring). Raises BagError for bad input, TimeoutError when nobody subscribes in time.
+
+    Three phases: select (the messages and where they go), wait for subscribers, pace (publish
+    on the recorded timing, or tick by tick)."""
     if rate < 0:
         raise BagError(f"--rate {rate}: must be >= 0 (0 plays as fast as possible)")
-    bag = open_bag(path)
-    line_ns = bag.info.namespace if bag.info else ""
-    if topics:
-        chosen = topics_of(bag, topics)
-    else:
-        chosen = [t for t in bag.types if (relative_to(line_ns, t) if line_ns else None) not in COMMANDS]
-
-    def target(topic: str) -> str:
-        rel = relative_to(line_ns, topic) if line_ns else None
-        return join(namespace, rel) if namespace and rel is not None else topic
-
-    out_ns = namespace or line_ns
-    waits = wait_for if wait_for is not None else (["input"] if join(line_ns, "input") in chosen else [])
-    messages = [m for m in bag.messages if m.topic in chosen]
-    recorded_answers: set[int] = set()
-    if lockstep:
-        answers = join(line_ns, "cmd/speed") if line_ns else None
-        if answers not in bag.types:
-            raise BagError(f"{bag.path}: --lockstep needs the bag's cmd/speed, the answers it waits for")
-        recorded_answers = {stamp_ns(m.plain) for m in bag.on(answers)}
+    selection = _Selection.of(open_bag(path), topics, namespace, wait_for, lockstep)
     tool = ToolNode("sorting_line_bag_play")
     try:
-        pubs = {t: tool.publisher(target(t), bag.types[t]) for t in chosen}
+        pubs = {t: tool.publisher(selection.target(t), selection.bag.types[t]) for t in selection.chosen}
         answered: set[int] = set()
         if lockstep:
-            tool.raw_subscription(join(out_ns, "cmd/speed"), LINE_TYPES["cmd/speed"],
-                                  lambda data, _t: answered.add(stamp_ns(decode(data, LINE_TYPES["cmd/speed"]))))
-        by_name = {target(t): p for t, p in pubs.items()}
-        for w in waits:
-            name = join(out_ns, w) if not w.startswith("/") else w
-            if name not in by_name:
-                raise BagError(f"--wait-for {w}: not one of the played topics ({', '.join(sorted(by_name))})")
-            tool.until(lambda p=by_name[name]: p.get_subscription_count() > 0, wait, f"a subscriber on {name}")
-        if waits:
-            # A controller's other readers (ratio, belt) are announced with the one waited for:
-            # give them a moment to match too (best effort: stale graph entries may never match).
-            def known_matched() -> bool:
-                return all(p.get_subscription_count() >= tool.node.count_subscribers(n) for n, p in by_name.items())
-
-            try:
-                tool.until(known_matched, 1.0, "the other subscribers of the played topics")
-            except TimeoutError:
-                pass
-        on_ready(f"playing {len(messages)} messages on {len(pubs)} topics" + (f" into {namespace}" if namespace else ""))
-        result = PlayResult()
-        counts: dict[str, int] = {}
-        t0 = messages[0].log_time if messages else 0
-        started = time.monotonic()
-        tick: int | None = None
-
-        def await_answer(stamp: int | None) -> None:
-            if stamp is None or stamp not in recorded_answers:
-                return
-            try:
-                tool.until(lambda: stamp in answered or stop(), answer_timeout,
-                           f"an answer on {join(out_ns, 'cmd/speed')} for the tick stamped {stamp / 1e9:.3f} s")
-            except TimeoutError:
-                result.unanswered.append(stamp)
-
-        for m in messages:
-            if stop():
-                break
-            if lockstep:
-                stamp = stamp_ns(m.plain)
-                if stamp is not None and stamp != tick:
-                    if tick is None or stamp > tick:
-                        await_answer(tick)
-                        tick = stamp
-            elif rate > 0:
-                due = started + (m.log_time - t0) / 1e9 / rate
-                while (left := due - time.monotonic()) > 0:
-                    if stop():
-                        break
-                    time.sleep(min(left, 0.05))
-            pubs[m.topic].publish(m.data)
-            counts[target(m.topic)] = counts.get(target(m.topic), 0) + 1
-        if lockstep and not stop():
-            await_answer(tick)
-        for p in pubs.values():
-            p.wait_for_all_acked(Duration(seconds=5))
-        result.counts = counts
-        result.seconds = time.monotonic() - started
-        result.recorded_seconds = (messages[-1].log_time - t0) / 1e9 if messages else 0.0
-        return result
+            answers = LINE_TYPES["cmd/speed"]
+            tool.raw_subscription(join(selection.out_ns, "cmd/speed"), answers,
+                                  lambda data, _t: answered.add(stamp_ns(decode(data, answers))))
+        _wait_for_subscribers(tool, selection, pubs, wait)
+        on_ready(f"playing {len(selection.messages)} messages on {len(pubs)} topics"
+                 + (f" into {namespace}" if namespace else ""))
+        pace = _Pace(tool, selection, pubs, stop, answered, answer_timeout)
+        return pace.tick_by_tick() if lockstep else pace.timed(rate)
     finally:
         tool.close()
+
+
+@dataclass
+class _Selection:
+    """The select phase: which recorded messages are played, on which topics, and what is waited for."""
+
+    bag: Bag
+    line_ns: str  # the recorded line's namespace ("" if the bag does not say)
+    namespace: str | None  # where the line's topics go instead, if anywhere
+    chosen: list[str]  # recorded topics played
+    waits: list[str]  # topics that need a subscriber before the first message
+    messages: list[BagMessage]
+    recorded_answers: set[int]  # lockstep: stamps of the ticks the bag shows a cmd/speed for
+
+    @property
+    def out_ns(self) -> str:
+        return self.namespace or self.line_ns
+
+    def target(self, topic: str) -> str:
+        rel = relative_to(self.line_ns, topic) if self.line_ns else None
+        return join(self.namespace, rel) if self.namespace and rel is not None else topic
+
+    @classmethod
+    def of(cls, bag: Bag, topics: list[str] | None, namespace: str | None, wait_for: list[str] | None,
+           lockstep: bool) -> "_Selection":
+        line_ns = bag.info.namespace if bag.info else ""
+        if topics:
+            chosen = topics_of(bag, topics)
+        else:
+            chosen = [t for t in bag.types if (relative_to(line_ns, t) if line_ns else None) not in COMMANDS]
+        waits = wait_for if wait_for is not None else (["input"] if join(line_ns, "input") in chosen else [])
+        recorded_answers: set[int] = set()
+        if lockstep:
+            answers = join(line_ns, "cmd/speed") if line_ns else None
+            if answers not in bag.types:
+                raise BagError(f"{bag.path}: --lockstep needs the bag's cmd/speed, the answers it waits for")
+            recorded_answers = {stamp_ns(m.plain) for m in bag.on(answers)}
+        messages = [m for m in bag.messages if m.topic in chosen]
+        return cls(bag, line_ns, namespace, chosen, waits, messages, recorded_answers)
+
+
+def _wait_for_subscribers(tool: ToolNode, selection: _Selection, pubs: dict, wait: float) -> None:
+    """Volatile samples sent before a reader matches are lost: wait for the ``waits`` topics'
+    subscribers, then (briefly) for the other known readers of the played topics."""
+    by_name = {selection.target(t): p for t, p in pubs.items()}
+    for w in selection.waits:
+        name = join(selection.out_ns, w) if not w.startswith("/") else w
+        if name not in by_name:
+            raise BagError(f"--wait-for {w}: not one of the played topics ({', '.join(sorted(by_name))})")
+        tool.until(lambda p=by_name[name]: p.get_subscription_count() > 0, wait, f"a subscriber on {name}")
+    if not selection.waits:
+        return
+    # A controller's other readers (ratio, belt) are announced with the one waited for: give them
+    # a moment to match too (best effort: stale graph entries may never match).
+    def known_matched() -> bool:
+        return all(p.get_subscription_count() >= tool.node.count_subscribers(n) for n, p in by_name.items())
+
+    try:
+        tool.until(known_matched, 1.0, "the other subscribers of the played topics")
+    except TimeoutError:
+        pass
+
+
+class _Pace:
+    """The pace phase: publishes the selected messages on the recorder's timing, or tick by tick."""
+
+    def __init__(self, tool: ToolNode, selection: _Selection, pubs: dict, stop: Callable[[], bool],
+                 answered: set[int], answer_timeout: float):
+        self.tool, self.selection, self.pubs, self.stop = tool, selection, pubs, stop
+        self.answered, self.answer_timeout = answered, answer_timeout
+        self.result = PlayResult()
+        self.started = time.monotonic()
+
+    def _publish(self, m: BagMessage) -> None:
+        self.pubs[m.topic].publish(m.data)
+        name = self.selection.target(m.topic)
+        self.result.counts[name] = self.result.counts.get(name, 0) + 1
+
+    def _done(self) -> PlayResult:
+        """Waits until every subscriber has every sample (reliable QoS), so nothing is cut off."""
+        for p in self.pubs.values():
+            p.wait_for_all_acked(Duration(seconds=5))
+        messages = self.selection.messages
+        self.result.seconds = time.monotonic() - self.started
+        self.result.recorded_seconds = (messages[-1].log_time - messages[0].log_time) / 1e9 if messages else 0.0
+        return self.result
+
+    def timed(self, rate: float) -> PlayResult:
+        """Each message at its receive time in the recording, ``rate`` times faster (0: at once)."""
+        messages = self.selection.messages
+        t0 = messages[0].log_time if messages else 0
+        for m in messages:
+            if self.stop():
+                break
+            if rate > 0:
+                due = self.started + (m.log_time - t0) / 1e9 / rate
+                while (left := due - time.monotonic()) > 0 and not self.stop():
+                    time.sleep(min(left, 0.05))
+            self._publish(m)
+        return self._done()
+
+    def tick_by_tick(self) -> PlayResult:
+        """A tick's messages, then the controller's answer to that tick (if the bag shows one)."""
+        tick: int | None = None
+        for m in self.selection.messages:
+            if self.stop():
+                break
+            stamp = stamp_ns(m.plain)
+            if stamp is not None and stamp != tick and (tick is None or stamp > tick):
+                self._await_answer(tick)
+                tick = stamp
+            self._publish(m)
+        if not self.stop():
+            self._await_answer(tick)
+        return self._done()
+
+    def _await_answer(self, stamp: int | None) -> None:
+        if stamp is None or stamp not in self.selection.recorded_answers:
+            return
+        topic = join(self.selection.out_ns, "cmd/speed")
+        try:
+            self.tool.until(lambda: stamp in self.answered or self.stop(), self.answer_timeout,
+                            f"an answer on {topic} for the tick stamped {stamp / 1e9:.3f} s")
+        except TimeoutError:
+            self.result.unanswered.append(stamp)

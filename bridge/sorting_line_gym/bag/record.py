@@ -115,7 +115,11 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
 
     ``topics``: absolute names or names relative to ``namespace``; None = the line's topics and
     /clock (plus /diagnostics with ``diagnostics=True``). Raises BagError for bad input (an
-    unknown topic, an existing output) and TimeoutError when the line does not show up."""
+    unknown topic, an existing output) and TimeoutError when the line does not show up.
+
+    Two phases: match (find the line's node and its parameters, the topics and their types, and
+    wait until the node's topics are matched) and write (store what arrives until the end, then
+    drain what is in flight)."""
     namespace = "/" + namespace.strip("/")
     out = Path(out)
     if out.exists():
@@ -123,30 +127,13 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
     tool = ToolNode("sorting_line_bag_record")
     writer = None
     try:
-        state = join(namespace, "state")
-        tool.until(lambda: tool.node.count_publishers(state) > 0, wait,
-                   f"a sorting_line node publishing {state} (is the namespace right?)")
-        options = node_options(tool, namespace, min(wait, 5.0))
-        if options is None:
-            print(f"sorting-line-bag record: warning: could not read the parameters of the node serving {namespace}; "
-                  "`replay` will need its options as flags", file=sys.stderr, flush=True)
-        variant = options["variant"] if options else (
-            "advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
-        wanted = topics if topics else [*line_topics(variant), CLOCK] + (["/diagnostics"] if diagnostics else [])
-        names = {join(namespace, t): t for t in wanted}
-        types = {}
-        for name in names:
-            rel = relative_to(namespace, name)
-            msgtype = LINE_TYPES.get(rel) if rel is not None else GLOBAL_TYPES.get(name)
-            if msgtype is None:
-                msgtype = _graph_type(tool, name, min(wait, 3.0))
-            types[name] = msgtype
+        options, types = _match(tool, namespace, topics, diagnostics, wait)
         info = LineInfo(namespace, options or {})
         writer = BagWriter(out, {META_KEY: info.to_json()})
         for name, msgtype in types.items():
             writer.add_topic(name, msgtype)
-
         states = [0]
+        state = join(namespace, "state")
 
         def keep(name):
             def on(data: bytes, received: int):
@@ -156,48 +143,82 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
             return on
 
         subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
-        # Ready when the node's topics are matched and the node has shown it sends to us.
-        from diagnostic_msgs.msg import DiagnosticArray
-
-        seen_status = []
-        diag = tool.node.create_subscription(
-            DiagnosticArray, "/diagnostics",
-            lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None, 10)
-        node_side = [n for n in subs if relative_to(namespace, n) in PUBLISHED or n == CLOCK]
-        tool.until(lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status, wait,
-                   lambda: f"the topics of {namespace} to match and a /diagnostics status of the line "
-                           f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})")
-        tool.node.destroy_subscription(diag)
+        _await_matched(tool, namespace, subs, wait)
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
-        matched: dict[str, int] = {}
-        next_check = 0.0
-        while not stop():
-            now = time.monotonic()
-            if duration is not None and now - started >= duration:
-                break
-            if max_ticks is not None and states[0] >= max_ticks:
-                break
-            if now >= next_check:  # tell who joins (a controller started later, say), so scripts can wait for it
-                next_check = now + 0.2
-                for name, sub in subs.items():
-                    n = sub.get_publisher_count()
-                    if matched.get(name) != n:
-                        matched[name] = n
-                        on_ready(f"matched {name}: {n} publisher(s)")
-            tool.executor.spin_once(timeout_sec=0.05)
-        # Drain what is in flight: spin until nothing has arrived for 0.2 s (at most 2 s).
-        deadline = time.monotonic() + 2.0
-        while time.monotonic() < deadline:
-            before = sum(writer.counts.values())
-            tool.spin_for(0.2)
-            if sum(writer.counts.values()) == before:
-                break
+        _write(tool, writer, subs, lambda: states[0], duration=duration, max_ticks=max_ticks, stop=stop,
+               on_ready=on_ready)
         return RecordResult(out, dict(writer.counts), info, time.monotonic() - started)
     finally:
         if writer is not None:
             writer.close()
         tool.close()
+
+
+def _match(tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics: bool,
+           wait: float) -> tuple[dict | None, dict[str, str]]:
+    """The line's node options (None if it does not tell) and the recorded topics with their types."""
+    state = join(namespace, "state")
+    tool.until(lambda: tool.node.count_publishers(state) > 0, wait,
+               f"a sorting_line node publishing {state} (is the namespace right?)")
+    options = node_options(tool, namespace, min(wait, 5.0))
+    if options is None:
+        print(f"sorting-line-bag record: warning: could not read the parameters of the node serving {namespace}; "
+              "`replay` will need its options as flags", file=sys.stderr, flush=True)
+    variant = options["variant"] if options else (
+        "advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
+    wanted = topics if topics else [*line_topics(variant), CLOCK] + (["/diagnostics"] if diagnostics else [])
+    types = {}
+    for name in {join(namespace, t): t for t in wanted}:
+        rel = relative_to(namespace, name)
+        msgtype = LINE_TYPES.get(rel) if rel is not None else GLOBAL_TYPES.get(name)
+        types[name] = msgtype if msgtype is not None else _graph_type(tool, name, min(wait, 3.0))
+    return options, types
+
+
+def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float) -> None:
+    """Ready when the node's topics are matched and the node has shown it sends to us (a
+    /diagnostics status of the line)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen_status = []
+    diag = tool.node.create_subscription(
+        DiagnosticArray, "/diagnostics",
+        lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None, 10)
+    node_side = [n for n in subs if relative_to(namespace, n) in PUBLISHED or n == CLOCK]
+    tool.until(lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status, wait,
+               lambda: f"the topics of {namespace} to match and a /diagnostics status of the line "
+                       f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})")
+    tool.node.destroy_subscription(diag)
+
+
+def _write(tool: ToolNode, writer: BagWriter, subs: dict, states: Callable[[], int], *, duration: float | None,
+           max_ticks: int | None, stop: Callable[[], bool], on_ready: Callable[[str], None]) -> None:
+    """Spins (the subscriptions write) until the end, telling who joins; then drains."""
+    started = time.monotonic()
+    matched: dict[str, int] = {}
+    next_check = 0.0
+    while not stop():
+        now = time.monotonic()
+        if duration is not None and now - started >= duration:
+            break
+        if max_ticks is not None and states() >= max_ticks:
+            break
+        if now >= next_check:  # tell who joins (a controller started later, say), so scripts can wait for it
+            next_check = now + 0.2
+            for name, sub in subs.items():
+                n = sub.get_publisher_count()
+                if matched.get(name) != n:
+                    matched[name] = n
+                    on_ready(f"matched {name}: {n} publisher(s)")
+        tool.executor.spin_once(timeout_sec=0.05)
+    # Drain what is in flight: spin until nothing has arrived for 0.2 s (at most 2 s).
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        before = sum(writer.counts.values())
+        tool.spin_for(0.2)
+        if sum(writer.counts.values()) == before:
+            break
 
 
 def _graph_type(tool: ToolNode, name: str, timeout: float) -> str:

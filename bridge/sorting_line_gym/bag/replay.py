@@ -139,10 +139,48 @@ class _Capture:
 
 def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, startup_timeout: float = 20.0,
            progress: bool = False) -> ReplayResult:
-    """Replays the bag at ``path`` (see the module docstring). Raises BagError for a bag that
-    cannot be replayed, transport.BridgeError when the replay node fails; a difference is a result."""
+    """Replays the bag at ``path`` (see the module docstring) in three phases: plan (what to send,
+    from the bag alone), drive (a fresh node, fed resets and commands tick by tick) and compare
+    (what it published against the recording). Raises BagError for a bag that cannot be
+    replayed, transport.BridgeError when the replay node fails; a difference is a result."""
     started = time.monotonic()
-    bag = open_bag(path)
+    plan = _plan(open_bag(path), overrides)
+    result = ReplayResult(plan.bag, plan.options)
+    if plan.ineffective:
+        result.notes.append(f"not sent: {plan.ineffective} commands for ticks the recorded node did not step from "
+                            "(the episode was over, a reset came first, or the recording ended)")
+    replay_ns = private_namespace()
+    process = NodeProcess(replay_ns, dict(plan.options, mode="lockstep", lines=1),
+                          ros_args=("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
+    tool = None
+    try:
+        tool = ToolNode("sorting_line_bag_replay", process)
+        capture = _Replay(plan, result, tool, replay_ns, step_timeout).drive(startup_timeout, progress)
+        _compare(plan, result, capture)
+        result.seconds = time.monotonic() - started
+        return result
+    finally:
+        if tool is not None:
+            tool.close()
+        process.stop()
+
+
+@dataclass
+class _Plan:
+    """What a replay sends and compares, worked out from the bag alone."""
+
+    bag: Bag
+    options: dict
+    period: int  # ns per tick
+    rel_msgs: dict[str, list[BagMessage]]
+    start: int  # stamp of the bag's first reset: nothing before it is sent or compared
+    bag_states: dict[int, dict]  # recorded states by stamp
+    drivers: list[tuple[str, BagMessage]]  # resets and commands, in the order to send them
+    compared_topics: list[str]
+    ineffective: int  # commands left out: the recorded node never stepped from their tick
+
+
+def _plan(bag: Bag, overrides: dict | None) -> _Plan:
     namespace = line_namespace(bag)
     options = node_options(bag, overrides)
     period = round(float(options["tick_period"]) * 1e9)
@@ -162,100 +200,103 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
     # came first, or the recording ended) changed nothing there; sent here it might step the node.
     stepped = {s - period for s, m in bag_states.items() if m["step"] > 0}
     commands = [(rel, m) for rel in COMMANDS for m in rel_msgs.get(rel, []) if stamp_ns(m.plain) >= start]
-    ineffective = [c for c in commands if stamp_ns(c[1].plain) not in stepped]
-    commands = [c for c in commands if stamp_ns(c[1].plain) in stepped]
-    drivers = _order_drivers(resets, commands)
-    compared_topics = [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t)]
-    result = ReplayResult(bag, options)
-    if ineffective:
-        result.notes.append(f"not sent: {len(ineffective)} commands for ticks the recorded node did not step from "
-                            "(the episode was over, a reset came first, or the recording ended)")
-    advanced = options["variant"] == "advanced"
+    effective = [c for c in commands if stamp_ns(c[1].plain) in stepped]
+    return _Plan(bag, options, period, rel_msgs, start, bag_states, _order_drivers(resets, effective),
+                 [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t)], len(commands) - len(effective))
 
-    replay_ns = private_namespace()
-    process = NodeProcess(replay_ns, dict(options, mode="lockstep", lines=1),
-                          ros_args=("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
-    tool = None
-    try:
-        tool = ToolNode("sorting_line_bag_replay", process)
-        link = LineLink(tool.node, replay_ns, advanced)
-        capture = _Capture(tool, replay_ns, compared_topics)
-        publishers = {"cmd/speed": link.speed_pub, "cmd/sort_mode": link.mode_pub}
-        tool.until(lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in capture.subs.values()),
-                   startup_timeout, f"the replay node serving {replay_ns} (its reset service and topics)")
-        _handshake(tool, link, int(options["seed"]), step_timeout)
 
-        def wait_state(bag_stamp: int, why: str) -> bool:
-            want = bag_stamp - result.tick_shift * period
-            try:
-                tool.until(lambda: want in capture.states, step_timeout,
-                           f"{replay_ns}/state of tick {want // period} ({why})")
-                return True
-            except BridgeTimeout:
-                return False
+class _Replay:
+    """The drive phase: one fresh lock-step node fed the plan's resets and commands, each once
+    the node has reached the tick the bag sent it at."""
 
-        store = typestore()
-        bar = _progress(len(drivers), progress)
+    def __init__(self, plan: _Plan, result: ReplayResult, tool: ToolNode, namespace: str, step_timeout: float):
+        self.plan, self.result, self.tool, self.namespace, self.step_timeout = plan, result, tool, namespace, step_timeout
+        self.link = LineLink(tool.node, namespace, plan.options["variant"] == "advanced")
+        self.capture = _Capture(tool, namespace, plan.compared_topics)
+        self.publishers = {"cmd/speed": self.link.speed_pub, "cmd/sort_mode": self.link.mode_pub}
+        self.store = typestore()
+
+    def drive(self, startup_timeout: float, progress: bool) -> _Capture:
+        """Sends every driver; stops at the first tick the node does not reach (result.difference)."""
+        link, tool, plan = self.link, self.tool, self.plan
+        tool.until(lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in self.capture.subs.values()),
+                   startup_timeout, f"the replay node serving {self.namespace} (its reset service and topics)")
+        _handshake(tool, link, int(plan.options["seed"]), self.step_timeout)
+        bar = _progress(len(plan.drivers), progress)
         try:
-            for rel, m in drivers:
+            for rel, m in plan.drivers:
                 bar.update(1)
-                plain = m.plain
-                stamp = stamp_ns(plain)
-                if rel == "events/reset":
-                    earlier = [s for s in bag_states if start <= s < stamp]
-                    if result.resets and earlier and not wait_state(max(earlier), "the last state before a reset"):
-                        result.difference = _missing_state(max(earlier), period, rel_msgs)
-                        break
-                    link.send_reset(int(plain["seed"]) if plain.get("seeded", True) else None)
-                    tool.until(link.reset_done, step_timeout, f"the reply of {replay_ns}/reset")
-                    reply = link.finish_reset()
-                    if result.resets == 0:
-                        result.tick_shift = (stamp - (reply.stamp.sec * 1_000_000_000 + reply.stamp.nanosec)) // period
-                        result.episode_shift = int(plain["episode"]) - int(reply.episode)
-                    result.resets += 1
-                    continue
-                # A command: wait until the replay node is at its tick, if the recorded one got there.
-                if stamp in bag_states and not wait_state(stamp, f"to answer with the bag's {rel}"):
-                    result.difference = _missing_state(stamp, period, rel_msgs)
-                    break
-                pub = publishers.get(rel)
-                if pub is None:  # a sort mode sent to a basic line: the node refuses it, as it did then
-                    pub = publishers[rel] = tool.publisher(join(replay_ns, rel), LINE_TYPES[rel])
-                pub.publish(_restamped(store, m, stamp - result.tick_shift * period))
-                result.commands += 1
-            else:
-                later = [s for s in bag_states if s >= start]
-                if later and not wait_state(max(later), "the bag's last state"):
-                    result.difference = _missing_state(max(later), period, rel_msgs)
-                tool.spin_for(0.3)  # /clock and anything else still in flight
+                sent = self._reset(m) if rel == "events/reset" else self._command(rel, m)
+                if not sent:
+                    return self.capture
+            later = [s for s in plan.bag_states if s >= plan.start]
+            if later:
+                self._reached(max(later), "the bag's last state")
+            tool.spin_for(0.3)  # /clock and anything else still in flight
         finally:
             bar.close()
-        recorded = {t: [m.plain for m in rel_msgs[t] if stamp_ns(m.plain) >= start] for t in compared_topics}
-        replayed = {}
-        for t in compared_topics:
-            items = [shifted(m, result.tick_shift * period, result.episode_shift) for m in capture.plain(t)]
-            replayed[t] = [m for m in items if stamp_ns(m) >= start]
-        if result.difference is not None:
-            # The node stopped short; anything before that point may still differ earlier.
-            cut = result.difference.stamp_ns
-            recorded = {t: [m for m in ms if stamp_ns(m) < cut] for t, ms in recorded.items()}
-            replayed = {t: [m for m in ms if stamp_ns(m) < cut] for t, ms in replayed.items()}
-            earlier = compare(recorded, replayed, period)
-            result.comparison = earlier
-            if earlier.difference is not None:
-                result.difference = earlier.difference
-        else:
-            result.comparison = compare(recorded, replayed, period)
-            result.difference = result.comparison.difference
-        if result.comparison.ignored_after_end:
-            result.notes.append(f"not compared: {result.comparison.ignored_after_end} replayed messages after the "
-                                "end of the recording")
-        result.seconds = time.monotonic() - started
-        return result
-    finally:
-        if tool is not None:
-            tool.close()
-        process.stop()
+        return self.capture
+
+    def _reached(self, bag_stamp: int, why: str) -> bool:
+        """Waits for the replay node's state of the bag's tick ``bag_stamp``; False (and the
+        result's difference set) when it does not come."""
+        period = self.plan.period
+        want = bag_stamp - self.result.tick_shift * period
+        try:
+            self.tool.until(lambda: want in self.capture.states, self.step_timeout,
+                            f"{self.namespace}/state of tick {want // period} ({why})")
+            return True
+        except BridgeTimeout:
+            self.result.difference = _missing_state(bag_stamp, period, self.plan.rel_msgs)
+            return False
+
+    def _reset(self, m: BagMessage) -> bool:
+        plain, stamp, result = m.plain, stamp_ns(m.plain), self.result
+        earlier = [s for s in self.plan.bag_states if self.plan.start <= s < stamp]
+        if result.resets and earlier and not self._reached(max(earlier), "the last state before a reset"):
+            return False
+        self.link.send_reset(int(plain["seed"]) if plain.get("seeded", True) else None)
+        self.tool.until(self.link.reset_done, self.step_timeout, f"the reply of {self.namespace}/reset")
+        reply = self.link.finish_reset()
+        if result.resets == 0:
+            result.tick_shift = (stamp - (reply.stamp.sec * 1_000_000_000 + reply.stamp.nanosec)) // self.plan.period
+            result.episode_shift = int(plain["episode"]) - int(reply.episode)
+        result.resets += 1
+        return True
+
+    def _command(self, rel: str, m: BagMessage) -> bool:
+        # Wait until the replay node is at the command's tick, if the recorded one got there.
+        stamp = stamp_ns(m.plain)
+        if stamp in self.plan.bag_states and not self._reached(stamp, f"to answer with the bag's {rel}"):
+            return False
+        pub = self.publishers.get(rel)
+        if pub is None:  # a sort mode sent to a basic line: the node refuses it, as it did then
+            pub = self.publishers[rel] = self.tool.publisher(join(self.namespace, rel), LINE_TYPES[rel])
+        pub.publish(_restamped(self.store, m, stamp - self.result.tick_shift * self.plan.period))
+        self.result.commands += 1
+        return True
+
+
+def _compare(plan: _Plan, result: ReplayResult, capture: _Capture) -> None:
+    """The compare phase: every recorded message from the first reset on against the replayed
+    one of the same (shifted) tick; up to where the node stopped, if it stopped short."""
+    shift = result.tick_shift * plan.period
+    recorded = {t: [m.plain for m in plan.rel_msgs[t] if stamp_ns(m.plain) >= plan.start] for t in plan.compared_topics}
+    replayed = {}
+    for t in plan.compared_topics:
+        items = [shifted(m, shift, result.episode_shift) for m in capture.plain(t)]
+        replayed[t] = [m for m in items if stamp_ns(m) >= plan.start]
+    if result.difference is not None:
+        # The node stopped short; anything before that point may still differ earlier.
+        cut = result.difference.stamp_ns
+        recorded = {t: [m for m in ms if stamp_ns(m) < cut] for t, ms in recorded.items()}
+        replayed = {t: [m for m in ms if stamp_ns(m) < cut] for t, ms in replayed.items()}
+    result.comparison = compare(recorded, replayed, plan.period)
+    if result.comparison.difference is not None:
+        result.difference = result.comparison.difference
+    if result.comparison.ignored_after_end:
+        result.notes.append(f"not compared: {result.comparison.ignored_after_end} replayed messages after the "
+                            "end of the recording")
 
 
 def _handshake(tool: ToolNode, link: LineLink, seed: int, timeout: float) -> None:
