@@ -17,10 +17,28 @@ step() { printf '\n== %s\n' "$*"; }
 step "set-up (venv, interfaces, release build)"
 bash launch_scripts/setup.sh
 
+# The real ros2 CLI for tests/python/test_ros2cli.py: built (or found in its cache) here, outside the
+# test network namespace, because it needs PyPI; in the background, next to the Rust tests.
+ROS2CLI_LOG="$(mktemp /tmp/sorting_line_ros2cli.XXXXXX.log)"
+ROS2CLI_PID=""
+if [[ $RUST_ONLY == 0 ]]; then
+  .venv/bin/python tests/python/ros2_cli.py --build >"$ROS2CLI_LOG" 2>&1 &
+  ROS2CLI_PID=$!
+fi
+
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 
 [[ $RUST_ONLY == 1 ]] && exit 0
+
+step "ros2 CLI for the CLI tests"
+if ! wait "$ROS2CLI_PID"; then
+  cat "$ROS2CLI_LOG" >&2
+  echo "test.sh: building the ros2 CLI venv from shared/tools/ros2cli failed" >&2
+  exit 1
+fi
+cat "$ROS2CLI_LOG"
+rm -f "$ROS2CLI_LOG"
 
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
@@ -39,5 +57,5 @@ unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
-  python -m pytest tests/python -q -p no:cacheprovider "$@"
+  python -m pytest tests/python -q -rs -p no:cacheprovider "$@"
 ' test.sh "$@"

@@ -20,6 +20,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import ros2_cli  # noqa: E402
 import ros_harness as h  # noqa: E402
 
 h.ros_environment()  # before anything imports rclpy
@@ -34,7 +35,8 @@ def pytest_sessionstart(session):
 
 def pytest_report_header(config):
     env = h.ros_environment()
-    return [f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items())]
+    return [f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items()),
+            f"ros2 CLI: {ros2_cli.describe()}"]
 
 
 @pytest.fixture(scope="session")
@@ -43,6 +45,27 @@ def ros():
     session = h.RosSession()
     yield session
     session.shutdown()
+
+
+@pytest.fixture(scope="session")
+def ros2(tmp_path_factory):
+    """The real `ros2` command line (tests/python/ros2_cli.py); skips with the reason when there is none."""
+    base = tmp_path_factory.mktemp("ros2cli")
+    cli, origin = ros2_cli.locate(base / "overlay", base / "log")
+    if cli is None:
+        print(f"\n{origin}", file=sys.stderr)
+        pytest.skip(origin)
+    return cli
+
+
+@pytest.fixture(scope="module")
+def ros2_daemon(ros2):
+    """The ros2 daemon, running in this test network namespace for one test module (stopped before
+    the namespace goes away, and before later modules run)."""
+    ros2.run("daemon", "stop", timeout=30, check=False)  # one of an earlier module has another environment
+    ros2.run("daemon", "start", timeout=30)
+    yield ros2
+    ros2.run("daemon", "stop", timeout=30)
 
 
 _NAMESPACES = itertools.count()

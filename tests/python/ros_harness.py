@@ -52,6 +52,17 @@ ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
 NS_PER_S = 1_000_000_000
 
+# Every topic of one line (relative to its namespace) and its type.
+LINE_TYPES = {
+    "input": "sorting_line_interfaces/msg/MaterialInput",
+    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
+    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
+    "state": "sorting_line_interfaces/msg/LineState",
+    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
+    "cmd/speed": "sorting_line_interfaces/msg/SpeedCommand",
+    "cmd/sort_mode": "sorting_line_interfaces/msg/SortModeCommand",
+}
+
 
 # --------------------------------------------------------------------------------------------
 # Environment

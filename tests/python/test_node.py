@@ -15,20 +15,10 @@ import time
 import pytest
 
 import ros_harness as h
-from ros_harness import NS_PER_S, show_ns, stamp_ns
+from ros_harness import LINE_TYPES, NS_PER_S, show_ns, stamp_ns
 
 REASONS = ["invalid_speed", "unknown_mode", "mode_on_basic_line", "stale", "duplicate", "unknown_tick",
            "episode_over", "malformed"]
-
-LINE_TYPES = {
-    "input": "sorting_line_interfaces/msg/MaterialInput",
-    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
-    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
-    "state": "sorting_line_interfaces/msg/LineState",
-    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
-    "cmd/speed": "sorting_line_interfaces/msg/SpeedCommand",
-    "cmd/sort_mode": "sorting_line_interfaces/msg/SortModeCommand",
-}
 
 # The fixed line contents after a reset (src/sim/line.rs).
 START_BELT = (40, 20)
