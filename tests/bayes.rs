@@ -6,6 +6,7 @@
 //!   on the real line match the model's expectations within 4 standard errors;
 //! - the clairvoyant oracle is above it on every seed.
 
+use sorting_line::sim::evolution::Schedule;
 use sorting_line::eval::{add_oracle, evaluate};
 use sorting_line::sim::agent::{Agent, AgentSpec};
 use sorting_line::sim::bayes::{expected_reward_of, BayesPolicy};
@@ -23,8 +24,8 @@ fn expected_of(config: &LineConfig, spec: &str) -> f64 {
 #[test]
 fn on_a_basic_bayes_is_rba() {
     let config = LineConfig::for_setup(Setup::A, Variant::Basic);
-    let bayes = evaluate(&config, AgentSpec::Bayes, 10, 42, |_| {}).unwrap();
-    let rba = evaluate(&config, AgentSpec::Rba, 10, 42, |_| {}).unwrap();
+    let bayes = evaluate(&config, &Schedule::default(), AgentSpec::Bayes, 10, 42, |_| {}).unwrap();
+    let rba = evaluate(&config, &Schedule::default(), AgentSpec::Rba, 10, 42, |_| {}).unwrap();
     let rewards = |s: &sorting_line::eval::EvalSummary| s.per_episode.iter().map(|e| e.reward).collect::<Vec<_>>();
     assert_eq!(rewards(&bayes), rewards(&rba));
     let planned = BayesPolicy::build(&config).unwrap().expected_reward();
@@ -53,7 +54,7 @@ fn no_reading_and_speed_policy_expects_more_than_bayes() {
 fn the_model_is_the_lines_over_a_thousand_episodes() {
     let config = LineConfig::for_setup(Setup::B, Variant::Basic);
     for spec in ["bayes", "rba-hold"] {
-        let run = evaluate(&config, spec.parse().unwrap(), 1000, 1000, |_| {}).unwrap();
+        let run = evaluate(&config, &Schedule::default(), spec.parse().unwrap(), 1000, 1000, |_| {}).unwrap();
         let expected = expected_of(&config, spec);
         assert!(
             (run.reward_mean - expected).abs() < 4.0 * run.reward_se,
@@ -68,7 +69,7 @@ fn the_model_is_the_lines_over_a_thousand_episodes() {
 fn the_oracle_is_above_bayes_on_every_seed() {
     for setup in [Setup::A, Setup::B] {
         let config = LineConfig::for_setup(setup, Variant::Basic);
-        let mut summary = evaluate(&config, AgentSpec::Bayes, 10, 42, |_| {}).unwrap();
+        let mut summary = evaluate(&config, &Schedule::default(), AgentSpec::Bayes, 10, 42, |_| {}).unwrap();
         add_oracle(&mut summary).unwrap();
         assert!(summary.per_episode.iter().all(|e| e.gap.unwrap() >= 0.0), "{setup:?}");
     }

@@ -8,6 +8,7 @@
 use std::process::Command;
 
 use serde_json::Value;
+use sorting_line::sim::evolution::Schedule;
 use sorting_line::eval::{add_oracle, evaluate};
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
@@ -90,7 +91,7 @@ fn oracle_is_at_least_every_builtin_agent_on_every_seed() {
         for variant in VARIANTS {
             let config = LineConfig::for_setup(setup, variant);
             for spec in builtin_agents(variant) {
-                let mut summary = evaluate(&config, spec, 10, 42, |_| {}).unwrap();
+                let mut summary = evaluate(&config, &Schedule::default(), spec, 10, 42, |_| {}).unwrap();
                 add_oracle(&mut summary).unwrap();
                 for e in &summary.per_episode {
                     let (oracle, gap) = (e.oracle.unwrap(), e.gap.unwrap());
