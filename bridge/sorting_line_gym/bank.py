@@ -18,6 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
 from . import line_server
+from .vocabulary import MAX_EPISODE_STEPS, SETUPS, THRESHOLD, check_setup, check_variant
 from .transport import (
     QOS,
     BatchLink,
@@ -32,17 +33,6 @@ from .transport import (
     release_rclpy,
     stamp_key,
 )
-
-#: The paper's setups: input generator, relative sensor noise, switching penalty.
-SETUPS = {
-    "A": {"input": "random", "obs_noise": 0.0, "action_penalty": 0.0},
-    "B": {"input": "seasonal", "obs_noise": 0.0, "action_penalty": 0.5},
-    "C": {"input": "random", "obs_noise": 0.3, "action_penalty": 0.0},
-    "D": {"input": "seasonal", "obs_noise": 0.3, "action_penalty": 0.5},
-}
-
-#: Longest episode the node accepts; used when truncation is left to a TimeLimit wrapper.
-UNLIMITED_STEPS = 1_000_000
 
 #: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
 #: retried: the first exchange after discovery is lost now and then (late matching), and a short
@@ -66,16 +56,14 @@ class LineBank:
         namespace: str | None = None,
         node: str = "spawn",
         max_steps: int | None = None,
-        threshold: float = 0.7,
+        threshold: float = THRESHOLD,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         watch_sensors: bool = False,
         batch: bool = False,
     ):
-        if variant not in ("basic", "advanced"):
-            raise ValueError(f"variant = {variant!r} is not valid: allowed 'basic', 'advanced'")
-        if setup not in SETUPS:
-            raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
+        check_variant(variant)
+        check_setup(setup)
         if node not in ("spawn", "shared", "attach"):
             raise ValueError(
                 f"node = {node!r} is not valid: allowed 'spawn' (start a node), 'shared' (lease a line of "
@@ -101,7 +89,8 @@ class LineBank:
         self._node_mode = node
         self._lines = lines
         self._node_options = dict(SETUPS[setup], variant=variant, threshold=threshold, lines=lines)
-        self._node_options["max_steps"] = max_steps if max_steps is not None else UNLIMITED_STEPS
+        # No max_steps: truncation is left to a TimeLimit wrapper, the node runs its longest episode.
+        self._node_options["max_steps"] = max_steps if max_steps is not None else MAX_EPISODE_STEPS
         self._watch_sensors = watch_sensors
         self._batch = batch
         self.links: list[LineLink] = []
