@@ -14,7 +14,8 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from .env import action_space, observation_space
-from .vector import line_infos, Lines
+from .vector import Lines
+from .vocabulary import EPISODE_STEPS, line_infos
 
 
 class SortingLineSB3VecEnv(VecEnv):
@@ -27,7 +28,7 @@ class SortingLineSB3VecEnv(VecEnv):
         variant: str = "basic",
         namespace: str | None = None,
         node: str = "spawn",
-        max_episode_steps: int | None = 50,
+        max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         seed: int | None = None,

@@ -22,36 +22,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .bank import LineBank
-from .env import SEED_BOUND, action_space, observation_space, observe, sim_seconds
-
-
-def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
-    """The KPIs of a state batch (:mod:`.batch_codec`: each batch owns its arrays) as arrays
-    (entry k = line k), the same keys as the single-line ``info`` (see ``env.state_info``)."""
-    return {
-        "accuracy": b.accuracy,
-        "purity": b.purity,
-        "recall_a": b.recall_a,
-        "recall_b": b.recall_b,
-        "speed": b.speed,
-        "speed_index": b.speed_index.astype(np.int64),
-        "mode": b.mode.astype(np.int64),
-        "occupancy": b.occupancy,
-        "containers": np.stack([b.container_a, b.container_a_false, b.container_b, b.container_b_false], axis=1),
-        "speed_changes": b.speed_changes.astype(np.int64),
-        "cumulative_reward": b.cumulative_reward,
-        "step": b.step.astype(np.int64),
-        "sim_time": b.stamp_sec + b.stamp_nanosec * 1e-9 - episode_start,
-        "seed": b.seed,
-    }
-
-
-def line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-    """Every line's entry of a batched info, as the single-line env reports it (Python scalars,
-    containers as a tuple), converting each array once."""
-    columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
-    keys = list(columns)
-    return [dict(zip(keys, values)) for values in zip(*columns.values())]
+from .env import SEED_BOUND, action_space, observation_space
+from .vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 
 
 class Lines:
@@ -88,22 +60,14 @@ class Lines:
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
         responses = self.bank.reset(seeds)
         for k, r in responses.items():
-            self.episode_start[k] = sim_seconds(r.stamp)
-        return {k: observe(self.variant, r.quantity, r.category) for k, r in responses.items()}
+            self.episode_start[k] = sim_seconds(r.stamp.sec, r.stamp.nanosec)
+        return {k: observations(self.variant, r.quantity, r.category) for k, r in responses.items()}
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        a = np.asarray(actions, dtype=np.int64)
-        if self.variant == "advanced":
-            speeds, modes = a // 3, a % 3
-        else:
-            speeds, modes = a, np.zeros_like(a)
-        b = self.bank.step_batch(speeds, modes)
-        quantity = b.observation_quantity.astype(np.float32)
-        if self.variant == "advanced":
-            obs = np.stack([quantity, b.observation_category.astype(np.float32)], axis=1)
-        else:
-            obs = quantity[:, None]
-        return obs, b.reward, b.truncated, batch_info(b, self.episode_start)
+        b = self.bank.step_batch(*decode_actions(self.variant, actions))
+        obs = observations(self.variant, b.observation_quantity, b.observation_category)
+        info = state_info(b, sim_seconds(b.stamp_sec, b.stamp_nanosec) - self.episode_start)
+        return obs, b.reward, b.truncated, info
 
     def action_masks(self) -> np.ndarray:
         return np.ones((len(self.rngs), action_space(self.variant).n), dtype=bool)
@@ -124,7 +88,7 @@ class SortingLineVectorEnv(VectorEnv):
         variant: str = "basic",
         namespace: str | None = None,
         node: str = "spawn",
-        max_episode_steps: int | None = 50,
+        max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         render_mode: str | None = None,
