@@ -59,7 +59,7 @@ from gymnasium import spaces
 
 from .bank import LineBank
 from .transport import stamp_key
-from .vocabulary import ACTION_COUNTS, ENV_IDS, decode_action, observations, sim_seconds, state_info
+from .vocabulary import ACTION_COUNTS, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
@@ -72,7 +72,7 @@ def observation_space(variant: str) -> spaces.Box:
 
 
 def action_space(variant: str) -> spaces.Discrete:
-    return spaces.Discrete(ACTION_COUNTS[variant])
+    return spaces.Discrete(ACTION_COUNTS[check_variant(variant)])
 
 
 class SortingLineEnv(gym.Env):
