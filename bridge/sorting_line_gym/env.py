@@ -58,6 +58,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .bank import LineBank
+from .options import LineOptions
 from .transport import stamp_key
 from .vocabulary import ACTION_COUNTS, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
 
@@ -92,20 +93,15 @@ class SortingLineEnv(gym.Env):
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
+        options = LineOptions(
+            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout, startup_timeout=startup_timeout,
+        )
         self.variant = variant
         self.render_mode = render_mode
         self.observation_space = observation_space(variant)
         self.action_space = action_space(variant)
-        self.bank = LineBank(
-            variant=variant,
-            setup=setup,
-            namespace=namespace,
-            node=node,
-            max_steps=max_episode_steps,
-            step_timeout=step_timeout,
-            startup_timeout=startup_timeout,
-            watch_sensors=render_mode is not None,
-        )
+        self.bank = LineBank(options, watch_sensors=render_mode is not None)
         self._history = None
         self._live = None
 

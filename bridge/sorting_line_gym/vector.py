@@ -23,25 +23,16 @@ from gymnasium.vector.utils import batch_space
 
 from .bank import LineBank
 from .env import SEED_BOUND, action_space, observation_space
+from .options import LineOptions
 from .vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 
 
 class Lines:
     """The bank plus per-line seed generators: what both vector faces share."""
 
-    def __init__(self, num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout):
-        self.variant = variant
-        self.bank = LineBank(
-            variant=variant,
-            setup=setup,
-            lines=num_envs,
-            namespace=namespace,
-            node=node,
-            max_steps=max_episode_steps,
-            step_timeout=step_timeout,
-            startup_timeout=startup_timeout,
-            batch=True,
-        )
+    def __init__(self, num_envs: int, options: LineOptions):
+        self.variant = options.variant
+        self.bank = LineBank(options, lines=num_envs, batch=True)
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         # Simulated time of each line's last reset: info["sim_time"] counts from there.
         self.episode_start = np.zeros(num_envs)
@@ -95,13 +86,17 @@ class SortingLineVectorEnv(VectorEnv):
     ):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
+        options = LineOptions(
+            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout, startup_timeout=startup_timeout,
+        )
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)
         self.single_action_space = action_space(variant)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
-        self._lines = Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        self._lines = Lines(num_envs, options)
         # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
         self._all_lines = np.ones(num_envs, dtype=bool)
         self._all_lines.flags.writeable = False
