@@ -40,8 +40,7 @@ sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 
 import ros_harness as h  # noqa: E402
-
-EPISODE_STEPS = 50
+from sorting_line_gym.vocabulary import EPISODE_STEPS, SETUPS, VARIANTS  # noqa: E402
 
 
 def progress(msg: str) -> None:
@@ -317,8 +316,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--ticks", type=int, default=1_000_000, help="line-ticks to run (default 1,000,000)")
     parser.add_argument("--lines", type=int, default=16, help="lines of the node (default 16)")
-    parser.add_argument("--setup", default="A", choices="ABCD")
-    parser.add_argument("--variant", default="basic", choices=["basic", "advanced"])
+    parser.add_argument("--setup", default="A", choices=list(SETUPS))
+    parser.add_argument("--variant", default="basic", choices=VARIANTS)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--window", type=int, default=50_000, help="line-ticks per throughput/RSS sample")
     parser.add_argument("--verify-episodes", type=int, default=20,

@@ -30,12 +30,14 @@ from unittest.mock import MagicMock
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 import ros_harness as h  # noqa: E402
+from sorting_line_gym.vocabulary import SETUPS, THRESHOLD, VARIANTS  # noqa: E402
 
+#: The reference env's name of each input generator.
+REFERENCE_INPUTS = {"random": "r", "seasonal": "s9"}
+#: The setups as the reference env's keyword arguments.
 REFERENCE_SETUPS = {
-    "A": dict(input="r", noise_lv=0.0, action_penalty=0.0),
-    "B": dict(input="s9", noise_lv=0.0, action_penalty=0.5),
-    "C": dict(input="r", noise_lv=0.3, action_penalty=0.0),
-    "D": dict(input="s9", noise_lv=0.3, action_penalty=0.5),
+    name: dict(input=REFERENCE_INPUTS[s["input"]], noise_lv=s["obs_noise"], action_penalty=s["action_penalty"])
+    for name, s in SETUPS.items()
 }
 TARGET_RATIO = 1.2
 
@@ -69,7 +71,7 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
         sys.exit(f"train_timing.py: cannot import the reference env from {ref_dir} ({e})")
     own, kwargs = hyperparams.split(hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}"]))
     torch.set_num_threads(threads)
-    env = Env(max_steps=own["episode_steps"], threshold=0.7, **REFERENCE_SETUPS[setup])
+    env = Env(max_steps=own["episode_steps"], threshold=THRESHOLD, **REFERENCE_SETUPS[setup])
     env.reset(seed=100)
     env = Monitor(env)
     check_env(env)
@@ -93,7 +95,7 @@ def main() -> int:
     p.add_argument("--reference", required=True, type=Path, help="checkout of the reference implementation (Storm-131/2024_Sorting_Env)")
     p.add_argument("--algo", default="ppo", choices=("ppo", "dqn", "a2c"))
     p.add_argument("--setup", default="B", choices=tuple(REFERENCE_SETUPS))
-    p.add_argument("--variant", default="advanced", choices=("basic", "advanced"))
+    p.add_argument("--variant", default="advanced", choices=VARIANTS)
     p.add_argument("--timesteps", type=int, default=100_000)
     p.add_argument("--torch-threads", type=int, default=1)
     p.add_argument("--rounds", type=int, default=1, help="alternate reference and ours this many times; medians reported")

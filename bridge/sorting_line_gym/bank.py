@@ -18,6 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
 from . import line_server
+from .options import LineOptions
 from .transport import (
     QOS,
     BatchLink,
@@ -33,17 +34,6 @@ from .transport import (
     stamp_key,
 )
 
-#: The paper's setups: input generator, relative sensor noise, switching penalty.
-SETUPS = {
-    "A": {"input": "random", "obs_noise": 0.0, "action_penalty": 0.0},
-    "B": {"input": "seasonal", "obs_noise": 0.0, "action_penalty": 0.5},
-    "C": {"input": "random", "obs_noise": 0.3, "action_penalty": 0.0},
-    "D": {"input": "seasonal", "obs_noise": 0.3, "action_penalty": 0.5},
-}
-
-#: Longest episode the node accepts; used when truncation is left to a TimeLimit wrapper.
-UNLIMITED_STEPS = 1_000_000
-
 #: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
 #: retried: the first exchange after discovery is lost now and then (late matching), and a short
 #: first attempt keeps that from costing every env seconds of start-up.
@@ -57,51 +47,24 @@ class LineBank:
     ``batch=False`` through each line's own topics (:meth:`step`), with ``batch=True`` through the
     node's ``batch/cmd`` and ``batch/state`` (:meth:`step_batch`)."""
 
-    def __init__(
-        self,
-        *,
-        variant: str,
-        setup: str = "A",
-        lines: int = 1,
-        namespace: str | None = None,
-        node: str = "spawn",
-        max_steps: int | None = None,
-        threshold: float = 0.7,
-        step_timeout: float = 2.0,
-        startup_timeout: float = 20.0,
-        watch_sensors: bool = False,
-        batch: bool = False,
-    ):
-        if variant not in ("basic", "advanced"):
-            raise ValueError(f"variant = {variant!r} is not valid: allowed 'basic', 'advanced'")
-        if setup not in SETUPS:
-            raise ValueError(f"setup = {setup!r} is not valid: allowed {', '.join(SETUPS)}")
-        if node not in ("spawn", "shared", "attach"):
-            raise ValueError(
-                f"node = {node!r} is not valid: allowed 'spawn' (start a node), 'shared' (lease a line of "
-                "this host's line server) or 'attach'"
-            )
-        if node == "shared" and (lines != 1 or batch):
+    def __init__(self, options: LineOptions, *, lines: int = 1, watch_sensors: bool = False, batch: bool = False):
+        if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
         if not 1 <= lines <= 64:
             raise ValueError(f"lines = {lines} is out of range: allowed 1 ..= 64")
-        if step_timeout <= 0 or startup_timeout <= 0:
-            raise ValueError("step_timeout and startup_timeout must be positive (seconds)")
-        if node == "attach" and not namespace:
-            raise ValueError("node='attach' needs the namespace of the running node")
-        self.variant = variant
-        self.advanced = variant == "advanced"
-        self.setup = setup
-        self.step_timeout = step_timeout
-        self.startup_timeout = startup_timeout
-        self.namespace = namespace or private_namespace()
+        self.options = options
+        self.variant = options.variant
+        self.advanced = options.advanced
+        self.setup = options.setup
+        self.step_timeout = options.step_timeout
+        self.startup_timeout = options.startup_timeout
+        self.namespace = options.namespace or private_namespace()
         self.process: NodeProcess | None = None
         self._closed = False
         self._opened_in: int | None = None  # the pid that opened the bank (see open())
-        self._node_mode = node
+        self._node_mode = options.node
         self._lines = lines
-        self._node_options = dict(SETUPS[setup], variant=variant, threshold=threshold, lines=lines)
-        self._node_options["max_steps"] = max_steps if max_steps is not None else UNLIMITED_STEPS
+        self._node_options = options.node_options(lines)
         self._watch_sensors = watch_sensors
         self._batch = batch
         self.links: list[LineLink] = []

@@ -53,19 +53,17 @@ seconds since the reset), seed.
 
 from __future__ import annotations
 
-from typing import Any
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from .bank import LineBank
+from .options import LineOptions
 from .transport import stamp_key
+from .vocabulary import ACTION_COUNTS, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
-#: Gymnasium id of each line variant (registered in ``__init__``).
-ENV_IDS = {"basic": "SortingLine-v0", "advanced": "SortingLineAdvanced-v0"}
 
 
 def observation_space(variant: str) -> spaces.Box:
@@ -75,48 +73,7 @@ def observation_space(variant: str) -> spaces.Box:
 
 
 def action_space(variant: str) -> spaces.Discrete:
-    return spaces.Discrete(30 if variant == "advanced" else 10)
-
-
-def decode_action(variant: str, action) -> tuple[int, int]:
-    """(speed index, mode) of a Gymnasium action."""
-    a = int(action)
-    if variant == "advanced":
-        return a // 3, a % 3
-    return a, 0
-
-
-def observe(variant: str, quantity: float, category: int) -> np.ndarray:
-    if variant == "advanced":
-        return np.array([quantity, category], dtype=np.float32)
-    return np.array([quantity], dtype=np.float32)
-
-
-def sim_seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def state_info(state, episode_start: float) -> dict[str, Any]:
-    """The KPIs of a LineState message. Nothing here may depend on the node's history (its
-    episode counter or absolute clock): the same seed and actions must give the same info, and
-    the key ``episode`` belongs to episode-statistics wrappers (SB3's Monitor, Gymnasium's
-    RecordEpisodeStatistics). ``sim_time`` is simulated seconds since the episode's reset."""
-    return {
-        "accuracy": state.accuracy,
-        "purity": state.purity,
-        "recall_a": state.recall_a,
-        "recall_b": state.recall_b,
-        "speed": state.speed,
-        "speed_index": int(state.speed_index),
-        "mode": int(state.mode),
-        "occupancy": state.occupancy,
-        "containers": (state.container_a, state.container_a_false, state.container_b, state.container_b_false),
-        "speed_changes": int(state.speed_changes),
-        "cumulative_reward": state.cumulative_reward,
-        "step": int(state.step),
-        "sim_time": sim_seconds(state.header.stamp) - episode_start,
-        "seed": int(state.seed),
-    }
+    return spaces.Discrete(ACTION_COUNTS[check_variant(variant)])
 
 
 class SortingLineEnv(gym.Env):
@@ -136,20 +93,15 @@ class SortingLineEnv(gym.Env):
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
+        options = LineOptions(
+            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout, startup_timeout=startup_timeout,
+        )
         self.variant = variant
         self.render_mode = render_mode
         self.observation_space = observation_space(variant)
         self.action_space = action_space(variant)
-        self.bank = LineBank(
-            variant=variant,
-            setup=setup,
-            namespace=namespace,
-            node=node,
-            max_steps=max_episode_steps,
-            step_timeout=step_timeout,
-            startup_timeout=startup_timeout,
-            watch_sensors=render_mode is not None,
-        )
+        self.bank = LineBank(options, watch_sensors=render_mode is not None)
         self._history = None
         self._live = None
 
@@ -168,23 +120,25 @@ class SortingLineEnv(gym.Env):
         # One seed reproduces a whole run: without a seed, the next node seed comes from np_random.
         node_seed = int(seed) if seed is not None else int(self.np_random.integers(0, SEED_BOUND))
         response = self.bank.reset({0: node_seed})[0]
-        self._episode_start = sim_seconds(response.stamp)
+        self._episode_start = sim_seconds(response.stamp.sec, response.stamp.nanosec)
         self._history = _History(self.bank) if self.render_mode else None
         info = {"seed": int(response.seed), "step": 0}
         if self.render_mode == "human":
             self.render()
-        return observe(self.variant, response.quantity, response.category), info
+        return observations(self.variant, response.quantity, response.category), info
 
     def step(self, action):
         if not self.action_space.contains(action):
             raise ValueError(f"action {action!r} is not in {self.action_space}")
         state = self.bank.step([decode_action(self.variant, action)])[0]
-        obs = observe(self.variant, state.observation_quantity, state.observation_category)
+        obs = observations(self.variant, state.observation_quantity, state.observation_category)
         if self._history is not None:
             self._history.record(state)
         if self.render_mode == "human":
             self.render()
-        return obs, float(state.reward), False, bool(state.truncated), state_info(state, self._episode_start)
+        stamp = state.header.stamp
+        info = state_info(state, sim_seconds(stamp.sec, stamp.nanosec) - self._episode_start)
+        return obs, float(state.reward), False, bool(state.truncated), info
 
     def render(self):
         if self.render_mode is None:

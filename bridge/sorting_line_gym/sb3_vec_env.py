@@ -14,7 +14,9 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from .env import action_space, observation_space
-from .vector import line_infos, Lines
+from .options import LineOptions
+from .vector import Lines
+from .vocabulary import EPISODE_STEPS, line_infos
 
 
 class SortingLineSB3VecEnv(VecEnv):
@@ -27,12 +29,16 @@ class SortingLineSB3VecEnv(VecEnv):
         variant: str = "basic",
         namespace: str | None = None,
         node: str = "spawn",
-        max_episode_steps: int | None = 50,
+        max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         seed: int | None = None,
     ):
-        self._lines = Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        options = LineOptions(
+            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout, startup_timeout=startup_timeout,
+        )
+        self._lines = Lines(num_envs, options)
         self.render_mode = None
         super().__init__(num_envs, observation_space(variant), action_space(variant))
         self._actions = None

@@ -43,9 +43,7 @@ from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, Sor
 from sorting_line_interfaces.srv import ResetLine, ResetLines
 
 from .batch_codec import BatchCodec, from_message
-
-#: The ten belt speeds; a speed index i commands SPEEDS[i].
-SPEEDS = tuple(round(0.1 * (i + 1), 1) for i in range(10))
+from .vocabulary import SPEEDS  # a speed index i commands SPEEDS[i]
 
 #: The node's QoS for commands and state.
 QOS = QoSProfile(

@@ -22,54 +22,17 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .bank import LineBank
-from .env import SEED_BOUND, action_space, observation_space, observe, sim_seconds
-
-
-def batch_info(b, episode_start: np.ndarray) -> dict[str, np.ndarray]:
-    """The KPIs of a state batch (:mod:`.batch_codec`: each batch owns its arrays) as arrays
-    (entry k = line k), the same keys as the single-line ``info`` (see ``env.state_info``)."""
-    return {
-        "accuracy": b.accuracy,
-        "purity": b.purity,
-        "recall_a": b.recall_a,
-        "recall_b": b.recall_b,
-        "speed": b.speed,
-        "speed_index": b.speed_index.astype(np.int64),
-        "mode": b.mode.astype(np.int64),
-        "occupancy": b.occupancy,
-        "containers": np.stack([b.container_a, b.container_a_false, b.container_b, b.container_b_false], axis=1),
-        "speed_changes": b.speed_changes.astype(np.int64),
-        "cumulative_reward": b.cumulative_reward,
-        "step": b.step.astype(np.int64),
-        "sim_time": b.stamp_sec + b.stamp_nanosec * 1e-9 - episode_start,
-        "seed": b.seed,
-    }
-
-
-def line_infos(info: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-    """Every line's entry of a batched info, as the single-line env reports it (Python scalars,
-    containers as a tuple), converting each array once."""
-    columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
-    keys = list(columns)
-    return [dict(zip(keys, values)) for values in zip(*columns.values())]
+from .env import SEED_BOUND, action_space, observation_space
+from .options import LineOptions
+from .vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 
 
 class Lines:
     """The bank plus per-line seed generators: what both vector faces share."""
 
-    def __init__(self, num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout):
-        self.variant = variant
-        self.bank = LineBank(
-            variant=variant,
-            setup=setup,
-            lines=num_envs,
-            namespace=namespace,
-            node=node,
-            max_steps=max_episode_steps,
-            step_timeout=step_timeout,
-            startup_timeout=startup_timeout,
-            batch=True,
-        )
+    def __init__(self, num_envs: int, options: LineOptions):
+        self.variant = options.variant
+        self.bank = LineBank(options, lines=num_envs, batch=True)
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         # Simulated time of each line's last reset: info["sim_time"] counts from there.
         self.episode_start = np.zeros(num_envs)
@@ -88,22 +51,14 @@ class Lines:
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
         responses = self.bank.reset(seeds)
         for k, r in responses.items():
-            self.episode_start[k] = sim_seconds(r.stamp)
-        return {k: observe(self.variant, r.quantity, r.category) for k, r in responses.items()}
+            self.episode_start[k] = sim_seconds(r.stamp.sec, r.stamp.nanosec)
+        return {k: observations(self.variant, r.quantity, r.category) for k, r in responses.items()}
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        a = np.asarray(actions, dtype=np.int64)
-        if self.variant == "advanced":
-            speeds, modes = a // 3, a % 3
-        else:
-            speeds, modes = a, np.zeros_like(a)
-        b = self.bank.step_batch(speeds, modes)
-        quantity = b.observation_quantity.astype(np.float32)
-        if self.variant == "advanced":
-            obs = np.stack([quantity, b.observation_category.astype(np.float32)], axis=1)
-        else:
-            obs = quantity[:, None]
-        return obs, b.reward, b.truncated, batch_info(b, self.episode_start)
+        b = self.bank.step_batch(*decode_actions(self.variant, actions))
+        obs = observations(self.variant, b.observation_quantity, b.observation_category)
+        info = state_info(b, sim_seconds(b.stamp_sec, b.stamp_nanosec) - self.episode_start)
+        return obs, b.reward, b.truncated, info
 
     def action_masks(self) -> np.ndarray:
         return np.ones((len(self.rngs), action_space(self.variant).n), dtype=bool)
@@ -124,20 +79,24 @@ class SortingLineVectorEnv(VectorEnv):
         variant: str = "basic",
         namespace: str | None = None,
         node: str = "spawn",
-        max_episode_steps: int | None = 50,
+        max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         render_mode: str | None = None,
     ):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
+        options = LineOptions(
+            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout, startup_timeout=startup_timeout,
+        )
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)
         self.single_action_space = action_space(variant)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
-        self._lines = Lines(num_envs, setup, variant, namespace, node, max_episode_steps, step_timeout, startup_timeout)
+        self._lines = Lines(num_envs, options)
         # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
         self._all_lines = np.ones(num_envs, dtype=bool)
         self._all_lines.flags.writeable = False

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
 from sorting_line_gym import vocabulary
-from sorting_line_gym.vocabulary import CATEGORIES, MODES, SETUPS, SPEEDS
+from sorting_line_gym.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
@@ -302,7 +302,7 @@ def run_node_expecting_failure(args: Iterable[str], env: Optional[dict[str, str]
 # The reference trajectory
 
 
-def run_trace(setup: str, variant: str, seed: int, actions: Iterable[Any], max_steps: int = 50) -> list[dict]:
+def run_trace(setup: str, variant: str, seed: int, actions: Iterable[Any], max_steps: int = EPISODE_STEPS) -> list[dict]:
     """`sorting_line trace`: the pure-library trajectory, one dict per line (first = initial reset)."""
     tokens = [str(a) for a in actions]
     argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),

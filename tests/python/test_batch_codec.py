@@ -15,7 +15,7 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
 from sorting_line_gym.batch_codec import PRIMITIVES, BatchCodec, from_message
-from sorting_line_gym.vector import batch_info
+from sorting_line_gym.vocabulary import sim_seconds, state_info
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates
 
 TYPECODES = {"<i4": "i", "<u4": "I", "<u8": "Q", "<f8": "d", "u1": "B"}
@@ -124,7 +124,8 @@ def test_decoded_arrays_own_their_memory():
     raw = serialize_message(random_states(np.random.default_rng(3), n))
     first, second = codec.decode(raw), codec.decode(raw)
     received = np.frombuffer(raw, np.uint8)
-    for key, value in batch_info(first, np.zeros(n)).items():
+    info = state_info(first, sim_seconds(first.stamp_sec, first.stamp_nanosec) - np.zeros(n))
+    for key, value in info.items():
         assert value.flags.writeable, key
         assert not np.shares_memory(value, received) and not np.shares_memory(value, second.reward), key
     first.reward[:] = -1.0

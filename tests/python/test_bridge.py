@@ -38,13 +38,14 @@ import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
 from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
 from sorting_line_gym.vector import SortingLineVectorEnv
+from sorting_line_gym.vocabulary import MAX_EPISODE_STEPS
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
 ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
 IDS = {"basic": BASIC, "advanced": ADVANCED}
 CATEGORY = {"basic": 0, "positive": 1, "negative": 2}
-UNLIMITED = 1_000_000
+UNLIMITED = MAX_EPISODE_STEPS  # the env's node episode length when gymnasium's TimeLimit truncates
 
 # The KPIs every step's info carries (env.py's docstring). Its "episode" (the node's episode number)
 # and "sim_time" are not required here: see test_step_info_does_not_depend_on_earlier_episodes and

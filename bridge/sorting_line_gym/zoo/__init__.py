@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..env import ENV_IDS
+from ..vocabulary import ENV_IDS
 from ..hyperparams import load, split
 
 
