@@ -109,8 +109,17 @@ impl Discovery {
         let builder = DomainParticipantBuilder::new(self.domain).with_endpoint_user_data(Arc::new(endpoint_user_data));
         match self.range {
             Range::Subnet => builder.with_static_peers(self.static_peers.clone()),
-            Range::Localhost => builder.multicast(false).with_static_peers(self.static_peers.clone()),
-            Range::Off => builder.multicast(false).same_host_loopback(false).with_only_networks([Ipv4Addr::LOCALHOST]),
+            // Still advertises this host's addresses: a same-host Fast DDS peer drops loopback
+            // locators of a participant whose GUID does not say "this host" (RustDDS's does not)
+            // and then never acknowledges the node's data.
+            Range::Localhost => {
+                builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone())
+            }
+            Range::Off => builder
+                .multicast(false)
+                .localhost_only(true)
+                .same_host_loopback(false)
+                .with_only_networks([Ipv4Addr::LOCALHOST]),
             Range::SystemDefault => builder,
         }
     }
