@@ -109,11 +109,11 @@ impl Discovery {
         let builder = DomainParticipantBuilder::new(self.domain).with_endpoint_user_data(Arc::new(endpoint_user_data));
         match self.range {
             Range::Subnet => builder.with_static_peers(self.static_peers.clone()),
-            // Still advertises this host's addresses: a same-host Fast DDS peer drops loopback
-            // locators of a participant whose GUID does not say "this host" (RustDDS's does not)
-            // and then never acknowledges the node's data.
+            // Traffic stays on this host but for the static peers, which are also the only reason
+            // to advertise more than loopback.
             Range::Localhost => {
-                builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone())
+                let builder = builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone());
+                if self.static_peers.is_empty() { builder.with_only_networks([Ipv4Addr::LOCALHOST]) } else { builder }
             }
             Range::Off => builder
                 .multicast(false)
