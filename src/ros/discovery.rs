@@ -5,7 +5,8 @@
 //! - `ROS_DOMAIN_ID` (0 when unset): the DDS domain.
 //! - `ROS_AUTOMATIC_DISCOVERY_RANGE`: `SUBNET` (the default) multicast discovery on every
 //!   interface; `LOCALHOST` no multicast, discovery only of participants on this host (and of
-//!   the static peers); `OFF` no discovery; `SYSTEM_DEFAULT` the DDS implementation's own
+//!   the static peers), and nothing sent anywhere else, whatever other participants advertise
+//!   (RustDDS `localhost_only`, see vendor/README.md); `OFF` no discovery; `SYSTEM_DEFAULT` the DDS implementation's own
 //!   defaults (for RustDDS the same as SUBNET), static peers ignored.
 //! - `ROS_STATIC_PEERS`: `;`-separated addresses or host names that discovery is also sent to
 //!   by unicast (with SUBNET and LOCALHOST).
@@ -14,8 +15,9 @@
 //! Unlike rcl, which warns and falls back to LOCALHOST, a value outside these fails at start
 //! with the variable, the value and what is allowed (a typo must not silently change which
 //! machines the simulator talks to). OFF is as close as RustDDS gets: the node announces
-//! itself to nobody and advertises only loopback, but RustDDS cannot ignore a participant that
-//! announces itself to the node's discovery port (Fast DDS under OFF runs no discovery at all).
+//! itself to nobody, advertises only loopback and sends only on this host, but RustDDS cannot
+//! ignore a same-host participant that announces itself to the node's discovery port (Fast DDS
+//! under OFF runs no discovery at all).
 
 use std::net::{IpAddr, Ipv4Addr, ToSocketAddrs};
 use std::sync::Arc;
