@@ -6,8 +6,9 @@
 //! - `ROS_AUTOMATIC_DISCOVERY_RANGE`: `SUBNET` (the default) multicast discovery on every
 //!   interface; `LOCALHOST` no multicast, discovery only of participants on this host (and of
 //!   the static peers), and nothing sent anywhere else, whatever other participants advertise
-//!   (RustDDS `localhost_only`, see vendor/README.md); `OFF` no discovery; `SYSTEM_DEFAULT` the DDS implementation's own
-//!   defaults (for RustDDS the same as SUBNET), static peers ignored.
+//!   (RustDDS `localhost_only`, see vendor/README.md); `OFF` no discovery; `SYSTEM_DEFAULT`
+//!   the DDS implementation's own defaults (for RustDDS the same as SUBNET), static peers
+//!   ignored.
 //! - `ROS_STATIC_PEERS`: `;`-separated addresses or host names that discovery is also sent to
 //!   by unicast (with SUBNET and LOCALHOST).
 //! - `ROS_LOCALHOST_ONLY=1` (deprecated): LOCALHOST, the other two ignored, with rcl's warnings.
@@ -114,7 +115,8 @@ impl Discovery {
             // Traffic stays on this host but for the static peers, which are also the only reason
             // to advertise more than loopback.
             Range::Localhost => {
-                let builder = builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone());
+                let builder =
+                    builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone());
                 if self.static_peers.is_empty() { builder.with_only_networks([Ipv4Addr::LOCALHOST]) } else { builder }
             }
             Range::Off => builder
