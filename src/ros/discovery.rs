@@ -5,8 +5,10 @@
 //! - `ROS_DOMAIN_ID` (0 when unset): the DDS domain.
 //! - `ROS_AUTOMATIC_DISCOVERY_RANGE`: `SUBNET` (the default) multicast discovery on every
 //!   interface; `LOCALHOST` no multicast, discovery only of participants on this host (and of
-//!   the static peers); `OFF` no discovery; `SYSTEM_DEFAULT` the DDS implementation's own
-//!   defaults (for RustDDS the same as SUBNET), static peers ignored.
+//!   the static peers), and nothing sent anywhere else, whatever other participants advertise
+//!   (RustDDS `localhost_only`, see vendor/README.md); `OFF` no discovery; `SYSTEM_DEFAULT`
+//!   the DDS implementation's own defaults (for RustDDS the same as SUBNET), static peers
+//!   ignored.
 //! - `ROS_STATIC_PEERS`: `;`-separated addresses or host names that discovery is also sent to
 //!   by unicast (with SUBNET and LOCALHOST).
 //! - `ROS_LOCALHOST_ONLY=1` (deprecated): LOCALHOST, the other two ignored, with rcl's warnings.
@@ -14,8 +16,9 @@
 //! Unlike rcl, which warns and falls back to LOCALHOST, a value outside these fails at start
 //! with the variable, the value and what is allowed (a typo must not silently change which
 //! machines the simulator talks to). OFF is as close as RustDDS gets: the node announces
-//! itself to nobody and advertises only loopback, but RustDDS cannot ignore a participant that
-//! announces itself to the node's discovery port (Fast DDS under OFF runs no discovery at all).
+//! itself to nobody, advertises only loopback and sends only on this host, but RustDDS cannot
+//! ignore a same-host participant that announces itself to the node's discovery port (Fast DDS
+//! under OFF runs no discovery at all).
 
 use std::net::{IpAddr, Ipv4Addr, ToSocketAddrs};
 use std::sync::Arc;
@@ -109,8 +112,18 @@ impl Discovery {
         let builder = DomainParticipantBuilder::new(self.domain).with_endpoint_user_data(Arc::new(endpoint_user_data));
         match self.range {
             Range::Subnet => builder.with_static_peers(self.static_peers.clone()),
-            Range::Localhost => builder.multicast(false).with_static_peers(self.static_peers.clone()),
-            Range::Off => builder.multicast(false).same_host_loopback(false).with_only_networks([Ipv4Addr::LOCALHOST]),
+            // Traffic stays on this host but for the static peers, which are also the only reason
+            // to advertise more than loopback.
+            Range::Localhost => {
+                let builder =
+                    builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone());
+                if self.static_peers.is_empty() { builder.with_only_networks([Ipv4Addr::LOCALHOST]) } else { builder }
+            }
+            Range::Off => builder
+                .multicast(false)
+                .localhost_only(true)
+                .same_host_loopback(false)
+                .with_only_networks([Ipv4Addr::LOCALHOST]),
             Range::SystemDefault => builder,
         }
     }

@@ -84,6 +84,7 @@ pub struct DomainParticipantBuilder {
 
   // [sorting_line patch] ROS 2 discovery range and static peers, endpoint USER_DATA.
   multicast: bool,
+  localhost_only: bool,
   static_peers: Vec<IpAddr>,
   endpoint_user_data: Option<EndpointUserData>,
 
@@ -103,6 +104,7 @@ impl DomainParticipantBuilder {
       only_networks: None,
       same_host_loopback: true,
       multicast: true,
+      localhost_only: false,
       static_peers: Vec::new(),
       endpoint_user_data: None,
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
@@ -142,13 +144,28 @@ impl DomainParticipantBuilder {
   }
 
   /// [sorting_line patch] Enable/disable multicast (default: enabled). When
-  /// disabled, no multicast group is joined, no multicast locator is advertised
-  /// and nothing is sent to a multicast address, so discovery reaches only the
+  /// disabled, no multicast group is joined (no socket is opened on a multicast
+  /// port), no multicast locator is advertised and nothing is sent to a
+  /// multicast address, so discovery reaches only the
   /// localhost peers (see [`Self::same_host_loopback`]), the static peers and
   /// participants that contact this one. ROS 2's
   /// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` and `OFF` need this.
   pub fn multicast(mut self, enabled: bool) -> Self {
     self.multicast = enabled;
+    self
+  }
+
+  /// [sorting_line patch] Keep all traffic on this host (default: off). When
+  /// on, the participant sends only to loopback addresses, to this host's own
+  /// addresses (rewritten to loopback, as Fast DDS does with local locators)
+  /// and to the static peers; any other locator a peer advertises (another
+  /// host's address, a multicast group) is never a destination. ROS 2's
+  /// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` and `OFF` need this together
+  /// with `multicast(false)`: without it, a participant that hears of a remote
+  /// one (a same-host peer's socket can make the kernel deliver multicast to
+  /// it, or the remote names this host as a static peer) answers it.
+  pub fn localhost_only(mut self, enabled: bool) -> Self {
+    self.localhost_only = enabled;
     self
   }
 
@@ -384,6 +401,7 @@ impl DomainParticipantBuilder {
       self.only_networks,
       self.same_host_loopback,
       self.multicast,
+      self.localhost_only,
       self.static_peers,
       dp_waker,
       discovery_sample_sender,
@@ -1029,6 +1047,7 @@ impl DomainParticipantDisc {
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
     multicast: bool,
+    localhost_only: bool,
     static_peers: Vec<IpAddr>,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
@@ -1048,6 +1067,7 @@ impl DomainParticipantDisc {
       only_networks,
       same_host_loopback,
       multicast,
+      localhost_only,
       static_peers,
       dp_waker,
       discovery_sample_sender,
@@ -1297,6 +1317,7 @@ impl DomainParticipantInner {
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
     multicast: bool,
+    localhost_only: bool,
     static_peers: Vec<IpAddr>,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
@@ -1311,17 +1332,23 @@ impl DomainParticipantInner {
 
     let mut listeners = HashMap::new();
 
-    match UDPListener::new_multicast_with_buf_size(
-      "0.0.0.0",
-      spdp_well_known_multicast_port(domain_id),
-      Ipv4Addr::new(239, 255, 0, 1),
-      socket_receive_buffer_size,
-      multicast_networks.as_deref(),
-    ) {
-      Ok(l) => {
+    // [sorting_line patch] Multicast off = no socket on the multicast port either:
+    // one bound to 0.0.0.0:<port> gets every datagram to a group that any other
+    // socket of this host joined (Linux IP_MULTICAST_ALL), e.g. a same-host peer's.
+    match multicast.then(|| {
+      UDPListener::new_multicast_with_buf_size(
+        "0.0.0.0",
+        spdp_well_known_multicast_port(domain_id),
+        Ipv4Addr::new(239, 255, 0, 1),
+        socket_receive_buffer_size,
+        multicast_networks.as_deref(),
+      )
+    }) {
+      None => {}
+      Some(Ok(l)) => {
         listeners.insert(DISCOVERY_MUL_LISTENER_TOKEN, l);
       }
-      Err(e) => warn!("Cannot get multicast discovery listener: {e:?}"),
+      Some(Err(e)) => warn!("Cannot get multicast discovery listener: {e:?}"),
     }
 
     let mut participant_id = 0;
@@ -1353,17 +1380,23 @@ impl DomainParticipantInner {
 
     // Now the user traffic listeners
 
-    match UDPListener::new_multicast_with_buf_size(
-      "0.0.0.0",
-      user_traffic_multicast_port(domain_id),
-      Ipv4Addr::new(239, 255, 0, 1),
-      socket_receive_buffer_size,
-      multicast_networks.as_deref(),
-    ) {
-      Ok(l) => {
+    // [sorting_line patch] Multicast off = no socket on the multicast port either:
+    // one bound to 0.0.0.0:<port> gets every datagram to a group that any other
+    // socket of this host joined (Linux IP_MULTICAST_ALL), e.g. a same-host peer's.
+    match multicast.then(|| {
+      UDPListener::new_multicast_with_buf_size(
+        "0.0.0.0",
+        user_traffic_multicast_port(domain_id),
+        Ipv4Addr::new(239, 255, 0, 1),
+        socket_receive_buffer_size,
+        multicast_networks.as_deref(),
+      )
+    }) {
+      None => {}
+      Some(Ok(l)) => {
         listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
       }
-      Err(e) => warn!("Cannot get multicast user traffic listener: {e:?}"),
+      Some(Err(e)) => warn!("Cannot get multicast user traffic listener: {e:?}"),
     }
 
     let user_traffic_listener = UDPListener::new_unicast_with_buf_size(
@@ -1477,6 +1510,7 @@ impl DomainParticipantInner {
           only_networks_for_ev_loop,
           socket_send_buffer_size,
           same_host_loopback,
+          localhost_only,
           static_peers,
           reader_ready_rx,
           writer_ready_rx,

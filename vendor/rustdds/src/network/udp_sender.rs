@@ -2,10 +2,8 @@ use std::{
   cell::RefCell,
   collections::HashMap,
   io,
-  net::{IpAddr, SocketAddr, UdpSocket},
+  net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket}, // [sorting_line patch] Ipv4Addr, Ipv6Addr
 };
-#[cfg(test)]
-use std::net::Ipv4Addr;
 #[cfg(unix)]
 use std::os::unix::io::{AsRawFd, RawFd};
 
@@ -38,6 +36,17 @@ pub struct UDPSender {
   // sent immediately. Drained on write readiness by `flush_control`.
   // (see src/rtps/nonblocking_transmit_design.md)
   control_queues: RefCell<HashMap<SocketId, ControlQueue>>,
+
+  // [sorting_line patch] When set, the only destinations allowed besides
+  // loopback, see `restrict_to_this_host`.
+  this_host_only: Option<ThisHost>,
+}
+
+// [sorting_line patch]
+#[derive(Debug)]
+struct ThisHost {
+  own_addresses: Vec<IpAddr>,
+  static_peers: Vec<IpAddr>,
 }
 
 impl UDPSender {
@@ -160,6 +169,7 @@ impl UDPSender {
       unicast_socket,
       multicast_sockets,
       control_queues: RefCell::new(HashMap::new()),
+      this_host_only: None, // [sorting_line patch]
     };
     info!("UDPSender::new() --> {sender:?}");
     Ok(sender)
@@ -209,8 +219,43 @@ impl UDPSender {
     }
   }
 
+  /// [sorting_line patch] From now on send only to loopback, to `own_addresses`
+  /// (this host's, sent to loopback instead, as Fast DDS does with local
+  /// locators) and to `static_peers`; every other destination is dropped. This
+  /// is the one gate every datagram passes (`raw_send`).
+  pub(crate) fn restrict_to_this_host(&mut self, own_addresses: Vec<IpAddr>, static_peers: Vec<IpAddr>) {
+    self.this_host_only = Some(ThisHost {
+      own_addresses,
+      static_peers,
+    });
+  }
+
+  // [sorting_line patch] Where a datagram for `addr` may go, if anywhere.
+  fn permitted_destination(&self, addr: SocketAddr) -> Option<SocketAddr> {
+    let Some(this_host) = &self.this_host_only else {
+      return Some(addr);
+    };
+    let ip = addr.ip();
+    if ip.is_loopback() || this_host.static_peers.contains(&ip) {
+      Some(addr)
+    } else if this_host.own_addresses.contains(&ip) {
+      let loopback = match ip {
+        IpAddr::V4(_) => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        IpAddr::V6(_) => IpAddr::V6(Ipv6Addr::LOCALHOST),
+      };
+      Some(SocketAddr::new(loopback, addr.port()))
+    } else {
+      None
+    }
+  }
+
   /// One non-blocking datagram send. Never blocks; classifies the result.
   fn raw_send(&self, id: SocketId, addr: SocketAddr, buffer: &[u8]) -> SendOutcome {
+    // [sorting_line patch] Localhost only (see `restrict_to_this_host`).
+    let Some(addr) = self.permitted_destination(addr) else {
+      trace!("raw_send: {addr} is not on this host, dropping (localhost only)");
+      return SendOutcome::Dropped;
+    };
     let Some(socket) = self.socket_ref(id) else {
       error!("raw_send: no socket for {id:?}");
       return SendOutcome::Dropped;

@@ -166,6 +166,7 @@ impl DPEventLoop {
     only_networks: Option<Arc<[IpAddr]>>,
     socket_send_buffer_size: usize,
     same_host_loopback: bool,
+    localhost_only: bool, // [sorting_line patch]
     static_peers: Vec<IpAddr>,
     reader_ready: ReadyReceiver<EntityId>,
     writer_ready: ReadyReceiver<EntityId>,
@@ -214,7 +215,7 @@ impl DPEventLoop {
     }
 
     // port number 0 means OS chooses an available port number.
-    let udp_sender = try_init!(
+    let mut udp_sender = try_init!(
       UDPSender::new_with_networks(0, only_networks.as_deref(), socket_send_buffer_size),
       "UDPSender construction fail"
     );
@@ -224,6 +225,11 @@ impl DPEventLoop {
 
     let interface_observations = Rc::new(RefCell::new(InterfaceObservations::new()));
     let local_interfaces: Rc<[IfAddr]> = Rc::from(local_interface_table());
+    // [sorting_line patch] Localhost only: see `DomainParticipantBuilder::localhost_only`.
+    if localhost_only {
+      let own = local_interfaces.iter().map(|i| i.ip).collect();
+      udp_sender.restrict_to_this_host(own, static_peers.clone());
+    }
 
     Ok(Self {
       domain_info,
