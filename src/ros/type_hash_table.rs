@@ -22,6 +22,7 @@ pub const TYPE_HASHES: &[(&str, &str)] = &[
     ("rmw_dds_common/msg/ParticipantEntitiesInfo", "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e"),
     ("rosgraph_msgs/msg/Clock", "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"),
     ("sorting_line_interfaces/msg/BeltOccupancy", "RIHS01_f3f783fc5c6cda0a7813a3a34ff5a512d77a4dc0262a183fcb7365ff7a254f82"),
+    ("sorting_line_interfaces/msg/EvolutionEvent", "RIHS01_566a8bf49b00dae860d4990d4501392ff2c153e901f167b548d6883f040a1611"),
     ("sorting_line_interfaces/msg/LineCommands", "RIHS01_16844149071f7ef1eded2e1115510c13fa3f9975bde1cac3c61f54d86f8f9801"),
     ("sorting_line_interfaces/msg/LineState", "RIHS01_f960d663f175fb957d5d0f04d630e30dcba23913e91dca00dcf85cfbf1da2a6c"),
     ("sorting_line_interfaces/msg/LineStates", "RIHS01_817712176a3d3dbe9e6f90339519fc99bfd93071405c0d7152c588a012849066"),

@@ -410,7 +410,8 @@ def test_service_call_reset_with_and_without_seed(ros2, start_node, namespace):
 def test_topic_pub_speed_command_on_a_realtime_line(ros2, ros, start_node, client_factory, namespace):
     """`ros2 topic pub --once` of a SpeedCommand (zero stamp: a realtime line takes lagging stamps)."""
     ns = namespace("pub")
-    node = start_node("--mode", "realtime", "--rate", str(RATE), "--ros-args", "-r", f"__ns:={ns}")
+    # One long episode: a realtime line's own restart shows the start speed again at step 0.
+    node = start_node("--mode", "realtime", "--rate", str(RATE), "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}")
     c = client_factory(ns, "basic", node_proc=node, topics=["state"])
     first = ros.spin_until(lambda: c.msgs["state"], 10.0, f"{ns}/state", c.context)[0]
     assert first.speed == 0.6, first  # the start speed, before anyone commands
