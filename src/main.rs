@@ -172,6 +172,9 @@ fn run_eval(args: EvalArgs) -> Result<(), String> {
     let run = &args.run;
     let config = run.config();
     let evolution = load_evolution(run.evolution.as_deref())?;
+    if args.gap && !evolution.is_empty() {
+        return Err("--gap: the oracle models a fixed line; it cannot be used with --evolution".into());
+    }
     let bar = if io::stderr().is_terminal() && run.episodes >= 20 {
         let bar = ProgressBar::new(run.episodes as u64);
         bar.set_style(
