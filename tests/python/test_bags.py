@@ -42,7 +42,7 @@ from sorting_line_gym.bag.schema import typestore
 
 @pytest.fixture(autouse=True)
 def same_binary(monkeypatch):
-    """The bag tools start the node the tests use (NODE_BIN / release build)."""
+    """The bag tools start the node the tests use (SORTING_LINE_BIN / release build)."""
     monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
 
 
