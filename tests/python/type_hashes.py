@@ -38,12 +38,18 @@ EXTERNAL = [
 ]
 
 
+# Interface packages built from this repository (by setup.sh): package -> its directory.
+PACKAGES = {"sorting_line_interfaces": ROOT / "msg", "simulation_interfaces": ROOT / "msg" / "simulation_interfaces"}
+
+
 def our_interfaces() -> list[str]:
-    """sorting_line_interfaces/msg/X and srv/X for every file in msg/."""
+    """pkg/msg/X and pkg/srv/X for every .msg and .srv file of the packages built from msg/ (the
+    node serves every service of simulation_interfaces we build; its messages are nested in them)."""
     names = []
-    for kind in ("msg", "srv"):
-        for f in sorted((ROOT / "msg" / kind).glob(f"*.{kind}")):
-            names.append(f"sorting_line_interfaces/{kind}/{f.stem}")
+    for package, directory in PACKAGES.items():
+        for kind in ("msg", "srv"):
+            for f in sorted((directory / kind).glob(f"*.{kind}")):
+                names.append(f"{package}/{kind}/{f.stem}")
     return names
 
 
