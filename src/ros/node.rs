@@ -9,7 +9,8 @@ use std::time::{Duration, Instant};
 
 use async_signal::{Signal, Signals};
 use futures::future::{FutureExt, LocalBoxFuture};
-use futures::stream::{self, LocalBoxStream, StreamExt};
+use futures::stream::{self, FuturesUnordered, LocalBoxStream, StreamExt};
+use ros2_client::action::{ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle};
 use ros2_client::{
     Context, Gid, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
     Server, ServiceMapping, Subscription,
@@ -25,7 +26,7 @@ use super::options::{NodeArgs, TickMode};
 use super::param_descriptors::descriptors;
 use super::params::NodeParams;
 use super::protocol::{batch_commands, batch_resets, Accepted, Client, Command, HostedLine, Rejection, TimerTick};
-use super::qos::default_profile;
+use super::qos::{action_status_profile, default_profile};
 use super::ros_args::RosArgs;
 use super::simulation::{self, code, reset_scope, step_request, transition, ResetScope, SimState, Transition};
 use super::simulation_interfaces::*;
@@ -74,6 +75,7 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let batch_state = publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?;
     let batch_reset = server(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?;
     let sim = SimulationServers::new(&mut node, &names)?;
+    let simulate_steps = simulate_steps_server(&mut node, &names)?;
     let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
     let shared = Shared {
         clock_pub,
@@ -82,6 +84,7 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
         batch_state,
         batch_reset,
         sim,
+        simulate_steps,
         fully_qualified_name: names.fully_qualified(),
         params: params.clone(),
         node,
@@ -294,11 +297,54 @@ fn ok() -> SimResult {
     SimResult { result: code::OK, error_message: String::new() }
 }
 
-/// A StepSimulation in progress: its request (answered when done), steps done and asked.
+type SimulateStepsServer = AsyncActionServer<SimulateStepsGoal, SimulateStepsResult, SimulateStepsFeedback>;
+type StepsGoal = ExecutingGoalHandle<SimulateStepsGoal>;
+
+/// The SimulateSteps action server, in the node's private namespace (`~/simulate_steps`), with
+/// rcl_action's QoS (the status topic is transient-local).
+fn simulate_steps_server(node: &mut Node, names: &Names) -> Result<SimulateStepsServer, String> {
+    let absolute = names.private(ACTION.0);
+    let qos = ActionServerQosPolicies {
+        goal_service: default_profile(),
+        result_service: default_profile(),
+        cancel_service: default_profile(),
+        feedback_publisher: default_profile(),
+        status_publisher: action_status_profile(),
+    };
+    let server = node
+        .create_action_server(ServiceMapping::Enhanced, &topic_name(&absolute)?, &action_type(), qos)
+        .map_err(|e| format!("cannot serve the action {absolute}: {e:?}"))?;
+    Ok(AsyncActionServer::new(server))
+}
+
+/// Whom a finished StepSimulation answers: a service request, or a SimulateSteps goal.
+#[derive(Clone, Copy)]
+enum StepReply {
+    Service(RmwRequestId),
+    Action(StepsGoal),
+}
+
+/// A StepSimulation (or SimulateSteps goal) in progress: whom to answer, steps done and asked.
 struct StepJob {
-    id: RmwRequestId,
+    reply: StepReply,
     done: u64,
     steps: u64,
+}
+
+/// Ends a SimulateSteps goal: the result goes out when the client asks for it (ros2-client's
+/// `send_result_response` waits for that request), so it runs beside the node's loop.
+fn finish_goal<'a>(
+    server: &'a SimulateStepsServer,
+    goal: StepsGoal,
+    status: GoalEndStatus,
+    result: SimResult,
+) -> LocalBoxFuture<'a, ()> {
+    async move {
+        if let Err(e) = server.send_result_response(goal, status, SimulateStepsResult { result }).await {
+            log("WARN", format!("{}: cannot send a goal's result: {e:?}", ACTION.0));
+        }
+    }
+    .boxed_local()
 }
 
 /// /clock: follows the line that is furthest ahead and goes back only when the simulation's time
@@ -348,6 +394,7 @@ struct Shared {
     batch_state: Publisher<LineStates>,
     batch_reset: Server<ResetLinesRequest, ResetLinesResponse>,
     sim: SimulationServers,
+    simulate_steps: SimulateStepsServer,
     fully_qualified_name: String,
     params: NodeParams,
     /// Last: the endpoints above are dropped before the node.
@@ -452,6 +499,9 @@ enum Event {
     Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
     /// A simulation_interfaces request.
     Sim(Result<(RmwRequestId, SimRequest), String>),
+    /// A new SimulateSteps goal, or a request to cancel goals.
+    Goal(Result<NewGoalHandle<SimulateStepsGoal>, String>),
+    Cancel(Result<CancelHandle, String>),
 }
 
 fn show_stamp(t: Time) -> String {
@@ -470,9 +520,24 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     let batch = shared.batch_cmd.async_stream().map(|r| Event::Batch(r.map_err(|e| format!("{e:?}")))).boxed_local();
     let resets =
         shared.batch_reset.receive_request_stream().map(|r| Event::BatchReset(r.map_err(|e| format!("{e:?}")))).boxed_local();
+    let action = &shared.simulate_steps;
+    let goals = stream::unfold((), move |()| async move {
+        Some((Event::Goal(action.receive_new_goal().await.map_err(|e| format!("{e:?}"))), ()))
+    })
+    .boxed_local();
+    let cancels = stream::unfold((), move |()| async move {
+        Some((Event::Cancel(action.receive_cancel_request().await.map_err(|e| format!("{e:?}"))), ()))
+    })
+    .boxed_local();
     let mut events = stream::select_all(
-        endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)).chain([batch, resets]).chain(shared.sim.events()),
+        endpoints
+            .iter()
+            .enumerate()
+            .flat_map(|(k, e)| e.events(k))
+            .chain([batch, resets, goals, cancels])
+            .chain(shared.sim.events()),
     );
+    let mut finishing: FuturesUnordered<LocalBoxFuture<'_, ()>> = FuturesUnordered::new();
     let mut signals = signals.fuse();
     let period = Duration::from_secs_f64(1.0 / shared.params.rate);
     let mut sim = SimState::initial(shared.params.mode);
@@ -568,12 +633,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         SimRequest::Step(steps) => match step_request(sim, steps, stepping) {
                             Ok(0) => Ok(()),
                             Ok(steps) => {
-                                // Realtime rules while stepping: a command updates the held
-                                // command (the next step uses it) instead of completing a tick.
-                                for r in runtimes.iter_mut() {
-                                    r.host.set_mode(TickMode::Realtime);
-                                }
-                                job = Some(StepJob { id, done: 0, steps });
+                                job = Some(start_job(runtimes, StepReply::Service(id), steps));
                                 continue; // answered when the steps are done
                             }
                             Err(refusal) => Err(refusal),
@@ -596,23 +656,85 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     shared.sim.reply(id, request, result, sim).await;
                 }
                 Event::Sim(Err(error)) => log("WARN", format!("simulation_interfaces: unreadable request: {error}")),
+                Event::Goal(Ok(handle)) => {
+                    let stepping = job.as_ref().map(|j| (j.done, j.steps));
+                    let Some(goal) = action.get_new_goal(handle) else {
+                        log("WARN", format!("{}: a new goal vanished before it was read", ACTION.0));
+                        continue;
+                    };
+                    // Accepted either way: a refused goal ends at once with the reason in its result.
+                    let executing = match action.accept_goal(handle).await {
+                        Ok(accepted) => action.start_executing_goal(accepted).await,
+                        Err(e) => Err(e),
+                    };
+                    let executing = match executing {
+                        Ok(executing) => executing,
+                        Err(e) => {
+                            log("WARN", format!("{}: cannot accept a goal: {e:?}", ACTION.0));
+                            continue;
+                        }
+                    };
+                    match step_request(sim, goal.steps, stepping) {
+                        Ok(0) => {
+                            sim_counters.answered_ok += 1;
+                            finishing.push(finish_goal(action, executing, GoalEndStatus::Succeeded, ok()));
+                        }
+                        Ok(steps) => job = Some(start_job(runtimes, StepReply::Action(executing), steps)),
+                        Err(refusal) => {
+                            if let Some(line) = sim_counters.refuse(ACTION.0, &format!("steps {}", goal.steps), &refusal) {
+                                log("WARN", line);
+                            }
+                            let result = SimResult { result: refusal.code, error_message: refusal.message };
+                            finishing.push(finish_goal(action, executing, GoalEndStatus::Aborted, result));
+                        }
+                    }
+                }
+                Event::Goal(Err(error)) => log("WARN", format!("{}: unreadable goal: {error}", ACTION.0)),
+                Event::Cancel(Ok(cancel)) => {
+                    // Only the goal in progress can be canceled: every other one has ended.
+                    let current = match job.as_ref().map(|j| (j.reply, j.done, j.steps)) {
+                        Some((StepReply::Action(goal), done, steps)) if cancel.contains_goal(&goal.goal_id()) => Some((goal, done, steps)),
+                        _ => None,
+                    };
+                    if let Err(e) = action.respond_to_cancel_requests(&cancel, current.map(|(g, _, _)| g.goal_id()).into_iter()).await {
+                        log("WARN", format!("{}: cannot answer a cancel request: {e:?}", ACTION.0));
+                    }
+                    if let Some((goal, done, steps)) = current {
+                        end_job(runtimes);
+                        job = None;
+                        let result = SimResult {
+                            result: code::OPERATION_FAILED,
+                            error_message: format!("canceled after {done} of {steps} steps"),
+                        };
+                        finishing.push(finish_goal(action, goal, GoalEndStatus::Canceled, result));
+                    }
+                }
+                Event::Cancel(Err(error)) => log("WARN", format!("{}: unreadable cancel request: {error}", ACTION.0)),
             },
             _ = step_now => {
                 if let Some(j) = job.as_mut() {
                     tick_all(endpoints, runtimes, shared, &mut clock);
                     j.done += 1;
                     sim_counters.steps += 1;
-                    if j.done == j.steps {
-                        for r in runtimes.iter_mut() {
-                            r.host.set_mode(TickMode::Lockstep);
+                    if let StepReply::Action(goal) = j.reply {
+                        let feedback = SimulateStepsFeedback { completed_steps: j.done, remaining_steps: j.steps - j.done };
+                        if let Err(e) = action.publish_feedback(goal, feedback).await {
+                            log("WARN", format!("{}: cannot publish feedback: {e:?}", ACTION.0));
                         }
-                        let id = j.id;
+                    }
+                    if j.done == j.steps {
+                        let reply = j.reply;
+                        end_job(runtimes);
                         job = None;
                         sim_counters.answered_ok += 1;
-                        shared.sim.reply(id, SimRequest::Step(0), ok(), sim).await;
+                        match reply {
+                            StepReply::Service(id) => shared.sim.reply(id, SimRequest::Step(0), ok(), sim).await,
+                            StepReply::Action(goal) => finishing.push(finish_goal(action, goal, GoalEndStatus::Succeeded, ok())),
+                        }
                     }
                 }
             },
+            () = finishing.select_next_some() => {},
             _ = timer.select_next_some() => tick_all(endpoints, runtimes, shared, &mut clock),
             _ = diagnostics.select_next_some() => {
                 let stepping = job.as_ref().map(|j| (j.done, j.steps));
@@ -624,6 +746,22 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 break;
             },
         }
+    }
+}
+
+/// Starts a StepSimulation (or SimulateSteps goal) of `steps` > 0. Realtime rules while stepping:
+/// a command updates the held command (the next step uses it) instead of completing a tick.
+fn start_job(runtimes: &mut [LineRuntime], reply: StepReply, steps: u64) -> StepJob {
+    for r in runtimes.iter_mut() {
+        r.host.set_mode(TickMode::Realtime);
+    }
+    StepJob { reply, done: 0, steps }
+}
+
+/// Back to lock-step (PAUSED) after a step job.
+fn end_job(runtimes: &mut [LineRuntime]) {
+    for r in runtimes.iter_mut() {
+        r.host.set_mode(TickMode::Lockstep);
     }
 }
 

@@ -12,6 +12,10 @@
 //! - **STOPPED**: paused and reset to the start (time and state, as SCOPE_ALL): no tick happens,
 //!   commands are rejected (`stopped` on /diagnostics) and StepSimulation answers INCORRECT_STATE.
 //!   PLAYING or PAUSED starts it again.
+//! - The **SimulateSteps** action steps as StepSimulation does, with feedback after each step; a
+//!   cancel ends it after the step in progress. A goal the rules refuse is accepted and ends at
+//!   once, aborted, with the refusal's code and reason in its result (a rejected goal could not
+//!   say why).
 //! - **QUITTING** (set only): the node replies, then leaves the graph as on SIGINT.
 //!
 //! Reset scopes: STATE puts every line back to how it was built (its seed's random streams from the
@@ -83,11 +87,12 @@ pub mod feature {
     pub const SIMULATION_STATE_PAUSE: u16 = 26;
     pub const STEP_SIMULATION_SINGLE: u16 = 31;
     pub const STEP_SIMULATION_MULTIPLE: u16 = 32;
+    pub const STEP_SIMULATION_ACTION: u16 = 33;
 }
 
 /// Exactly what works (GetSimulatorFeatures): reset (time, state), getting and setting the state
-/// (pause included), stepping once and many times. No entities, spawning, worlds or the
-/// SimulateSteps action.
+/// (pause included), stepping once and many times, by service and by the SimulateSteps action.
+/// No entities, spawning or worlds.
 pub fn features() -> Vec<u16> {
     use feature::*;
     vec![
@@ -99,6 +104,7 @@ pub fn features() -> Vec<u16> {
         SIMULATION_STATE_PAUSE,
         STEP_SIMULATION_SINGLE,
         STEP_SIMULATION_MULTIPLE,
+        STEP_SIMULATION_ACTION,
     ]
 }
 
@@ -319,8 +325,8 @@ mod tests {
     #[test]
     fn features_are_what_the_node_serves() {
         let f = features();
-        assert!(f.contains(&feature::SIMULATION_STATE_PAUSE) && f.contains(&feature::STEP_SIMULATION_MULTIPLE));
-        // Not advertised: SIMULATION_RESET_SPAWNED (23), STEP_SIMULATION_ACTION (33), entities, worlds.
-        assert!(f.iter().all(|&x| !matches!(x, 0..=14 | 23 | 33 | 40..=50)), "{f:?}");
+        assert!(f.contains(&feature::SIMULATION_STATE_PAUSE) && f.contains(&feature::STEP_SIMULATION_ACTION));
+        // Not advertised: SIMULATION_RESET_SPAWNED (23), entities, worlds.
+        assert!(f.iter().all(|&x| !matches!(x, 0..=14 | 23 | 40..=50)), "{f:?}");
     }
 }

@@ -3,7 +3,7 @@
 //! `messages`, each struct lists its fields in .msg order (CDR is positional); the constants live
 //! in `simulation` beside the rules that use them.
 
-use ros2_client::{Message, ServiceTypeName};
+use ros2_client::{ActionTypeName, Message, ServiceTypeName};
 use serde::{Deserialize, Serialize};
 
 /// The standard's package name.
@@ -92,6 +92,37 @@ pub struct ResetSimulationResponse {
     pub result: SimResult,
 }
 
+/// simulation_interfaces/SimulateSteps goal (Copy: ros2-client's goal handles are Copy when it is).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SimulateStepsGoal {
+    pub steps: u64,
+}
+
+/// simulation_interfaces/SimulateSteps result.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SimulateStepsResult {
+    pub result: SimResult,
+}
+
+/// simulation_interfaces/SimulateSteps feedback.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SimulateStepsFeedback {
+    pub completed_steps: u64,
+    pub remaining_steps: u64,
+}
+
+impl Message for SimulateStepsGoal {}
+impl Message for SimulateStepsResult {}
+impl Message for SimulateStepsFeedback {}
+
+/// The action the node serves in its private namespace: (relative name, type).
+pub const ACTION: (&str, &str) = ("simulate_steps", "SimulateSteps");
+
+/// `simulation_interfaces/action/SimulateSteps`.
+pub fn action_type() -> ActionTypeName {
+    ActionTypeName::new(PACKAGE, ACTION.1)
+}
+
 impl Message for GetSimulatorFeaturesRequest {}
 impl Message for GetSimulatorFeaturesResponse {}
 impl Message for GetSimulationStateRequest {}
@@ -157,6 +188,15 @@ mod tests {
         for (name, req, resp) in cases {
             assert_eq!(srv(yaml(req), yaml(resp)), fields(&format!("srv/{name}.srv")), "{name}");
         }
+        let action = [
+            yaml(v(SimulateStepsGoal::default())),
+            vec!["---".to_string()],
+            yaml(v(SimulateStepsResult::default())),
+            vec!["---".to_string()],
+            yaml(v(SimulateStepsFeedback::default())),
+        ]
+        .concat();
+        assert_eq!(action, fields("action/SimulateSteps.action"));
         let built = std::fs::read_dir(format!("{root}/srv")).unwrap().count();
         assert_eq!(SERVICES.len(), built, "the node serves every service of msg/simulation_interfaces/srv");
     }

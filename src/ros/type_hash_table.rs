@@ -4,6 +4,9 @@
 
 /// (ROS type name, RIHS01 hash), sorted by name.
 pub const TYPE_HASHES: &[(&str, &str)] = &[
+    ("action_msgs/msg/GoalStatusArray", "RIHS01_6c1684b00f177d37438febe6e709fc4e2b0d4248dca4854946f9ed8b30cda83e"),
+    ("action_msgs/srv/CancelGoal_Request", "RIHS01_3d3c84653c1f96918086887e1dcb236faec88b81a5b14fd4cf4840065bcdf8af"),
+    ("action_msgs/srv/CancelGoal_Response", "RIHS01_35e682cf3f510e83c70a82a4aac888496dedee56773bf9d8e5e0aa81f9e1c960"),
     ("diagnostic_msgs/msg/DiagnosticArray", "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"),
     ("rcl_interfaces/msg/Log", "RIHS01_e28ce254ca8abc06abf92773b74602cdbf116ed34fbaf294fb9f81da9f318eac"),
     ("rcl_interfaces/msg/ParameterEvent", "RIHS01_043e627780fcad87a22d225bc2a037361dba713fca6a6b9f4b869a5aa0393204"),
@@ -21,6 +24,11 @@ pub const TYPE_HASHES: &[(&str, &str)] = &[
     ("rcl_interfaces/srv/SetParametersAtomically_Response", "RIHS01_31b1a38c5b0b9d893ee24da45f69638f4561c78461d82d52750f429b534502b8"),
     ("rmw_dds_common/msg/ParticipantEntitiesInfo", "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e"),
     ("rosgraph_msgs/msg/Clock", "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"),
+    ("simulation_interfaces/action/SimulateSteps_SendGoal_Request", "RIHS01_275e6fd2fafc5d33dcdc83bdea6de5cf29f30b9df74a3b9514a8c5d501fd0fe3"),
+    ("simulation_interfaces/action/SimulateSteps_SendGoal_Response", "RIHS01_755f44a68d1e8d116f50dfed7ab30a140137fb71ad59eca4851d55abe2b3d4c2"),
+    ("simulation_interfaces/action/SimulateSteps_GetResult_Request", "RIHS01_4591b0bfbcb881003bbd46a2acebcaddceb977e5352905218688ce5ed051fdeb"),
+    ("simulation_interfaces/action/SimulateSteps_GetResult_Response", "RIHS01_5658172e771cb145a986a8ef4c2b80b5407b741038453b8539e35bed5ff23207"),
+    ("simulation_interfaces/action/SimulateSteps_FeedbackMessage", "RIHS01_a30dee7ee7380769e616406ec5067b238aa2b27e1dbd7a5957fba1d908d7754d"),
     ("simulation_interfaces/msg/Result", "RIHS01_cf43a306adff3337a0a47143d8f5689933bc70a30478f13b077dc1fe3bc5ad17"),
     ("simulation_interfaces/msg/SimulationState", "RIHS01_bb9f87ccdd98fba113052a512d9801e84ce732d0a2b3c2b0cb281828de36e415"),
     ("simulation_interfaces/msg/SimulatorFeatures", "RIHS01_8b101c8529bc0ea3dcf056078254768f39832b9ef0adaf93bd5cea96c0de3305"),

@@ -1,6 +1,6 @@
 """The node as a standard simulator: ROS 2's simulation_interfaces services in its private namespace
 (`<ns>/sorting_line/get_simulator_features`, `get_simulation_state`, `set_simulation_state`,
-`step_simulation`, `reset_simulation`), driven by real rclpy clients built against the interface
+`step_simulation`, `reset_simulation`) and the SimulateSteps action (`simulate_steps`), driven by real rclpy clients built against the interface
 package (msg/simulation_interfaces, compiled by setup.sh) and by the real `ros2` CLI.
 
 The line is driven through the standard services only, and every state it publishes is compared
@@ -23,7 +23,7 @@ from ros_harness import stamp_ns, show_ns
 
 SETUP, VARIANT, SEED, RATE = "B", "basic", 13, 40.0
 START_SPEED_INDEX = 5  # the speed a line starts each episode with (0.6), held until commanded
-FEATURES = [20, 21, 22, 24, 25, 26, 31, 32]  # reset (time, state), state get/set/pause, step single/multiple
+FEATURES = [20, 21, 22, 24, 25, 26, 31, 32, 33]  # reset (time, state), state get/set/pause, step single/multiple/action
 SERVICES = {
     "get_simulator_features": "simulation_interfaces/srv/GetSimulatorFeatures",
     "get_simulation_state": "simulation_interfaces/srv/GetSimulationState",
@@ -245,6 +245,59 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     assert sim.proc.proc.returncode == 0, sim.proc.describe()
     sim.proc.stopped_by_test = True
     assert "simulation QUITTING" in sim.proc.log()
+
+
+def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
+    """SimulateSteps: N steps with feedback, the same trajectory as StepSimulation; refused (aborted,
+    the reason in the result) while PLAYING; canceled after the step in progress."""
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+    from simulation_interfaces.action import SimulateSteps
+
+    sim = simulator
+    client = ActionClient(sim.node, SimulateSteps, f"{sim.fqn}/simulate_steps")
+    sim.ros.spin_until(client.server_is_ready, 10.0, "the simulate_steps action server", sim.context, abort=sim.gone)
+    sim.ros.spin_until(lambda: sim.states.sub.get_publisher_count() >= 1, 10.0, "state to match", sim.context)
+    sim.ros.spin_until(lambda: sim.diag.msgs, 10.0, "/diagnostics from the node", sim.context, abort=sim.gone)
+    # Feedback is volatile: the client's feedback reader must be matched before the first goal.
+    feedback_topic = f"{sim.fqn}/simulate_steps/_action/feedback"
+    sim.ros.spin_until(lambda: sim.node.count_publishers(feedback_topic) >= 1, 10.0, feedback_topic, sim.context)
+
+    def run(steps: int, feedback: list, timeout: float = 10.0):
+        goal = sim.ros.wait_future(client.send_goal_async(SimulateSteps.Goal(steps=steps), feedback_callback=feedback.append),
+                                   timeout, f"the goal of {steps} steps accepted", sim.context, abort=sim.gone)
+        assert goal.accepted, "a goal is accepted, and ends with the reason if refused"
+        return goal
+
+    feedback: list = []
+    goal = run(20, feedback)
+    done = sim.ros.wait_future(goal.get_result_async(), 10.0, "the result of 20 steps", sim.context, abort=sim.gone)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.result.result == OK, done
+    assert_trajectory(sim.states_after(0, 20), [START_SPEED_INDEX] * 20, "SimulateSteps 20")
+    # One feedback per step is sent; rclpy keeps the last 10 of a burst and drops a goal's feedback
+    # once its result is in, so only what arrived is checked here: each one consistent, in order
+    # (the long goal below waits for its feedback).
+    got = [(f.feedback.completed_steps, f.feedback.remaining_steps) for f in feedback]
+    assert all(c + r == 20 and 1 <= c <= 20 for c, r in got), got
+    assert [c for c, _ in got] == sorted(set(c for c, _ in got)), got
+
+    assert sim.set_state(PLAYING) == (OK, "")
+    refused = sim.ros.wait_future(run(5, []).get_result_async(), 10.0, "the refused goal's result", sim.context)
+    assert refused.status == GoalStatus.STATUS_ABORTED, refused
+    assert refused.result.result.result == INCORRECT_STATE and "PLAYING" in refused.result.result.error_message
+    assert sim.set_state(PAUSED) == (OK, "")
+
+    feedback = []
+    goal = run(10**9, feedback)
+    sim.ros.spin_until(lambda: len(feedback) >= 3, 10.0, "feedback of the long goal", sim.context)
+    got = [(f.feedback.completed_steps, f.feedback.remaining_steps) for f in feedback]
+    assert all(c + r == 10**9 for c, r in got) and [c for c, _ in got] == sorted(set(c for c, _ in got)), got
+    sim.ros.wait_future(goal.cancel_goal_async(), 10.0, "the cancel's answer", sim.context, abort=sim.gone)
+    canceled = sim.ros.wait_future(goal.get_result_async(), 10.0, "the canceled goal's result", sim.context)
+    assert canceled.status == GoalStatus.STATUS_CANCELED, canceled
+    assert re.fullmatch(r"canceled after \d+ of 1000000000 steps", canceled.result.result.error_message), canceled
+    assert sim.state() == PAUSED and sim.result("step_simulation", steps=1) == (OK, ""), "the job has ended"
+    client.destroy()
 
 
 def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node, namespace):
