@@ -301,7 +301,8 @@ def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
 
 
 def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node, namespace):
-    """`ros2 service list -t` shows the standard types; `ros2 service call` works on them."""
+    """`ros2 service list -t` and `ros2 action list -t` show the standard types; `ros2 service call`
+    works on them."""
     ros2 = ros2_daemon
     ns = namespace("simif_cli")
     start_node("--setup", SETUP, "--seed", str(SEED), "--ros-args", "-r", f"__ns:={ns}")
@@ -315,6 +316,8 @@ def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node,
             break
         time.sleep(0.5)
     assert {k: listed.get(k) for k in want} == want, out
+    actions = ros2.run("action", "list", "-t", timeout=20).stdout
+    assert f"{fqn}/simulate_steps [simulation_interfaces/action/SimulateSteps]" in actions.splitlines(), actions
 
     def call(name: str, request: str = "{}") -> str:
         return ros2.run("service", "call", f"{fqn}/{name}", SERVICES[name], request, timeout=40).stdout
