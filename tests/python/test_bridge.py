@@ -35,10 +35,8 @@ import numpy as np
 import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
-from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
-from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
-from sorting_line_gym.vector import SortingLineVectorEnv
-from sorting_line_gym.vocabulary import MAX_EPISODE_STEPS
+from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv, SortingLineSB3VecEnv, SortingLineVectorEnv
+from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -553,6 +551,8 @@ def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
     elapsed = time.monotonic() - start
     assert elapsed < 1.5 + 0.5, f"reset gave up after {elapsed:.2f} s (startup_timeout 1.5 s)"
     assert namespace in str(excinfo.value), f"the error does not name {namespace}: {excinfo.value}"
+    missing = f"not yet discovered: {namespace} reset service, {namespace} cmd/speed reader, {namespace} state writer"
+    assert missing in str(excinfo.value), f"the error does not list the endpoints it lacks: {excinfo.value}"
 
 
 def test_attach_to_a_running_node(make_env):
