@@ -2,7 +2,7 @@
 
 The hosts are network namespaces this test makes, each plugged by a veth pair into a Linux bridge,
 with addresses that exist only inside them (tests/python/netns_hosts.py): h1, h2, h3 each run a
-`sorting_line node --lines 4` in a namespace of their own (/h1/plant, ...), and "trainer" runs a
+`sorting_line node --lines 16` in a namespace of their own (/h1/plant, ...), and "trainer" runs a
 `SortingLineVectorEnv` over all three (``namespace=[...]``, ``node="attach"``). Discovery is set as
 users set it: h1, h2 and the trainer under ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (multicast through
 the bridge); h3 under LOCALHOST with ROS_STATIC_PEERS naming the trainer, which names h3 in its own
@@ -34,7 +34,7 @@ import netns_hosts
 import ros_harness as h
 from test_bridge import assert_obs, assert_step, fixed_actions, trace
 
-LINES = 4  # per node
+LINES = 16  # per node: a batch/reset reply of 16 lines (2.5 KB) is larger than one datagram of a 1500-byte MTU
 SETUP, VARIANT = "B", "basic"
 EPISODE = 10
 STEP_TIMEOUT = 2.0
