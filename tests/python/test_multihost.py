@@ -275,3 +275,19 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
             p.send_signal(signal.SIGINT)
             codes[host] = p.wait(timeout=10)
         assert codes == {host: 0 for host in codes}, f"node exit codes after SIGINT: {codes}"
+
+
+def test_a_list_of_nodes_is_checked_when_the_env_is_made():
+    """Nothing starts before the first reset, but a bad list fails at once, saying why."""
+    from sorting_line_gym.vector import SortingLineVectorEnv
+
+    env = SortingLineVectorEnv(num_envs=8, namespace=["/a/plant", "/b/plant"], node="attach")
+    assert len(env._lines.bank) == 8 and env._lines.bank.lines_per_node == 4
+    with pytest.raises(ValueError, match="num_envs = 7 lines cannot be spread evenly over 2 nodes"):
+        SortingLineVectorEnv(num_envs=7, namespace=["/a/plant", "/b/plant"], node="attach")
+    with pytest.raises(ValueError, match="lists a node twice"):
+        SortingLineVectorEnv(num_envs=4, namespace=["/a/plant", "/a/plant"], node="attach")
+    with pytest.raises(ValueError, match="node='shared' leases single lines"):
+        SortingLineVectorEnv(num_envs=4, namespace=["/a/plant", "/b/plant"], node="shared")
+    with pytest.raises(ValueError, match="name at least one node"):
+        SortingLineVectorEnv(num_envs=4, namespace=[], node="attach")
