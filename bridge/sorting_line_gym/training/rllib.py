@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> None:
 
     log("imported ray and rllib")
     if args.address:
-        ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
+        ray.init(address=args.address, log_to_driver=False)
     else:
         ray.init(num_cpus=args.num_cpus or args.env_runners + 1, include_dashboard=False,
                  _node_ip_address=args.node_ip, log_to_driver=False)
