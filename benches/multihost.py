@@ -42,7 +42,7 @@ LINES = 16
 def measure(cfg: dict) -> dict:
     """In the trainer host: round trips over the nodes of ``cfg["namespaces"]``."""
     import numpy as np
-    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_gym import SortingLineVectorEnv
 
     n = LINES * len(cfg["namespaces"])
     env = SortingLineVectorEnv(num_envs=n, setup="A", namespace=cfg["namespaces"], node="attach",

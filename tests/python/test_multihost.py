@@ -46,7 +46,7 @@ TRAINER = r'''
 import json, sys, time
 import numpy as np
 from sorting_line_gym import BridgeError
-from sorting_line_gym.vector import SortingLineVectorEnv
+from sorting_line_gym import SortingLineVectorEnv
 
 cfg = json.loads(sys.argv[1])
 KEYS = ("accuracy", "purity", "containers", "speed_changes", "occupancy", "cumulative_reward", "speed_index",
@@ -279,7 +279,7 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
 
 def test_a_list_of_nodes_is_checked_when_the_env_is_made():
     """Nothing starts before the first reset, but a bad list fails at once, saying why."""
-    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_gym import SortingLineVectorEnv
 
     env = SortingLineVectorEnv(num_envs=8, namespace=["/a/plant", "/b/plant"], node="attach")
     assert len(env._lines.bank) == 8 and env._lines.bank.lines_per_node == 4

@@ -21,9 +21,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..bank import LineBank
-from ..options import LineOptions
-from ..transport import BridgeError, BridgeTimeout, Waiter
+from ..line.errors import BridgeError, BridgeTimeout
+from ..line.options import LineOptions
+from .bank import LineBank
+from .waits import Waiter
 
 #: How long each pending node's executor is spun per turn while resets of several nodes are in
 #: flight (their replies are futures served by each bank's own executor).

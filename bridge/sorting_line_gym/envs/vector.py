@@ -23,11 +23,11 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .bank import LineBank
-from .ros.fleet import NodeFleet, split_lines
+from ..line.options import LineOptions
+from ..line.vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
+from ..ros.bank import LineBank
+from ..ros.fleet import NodeFleet, split_lines
 from .env import SEED_BOUND, action_space, observation_space
-from .options import LineOptions
-from .vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 
 
 def node_namespaces(namespace: str | Sequence[str] | None) -> list[str] | None:
