@@ -281,8 +281,12 @@ def test_a_list_of_nodes_is_checked_when_the_env_is_made():
     """Nothing starts before the first reset, but a bad list fails at once, saying why."""
     from sorting_line_gym import SortingLineVectorEnv
 
+    from sorting_line_gym import SortingLineSB3VecEnv
+
     env = SortingLineVectorEnv(num_envs=8, namespace=["/a/plant", "/b/plant"], node="attach")
     assert len(env._lines.bank) == 8 and env._lines.bank.lines_per_node == 4
+    sb3 = SortingLineSB3VecEnv(num_envs=6, namespace=["/a/plant", "/b/plant", "/c/plant"], node="attach")
+    assert sb3._lines.bank.namespaces == ["/a/plant", "/b/plant", "/c/plant"] and sb3._lines.bank.lines_per_node == 2
     with pytest.raises(ValueError, match="num_envs = 7 lines cannot be spread evenly over 2 nodes"):
         SortingLineVectorEnv(num_envs=7, namespace=["/a/plant", "/b/plant"], node="attach")
     with pytest.raises(ValueError, match="lists a node twice"):
