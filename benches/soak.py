@@ -169,8 +169,11 @@ class SoakResult:
 
 def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basic", seed: int = 7,
              window: int = 50_000, verify_episodes: int = 20, step_timeout: float = 5.0,
-             show_progress: bool = True) -> SoakResult:
-    """Runs the soak in this process (rclpy must be importable; the caller ensures isolation)."""
+             show_progress: bool = True, namespace=None, node: str = "spawn") -> SoakResult:
+    """Runs the soak in this process (rclpy must be importable; the caller ensures isolation).
+    ``namespace`` and ``node`` are the vector env's (a list of node namespaces with ``node="attach"``
+    soaks lines on several hosts: benches/multihost.py); the node's RSS is reported only for a node
+    the env spawned."""
     import numpy as np
     from node_lockstep import cpu_times, loadavg, steal_percent
     from sorting_line_gym.envs.env import SEED_BOUND
@@ -178,10 +181,11 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
     from sorting_line_gym import SortingLineVectorEnv
 
     result = SoakResult(load_before=loadavg(), config=dict(ticks=ticks, lines=lines, setup=setup, variant=variant,
-                                                           seed=seed, window=window, verify_episodes=verify_episodes))
+                                                           seed=seed, window=window, verify_episodes=verify_episodes,
+                                                           nodes=1 if isinstance(namespace, (str, type(None))) else len(namespace)))
     cpu_before = cpu_times()
     env = SortingLineVectorEnv(num_envs=lines, setup=setup, variant=variant, max_episode_steps=EPISODE_STEPS,
-                               step_timeout=step_timeout)
+                               step_timeout=step_timeout, namespace=namespace, node=node)
     n_actions = int(env.single_action_space.n)
     actions_rng = np.random.default_rng(seed + 1_000_003)
     bar = None
@@ -197,7 +201,9 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
             return mirrors, ledgers
 
         mirrors, ledgers = start(seed)
-        node_pid = env._lines.bank.process.process.pid  # the node the env spawned at its first reset
+        # The node the env spawned at its first reset (none when it attached to others' nodes).
+        spawned = getattr(env._lines.bank, "process", None)
+        node_pid = spawned.process.pid if spawned is not None else -1
         result.rss_node_start, result.rss_bridge_start = rss_mb(node_pid), rss_mb(os.getpid())
         if show_progress:
             from tqdm import tqdm
@@ -265,7 +271,7 @@ def report(r: SoakResult) -> str:
     first, last = (rates[0], rates[-1]) if rates else (0, 0)
     c = r.config
     lines = [
-        f"soak: {r.ticks:,} lock-step line-ticks through SortingLineVectorEnv ({c['lines']} lines of one node, "
+        f"soak: {r.ticks:,} lock-step line-ticks through SortingLineVectorEnv ({c['lines']} lines of {c.get('nodes', 1)} node(s), "
         f"setup {c['setup']} {c['variant']}, 50-step episodes, seed {c['seed']}), {r.round_trips:,} round trips, "
         f"{r.resets:,} autoresets, in {r.seconds:.1f} s",
         f"  lost {r.lost}, misaligned {r.misaligned}, values compared with `sorting_line trace` {r.verified:,}, "

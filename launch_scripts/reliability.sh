@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The reliability suite (issue 7) in full size: message-level fuzzing of commands, parameter files
 # and --ros-args (proptest, FUZZ_CASES cases per property), the Python/ROS reliability tests
-# (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), and two
+# (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), Ray RLlib
+# (tests/python/test_rllib.py: PPO with 2 EnvRunners x 4 envs, and a Ray cluster of a head and a
+# worker in two network namespaces; about a minute each, too slow for CI), and two
 # 1,000,000-tick soaks through the bridge (basic setup A with its plot, advanced setup D). CI runs
 # the same tests in reduced size through launch_scripts/test.sh (256 fuzz cases, the 50,000-tick
 # soak).
@@ -45,6 +47,14 @@ unshare -n bash -c '
   source launch_scripts/env.sh
   SORTING_LINE_SUBPROC16=1 python -m pytest tests/python/test_reliability.py tests/python/test_vectorizers.py::test_sb3_subproc_vec_env_of_16_workers_matches_the_library -q -p no:cacheprovider -rA
 ' 2>&1 | tee "$OUT/tests.log"
+
+step "Ray RLlib: PPO on 2 EnvRunners x 4 envs; a Ray cluster of two network-namespace hosts"
+unshare -n bash -c '
+  set -euo pipefail
+  ip link set lo up
+  source launch_scripts/env.sh
+  SORTING_LINE_RLLIB=1 python -m pytest tests/python/test_rllib.py -q -s -p no:cacheprovider -rA
+' 2>&1 | tee "$OUT/rllib.log"
 
 step "soak: $TICKS line-ticks through the bridge, basic line, setup A"
 .venv/bin/python benches/soak.py --ticks "$TICKS" --domain "$(( ROS_DOMAIN_ID + 1 ))" \

@@ -1,12 +1,16 @@
-"""Two "hosts" for discovery tests: network namespaces made by the test, joined by one veth pair, with
-addresses that exist only on those two veth ends. Nothing else is reachable from them (no other
-interface, no default route), and they are deleted on exit even when the test fails.
+"""The "hosts" of multi-host tests: network namespaces made by the test, each with one veth "cable"
+plugged into a Linux bridge (the "switch", in a namespace of its own), with addresses that exist
+only on those veth ends (192.168.77.1, .2, ... in the order the hosts are named). Nothing else is
+reachable from them (no other interface, no default route), and they are all deleted on exit, even
+when the test fails.
 
-    with TwoHosts() as hosts:
+    with Hosts(["a", "b", "trainer"]) as hosts:
         proc = hosts.popen("a", [...], env=...)   # a process inside host a
-        hosts.address("a")                        # its address on the veth (e.g. 192.168.77.1)
+        hosts.address("a")                        # its address (192.168.77.1)
+        hosts.unplug("a"); hosts.plug("a")        # its cable out of the switch, and back in
 
-Needs root and iproute2 (`ip netns`), like launch_scripts/test.sh's own namespace.
+``TwoHosts()`` is ``Hosts(["a", "b"])``. Needs root and iproute2 (`ip netns`), like
+launch_scripts/test.sh's own namespace.
 """
 
 from __future__ import annotations
@@ -15,14 +19,15 @@ import itertools
 import os
 import shutil
 import subprocess
-from typing import Optional
+from typing import Optional, Sequence
 
 SUBNET = "192.168.77"  # exists only inside the namespaces made here
+MULTICAST = "224.0.0.0/4"
 _COUNT = itertools.count()
 
 
 def problem() -> Optional[str]:
-    """None when two hosts can be made here; otherwise why not."""
+    """None when hosts can be made here; otherwise why not."""
     if os.geteuid() != 0:
         return "network namespaces need root"
     if not shutil.which("ip"):
@@ -36,30 +41,44 @@ def _ip(*args: str) -> None:
         raise RuntimeError(f"`ip {' '.join(args)}` failed ({r.returncode}): {r.stderr.strip()}")
 
 
-class TwoHosts:
-    def __init__(self) -> None:
+class Hosts:
+    """One namespace per name in ``hosts`` (at most 200), plus the switch's namespace."""
+
+    DEVICE = "eth0"  # each host's end of its cable
+
+    def __init__(self, hosts: Sequence[str]) -> None:
+        if not 1 <= len(hosts) <= 200 or len(set(hosts)) != len(hosts):
+            raise ValueError(f"hosts = {list(hosts)}: want 1 ..= 200 distinct names")
         tag = f"sl{os.getpid()}n{next(_COUNT)}"
-        self.names = {"a": f"{tag}a", "b": f"{tag}b"}
-        self.devices = {"a": "veth_a", "b": "veth_b"}
-        self.addresses = {"a": f"{SUBNET}.1", "b": f"{SUBNET}.2"}
+        self.hosts = list(hosts)
+        self.names = {host: f"{tag}h{i}" for i, host in enumerate(self.hosts)}
+        self.switch = f"{tag}sw"
+        self.ports = {host: f"port{i}" for i, host in enumerate(self.hosts)}  # the switch's ends
+        self.addresses = {host: f"{SUBNET}.{i + 1}" for i, host in enumerate(self.hosts)}
         self.created: list[str] = []
         self.procs: list[subprocess.Popen] = []
 
-    def __enter__(self) -> "TwoHosts":
+    def __enter__(self) -> "Hosts":
         try:
-            for host in "ab":
-                _ip("netns", "add", self.names[host])
-                self.created.append(self.names[host])
-            _ip("-n", self.names["a"], "link", "add", self.devices["a"], "type", "veth", "peer", "name",
-                self.devices["b"], "netns", self.names["b"])
-            for host in "ab":
-                ns, dev = self.names[host], self.devices[host]
-                _ip("-n", ns, "link", "set", dev, "addrgenmode", "none")  # no IPv6 link-local address
-                _ip("-n", ns, "addr", "add", f"{self.addresses[host]}/24", "dev", dev)
-                _ip("-n", ns, "link", "set", dev, "up")
+            _ip("netns", "add", self.switch)
+            self.created.append(self.switch)
+            _ip("-n", self.switch, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0")
+            _ip("-n", self.switch, "link", "set", "br0", "addrgenmode", "none")  # the switch has no address
+            _ip("-n", self.switch, "link", "set", "br0", "up")
+            for host in self.hosts:
+                ns, port = self.names[host], self.ports[host]
+                _ip("netns", "add", ns)
+                self.created.append(ns)
+                _ip("-n", self.switch, "link", "add", port, "type", "veth", "peer", "name", self.DEVICE, "netns", ns)
+                _ip("-n", self.switch, "link", "set", port, "addrgenmode", "none")
+                _ip("-n", self.switch, "link", "set", port, "master", "br0")
+                _ip("-n", self.switch, "link", "set", port, "up")
+                _ip("-n", ns, "link", "set", self.DEVICE, "addrgenmode", "none")  # no IPv6 link-local address
+                _ip("-n", ns, "addr", "add", f"{self.addresses[host]}/24", "dev", self.DEVICE)
+                _ip("-n", ns, "link", "set", self.DEVICE, "up")
                 _ip("-n", ns, "link", "set", "lo", "up")
-                # Multicast (DDS discovery under SUBNET) leaves by the veth, the only way out.
-                _ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", dev)
+                # Multicast (DDS discovery under SUBNET) leaves by the cable, the only way out.
+                _ip("-n", ns, "route", "add", MULTICAST, "dev", self.DEVICE)
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -79,6 +98,16 @@ class TwoHosts:
         self.procs.append(p)
         return p
 
+    def unplug(self, host: str) -> None:
+        """Takes `host`'s cable out of the switch (its port down): the host keeps its address and
+        its processes, and nothing reaches it or leaves it."""
+        _ip("-n", self.switch, "link", "set", self.ports[host], "down")
+
+    def plug(self, host: str) -> None:
+        """Puts `host`'s cable back (and its multicast route, should the kernel have dropped it)."""
+        _ip("-n", self.switch, "link", "set", self.ports[host], "up")
+        _ip("-n", self.names[host], "route", "replace", MULTICAST, "dev", self.DEVICE)
+
     def __exit__(self, *exc) -> None:
         for p in self.procs:
             if p.poll() is None:
@@ -93,3 +122,8 @@ class TwoHosts:
         self.created.clear()
         if problems and exc[0] is None:
             raise RuntimeError("; ".join(problems))
+
+
+def TwoHosts() -> Hosts:
+    """Hosts a and b (192.168.77.1 and .2)."""
+    return Hosts(["a", "b"])

@@ -16,7 +16,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from ..line.options import LineOptions
 from ..line.vocabulary import EPISODE_STEPS, line_infos
 from .env import action_space, observation_space
-from .vector import Lines
+from .vector import Lines, node_namespaces
 
 
 class SortingLineSB3VecEnv(VecEnv):
@@ -27,18 +27,19 @@ class SortingLineSB3VecEnv(VecEnv):
         num_envs: int = 4,
         setup: str = "A",
         variant: str = "basic",
-        namespace: str | None = None,
+        namespace: str | list[str] | None = None,
         node: str = "spawn",
         max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         seed: int | None = None,
     ):
+        namespaces = node_namespaces(namespace)
         options = LineOptions(
-            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
-            step_timeout=step_timeout, startup_timeout=startup_timeout,
+            setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
+            max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
         )
-        self._lines = Lines(num_envs, options)
+        self._lines = Lines(num_envs, options, namespaces)
         self.render_mode = None
         super().__init__(num_envs, observation_space(variant), action_space(variant))
         self._actions = None

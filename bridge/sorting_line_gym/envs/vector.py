@@ -1,5 +1,7 @@
 """N lines of one `sorting_line node` (``--lines N``) as one vectorised environment: one round
-trip steps every line. Two faces over the same bank of lines:
+trip steps every line. With ``namespace`` a list of several nodes' namespaces (several hosts of one
+DDS domain, say), the N lines are spread evenly over them and each step is one round trip per node,
+all in flight at once (``ros/fleet.py``). Two faces over the same bank of lines:
 
 - :class:`SortingLineVectorEnv`, a Gymnasium ``VectorEnv`` (``gymnasium.make_vec(id, num_envs=N,
   vectorization_mode="vector_entry_point")``), autoreset mode SAME_STEP: a line whose episode ends
@@ -24,15 +26,29 @@ from gymnasium.vector.utils import batch_space
 from ..line.options import LineOptions
 from ..line.vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 from ..ros.bank import LineBank
+from ..ros.fleet import NodeFleet, split_lines
 from .env import SEED_BOUND, action_space, observation_space
+
+
+def node_namespaces(namespace: str | Sequence[str] | None) -> list[str] | None:
+    """``namespace`` as a list of node namespaces (None: the bank chooses one)."""
+    if namespace is None or isinstance(namespace, str):
+        return None if namespace is None else [namespace]
+    namespaces = [str(ns) for ns in namespace]
+    if not namespaces:
+        raise ValueError("namespace = []: name at least one node")
+    return namespaces
 
 
 class Lines:
     """The bank plus per-line seed generators: what both vector faces share."""
 
-    def __init__(self, num_envs: int, options: LineOptions):
+    def __init__(self, num_envs: int, options: LineOptions, namespaces: list[str] | None = None):
         self.variant = options.variant
-        self.bank = LineBank(options, lines=num_envs, batch=True)
+        if namespaces is not None and len(namespaces) > 1:
+            self.bank = NodeFleet(options, namespaces, split_lines(num_envs, len(namespaces)))
+        else:
+            self.bank = LineBank(options, lines=num_envs, batch=True)
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         # Simulated time of each line's last reset: info["sim_time"] counts from there.
         self.episode_start = np.zeros(num_envs)
@@ -77,7 +93,7 @@ class SortingLineVectorEnv(VectorEnv):
         num_envs: int = 4,
         setup: str = "A",
         variant: str = "basic",
-        namespace: str | None = None,
+        namespace: str | Sequence[str] | None = None,
         node: str = "spawn",
         max_episode_steps: int | None = EPISODE_STEPS,
         step_timeout: float = 2.0,
@@ -86,9 +102,10 @@ class SortingLineVectorEnv(VectorEnv):
     ):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
+        namespaces = node_namespaces(namespace)
         options = LineOptions(
-            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
-            step_timeout=step_timeout, startup_timeout=startup_timeout,
+            setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
+            max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
         )
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)
@@ -96,7 +113,7 @@ class SortingLineVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
-        self._lines = Lines(num_envs, options)
+        self._lines = Lines(num_envs, options, namespaces)
         # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
         self._all_lines = np.ones(num_envs, dtype=bool)
         self._all_lines.flags.writeable = False

@@ -2238,6 +2238,10 @@ impl HasQoSPolicy for Writer {
   }
 }
 
+// [sorting_line patch] Largest service sample (reply or request) sent as one DATA whatever the
+// path MTU (see FragmentationIter::new_resume): well inside a UDP datagram with its headers.
+const UNFRAGMENTED_SERVICE_SAMPLE_MAX: usize = 60_000;
+
 // Serialized overhead of one DATA submessage excluding its serialized payload
 // and inline QoS. Conservative fixed fields only; underestimating inline QoS
 // causes earlier fragmentation (safe), never datagram overflow.
@@ -2329,8 +2333,16 @@ impl<'a> FragmentationIter<'a> {
       target_reader_opt.map_or(EntityId::UNKNOWN, |p| p.remote_reader_guid.entity_id);
 
     let data_size = cache_change.data_value.payload_size();
+    // [sorting_line patch] A service reply or request (it carries a related sample identity)
+    // goes out as one DATA up to UNFRAGMENTED_SERVICE_SAMPLE_MAX bytes, IP fragmentation
+    // carrying it across the link: Fast DDS (rclpy's clients and services) drops such a sample
+    // when it arrives as DATA_FRAG with the identity in its inline QoS, so a reply larger than
+    // one datagram never reached a client on another host (a 16-line batch/reset reply, 2.5 KB,
+    // over a 1500-byte MTU; on loopback the budget is 64 KB and nothing was fragmented).
+    let service_sample = cache_change.write_options.related_sample_identity().is_some()
+      && data_size <= UNFRAGMENTED_SERVICE_SAMPLE_MAX;
     let fragmentation_needed =
-      data_size > writer.max_unfragmented_serialized_payload(target_reader_opt);
+      data_size > writer.max_unfragmented_serialized_payload(target_reader_opt) && !service_sample;
 
     let state = if fragmentation_needed {
       let fragmented = match cursor {

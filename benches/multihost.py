@@ -1,0 +1,202 @@
+#!/usr/bin/env python3
+"""Lines on several hosts, one vector env driving them all (issue 15): what a round trip costs as
+hosts are added, and a soak across hosts.
+
+The hosts are network namespaces made here (tests/python/netns_hosts.py: veth pairs into a Linux
+bridge, addresses 192.168.77.x that exist only inside them; nothing is sent anywhere else). Each
+host runs one `sorting_line node --lines 16` (/h<i>/plant) under ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET;
+a "trainer" host runs a ``SortingLineVectorEnv`` over all of them (``namespace=[...]``,
+``node="attach"``): one round trip per node per step, all in flight at once.
+
+- scaling: for 1, 2 and 4 hosts (``--hosts``), ``--round-trips`` timed steps after a warm-up:
+  round trips/s and p50/p99 latency, ``--rounds`` interleaved rounds (the median of each figure
+  over the rounds is reported); the target is a 4-host round trip at most 1.5x a 1-host one (p50);
+- soak: ``--soak-ticks`` line-ticks (default 100,000) over ``--soak-hosts`` hosts (default 3) through
+  benches/soak.py's checks: nothing lost, nothing misaligned, every value equal to the library's.
+
+    .venv/bin/python benches/multihost.py                    # both (about 3 min on 2 shared cores)
+    .venv/bin/python benches/multihost.py --soak-ticks 0     # scaling only
+    .venv/bin/python benches/multihost.py --json r.json --plot docs/scaling.png
+
+Needs root (network namespaces). Exit code 1 when the soak lost, misaligned or mismatched anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "python"))
+sys.path.insert(0, str(ROOT / "benches"))
+
+LINES = 16
+
+
+def measure(cfg: dict) -> dict:
+    """In the trainer host: round trips over the nodes of ``cfg["namespaces"]``."""
+    import numpy as np
+    from sorting_line_gym import SortingLineVectorEnv
+
+    n = LINES * len(cfg["namespaces"])
+    env = SortingLineVectorEnv(num_envs=n, setup="A", namespace=cfg["namespaces"], node="attach",
+                               max_episode_steps=50, step_timeout=10.0, startup_timeout=60.0)
+    rng = np.random.default_rng(1)
+    env.reset(seed=1)
+    for _ in range(100):
+        env.step(rng.integers(0, 10, size=n))
+    times = []
+    t0 = time.perf_counter()
+    for _ in range(cfg["round_trips"]):
+        actions = rng.integers(0, 10, size=n)
+        t = time.perf_counter()
+        env.step(actions)
+        times.append(time.perf_counter() - t)
+    total = time.perf_counter() - t0
+    env.close()
+    times.sort()
+    return {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
+            "line_ticks_per_s": round(n * len(times) / total, 1),
+            "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+
+
+def soak(cfg: dict) -> dict:
+    """In the trainer host: benches/soak.py's soak over the nodes of ``cfg["namespaces"]``."""
+    from soak import report, run_soak
+
+    r = run_soak(cfg["ticks"], lines=LINES * len(cfg["namespaces"]), setup="A", seed=11, window=25_000,
+                 namespace=cfg["namespaces"], node="attach", step_timeout=10.0, show_progress=False)
+    print(report(r), file=sys.stderr, flush=True)
+    return {"ticks": r.ticks, "lines": r.config["lines"], "hosts": len(cfg["namespaces"]), "lost": r.lost,
+            "misaligned": r.misaligned, "values_compared": r.verified, "mismatched": r.mismatched,
+            "seconds": round(r.seconds, 1), "line_ticks_per_s": round(r.ticks / max(r.seconds, 1e-9), 1),
+            "ok": r.ok()}
+
+
+def ros_env(**values: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",
+                                                             "ROS_LOCALHOST_ONLY")}
+    env.setdefault("ROS_DOMAIN_ID", "93")
+    env.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(ROOT / "launch_scripts" / "fastdds_profile.xml"))
+    env.update(values, PYTHONUNBUFFERED="1")
+    return env
+
+
+def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
+    """Builds ``count`` node hosts and a trainer host, runs ``role`` in the trainer, tears down."""
+    import netns_hosts
+    import ros_harness as h
+
+    names = [f"h{i + 1}" for i in range(count)]
+    env = ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", SORTING_LINE_BIN=str(h.node_binary()))
+    with netns_hosts.Hosts([*names, "trainer"]) as hosts:
+        namespaces = [f"/{name}/plant" for name in names]
+        for name, ns in zip(names, namespaces):
+            log = open(log_dir / f"node_{role}_{count}_{name}.log", "wb")
+            hosts.popen(name, [str(h.node_binary()), "node", "--setup", "A", "--lines", str(LINES), "--max-steps", "50",
+                               "--ros-args", "-r", f"__ns:={ns}"], env=env, stdout=log, stderr=subprocess.STDOUT)
+        cfg = dict(cfg, namespaces=namespaces)
+        r = subprocess.run(hosts.argv("trainer", [sys.executable, os.path.abspath(__file__), "--role", role,
+                                                  json.dumps(cfg)]),
+                           env=env, capture_output=True, text=True, timeout=3600)
+        if r.returncode != 0:
+            raise SystemExit(f"{role} on {count} hosts failed ({r.returncode}):\n{r.stderr[-4000:]}")
+        if r.stderr.strip():
+            print(r.stderr.strip(), file=sys.stderr, flush=True)
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    hosts = [r["hosts"] for r in rows]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.4))
+    a.bar([str(x) for x in hosts], [r["round_trips_per_s"] for r in rows], color="#4c72b0")
+    a.set_xlabel("hosts (16 lines each)")
+    a.set_ylabel("round trips/s")
+    a.set_title("one vector env over K hosts")
+    b.plot(hosts, [r["p50_ms"] for r in rows], "o-", label="p50")
+    b.plot(hosts, [r["p99_ms"] for r in rows], "s--", label="p99")
+    b.set_xticks(hosts)
+    b.set_xlabel("hosts (16 lines each)")
+    b.set_ylabel("round trip, ms")
+    b.legend()
+    b.set_title("latency of one step (all hosts)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    if path.suffix == ".png":
+        fig.savefig(path.with_suffix(".svg"))
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--role", help=argparse.SUPPRESS)
+    p.add_argument("cfg", nargs="?", help=argparse.SUPPRESS)
+    p.add_argument("--hosts", type=int, nargs="+", default=[1, 2, 4])
+    p.add_argument("--round-trips", type=int, default=2000)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--soak-ticks", type=int, default=100_000)
+    p.add_argument("--soak-hosts", type=int, default=3)
+    p.add_argument("--json", type=Path)
+    p.add_argument("--plot", type=Path)
+    p.add_argument("--logs", type=Path, default=Path("/tmp/sorting_line_multihost"))
+    args = p.parse_args()
+    if args.role:
+        print(json.dumps({"measure": measure, "soak": soak}[args.role](json.loads(args.cfg))))
+        return 0
+
+    import netns_hosts
+    from node_lockstep import loadavg
+
+    if netns_hosts.problem():
+        sys.exit(f"multihost.py: {netns_hosts.problem()}")
+    args.logs.mkdir(parents=True, exist_ok=True)
+    print(f"load before: {loadavg()}", flush=True)
+    runs: dict[int, list[dict]] = {k: [] for k in args.hosts}
+    for round_ in range(args.rounds):
+        for k in args.hosts:
+            row = on_hosts(k, "measure", {"round_trips": args.round_trips}, args.logs)
+            runs[k].append(row)
+            print(f"round {round_ + 1}, {k} host(s): {row}", file=sys.stderr, flush=True)
+    rows = []  # each figure the median of its rounds (the rounds swing with the machine's load)
+    for k in args.hosts:
+        row = {key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0] if key not in ("hosts", "lines")}
+        rows.append(dict(row, hosts=k, lines=runs[k][0]["lines"], rounds=[r["p50_ms"] for r in runs[k]]))
+    print(f"\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | p50 of each round (ms) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['hosts']} | {r['lines']} | {r['round_trips_per_s']:,.0f} | {r['line_ticks_per_s']:,.0f} | "
+              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
+    by = {r["hosts"]: r for r in rows}
+    if 1 in by and max(by) > 1:
+        ratio = by[max(by)]["p50_ms"] / by[1]["p50_ms"]
+        print(f"\n{max(by)} hosts / 1 host, p50 round trip: {ratio:.2f}x (target <= 1.5x)")
+    result = {"scaling": rows, "load_after_scaling": loadavg()}
+    ok = True
+    if args.soak_ticks > 0:
+        s = on_hosts(args.soak_hosts, "soak", {"ticks": args.soak_ticks}, args.logs)
+        print(f"\nsoak: {s['ticks']:,} line-ticks over {s['hosts']} hosts ({s['lines']} lines): lost {s['lost']}, "
+              f"misaligned {s['misaligned']}, values compared with the library {s['values_compared']:,}, "
+              f"mismatched {s['mismatched']}; {s['line_ticks_per_s']:,.0f} line-ticks/s")
+        result["soak"] = s
+        ok = s["ok"]
+    print(f"load after: {loadavg()}", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1))
+    if args.plot:
+        plot(rows, args.plot)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

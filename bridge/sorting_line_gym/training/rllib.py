@@ -1,0 +1,177 @@
+"""Ray RLlib on the sorting line: our Gymnasium ids registered with Ray Tune, so that RLlib's
+EnvRunners (actors, possibly on other machines of a Ray cluster) make their envs with
+``gymnasium.make`` inside their own processes.
+
+    import ray
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from sorting_line_gym.training import rllib
+
+    rllib.register()                                   # Tune name "sorting_line"
+    config = (PPOConfig().environment("sorting_line", env_config={"setup": "B", "node": "shared"})
+              .env_runners(num_env_runners=2, num_envs_per_env_runner=4))
+
+``env_config`` holds ``gymnasium.make``'s keyword arguments (``id``, default
+``sorting_line_gym:SortingLine-v0``; ``setup``, ``max_episode_steps``, ``node``, ...) plus one key
+of ours, ``nodes``: a list of node namespaces, one per EnvRunner (runner i, counted from 1, takes
+``nodes[(i - 1) % len(nodes)]``), each a ``sorting_line node --lines L`` (``lines_per_node``, default
+4). The envs of runner i attach to that node's lines, one line each, so each EnvRunner's envs live
+on the node of its own host. Without ``nodes``, ``node="shared"`` (the default here) leases lines
+of the line server of whichever host the runner is on.
+
+The envs start nothing until their first reset: the driver's own EnvRunner, which RLlib builds only
+to read the spaces, costs no node and no DDS participant.
+
+Ray is imported lazily (by :func:`register`): importing this module costs nothing without it.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from collections import defaultdict
+from typing import Any, Mapping
+
+import gymnasium
+
+#: The name the envs are registered under with Ray Tune.
+ENV_NAME = "sorting_line"
+DEFAULT_ID = "sorting_line_gym:SortingLine-v0"
+
+# Per process (an EnvRunner is one): the next line of each node to hand to a new env.
+_next_line: dict[str, itertools.count] = defaultdict(itertools.count)
+
+
+def env_kwargs(config: Mapping[str, Any], worker_index: int) -> tuple[str, dict[str, Any]]:
+    """The Gymnasium id and ``gymnasium.make`` kwargs of the next env of EnvRunner
+    ``worker_index`` (0: the driver's) under ``config`` (an RLlib ``env_config``)."""
+    kwargs = dict(config)
+    env_id = kwargs.pop("id", DEFAULT_ID)
+    nodes = kwargs.pop("nodes", None)
+    lines = int(kwargs.pop("lines_per_node", 4))
+    if nodes:
+        node = str(nodes[(max(worker_index, 1) - 1) % len(nodes)]).rstrip("/")
+        k = next(_next_line[node]) % lines
+        kwargs.update(node="attach", namespace=node if lines == 1 else f"{node}/line_{k}")
+    else:
+        kwargs.setdefault("node", "shared")
+    return env_id, kwargs
+
+
+def make_env(config) -> gymnasium.Env:
+    """Ray Tune's env creator: ``config`` is RLlib's ``EnvContext`` (a dict of ``env_config``
+    with ``worker_index``)."""
+    import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids in this (EnvRunner) process
+
+    env_id, kwargs = env_kwargs(config, int(getattr(config, "worker_index", 0)))
+    return gymnasium.make(env_id, **kwargs)
+
+
+def register(name: str = ENV_NAME) -> str:
+    """Registers :func:`make_env` with Ray Tune under ``name``; returns the name."""
+    from ray.tune.registry import register_env
+
+    register_env(name, make_env)
+    return name
+
+
+def quiet_ray_environment() -> dict[str, str]:
+    """Environment variables for a Ray that talks to nobody outside the cluster: no usage
+    statistics sent home. Set them before ``ray.init`` / ``ray start`` (they are inherited by
+    Ray's own processes)."""
+    values = {"RAY_USAGE_STATS_ENABLED": "0"}
+    os.environ.update(values)
+    return values
+
+
+def where_envs_live(algo) -> list[dict[str, Any]]:
+    """For each remote EnvRunner: its Ray node's address, its pid and the namespaces of its envs'
+    lines (known once they have reset)."""
+
+    def report(runner):
+        import ray.util
+
+        envs = getattr(runner.env.unwrapped, "envs", [])  # RLlib wraps Gymnasium's SyncVectorEnv
+        return {"node_ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
+                "worker_index": runner.worker_index, "lines": [e.unwrapped.namespace for e in envs]}
+
+    return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """`python -m sorting_line_gym.training.rllib`: PPO on the line with RLlib, progress per
+    iteration on stderr, a JSON summary on stdout."""
+    import argparse
+    import json
+    import sys
+    import time
+
+    p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
+    p.add_argument("--id", default=DEFAULT_ID, help="Gymnasium id (default %(default)s)")
+    p.add_argument("--setup", default="B", choices=list("ABCD"))
+    p.add_argument("--env-runners", type=int, default=2)
+    p.add_argument("--envs-per-runner", type=int, default=4)
+    p.add_argument("--timesteps", type=int, default=4000, help="env steps to train for (whole iterations)")
+    p.add_argument("--batch", type=int, default=1000, help="train batch size per iteration")
+    p.add_argument("--episode-steps", type=int, default=50)
+    p.add_argument("--nodes", nargs="*", default=None,
+                   help="node namespaces, one per EnvRunner (its envs attach to that node's lines); default: line servers")
+    p.add_argument("--lines-per-node", type=int, default=4)
+    p.add_argument("--address", default=None, help="a Ray cluster to join (default: start a local one)")
+    p.add_argument("--node-ip", default="127.0.0.1", help="this machine's address for a local Ray (default %(default)s)")
+    p.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray (default: env runners + 1)")
+    p.add_argument("--seed", type=int, default=42)
+    args = p.parse_args(argv)
+
+    quiet_ray_environment()
+    t0 = time.monotonic()
+    import ray
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    def log(msg: str) -> None:
+        print(f"[rllib {time.monotonic() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    log("imported ray and rllib")
+    if args.address:
+        ray.init(address=args.address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=args.num_cpus or args.env_runners + 1, include_dashboard=False,
+                 _node_ip_address=args.node_ip, log_to_driver=False)
+    log(f"ray up: {ray.cluster_resources()}")
+    env_config: dict[str, Any] = {"id": args.id, "setup": args.setup, "max_episode_steps": args.episode_steps}
+    if args.nodes:
+        env_config.update(nodes=args.nodes, lines_per_node=args.lines_per_node)
+    config = (
+        PPOConfig()
+        .environment(register(), env_config=env_config)
+        .env_runners(num_env_runners=args.env_runners, num_envs_per_env_runner=args.envs_per_runner,
+                     rollout_fragment_length="auto", num_cpus_per_env_runner=1)
+        .training(train_batch_size_per_learner=args.batch, minibatch_size=min(250, args.batch), num_epochs=4,
+                  gamma=0.85, lr=7e-4, entropy_coeff=0.03)  # the paper's PPO settings (hyperparams/ppo.yml)
+        .learners(num_learners=0)
+        .debugging(seed=args.seed)
+    )
+    algo = config.build_algo()
+    log("algorithm built")
+    history, sampled = [], 0
+    try:
+        while sampled < args.timesteps:
+            t = time.monotonic()
+            result = algo.train()
+            runners = result.get("env_runners", {})
+            sampled = int(runners.get("num_env_steps_sampled_lifetime", 0))
+            row = {"iteration": len(history) + 1, "env_steps": sampled, "seconds": round(time.monotonic() - t, 2),
+                   "episode_return_mean": runners.get("episode_return_mean"),
+                   "episodes": runners.get("num_episodes_lifetime")}
+            history.append(row)
+            log(f"iteration {row['iteration']}: {sampled} env steps, return mean {row['episode_return_mean']}, "
+                f"{row['seconds']} s")
+        placement = where_envs_live(algo)
+    finally:
+        algo.stop()
+        ray.shutdown()
+    print(json.dumps({"iterations": history, "env_steps": sampled, "env_runners": placement,
+                      "seconds": round(time.monotonic() - t0, 1)}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""Ray RLlib trains on the sorting line (issue 15): our Gymnasium ids registered with Ray Tune
+(sorting_line_gym.training.rllib), envs made by ``gymnasium.make`` inside RLlib's EnvRunners.
+
+- PPO with 2 EnvRunners x 4 envs on this machine, each EnvRunner's envs on the lines of a node of
+  its own (``nodes``), trained 2,000 env steps;
+- a Ray cluster of a head and a worker in two network namespaces this test makes (tests/python/
+  netns_hosts.py), the EnvRunners on the worker (the head offers no CPU), their envs on lines of the
+  worker's own line server; the driver and the learner on the head.
+
+Ray takes 15-20 s to import and 15-20 s to start on the 2 shared cores, and building the algorithm
+another 20 s, so these run in launch_scripts/reliability.sh (SORTING_LINE_RLLIB=1), not in CI's
+test.sh (each would cost about a minute). Ray is kept from talking to anyone: usage statistics off
+(RAY_USAGE_STATS_ENABLED=0), no dashboard, and only the addresses of the namespaces (or loopback).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import secrets
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+import netns_hosts
+import ros_harness as h
+
+RUN = os.environ.get("SORTING_LINE_RLLIB") == "1"
+pytestmark = pytest.mark.skipif(not RUN, reason="Ray RLlib takes about a minute per test: launch_scripts/reliability.sh "
+                                "runs these (SORTING_LINE_RLLIB=1)")
+TRAIN = [sys.executable, "-m", "sorting_line_gym.training.rllib"]
+
+
+def ray_env(**values: str) -> dict[str, str]:
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0", PYTHONUNBUFFERED="1", SORTING_LINE_BIN=str(h.node_binary()))
+    env.update(values)
+    return env
+
+
+def summary(r: subprocess.CompletedProcess, what: str) -> dict:
+    assert r.returncode == 0, f"{what} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-6000:]}"
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def check_training(result: dict, timesteps: int, where: str) -> None:
+    assert result["env_steps"] >= timesteps, f"{where}: {result['env_steps']} env steps, want {timesteps}: {result}"
+    last = result["iterations"][-1]
+    assert last["episodes"] and last["episodes"] > 0, f"{where}: no episode completed: {result}"
+    assert last["episode_return_mean"] is not None and math.isfinite(last["episode_return_mean"]), result
+
+
+def test_ppo_with_two_env_runners_each_on_a_node_of_its_own(start_node, namespace):
+    nodes = [namespace("runner1"), namespace("runner2")]
+    for ns in nodes:
+        start_node("--setup", "B", "--lines", "4", "--ros-args", "-r", f"__ns:={ns}")
+    r = subprocess.run([*TRAIN, "--setup", "B", "--env-runners", "2", "--envs-per-runner", "4", "--timesteps", "2000",
+                        "--batch", "1000", "--nodes", *nodes], capture_output=True, text=True, timeout=400, env=ray_env())
+    result = summary(r, "RLlib PPO")
+    check_training(result, 2000, "2 EnvRunners x 4 envs")
+    placement = sorted(result["env_runners"], key=lambda p: p["worker_index"])
+    assert [p["worker_index"] for p in placement] == [1, 2], placement
+    for p, ns in zip(placement, nodes):
+        assert sorted(p["lines"]) == [f"{ns}/line_{k}" for k in range(4)], f"EnvRunner {p['worker_index']}: {p}"
+    assert len({p["pid"] for p in placement}) == 2, placement
+
+
+@pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
+def test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker(tmp_path):
+    ray = str(Path(sys.executable).with_name("ray"))
+    # Ray's unix sockets live under its temp dir: keep the path short (a socket path has 107 bytes).
+    temp = {host: tempfile.mkdtemp(prefix=f"slray_{host}_") for host in ("head", "worker")}
+    with netns_hosts.Hosts(["head", "worker"]) as hosts:
+        head_ip, worker_ip = hosts.address("head"), hosts.address("worker")
+        gcs = f"{head_ip}:6379"
+        # The lines stay on the worker host; the cluster's members prove themselves with a token of
+        # this test's own (Ray's token authentication; `ray start --head` requires one).
+        env = ray_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", RAY_AUTH_MODE="token",
+                      RAY_AUTH_TOKEN=secrets.token_hex(32))
+        logs = {host: open(tmp_path / f"ray_{host}.log", "a") for host in ("head", "worker")}
+        daemons: dict[str, subprocess.Popen] = {}
+
+        def status() -> subprocess.CompletedProcess:
+            return subprocess.run(hosts.argv("head", [ray, "status", f"--address={gcs}"]), capture_output=True,
+                                  text=True, timeout=60, env=env)
+
+        def start(host: str, argv: list[str], ready, what: str) -> None:
+            """`ray start ... --block` on `host`, until `ready(ray status)`. Ray gives its raylet a fixed
+            30 s to register and exits when it is late, which happens on the 2 shared cores under load:
+            then it is started again (3 attempts)."""
+            for _ in range(3):
+                daemons[host] = p = hosts.popen(host, argv, env=env, stdout=logs[host], stderr=subprocess.STDOUT)
+                deadline = time.monotonic() + 240
+                while not ready(last := status()):
+                    if p.poll() is not None:
+                        break
+                    assert time.monotonic() < deadline, f"{what} within 240 s:\n{last.stdout}\n{last.stderr[-2000:]}"
+                    time.sleep(2)
+                else:
+                    return
+            pytest.fail(f"{what}: `ray start` exited in 3 attempts (log {tmp_path}/ray_{host}.log)")
+
+        try:
+            start("head", [ray, "start", "--head", "--block", f"--node-ip-address={head_ip}", "--port=6379",
+                           "--num-cpus=0", "--include-dashboard=false", f"--temp-dir={temp['head']}",
+                           "--disable-usage-stats"],
+                  lambda s: s.returncode == 0, "the head did not answer")
+            # The driver would wait forever for CPUs: first the worker's 2 CPUs must be in the cluster.
+            start("worker", [ray, "start", "--block", f"--address={gcs}", f"--node-ip-address={worker_ip}",
+                             "--num-cpus=2", f"--temp-dir={temp['worker']}", "--disable-usage-stats"],
+                  lambda s: s.returncode == 0 and "/2.0 CPU" in s.stdout, "the worker did not join the head")
+            driver = hosts.argv("head", [*TRAIN, "--setup", "A", "--env-runners", "2", "--envs-per-runner", "4",
+                                         "--timesteps", "2000", "--batch", "1000", "--address", gcs])
+            r = subprocess.run(driver, capture_output=True, text=True, timeout=400, env=env)
+            result = summary(r, "RLlib PPO on the two-host Ray cluster")
+        finally:
+            for host in ("worker", "head"):
+                p = daemons.get(host)
+                if p is not None and p.poll() is None:
+                    p.send_signal(signal.SIGTERM)  # `ray start --block` stops the Ray processes it started
+                    try:
+                        p.wait(timeout=30)
+                    except subprocess.TimeoutExpired:
+                        p.kill()
+    print(json.dumps(result, indent=1))
+    check_training(result, 2000, "Ray cluster")
+    assert {p["node_ip"] for p in result["env_runners"]} == {worker_ip}, f"EnvRunners not all on the worker: {result}"
+    lines = [ns for p in result["env_runners"] for ns in p["lines"]]
+    assert len(lines) == 8 and len(set(lines)) == 8, f"8 envs on 8 distinct lines: {lines}"
