@@ -31,7 +31,7 @@ while [[ $# -gt 0 ]]; do
 done
 step() { printf '\n== %s\n' "$*"; }
 
-bash launch_scripts/setup.sh
+bash launch_scripts/setup.sh --rllib
 mkdir -p "$OUT"
 
 step "fuzz: commands, parameter files, --ros-args ($FUZZ_CASES cases per property)"

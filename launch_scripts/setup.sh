@@ -9,11 +9,13 @@
 #      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
 #   4. bridge/ (Python package sorting_line_gym) installed editable into .venv/
 #   5. `cargo build --release` (cargo's own checks make it a no-op when nothing changed)
-# Steps 2-4 already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
+#   6. only with --rllib: Ray RLlib (launch_scripts/requirements-rllib.txt; reliability.sh asks for it)
+# Steps 2-4 and 6 already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
 #
-# Usage: launch_scripts/setup.sh [--force] [--no-cargo]
+# Usage: launch_scripts/setup.sh [--force] [--no-cargo] [--rllib]
 #   --force      redo steps 2, 3 and 4 even if their stamps match
 #   --no-cargo   skip step 5 (same as SORTING_LINE_SKIP_CARGO=1)
+#   --rllib      also install Ray RLlib (~6 min and 655 MB: CI runs no RLlib test, so test.sh does not ask)
 # Environment (all optional):
 #   SORTING_LINE_PYTHON      interpreter for a new venv (default: python3.11; must be CPython 3.11 with
 #                            its headers, e.g. Debian packages python3.11-venv python3.11-dev)
@@ -28,6 +30,7 @@ VENV="$ROOT/.venv"
 STATE="$VENV/.sorting_line"
 REQ="$ROOT/launch_scripts/requirements-ros.txt"
 REQ_BRIDGE="$ROOT/launch_scripts/requirements-bridge.txt"
+REQ_RLLIB="$ROOT/launch_scripts/requirements-rllib.txt"
 BRIDGE="$ROOT/bridge"
 MSG_DIR="$ROOT/msg"
 PYTHON="${SORTING_LINE_PYTHON:-python3.11}"
@@ -36,11 +39,13 @@ RECIPE=3
 
 FORCE=0
 CARGO=1
+RLLIB=0
 [[ "${SORTING_LINE_SKIP_CARGO:-0}" == 1 ]] && CARGO=0
 for arg in "$@"; do
   case "$arg" in
     --force) FORCE=1 ;;
     --no-cargo) CARGO=0 ;;
+    --rllib) RLLIB=1 ;;
     -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "setup.sh: unknown argument: $arg (see --help)" >&2; exit 2 ;;
   esac
@@ -110,6 +115,19 @@ install_wheels() {
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
     die "pip install -r $REQ -r $REQ_BRIDGE failed"
   write_stamp pip "$key"
+}
+
+install_rllib() {
+  local key
+  key="$( { pip_key; cat "$REQ_RLLIB"; } | sha)"
+  if stamp_matches rllib "$key"; then
+    say "rllib: up to date (requirements-rllib.txt unchanged)"
+    return
+  fi
+  say "rllib: installing requirements-rllib.txt (Ray, ~6 min cold)"
+  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" -r "$REQ_RLLIB" ||
+    die "pip install -r $REQ_RLLIB failed"
+  write_stamp rllib "$key"
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -263,6 +281,7 @@ make_venv
 PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.implementation.cache_tag)')"
 mkdir -p "$STATE"
 install_wheels
+[[ $RLLIB == 1 ]] && install_rllib
 build_interfaces simulation_interfaces "$MSG_DIR/simulation_interfaces" \
   'from simulation_interfaces.srv import StepSimulation; from simulation_interfaces.action import SimulateSteps'
 build_interfaces sorting_line_interfaces "$MSG_DIR" \

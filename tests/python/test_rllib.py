@@ -33,7 +33,7 @@ import ros_harness as h
 
 RUN = os.environ.get("SORTING_LINE_RLLIB") == "1"
 pytestmark = pytest.mark.skipif(not RUN, reason="Ray RLlib takes about a minute per test: launch_scripts/reliability.sh "
-                                "runs these (SORTING_LINE_RLLIB=1)")
+                                "installs it (setup.sh --rllib) and runs these (SORTING_LINE_RLLIB=1)")
 TRAIN = [sys.executable, "-m", "sorting_line_gym.training.rllib"]
 
 

@@ -97,7 +97,7 @@ def where_envs_live(algo) -> list[dict[str, Any]]:
     return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     """`python -m sorting_line_gym.training.rllib`: PPO on the line with RLlib, progress per
     iteration on stderr, a JSON summary on stdout."""
     import argparse
@@ -124,8 +124,13 @@ def main(argv: list[str] | None = None) -> None:
 
     quiet_ray_environment()
     t0 = time.monotonic()
-    import ray
-    from ray.rllib.algorithms.ppo import PPOConfig
+    try:
+        import ray
+        from ray.rllib.algorithms.ppo import PPOConfig
+    except ImportError as e:
+        print(f"sorting_line_gym.training.rllib: Ray RLlib is not installed ({e}): install it with "
+              "`bash launch_scripts/setup.sh --rllib` (launch_scripts/requirements-rllib.txt)", file=sys.stderr)
+        return 2
 
     def log(msg: str) -> None:
         print(f"[rllib {time.monotonic() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
@@ -171,7 +176,8 @@ def main(argv: list[str] | None = None) -> None:
         ray.shutdown()
     print(json.dumps({"iterations": history, "env_steps": sampled, "env_runners": placement,
                       "seconds": round(time.monotonic() - t0, 1)}))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
