@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import sys
 from collections import defaultdict
 from typing import Any, Mapping
 
@@ -102,7 +103,6 @@ def main(argv: list[str] | None = None) -> int:
     iteration on stderr, a JSON summary on stdout."""
     import argparse
     import json
-    import sys
     import time
 
     p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
