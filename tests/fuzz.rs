@@ -351,7 +351,9 @@ fn report_commands(name: &str, (cases, commands, skipped, by_reason): (u32, u64,
         reasons.join(", ")
     );
     for reason in REJECTIONS {
-        let reachable = !matches!(reason, Rejection::Malformed) && (name == "lockstep" || !matches!(
+        // Malformed comes from decoding and Stopped from the simulation state (STOPPED), not from a
+        // command's content: protocol's unit tests and test_simulation_interfaces.py cover them.
+        let reachable = !matches!(reason, Rejection::Malformed | Rejection::Stopped) && (name == "lockstep" || !matches!(
             reason,
             Rejection::Stale | Rejection::Duplicate | Rejection::EpisodeOver
         ));

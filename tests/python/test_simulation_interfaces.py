@@ -256,9 +256,13 @@ def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
 
     sim = simulator
     client = ActionClient(sim.node, SimulateSteps, f"{sim.fqn}/simulate_steps")
+    created = len(sim.diag.msgs)
     sim.ros.spin_until(client.server_is_ready, 10.0, "the simulate_steps action server", sim.context, abort=sim.gone)
     sim.ros.spin_until(lambda: sim.states.sub.get_publisher_count() >= 1, 10.0, "state to match", sim.context)
-    sim.ros.spin_until(lambda: sim.diag.msgs, 10.0, "/diagnostics from the node", sim.context, abort=sim.gone)
+    # A /diagnostics array sent after the client's endpoints existed: the node has been discovering
+    # them meanwhile (a reply written before it matched our reader would be lost: ros_harness).
+    sim.ros.spin_until(lambda: len(sim.diag.msgs) > created + 1, 10.0, "/diagnostics after the action client",
+                       sim.context, abort=sim.gone)
     # Feedback is volatile: the client's feedback reader must be matched before the first goal.
     feedback_topic = f"{sim.fqn}/simulate_steps/_action/feedback"
     sim.ros.spin_until(lambda: sim.node.count_publishers(feedback_topic) >= 1, 10.0, feedback_topic, sim.context)
