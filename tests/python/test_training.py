@@ -40,9 +40,10 @@ def script(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
-def library_eval(agent: str, setup: str, variant: str, episodes: int) -> dict:
+def library_eval(agent: str, setup: str, variant: str, episodes: int, seed: int = 42, gap: bool = False) -> dict:
     out = subprocess.run(
-        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes), "--json"],
+        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes),
+         "--seed", str(seed), "--json", *(["--gap"] if gap else [])],
         capture_output=True, text=True, check=True, timeout=60,
     ).stdout
     return json.loads(out)
@@ -184,22 +185,39 @@ def test_console_scripts_are_installed(tmp_path):
 
 
 def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
+    """Baselines on B advanced: the paper's seeds and 5 held-out seeds through ROS equal the
+    library's `sorting_line eval --gap` (agent, oracle and gap), and the statistics and figures
+    are drawn; a rerun skips the finished cells."""
     from sorting_line_gym import benchmark
 
     out = tmp_path / "bench"
-    argv = ["--setups", "B", "--variants", "advanced", "--agents", "rba", "rba-hold", "--out", str(out)]
+    argv = ["--setups", "B", "--variants", "advanced", "--agents", "random", "rba", "rba-hold", "--heldout-seed", "10000",
+            "--heldout-episodes", "5", "--out", str(out)]
     assert benchmark.main(argv) == 0
-    assert "2 to run" in capsys.readouterr().err
+    assert "3 to run" in capsys.readouterr().err
     table = (out / "table.md").read_text()
-    reference = library_eval("rba", "B", "advanced", 10)
-    assert f"| B5 | B | Adv | rba | {reference['reward_mean']:.2f} +- {reference['reward_std']:.2f} |" in table
-    assert "| B | Adv | rba-hold | **" in table  # the better of the two on B is bold
+    paper = library_eval("rba", "B", "advanced", 10, gap=True)
+    heldout = library_eval("rba", "B", "advanced", 5, seed=10000, gap=True)
+    # One deterministic run: the IQM of 5 episodes is the mean of the middle 3, its interval the point.
+    iqm = float(np.mean(sorted(e["reward"] for e in heldout["per_episode"])[1:4]))
+    row = (f"| B5 | B | Adv | rba | 1 | {paper['reward_mean']:.2f} +- {paper['reward_std']:.2f} | {heldout['reward_mean']:.2f} | "
+           f"{iqm:.2f} [{iqm:.2f}, {iqm:.2f}] | ")
+    assert row in table, table
+    assert table.split(row)[1].startswith(f"{heldout['gap_mean']:.2f} |")  # the gap to the oracle
+    oracle_row = f"| B | Adv | oracle |  | {paper['oracle_mean']:.2f} +- "
+    assert oracle_row in table and f"| {heldout['oracle_mean']:.2f} | exact: " in table
+    assert "| B | Adv | rba-hold | 1 | **" in table  # the better of the two on B is bold
     assert "27.33" in table and "22.58 +- 3.29" in table
-    for name in ("figure7.png", "figure3.png", "dashboards/B_advanced_rba-hold.png"):
+    assert "| rba-hold | 1 |" in table  # the aggregate over lines, normalized between random and the oracle
+    report = json.loads((out / "table.json").read_text())
+    aggregate = report["aggregate_normalized"]
+    assert aggregate["random"]["iqm"]["point"] == pytest.approx(0.0, abs=1e-12)
+    assert 0.5 < aggregate["rba-hold"]["iqm"]["point"] < 1.0
+    for name in ("figure7.png", "figure3.png", "intervals.png", "aggregate.png", "dashboards/B_advanced_rba-hold.png"):
         assert_real_image(out / name)
     assert (out / "figure7.svg").stat().st_size > 10_000
     assert benchmark.main(argv) == 0
-    assert "2 already done, 0 to run" in capsys.readouterr().err
+    assert "3 already done, 0 to run" in capsys.readouterr().err
     assert (out / "table.md").read_text() == table
 
 
