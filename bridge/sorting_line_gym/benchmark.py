@@ -63,6 +63,8 @@ DEFAULT_SEEDS = (42, 43, 44, 45, 46)
 #: The held-out evaluation: seeds far from every training start (s .. s + n_envs - 1).
 HELDOUT_SEED = 10_000
 HELDOUT_EPISODES = 100
+#: Where --check-n-envs compares one line with N (issue 17): ((setups), (variants)), agent.
+AGREEMENT_CELLS = ((("B",), ("advanced",)), "ppo"), ((("D",), ("basic",)), "dqn")
 
 
 @dataclass(frozen=True)
@@ -473,6 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--heldout-seed", type=int, default=HELDOUT_SEED, help=f"first held-out evaluation seed (default {HELDOUT_SEED})")
     p.add_argument("--heldout-episodes", type=int, default=HELDOUT_EPISODES, help=f"held-out evaluation episodes (default {HELDOUT_EPISODES})")
     p.add_argument("--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)")
+    p.add_argument("--check-n-envs", action="store_true",
+                   help="with --n-envs N > 1: also train PPO on B advanced and DQN on D basic (where selected) on one line, per "
+                        "training seed, for the check that one line and N lines agree (run last)")
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     return p
 
@@ -546,6 +551,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     heldout = heldout_of(args)
     cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs)
+    if args.check_n_envs and args.n_envs > 1:
+        cells += [c for line, agent in AGREEMENT_CELLS for c in plan(*line, [agent], args.train_seeds, 1)
+                  if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants]
     done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
     todo = [c for c in cells if c not in done]
     if args.report_only:
@@ -576,7 +584,8 @@ def main(argv: list[str] | None = None) -> int:
                   "the same command goes on from there", file=sys.stderr)
             return 130
         bar.close()
-    records = [done[c] for c in cells if c in done]
+    # The table is of the run's --n-envs; the one-line cells of --check-n-envs go to the agreement check.
+    records = [done[c] for c in cells if c in done and (c.agent not in ALGOS or c.n_envs == args.n_envs)]
     if not records:
         print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
         return 1
