@@ -221,6 +221,38 @@ def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     assert (out / "table.md").read_text() == table
 
 
+def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
+    """DQN on D basic, two training seeds on 2 lines of one node and (--check-n-envs) on one line,
+    a few hundred steps each: the RL row has 2 runs and an IQM interval, P(dqn > rba-hold) is
+    reported, the one-line cells go to the agreement check only, and the 2-line trainings ran with
+    the mapped hyperparameters (one gradient step per 4 transitions)."""
+    from sorting_line_gym import benchmark
+
+    out = tmp_path / "bench"
+    argv = ["--setups", "D", "--variants", "basic", "--agents", "rba-hold", "dqn", "--train-seeds", "42", "43",
+            "--timesteps", "200", "--n-envs", "2", "--check-n-envs", "--heldout-episodes", "3", "--out", str(out)]
+    assert benchmark.main(argv) == 0
+    assert "5 cells, 0 already done, 5 to run" in capsys.readouterr().err
+    report = json.loads((out / "table.json").read_text())
+    (row,) = [r for r in report["rows"] if r["agent"] == "dqn"]
+    assert row["seeds"] == 2 and row["n_envs"] == 2
+    iqm = row["heldout"]["iqm"]
+    assert iqm["low"] <= iqm["point"] <= iqm["high"]
+    assert row["heldout"]["gap_mean"] > 0  # nothing this short reaches the clairvoyant optimum
+    (poi,) = report["probability_of_improvement_over_rba_hold"]
+    assert poi["agent"] == "dqn" and 0.0 <= poi["low"] <= poi["point"] <= poi["high"] <= 1.0
+    (check,) = report["n_envs_agreement"]
+    assert (check["setup"], check["variant"], check["agent"], check["n_envs"], check["runs"]) == ("D", "basic", "dqn", 2, [2, 2])
+    table = (out / "table.md").read_text()
+    assert "| D2 | D | Basic | dqn | 2 |" in table and "P(dqn > rba-hold)" in table and "| D | Basic | dqn | 2 | 2 / 2 |" in table
+    for seed in (42, 43):
+        two = json.loads((out / "cells" / f"D_basic_dqn_n2_seed{seed}.json").read_text())["training"]
+        one = json.loads((out / "cells" / f"D_basic_dqn_seed{seed}.json").read_text())["training"]
+        assert (two["n_envs"], two["hyperparams"]["train_freq"], two["hyperparams"]["gradient_steps"]) == (2, 2, 1)
+        assert one["n_envs"] == 1 and "train_freq" not in one["hyperparams"]
+        assert Path(two["model_path"]).parent.name == "models_n2" and Path(one["model_path"]).parent.name == "models"
+
+
 def children(pid: int) -> list[int]:
     """The live child processes of `pid` (from /proc)."""
     found = []
