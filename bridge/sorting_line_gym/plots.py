@@ -186,7 +186,7 @@ def interval_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Path
         ax.grid(axis="x", alpha=0.3)
     for ax in axes[len(lines):]:
         ax.set_visible(False)
-    fig.supxlabel("episode reward on the held-out seeds: IQM (dot) with its 95% stratified bootstrap interval (bar); mean (x); oracle (dashed)")
+    fig.supxlabel("held-out episode reward: IQM (dot), 95% CI (bar), mean (x), oracle (dashed)", fontsize=9)
     return _save(fig, stem)
 
 
