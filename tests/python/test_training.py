@@ -157,6 +157,7 @@ def test_dqn_and_a2c_train_through_ros(algo, tmp_path):
         (["--hp", "no_such_argument=1"], "no_such_argument"),
         (["--timesteps", "0"], "n_timesteps = 0"),
         (["--hyperparams", "/nonexistent.yml"], "/nonexistent.yml"),
+        (["--n-envs", "3"], "n_envs = 3"),
     ],
 )
 def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
@@ -165,6 +166,25 @@ def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
     assert train.main(["--algo", "ppo", "--setup", "A", "--out", str(tmp_path), "--no-progress", *argv]) == 2
     assert names in capsys.readouterr().err
     assert not list(tmp_path.iterdir()), "nothing is written when the arguments are bad"
+
+
+def test_hyperparameters_are_mapped_from_one_line_to_n_lines():
+    """What one update sees stays the paper's: PPO's 2048-step rollout, DQN's gradient step per 4
+    transitions, A2C's update as near 5 transitions as N lines allow; explicit keys are kept."""
+    from sorting_line_gym import hyperparams
+
+    def rollout(algo, *overrides):
+        params = hyperparams.load(algo, "advanced", overrides=list(overrides))
+        return {k: params[k] for k in ("n_steps", "train_freq", "gradient_steps") if k in params}
+
+    assert rollout("ppo") == {} and rollout("dqn", "n_envs=1") == {}
+    assert rollout("ppo", "n_envs=8") == {"n_steps": 256}
+    assert rollout("ppo", "n_envs=8", "n_steps=64") == {"n_steps": 64}
+    assert rollout("dqn", "n_envs=2") == {"train_freq": 2, "gradient_steps": 1}
+    assert rollout("dqn", "n_envs=8") == {"train_freq": 1, "gradient_steps": 2}
+    assert rollout("a2c", "n_envs=2") == {"n_steps": 2} and rollout("a2c", "n_envs=8") == {"n_steps": 1}
+    with pytest.raises(ValueError, match="n_envs = 6 .* power of two"):
+        hyperparams.load("ppo", "basic", overrides=["n_envs=6"])
 
 
 def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
