@@ -27,8 +27,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from .transport import find_node_binary
-from .vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
+from ..line.process import find_node_binary
+from ..line.vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
 
 AGENT_COLORS = {
     "random": "#9e9e9e",
@@ -194,7 +194,7 @@ def aggregate_figure(aggregate: dict[str, dict[str, Any]], normalized: dict[str,
     """Left: each agent's IQM and mean over the lines of the normalized score (random 0, oracle 1)
     with their 95 % intervals. Right: performance profiles, the fraction of runs x lines whose
     normalized score exceeds tau."""
-    from .reports import stats
+    from . import stats
 
     agents = [a for a in AGENT_COLORS if a in aggregate]
     fig = _figure(figsize=(12, 4.2))

@@ -7,7 +7,7 @@
 For every setup (A-D) and variant (basic, advanced) it evaluates the baselines (random, rba,
 rba-hold) and, for each training seed, trains DQN, PPO and A2C with the paper's hyperparameters
 (``sorting-line-train``; with ``--n-envs N`` on N lines of one node, the hyperparameters mapped as
-``hyperparams.for_lines`` says) and evaluates the model. Every agent is evaluated twice with
+``training.hyperparams.for_lines`` says) and evaluates the model. Every agent is evaluated twice with
 ``sorting-line-eval``'s protocol (50 steps, deterministic): on the paper's 10 seeds 42..51, and
 on ``--heldout-episodes`` (100) held-out seeds from ``--heldout-seed`` (10000), which no training
 starts from (training seed s starts its N lines from seeds s..s+N-1 and draws the later
@@ -50,9 +50,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .hyperparams import ALGOS
-from .reports import stats
-from .vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import SETUPS, VARIANTS
+from ..training.hyperparams import ALGOS
+from . import stats
 
 BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
@@ -103,9 +103,9 @@ def plan(setups, variants, agents, train_seeds, n_envs: int = 1) -> list[Cell]:
 
 def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: bool) -> dict[str, Any]:
     """Trains (RL) and evaluates one cell; writes and returns its record. Runs in a worker."""
-    from . import hyperparams
+    from ..training import hyperparams
     from .evaluate import evaluate
-    from .train import train
+    from ..training.train import train
 
     start = time.perf_counter()
     record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
@@ -165,7 +165,7 @@ def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> d
     ``cache`` (it is deterministic)."""
     import subprocess
 
-    from .transport import find_node_binary
+    from ..line.process import find_node_binary
 
     path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
     if path.is_file():
@@ -490,6 +490,15 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _die_with_the_benchmark() -> None:
+    """Worker initializer: the kernel kills this worker when the benchmark process dies, however
+    it dies (a worker in an rclpy wait ignores SIGTERM, and a killed benchmark runs no handler)."""
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
     """Kills the pool's workers at once (their nodes get SIGTERM through their parent-death
     signal): a worker would otherwise finish its cell, a training of several minutes, and rclpy's
@@ -513,7 +522,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
         return
     # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context, initializer=_die_with_the_benchmark) as pool:
         try:
             pending = {}
             queue = list(todo)

@@ -1,0 +1,3 @@
+"""The environments: one line as a Gymnasium ``Env`` (``env``), N lines of one node as a Gymnasium
+``VectorEnv`` (``vector``) and as a Stable-Baselines3 ``VecEnv`` (``sb3_vec_env``, which imports
+SB3 and torch), and the dashboard they render (``render``)."""
