@@ -18,7 +18,7 @@
 #                     with CIs; PPO on B advanced and DQN on D basic also on one line, for the --n-envs
 #                     check) -> results/benchmark/; resumable (finished cells are kept), progress shown
 #   --smoke           the same pipeline at CI size (B advanced: random, rba-hold, PPO at 512 steps, 2
-#                     seeds, 2 lines and 1 line, 5 held-out seeds) -> results/smoke/; about a minute
+#                     seeds, 2 lines and 1 line, 5 held-out seeds) -> results/smoke/; a few minutes
 #   --jobs J          cells at once in --full/--smoke (default 2)
 #   --train-seeds S.. training seeds (default 42 43 44 45 46; --smoke 42 43)
 #   --timesteps N     training budget per RL cell (default 100000; --smoke 512)
