@@ -1,11 +1,15 @@
-"""Wall time of training through ROS against training on the reference's in-process Python env.
+"""Wall time of training through ROS, on one line and on N lines of one node, against training on
+the reference's in-process Python env.
 
     .venv/bin/python benches/train_timing.py --reference /path/to/2024_Sorting_Env
-    .venv/bin/python benches/train_timing.py --reference DIR --algo ppo --setup B --variant advanced --timesteps 100000
+    .venv/bin/python benches/train_timing.py --reference DIR --algo ppo dqn a2c --n-envs 1 8 --timesteps 20000
 
-Target (issue 5): 100k PPO steps through ROS cost at most 1.2x the same training on the
-reference's env. Both sides are measured the same way, one after the other in this process
-tree: the algorithm with the paper's hyperparameters (``hyperparams/<algo>.yml``), seed 42,
+Targets: 100k PPO steps through ROS on one line cost at most 1.2x the same training on the
+reference's env (issue 5); the whole Table 1 with 5 seeds per RL cell (``run.sh --full``) takes
+under 2 hours on 2 cores (issue 17): the last lines project the full study's training time from
+the steps/s measured here. Both sides are measured the same way, one after the other in this process
+tree: the algorithm with the paper's hyperparameters (``hyperparams/<algo>.yml``; on N lines
+mapped as ``hyperparams.for_lines`` says), seed 42,
 250-step training episodes, a Monitor for episode statistics, TensorBoard logging and the progress
 bar on, the same torch thread count, and the wall time of ``model.learn()`` alone (env start-up
 and saving excluded on both sides). The reference (Storm-131/2024_Sorting_Env, read unmodified
@@ -81,47 +85,75 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
     return time.perf_counter() - start
 
 
-def time_ours(algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path) -> float:
+def time_ours(algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path, n_envs: int = 1) -> float:
     from sorting_line_gym.training import hyperparams
     from sorting_line_gym.training.train import train
 
-    params = hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}"])
+    params = hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={n_envs}"])
     run = train(algo, setup, variant, seed=42, out=out, params=params, tensorboard=tb, progress=True, torch_threads=threads)
     return run.wall_s
 
 
+#: What run.sh --full trains: 8 lines x 5 seeds per algorithm on N lines, and for the --n-envs
+#: check 5 one-line trainings each of PPO (B advanced) and DQN (D basic); two cells at a time.
+FULL_STUDY = {"cells_per_algo": 8 * 5, "one_line_cells": {"ppo": 5, "dqn": 5}, "timesteps": 100_000, "jobs": 2}
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--reference", required=True, type=Path, help="checkout of the reference implementation (Storm-131/2024_Sorting_Env)")
-    p.add_argument("--algo", default="ppo", choices=("ppo", "dqn", "a2c"))
+    p.add_argument("--reference", type=Path, help="checkout of the reference implementation (Storm-131/2024_Sorting_Env); without it only ours is timed")
+    p.add_argument("--algo", nargs="+", default=["ppo"], choices=("ppo", "dqn", "a2c"))
+    p.add_argument("--n-envs", nargs="+", type=int, default=[1], help="lines of one node for our side (default 1); several values: each timed")
     p.add_argument("--setup", default="B", choices=tuple(REFERENCE_SETUPS))
     p.add_argument("--variant", default="advanced", choices=VARIANTS)
     p.add_argument("--timesteps", type=int, default=100_000)
     p.add_argument("--torch-threads", type=int, default=1)
     p.add_argument("--rounds", type=int, default=1, help="alternate reference and ours this many times; medians reported")
     args = p.parse_args()
-    if not (args.reference / "src" / "env_1_simple.py").is_file():
+    if args.reference is not None and not (args.reference / "src" / "env_1_simple.py").is_file():
         sys.exit(f"train_timing.py: {args.reference} does not look like the reference checkout (no src/env_1_simple.py)")
     h.run_isolated(__file__, "SORTING_LINE_TRAIN_TIMING_IN_NETNS")
     h.ros_environment("97")
 
-    ours, theirs = [], []
+    times: dict[tuple[str, str], list[float]] = {}
     with tempfile.TemporaryDirectory(prefix="train_timing_") as tmp:
         tmp = Path(tmp)
         for r in range(args.rounds):
-            progress(f"round {r + 1}/{args.rounds}: reference env, {args.algo} {args.timesteps} steps ({h.machine_conditions()})")
-            theirs.append(time_reference(args.reference, args.algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb"))
-            progress(f"  reference: {theirs[-1]:.1f} s")
-            progress(f"round {r + 1}/{args.rounds}: through ROS ({h.machine_conditions()})")
-            ours.append(time_ours(args.algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb", tmp / "models"))
-            progress(f"  through ROS: {ours[-1]:.1f} s")
-    ref_s, our_s = statistics.median(theirs), statistics.median(ours)
-    ratio = our_s / ref_s
-    print(f"\n{args.algo.upper()} {args.timesteps} steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
+            for algo in args.algo:
+                if args.reference is not None:
+                    progress(f"round {r + 1}/{args.rounds}: {algo} on the reference env, {args.timesteps} steps ({h.machine_conditions()})")
+                    wall = time_reference(args.reference, algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb")
+                    times.setdefault((algo, "reference"), []).append(wall)
+                    progress(f"  reference: {wall:.1f} s")
+                for n in args.n_envs:
+                    progress(f"round {r + 1}/{args.rounds}: {algo} through ROS on {n} line(s) ({h.machine_conditions()})")
+                    wall = time_ours(algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb", tmp / f"models_n{n}", n)
+                    times.setdefault((algo, f"ros x{n}"), []).append(wall)
+                    progress(f"  through ROS, {n} line(s): {wall:.1f} s")
+    print(f"\n{args.timesteps} training steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
           f"{args.rounds} round(s), medians ({h.machine_conditions()}):")
-    print(f"  reference in-process env: {ref_s:8.1f} s  ({args.timesteps / ref_s:6.0f} steps/s)  runs {[round(x, 1) for x in theirs]}")
-    print(f"  through ROS (this repo):  {our_s:8.1f} s  ({args.timesteps / our_s:6.0f} steps/s)  runs {[round(x, 1) for x in ours]}")
-    print(f"  ratio ours/reference: {ratio:.2f}x (target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})")
+    print("| algorithm | trained on | wall s | steps/s | vs reference |")
+    print("|---|---|---|---|---|")
+    for algo in args.algo:
+        ref = statistics.median(times[(algo, "reference")]) if (algo, "reference") in times else None
+        for side in (["reference"] if ref else []) + [f"ros x{n}" for n in args.n_envs]:
+            wall = statistics.median(times[(algo, side)])
+            label = "reference in-process env" if side == "reference" else f"ROS, {side[5:]} line(s) of one node"
+            ratio = f"{wall / ref:.2f}x" if ref and side != "reference" else ""
+            print(f"| {algo} | {label} | {wall:.1f} | {args.timesteps / wall:.0f} | {ratio} |")
+    if args.reference is not None and "ppo" in args.algo and 1 in args.n_envs:
+        ratio = statistics.median(times[("ppo", "ros x1")]) / statistics.median(times[("ppo", "reference")])
+        print(f"PPO on one line, ours/reference: {ratio:.2f}x (target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})")
+    n = max(args.n_envs)
+    if all((a, f"ros x{n}") in times for a in ("ppo", "dqn", "a2c")) and 1 in args.n_envs and all((a, "ros x1") in times for a in ("ppo", "dqn")):
+        rate = {a: args.timesteps / statistics.median(times[(a, f"ros x{n}")]) for a in ("ppo", "dqn", "a2c")}
+        one = {a: args.timesteps / statistics.median(times[(a, "ros x1")]) for a in ("ppo", "dqn")}
+        total = sum(FULL_STUDY["cells_per_algo"] * FULL_STUDY["timesteps"] / rate[a] for a in rate)
+        total += sum(k * FULL_STUDY["timesteps"] / one[a] for a, k in FULL_STUDY["one_line_cells"].items())
+        hours = total / FULL_STUDY["jobs"] / 3600
+        print(f"projected training time of run.sh --full (--n-envs {n}, {FULL_STUDY['jobs']} cells at once, at these rates): "
+              f"{hours:.1f} h (target < 2 h: {'met' if hours < 2 else 'NOT met'}; measured one training at a time, so two at once on "
+              f"2 cores may be slower; evaluations add about 20 s per cell)")
     return 0
 
 

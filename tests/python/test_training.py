@@ -40,9 +40,10 @@ def script(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
-def library_eval(agent: str, setup: str, variant: str, episodes: int) -> dict:
+def library_eval(agent: str, setup: str, variant: str, episodes: int, seed: int = 42, gap: bool = False) -> dict:
     out = subprocess.run(
-        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes), "--json"],
+        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes),
+         "--seed", str(seed), "--json", *(["--gap"] if gap else [])],
         capture_output=True, text=True, check=True, timeout=60,
     ).stdout
     return json.loads(out)
@@ -156,6 +157,7 @@ def test_dqn_and_a2c_train_through_ros(algo, tmp_path):
         (["--hp", "no_such_argument=1"], "no_such_argument"),
         (["--timesteps", "0"], "n_timesteps = 0"),
         (["--hyperparams", "/nonexistent.yml"], "/nonexistent.yml"),
+        (["--n-envs", "3"], "n_envs = 3"),
     ],
 )
 def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
@@ -164,6 +166,25 @@ def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
     assert train.main(["--algo", "ppo", "--setup", "A", "--out", str(tmp_path), "--no-progress", *argv]) == 2
     assert names in capsys.readouterr().err
     assert not list(tmp_path.iterdir()), "nothing is written when the arguments are bad"
+
+
+def test_hyperparameters_are_mapped_from_one_line_to_n_lines():
+    """What one update sees stays the paper's: PPO's 2048-step rollout, DQN's gradient step per 4
+    transitions, A2C's update as near 5 transitions as N lines allow; explicit keys are kept."""
+    from sorting_line_gym.training import hyperparams
+
+    def rollout(algo, *overrides):
+        params = hyperparams.load(algo, "advanced", overrides=list(overrides))
+        return {k: params[k] for k in ("n_steps", "train_freq", "gradient_steps") if k in params}
+
+    assert rollout("ppo") == {} and rollout("dqn", "n_envs=1") == {}
+    assert rollout("ppo", "n_envs=8") == {"n_steps": 256}
+    assert rollout("ppo", "n_envs=8", "n_steps=64") == {"n_steps": 64}
+    assert rollout("dqn", "n_envs=2") == {"train_freq": 2, "gradient_steps": 1}
+    assert rollout("dqn", "n_envs=8") == {"train_freq": 1, "gradient_steps": 2}
+    assert rollout("a2c", "n_envs=2") == {"n_steps": 2} and rollout("a2c", "n_envs=8") == {"n_steps": 1}
+    with pytest.raises(ValueError, match="n_envs = 6 .* power of two"):
+        hyperparams.load("ppo", "basic", overrides=["n_envs=6"])
 
 
 def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
@@ -184,23 +205,72 @@ def test_console_scripts_are_installed(tmp_path):
 
 
 def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
+    """Baselines on B advanced: the paper's seeds and 5 held-out seeds through ROS equal the
+    library's `sorting_line eval --gap` (agent, oracle and gap), and the statistics and figures
+    are drawn; a rerun skips the finished cells."""
     from sorting_line_gym.reports import benchmark
 
     out = tmp_path / "bench"
-    argv = ["--setups", "B", "--variants", "advanced", "--agents", "rba", "rba-hold", "--out", str(out)]
+    argv = ["--setups", "B", "--variants", "advanced", "--agents", "random", "rba", "rba-hold", "--heldout-seed", "10000",
+            "--heldout-episodes", "5", "--out", str(out)]
     assert benchmark.main(argv) == 0
-    assert "2 to run" in capsys.readouterr().err
+    assert "3 to run" in capsys.readouterr().err
     table = (out / "table.md").read_text()
-    reference = library_eval("rba", "B", "advanced", 10)
-    assert f"| B5 | B | Adv | rba | {reference['reward_mean']:.2f} +- {reference['reward_std']:.2f} |" in table
-    assert "| B | Adv | rba-hold | **" in table  # the better of the two on B is bold
+    paper = library_eval("rba", "B", "advanced", 10, gap=True)
+    heldout = library_eval("rba", "B", "advanced", 5, seed=10000, gap=True)
+    # One deterministic run: the IQM of 5 episodes is the mean of the middle 3, its interval the point.
+    iqm = float(np.mean(sorted(e["reward"] for e in heldout["per_episode"])[1:4]))
+    row = (f"| B5 | B | Adv | rba | 1 | {paper['reward_mean']:.2f} +- {paper['reward_std']:.2f} | {heldout['reward_mean']:.2f} | "
+           f"{iqm:.2f} [{iqm:.2f}, {iqm:.2f}] | ")
+    assert row in table, table
+    assert table.split(row)[1].startswith(f"{heldout['gap_mean']:.2f} |")  # the gap to the oracle
+    oracle_row = f"| B | Adv | oracle |  | {paper['oracle_mean']:.2f} +- "
+    assert oracle_row in table and f"| {heldout['oracle_mean']:.2f} | exact: " in table
+    assert "| B | Adv | rba-hold | 1 | **" in table  # the better of the two on B is bold
     assert "27.33" in table and "22.58 +- 3.29" in table
-    for name in ("figure7.png", "figure3.png", "dashboards/B_advanced_rba-hold.png"):
+    assert "| rba-hold | 1 |" in table  # the aggregate over lines, normalized between random and the oracle
+    report = json.loads((out / "table.json").read_text())
+    aggregate = report["aggregate_normalized"]
+    assert aggregate["random"]["iqm"]["point"] == pytest.approx(0.0, abs=1e-12)
+    assert 0.5 < aggregate["rba-hold"]["iqm"]["point"] < 1.0
+    for name in ("figure7.png", "figure3.png", "intervals.png", "aggregate.png", "dashboards/B_advanced_rba-hold.png"):
         assert_real_image(out / name)
     assert (out / "figure7.svg").stat().st_size > 10_000
     assert benchmark.main(argv) == 0
-    assert "2 already done, 0 to run" in capsys.readouterr().err
+    assert "3 already done, 0 to run" in capsys.readouterr().err
     assert (out / "table.md").read_text() == table
+
+
+def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
+    """DQN on D basic, two training seeds on 2 lines of one node and (--check-n-envs) on one line,
+    a few hundred steps each: the RL row has 2 runs and an IQM interval, P(dqn > rba-hold) is
+    reported, the one-line cells go to the agreement check only, and the 2-line trainings ran with
+    the mapped hyperparameters (one gradient step per 4 transitions)."""
+    from sorting_line_gym.reports import benchmark
+
+    out = tmp_path / "bench"
+    argv = ["--setups", "D", "--variants", "basic", "--agents", "rba-hold", "dqn", "--train-seeds", "42", "43",
+            "--timesteps", "200", "--n-envs", "2", "--check-n-envs", "--heldout-episodes", "3", "--out", str(out)]
+    assert benchmark.main(argv) == 0
+    assert "5 cells, 0 already done, 5 to run" in capsys.readouterr().err
+    report = json.loads((out / "table.json").read_text())
+    (row,) = [r for r in report["rows"] if r["agent"] == "dqn"]
+    assert row["seeds"] == 2 and row["n_envs"] == 2
+    iqm = row["heldout"]["iqm"]
+    assert iqm["low"] <= iqm["point"] <= iqm["high"]
+    assert row["heldout"]["gap_mean"] > 0  # nothing this short reaches the clairvoyant optimum
+    (poi,) = report["probability_of_improvement_over_rba_hold"]
+    assert poi["agent"] == "dqn" and 0.0 <= poi["low"] <= poi["point"] <= poi["high"] <= 1.0
+    (check,) = report["n_envs_agreement"]
+    assert (check["setup"], check["variant"], check["agent"], check["n_envs"], check["runs"]) == ("D", "basic", "dqn", 2, [2, 2])
+    table = (out / "table.md").read_text()
+    assert "| D2 | D | Basic | dqn | 2 |" in table and "P(dqn > rba-hold)" in table and "| D | Basic | dqn | 2 | 2 / 2 |" in table
+    for seed in (42, 43):
+        two = json.loads((out / "cells" / f"D_basic_dqn_n2_seed{seed}.json").read_text())["training"]
+        one = json.loads((out / "cells" / f"D_basic_dqn_seed{seed}.json").read_text())["training"]
+        assert (two["n_envs"], two["hyperparams"]["train_freq"], two["hyperparams"]["gradient_steps"]) == (2, 2, 1)
+        assert one["n_envs"] == 1 and "train_freq" not in one["hyperparams"]
+        assert Path(two["model_path"]).parent.name == "models_n2" and Path(one["model_path"]).parent.name == "models"
 
 
 def children(pid: int) -> list[int]:

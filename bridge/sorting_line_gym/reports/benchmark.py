@@ -1,21 +1,35 @@
 """`sorting-line-benchmark`: the paper's Table 1 and Figure 7, reproduced through ROS 2.
 
-    sorting-line-benchmark                                   # everything: 8 lines x 6 agents
-    sorting-line-benchmark --setups B D --agents rba rba-hold ppo --train-seeds 42 43 44
+    sorting-line-benchmark                                   # everything: 8 lines x 6 agents, 5 training seeds
+    sorting-line-benchmark --setups B D --agents rba rba-hold ppo --train-seeds 42 43 44 --n-envs 8
     sorting-line-benchmark --agents random rba rba-hold      # baselines only, about a minute
 
 For every setup (A-D) and variant (basic, advanced) it evaluates the baselines (random, rba,
 rba-hold) and, for each training seed, trains DQN, PPO and A2C with the paper's hyperparameters
-(``sorting-line-train``) and evaluates the model; evaluation is ``sorting-line-eval``'s protocol
-(seeds 42..51, 50 steps, deterministic). Every line is a real node process stepped over DDS.
+(``sorting-line-train``; with ``--n-envs N`` on N lines of one node, the hyperparameters mapped as
+``training.hyperparams.for_lines`` says) and evaluates the model. Every agent is evaluated twice with
+``sorting-line-eval``'s protocol (50 steps, deterministic): on the paper's 10 seeds 42..51, and
+on ``--heldout-episodes`` (100) held-out seeds from ``--heldout-seed`` (10000), which no training
+starts from (training seed s starts its N lines from seeds s..s+N-1 and draws the later
+episodes' seeds at random from [0, 2^63)). Every line is a real node process stepped over DDS.
+Beside each agent: ``sorting_line oracle`` on the same seeds (the clairvoyant optimum per seed)
+and the gap to it.
+
+Statistics (``reports/stats.py``, rliable's method on scipy): per cell the mean, the IQM over
+training seeds x held-out episodes with its 95 % stratified bootstrap interval (training seeds
+resampled within each evaluation seed), the probability that each RL agent beats rba-hold per
+line, and per agent the IQM over the 8 lines of the score normalized between the random agent
+(0) and the oracle (1). Where cells of one agent on one line exist with two ``--n-envs`` values
+(in the same ``--out``), the report checks that they agree.
 
 Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
 interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
 ``--jobs N`` runs N cells at once (each its own node and process). When the cells are in, it
 writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Table 1 and the
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
-``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent) and the seed-42
-dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
+``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
+and interval per line and agent), ``aggregate`` (aggregate IQM and performance profiles) and the
+seed-42 dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
 Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
 cells that finished are kept.
 """
@@ -34,40 +48,60 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Optional
 
+import numpy as np
+
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
+from . import stats
 
 BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
 #: Row order of the table: the paper's within a line (RBA, DQN, PPO, A2C), our extras first.
 TABLE_ORDER = ("random", "rba", "rba-hold", "dqn", "ppo", "a2c")
-DEFAULT_SEEDS = (42,)
+#: Five training seeds per RL cell (issue 17), the paper's 42 first.
+DEFAULT_SEEDS = (42, 43, 44, 45, 46)
+#: The held-out evaluation: seeds far from every training start (s .. s + n_envs - 1).
+HELDOUT_SEED = 10_000
+HELDOUT_EPISODES = 100
+#: Where --check-n-envs compares one line with N (issue 17): ((setups), (variants)), agent.
+AGREEMENT_CELLS = ((("B",), ("advanced",)), "ppo"), ((("D",), ("basic",)), "dqn")
 
 
 @dataclass(frozen=True)
 class Cell:
-    """One evaluation of the benchmark: an agent on a line (and its training seed, for RL)."""
+    """One evaluation of the benchmark: an agent on a line (and its training seed and number of
+    training lines, for RL)."""
 
     setup: str
     variant: str
     agent: str
     train_seed: Optional[int] = None
+    n_envs: int = 1
 
     @property
     def name(self) -> str:
+        lines = f"_n{self.n_envs}" if self.n_envs != 1 else ""
         seed = f"_seed{self.train_seed}" if self.train_seed is not None else ""
-        return f"{self.setup}_{self.variant}_{self.agent}{seed}"
+        return f"{self.setup}_{self.variant}_{self.agent}{lines}{seed}"
 
 
-def plan(setups, variants, agents, train_seeds) -> list[Cell]:
+@dataclass(frozen=True)
+class Heldout:
+    """The held-out evaluation seeds: ``episodes`` seeds from ``seed``."""
+
+    seed: int = HELDOUT_SEED
+    episodes: int = HELDOUT_EPISODES
+
+
+def plan(setups, variants, agents, train_seeds, n_envs: int = 1) -> list[Cell]:
     """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
     so a partial run has whole rows: one algorithm on every line before the next."""
     cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
-    cells += [Cell(s, v, a, seed) for seed in train_seeds for a in agents if a in ALGOS for s in setups for v in variants]
+    cells += [Cell(s, v, a, seed, n_envs) for seed in train_seeds for a in agents if a in ALGOS for s in setups for v in variants]
     return cells
 
 
-def run_cell(cell: Cell, out: Path, timesteps: int, n_envs: int, progress: bool) -> dict[str, Any]:
+def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: bool) -> dict[str, Any]:
     """Trains (RL) and evaluates one cell; writes and returns its record. Runs in a worker."""
     from ..training import hyperparams
     from .evaluate import evaluate
@@ -77,9 +111,10 @@ def run_cell(cell: Cell, out: Path, timesteps: int, n_envs: int, progress: bool)
     record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
     spec = cell.agent
     if cell.agent in ALGOS:
-        params = hyperparams.load(cell.agent, cell.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={n_envs}"])
+        params = hyperparams.load(cell.agent, cell.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"])
+        models = out / ("models" if cell.n_envs == 1 else f"models_n{cell.n_envs}")
         run = train(
-            cell.agent, cell.setup, cell.variant, seed=cell.train_seed, out=out / "models", params=params,
+            cell.agent, cell.setup, cell.variant, seed=cell.train_seed, out=models, params=params,
             tensorboard=out / "tensorboard", progress=progress,
         )
         record["training"] = asdict(run)
@@ -87,6 +122,7 @@ def run_cell(cell: Cell, out: Path, timesteps: int, n_envs: int, progress: bool)
     dashboard = out / "dashboards" / f"{cell.name}.png"  # the first evaluation episode, seed 42
     dashboard.parent.mkdir(parents=True, exist_ok=True)
     record["evaluation"] = asdict(evaluate(spec, cell.setup, cell.variant, dashboard=dashboard))
+    record["heldout"] = asdict(evaluate(spec, cell.setup, cell.variant, seed=heldout.seed, episodes=heldout.episodes))
     record["wall_s"] = time.perf_counter() - start
     path = out / "cells" / f"{cell.name}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -96,8 +132,8 @@ def run_cell(cell: Cell, out: Path, timesteps: int, n_envs: int, progress: bool)
     return record
 
 
-def load_cell(cell: Cell, out: Path, timesteps: int) -> Optional[dict[str, Any]]:
-    """The saved record of ``cell`` if it was run with the same budget."""
+def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> Optional[dict[str, Any]]:
+    """The saved record of ``cell`` if it was run with the same budget and held-out seeds."""
     path = out / "cells" / f"{cell.name}.json"
     if not path.is_file():
         return None
@@ -107,27 +143,77 @@ def load_cell(cell: Cell, out: Path, timesteps: int) -> Optional[dict[str, Any]]
         return None
     if cell.agent in ALGOS and record.get("timesteps") != timesteps:
         return None
+    saved = record.get("heldout")
+    if not saved or (saved["seed"], saved["episodes"]) != (heldout.seed, heldout.episodes):
+        return None
+    return record
+
+
+def saved_records(out: Path) -> list[dict[str, Any]]:
+    """Every finished cell in ``out`` (any budget or number of lines), for the agreement check."""
+    records = []
+    for path in sorted((out / "cells").glob("*.json")):
+        try:
+            records.append(json.loads(path.read_text()))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> dict[str, Any]:
+    """``sorting_line oracle --json`` for these seeds (the clairvoyant optimum per seed), kept in
+    ``cache`` (it is deterministic)."""
+    import subprocess
+
+    from ..line.process import find_node_binary
+
+    path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    argv = [find_node_binary(), "oracle", "--setup", setup, "--variant", variant, "--seed", str(seed), "--episodes", str(episodes), "--json"]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    if result.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
+    record = json.loads(result.stdout)
+    for e in record["per_episode"]:
+        e.pop("actions", None)  # the report needs the rewards; `sorting_line oracle --actions` gives them again
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record) + "\n")
     return record
 
 
 # ------------------------------------------------------------------------------------------
 # Aggregation
 
+Key = tuple  # (setup, variant, agent)
 
-def summarize(records: list[dict[str, Any]]) -> dict[tuple[str, str, str], dict[str, Any]]:
-    """Per (setup, variant, agent): reward mean and std. Baselines: over the 10 evaluation
-    episodes. RL: the mean over training seeds of each model's mean, with the std across training
-    seeds (and the per-episode std when there is a single seed)."""
-    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+
+def _group(records: list[dict[str, Any]]) -> dict[Key, list[dict[str, Any]]]:
+    groups: dict[Key, list[dict[str, Any]]] = {}
     for r in records:
         c = r["cell"]
         groups.setdefault((c["setup"], c["variant"], c["agent"]), []).append(r)
+    for rs in groups.values():
+        rs.sort(key=lambda r: r["cell"]["train_seed"] or 0)
+    return groups
+
+
+def episode_rewards(records: list[dict[str, Any]], which: str = "heldout") -> np.ndarray:
+    """Runs x evaluation seeds: each record's (training seed's) per-episode rewards."""
+    return np.array([[e["reward"] for e in r[which]["per_episode"]] for r in records])
+
+
+def summarize(records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[Key, dict[str, Any]]:
+    """Per (setup, variant, agent). On the paper's seeds 42..51: the mean over training seeds of
+    each model's mean, with the std across training seeds (the per-episode std for one run). On
+    the held-out seeds: mean, IQM and their stratified bootstrap intervals over runs x episodes,
+    and the gap to the oracle of the same seeds."""
     rows = {}
-    for key, rs in groups.items():
+    for key, rs in _group(records).items():
         evals = [r["evaluation"] for r in rs]
         means = [e["reward_mean"] for e in evals]
         seeds = len(rs)
-        rows[key] = {
+        row = {
             "reward_mean": statistics.fmean(means),
             "reward_std": statistics.pstdev(means) if seeds > 1 else evals[0]["reward_std"],
             "std_over": "training seeds" if seeds > 1 else "episodes",
@@ -137,26 +223,125 @@ def summarize(records: list[dict[str, Any]]) -> dict[tuple[str, str, str], dict[
             "purity_mean": statistics.fmean(e["purity_mean"] for e in evals),
             "speed_changes_mean": statistics.fmean(e["speed_changes_mean"] for e in evals),
             "train_wall_s": statistics.fmean(r["training"]["wall_s"] for r in rs) if "training" in rs[0] else None,
+            "n_envs": rs[0]["cell"].get("n_envs", 1),
+        }
+        if all("heldout" in r for r in rs):
+            scores = episode_rewards(rs)
+            oracle_rewards = np.array([e["reward"] for e in oracles[key[:2]]["per_episode"]])
+            row["heldout"] = {
+                "first_seed": rs[0]["heldout"]["seed"],
+                "episodes": scores.shape[1],
+                "per_seed": scores.mean(axis=1).tolist(),
+                "mean": stats.mean_interval(scores).as_dict(),
+                "iqm": stats.iqm_interval(scores).as_dict(),
+                "oracle_mean": float(oracle_rewards.mean()),
+                "gap_mean": float((oracle_rewards[None, :] - scores).mean()),
+            }
+        rows[key] = row
+    return rows
+
+
+def oracle_rows(oracles: dict[tuple[str, str], dict[str, Any]], paper_oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[Key, dict[str, Any]]:
+    """The oracle as a row of the table (it has no runs: the optimum is one number per seed)."""
+    rows = {}
+    for line, heldout in oracles.items():
+        paper = paper_oracles[line]
+        rewards = np.array([e["reward"] for e in heldout["per_episode"]])
+        rows[line + ("oracle",)] = {
+            "reward_mean": paper["reward_mean"], "reward_std": paper["reward_std"], "seeds": 1,
+            "speed_mean": paper["speed_mean"], "purity_mean": paper["purity_mean"], "speed_changes_mean": paper["speed_changes_mean"],
+            "heldout": {"mean": {"point": float(rewards.mean())}, "iqm": {"point": float(stats.iqm(rewards))}, "oracle_mean": float(rewards.mean()), "gap_mean": 0.0},
         }
     return rows
 
 
-def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: int, agents=AGENTS) -> str:
-    """Our figures beside the paper's and the reference's, for ``agents`` on every line that has
-    results ("not run" marks a requested agent whose cells are missing)."""
+def improvements(records: list[dict[str, Any]], versus: str = "rba-hold") -> dict[tuple[str, str, str], dict[str, float]]:
+    """Per line and RL agent: P(agent > ``versus``) on the held-out seeds, with its interval."""
+    groups = _group([r for r in records if "heldout" in r])
+    found = {}
+    for (setup, variant, agent), rs in groups.items():
+        if agent in ALGOS and (setup, variant, versus) in groups:
+            interval = stats.probability_of_improvement_interval(episode_rewards(rs), episode_rewards(groups[(setup, variant, versus)]))
+            found[(setup, variant, agent)] = interval.as_dict()
+    return found
+
+
+def normalized_runs(records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[str, dict[tuple[str, str], np.ndarray]]:
+    """Per agent and line: each run's held-out mean reward normalized between the random agent's
+    mean (0) and the oracle's (1) on the same seeds. Lines without a random cell are left out."""
+    groups = _group([r for r in records if "heldout" in r])
+    per_agent: dict[str, dict[tuple[str, str], np.ndarray]] = {}
+    for (setup, variant, agent), rs in groups.items():
+        if (setup, variant, "random") not in groups or (setup, variant) not in oracles:
+            continue
+        worst = float(episode_rewards(groups[(setup, variant, "random")]).mean())
+        best = float(np.mean([e["reward"] for e in oracles[(setup, variant)]["per_episode"]]))
+        per_agent.setdefault(agent, {})[(setup, variant)] = stats.normalized(episode_rewards(rs).mean(axis=1), worst, best)
+    return per_agent
+
+
+def aggregates(normalized: dict[str, dict[tuple[str, str], np.ndarray]]) -> dict[str, dict[str, Any]]:
+    """Per agent: IQM and mean over the lines of the normalized score, stratified by line."""
+    found = {}
+    for agent, lines in normalized.items():
+        strata = list(lines.values())
+        found[agent] = {
+            "lines": len(strata),
+            "iqm": stats.stratified_bootstrap(strata, lambda x: stats.iqm(x, axis=-1)).as_dict(),
+            "mean": stats.stratified_bootstrap(strata, lambda x: np.mean(x, axis=-1)).as_dict(),
+        }
+    return found
+
+
+def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, Any]]:
+    """Where one agent on one line was trained with two numbers of lines (same budget): their IQM
+    intervals and P(N lines > 1 line); they agree when the IQM intervals overlap."""
+    by_lines: dict[tuple[str, str, str], dict[int, list[dict[str, Any]]]] = {}
+    for r in records:
+        c = r["cell"]
+        if c["agent"] in ALGOS and "heldout" in r and r.get("timesteps") == timesteps:
+            by_lines.setdefault((c["setup"], c["variant"], c["agent"]), {}).setdefault(c.get("n_envs", 1), []).append(r)
+    checks = []
+    for (setup, variant, agent), groups in sorted(by_lines.items()):
+        if 1 not in groups or len(groups) < 2:
+            continue
+        one = episode_rewards(groups[1])
+        for n, rs in sorted(groups.items()):
+            if n == 1:
+                continue
+            many = episode_rewards(rs)
+            iqm_one, iqm_many = stats.iqm_interval(one), stats.iqm_interval(many)
+            checks.append({
+                "setup": setup, "variant": variant, "agent": agent, "n_envs": n,
+                "runs": [one.shape[0], many.shape[0]],
+                "iqm_1": iqm_one.as_dict(), "iqm_n": iqm_many.as_dict(),
+                "poi_n_over_1": stats.probability_of_improvement_interval(many, one).as_dict(),
+                "agree": iqm_one.overlaps(iqm_many),
+                "train_wall_s": [statistics.fmean(r["training"]["wall_s"] for r in groups[1]), statistics.fmean(r["training"]["wall_s"] for r in rs)],
+            })
+    return checks
+
+
+def _interval(d: dict[str, float]) -> str:
+    return f"{d['point']:.2f} [{d['low']:.2f}, {d['high']:.2f}]"
+
+
+def table_markdown(rows: dict[Key, dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()) -> str:
+    """Our figures beside the paper's and the reference's, for ``agents`` (and the oracle) on every
+    line that has results ("not run" marks a requested agent whose cells are missing)."""
     from .paper import REFERENCE, TABLE_1, TABLE_1_INDEX
 
     lines = [
-        "| index | setup | env | agent | ours: reward | ours: speed % | ours: purity % | speed changes | paper: reward | paper: speed % | paper: purity % | reference impl.: reward |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean | held-out: IQM [95% CI] | gap to oracle | speed % | purity % | speed changes | paper: reward | reference impl.: reward |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    ran = {(s, v) for s, v, _ in rows}
+    ran = {(s, v) for s, v, a in rows if a != "oracle"}
     for setup in SETUPS:
         for variant in VARIANTS:
             if (setup, variant) not in ran:
                 continue
-            shown = [a for a in TABLE_ORDER if a in agents]
-            best = max(rows[(setup, variant, a)]["reward_mean"] for a in shown if (setup, variant, a) in rows)
+            shown = [a for a in TABLE_ORDER if a in agents] + ["oracle"]
+            best = max(rows[(setup, variant, a)]["reward_mean"] for a in shown[:-1] if (setup, variant, a) in rows)
             for agent in shown:
                 key = (setup, variant, agent)
                 row = rows.get(key)
@@ -164,56 +349,112 @@ def table_markdown(rows: dict[tuple[str, str, str], dict[str, Any]], timesteps: 
                 ref = REFERENCE.get(key)
                 if row is None and paper is None:
                     continue
-                if row is None:
-                    ours = "not run"
-                else:
+                cells = ["not run"] + [""] * 8
+                if row is not None:
                     mean = f"{row['reward_mean']:.2f}"
-                    ours = (
-                        (f"**{mean}**" if row["reward_mean"] == best else mean)
-                        + f" +- {row['reward_std']:.2f}"
-                        + (f" ({row['seeds']} seeds)" if row["seeds"] > 1 else "")
-                    )
+                    ours = (f"**{mean}**" if row["reward_mean"] == best and agent != "oracle" else mean) + f" +- {row['reward_std']:.2f}"
+                    h = row.get("heldout")
+                    cells = [
+                        ours,
+                        f"{h['mean']['point']:.2f}" if h else "",
+                        ("exact: " + f"{h['iqm']['point']:.2f}" if agent == "oracle" else _interval(h["iqm"])) if h else "",
+                        f"{h['gap_mean']:.2f}" if h else "",
+                        f"{100 * row['speed_mean']:.0f}",
+                        f"{100 * row['purity_mean']:.1f}",
+                        f"{row['speed_changes_mean']:.1f}",
+                    ]
+                    cells.insert(0, "" if agent == "oracle" else str(row["seeds"]))
+                else:
+                    cells = ["", "not run", "", "", "", "", "", ""]
                 lines.append(
                     "| "
                     + " | ".join(
-                        [
-                            TABLE_1_INDEX.get(key, ""),
-                            setup,
-                            "Adv" if variant == "advanced" else "Basic",
-                            agent,
-                            ours,
-                            f"{100 * row['speed_mean']:.0f}" if row else "",
-                            f"{100 * row['purity_mean']:.1f}" if row else "",
-                            f"{row['speed_changes_mean']:.1f}" if row else "",
-                            f"{paper[2]:.2f}" if paper else "",
-                            f"{paper[0]:g}" if paper else "",
-                            f"{paper[1]:g}" if paper else "",
-                            f"{ref[0]:.2f} +- {ref[1]:.2f}" if ref else "",
-                        ]
+                        [TABLE_1_INDEX.get(key, ""), setup, "Adv" if variant == "advanced" else "Basic", agent, *cells,
+                         f"{paper[2]:.2f}" if paper else "", f"{ref[0]:.2f} +- {ref[1]:.2f}" if ref else ""]
                     )
                     + " |"
                 )
     note = (
-        f"\nEpisode reward over seeds 42..51 (50 steps, deterministic policy): mean +- population std over the 10 episodes,"
-        f" or, for RL agents trained with more than one seed, the mean over training seeds +- the std across them."
-        f" RL agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random or"
-        f" rba-hold rows, and its RBA figures are not what the reference implementation's code gives on the same protocol"
-        f" (last column). Bold: our best agent on the line."
+        f"\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10 episodes of 50"
+        f" steps, deterministic policy), mean +- population std over the episodes, or for RL with several runs the mean over runs +-"
+        f" the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean and IQM over runs x episodes, the IQM's"
+        f" 95% stratified bootstrap interval resamples the runs within each evaluation seed (one run: exact); gap to oracle = mean"
+        f" over runs x seeds of `sorting_line oracle` - agent. RL agents trained for {timesteps} steps with the paper's"
+        f" hyperparameters. The paper's Table 1 has no random, rba-hold or oracle rows, and its RBA figures are not what the"
+        f" reference implementation's code gives on the same protocol (last column). Bold: our best agent on seeds 42..51."
     )
     return "\n".join(lines) + "\n" + note + "\n"
 
 
-def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS) -> list[Path]:
-    from .plots import analysis_figure, benchmark_figure
+def statistics_markdown(poi, aggregate, checks) -> str:
+    """Probability of improvement, aggregate IQM and the --n-envs agreement check as markdown."""
+    out = []
+    if poi:
+        algos = [a for a in ALGOS if any(k[2] == a for k in poi)]
+        out += ["## Probability of improvement over rba-hold (held-out seeds, 95% CI)", "",
+                "| setup | env | " + " | ".join(f"P({a} > rba-hold)" for a in algos) + " |",
+                "|---|---|" + "---|" * len(algos)]
+        for setup in SETUPS:
+            for variant in VARIANTS:
+                if any((setup, variant, a) in poi for a in algos):
+                    out.append(f"| {setup} | {'Adv' if variant == 'advanced' else 'Basic'} | "
+                               + " | ".join(_interval(poi[(setup, variant, a)]) if (setup, variant, a) in poi else "" for a in algos) + " |")
+        out += ["", "P(X > Y): the chance that a run of X beats rba-hold on a held-out seed, averaged over the seeds (ties half);"
+                " 0.5 = no difference. Interval: runs resampled within each seed.", ""]
+    if aggregate:
+        out += ["## Aggregate over the lines: score normalized between random (0) and the oracle (1)", "",
+                "| agent | lines | IQM [95% CI] | mean [95% CI] |", "|---|---|---|---|"]
+        for agent in TABLE_ORDER:
+            if agent in aggregate:
+                a = aggregate[agent]
+                out.append(f"| {agent} | {a['lines']} | {_interval(a['iqm'])} | {_interval(a['mean'])} |")
+        out += ["", "Per run and line: (held-out mean reward - random's) / (oracle's - random's); IQM over runs x lines,"
+                " interval by the bootstrap stratified by line.", ""]
+    if checks:
+        out += ["## One line against N lines of one node (--n-envs)", "",
+                "| setup | env | agent | lines | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] | P(N lines > 1 line) | agree | training s (1 / N lines) |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
+        for c in checks:
+            out.append(f"| {c['setup']} | {'Adv' if c['variant'] == 'advanced' else 'Basic'} | {c['agent']} | {c['n_envs']} | "
+                       f"{c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | {_interval(c['poi_n_over_1'])} | "
+                       f"{'yes' if c['agree'] else 'NO'} | {c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |")
+        out += ["", "Agree: the two IQM intervals overlap.", ""]
+    return "\n".join(out)
 
-    rows = summarize(records)
+
+def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()) -> list[Path]:
+    from .plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure
+
+    lines = sorted({(r["cell"]["setup"], r["cell"]["variant"]) for r in records})
+    oracles = {line: oracle(*line, heldout.seed, heldout.episodes, out / "oracle") for line in lines}
+    paper_oracles = {line: oracle(*line, 42, 10, out / "oracle") for line in lines}
+    rows = summarize(records, oracles)
+    rows.update(oracle_rows(oracles, paper_oracles))
+    poi = improvements(records)
+    normalized = normalized_runs(records, oracles)
+    aggregate = aggregates(normalized)
+    checks = agreement(saved_records(out), timesteps)
     table = out / "table.md"
-    table.write_text(f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents)}")
+    table.write_text(
+        f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}\n{statistics_markdown(poi, aggregate, checks)}"
+    )
     (out / "table.json").write_text(
-        json.dumps([{"setup": s, "variant": v, "agent": a, **row} for (s, v, a), row in sorted(rows.items())], indent=2) + "\n"
+        json.dumps(
+            {
+                "rows": [{"setup": s, "variant": v, "agent": a, **row} for (s, v, a), row in sorted(rows.items())],
+                "probability_of_improvement_over_rba_hold": [{"setup": s, "variant": v, "agent": a, **p} for (s, v, a), p in sorted(poi.items())],
+                "aggregate_normalized": aggregate,
+                "n_envs_agreement": checks,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     written = [table, out / "table.json"]
-    written += benchmark_figure(rows, out / "figure7")
+    written += benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
+    written += interval_figure(rows, out / "intervals")
+    if aggregate:
+        written += aggregate_figure(aggregate, normalized, out / "aggregate")
     written += analysis_figure(out / "figure3")
     return written
 
@@ -228,12 +469,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS))
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS)
-    p.add_argument("--train-seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS), help="training seeds of the RL agents (default 42)")
+    p.add_argument("--train-seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS), help="training seeds of the RL agents (default 42 43 44 45 46)")
     p.add_argument("--timesteps", type=int, default=100_000, help="training budget per RL agent (default 100000, the paper's)")
-    p.add_argument("--n-envs", type=int, default=1, help="lines per training (default 1, as the paper)")
+    p.add_argument("--n-envs", type=int, default=1, help="lines of one node per training, a power of two (default 1, as the paper; hyperparameters mapped, see hyperparams)")
+    p.add_argument("--heldout-seed", type=int, default=HELDOUT_SEED, help=f"first held-out evaluation seed (default {HELDOUT_SEED})")
+    p.add_argument("--heldout-episodes", type=int, default=HELDOUT_EPISODES, help=f"held-out evaluation episodes (default {HELDOUT_EPISODES})")
     p.add_argument("--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)")
+    p.add_argument("--check-n-envs", action="store_true",
+                   help="with --n-envs N > 1: also train PPO on B advanced and DQN on D basic (where selected) on one line, per "
+                        "training seed, for the check that one line and N lines agree (run last)")
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     return p
+
+
+def heldout_of(args) -> Heldout:
+    return Heldout(args.heldout_seed, args.heldout_episodes)
 
 
 def _interrupt(signum, frame):
@@ -265,7 +515,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
         for cell in todo:
             bar.set_postfix_str(cell.name)
             try:
-                outcome = run_cell(cell, args.out, args.timesteps, args.n_envs, True)
+                outcome = run_cell(cell, args.out, args.timesteps, heldout_of(args), True)
             except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
                 outcome = e
             finished(cell, outcome)
@@ -279,7 +529,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
             while queue or pending:
                 while queue and len(pending) < args.jobs:
                     cell = queue.pop(0)
-                    pending[pool.submit(run_cell, cell, args.out, args.timesteps, args.n_envs, False)] = cell
+                    pending[pool.submit(run_cell, cell, args.out, args.timesteps, heldout_of(args), False)] = cell
                     bar.set_postfix_str(", ".join(c.name for c in pending.values()))
                 complete, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for future in complete:
@@ -298,12 +548,22 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     args = build_parser().parse_args(argv)
-    for flag, value in (("--timesteps", args.timesteps), ("--n-envs", args.n_envs), ("--jobs", args.jobs)):
+    for flag, value in (("--timesteps", args.timesteps), ("--n-envs", args.n_envs), ("--jobs", args.jobs), ("--heldout-episodes", args.heldout_episodes)):
         if value < 1:
             print(f"sorting-line-benchmark: {flag} = {value} is not valid: allowed 1 or more", file=sys.stderr)
             return 2
-    cells = plan(args.setups, args.variants, args.agents, args.train_seeds)
-    done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps)) is not None}
+    if args.n_envs & (args.n_envs - 1) or args.n_envs > 2048:
+        print(f"sorting-line-benchmark: --n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048", file=sys.stderr)
+        return 2
+    if args.heldout_seed < 0:
+        print(f"sorting-line-benchmark: --heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more", file=sys.stderr)
+        return 2
+    heldout = heldout_of(args)
+    cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs)
+    if args.check_n_envs and args.n_envs > 1:
+        cells += [c for line, agent in AGREEMENT_CELLS for c in plan(*line, [agent], args.train_seeds, 1)
+                  if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants]
+    done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
     todo = [c for c in cells if c not in done]
     if args.report_only:
         todo = []
@@ -320,7 +580,9 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 done[cell] = outcome
                 r = outcome["evaluation"]
-                bar.write(f"{cell.name}: {r['reward_mean']:.2f} +- {r['reward_std']:.2f} ({outcome['wall_s']:.0f} s)")
+                h = outcome["heldout"]
+                bar.write(f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}, held-out {h['reward_mean']:.2f}"
+                          f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)")
             bar.update(1)
 
         try:
@@ -331,11 +593,12 @@ def main(argv: list[str] | None = None) -> int:
                   "the same command goes on from there", file=sys.stderr)
             return 130
         bar.close()
-    records = [done[c] for c in cells if c in done]
+    # The table is of the run's --n-envs; the one-line cells of --check-n-envs go to the agreement check.
+    records = [done[c] for c in cells if c in done and (c.agent not in ALGOS or c.n_envs == args.n_envs)]
     if not records:
         print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
         return 1
-    for path in write_report(args.out, records, args.timesteps, args.agents):
+    for path in write_report(args.out, records, args.timesteps, args.agents, heldout):
         print(f"written: {path}", file=sys.stderr)
     print((args.out / "table.md").read_text())
     if failures:

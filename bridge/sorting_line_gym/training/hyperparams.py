@@ -12,6 +12,15 @@ overrides single keys (the value is read as YAML: ``--hp gamma=0.9 --hp policy_k
 
 Everything else is handed to the algorithm's constructor; ``load`` refuses, by name, a key the
 constructor does not take.
+
+Several lines (``n_envs`` = N > 1) change what one update sees unless the rollout keys follow, so
+``load`` maps the paper's one-line settings to N lines (:func:`for_lines`), for each key the file
+and the overrides leave at SB3's default: PPO keeps its 2048-step rollout as N x ``n_steps`` (same
+samples, minibatches and epochs per update); DQN keeps one gradient step per 4 transitions
+(``train_freq`` counts vector steps of N transitions, so ``train_freq`` x N / 4 gradient steps;
+``target_update_interval`` SB3 already divides by N); A2C keeps its update as close to 5
+transitions as N allows (``n_steps`` = max(1, 5 // N): from 5 lines on, N transitions and 1-step
+returns per update). N must be a power of two (up to 2048) so these are whole numbers.
 """
 
 from __future__ import annotations
@@ -84,7 +93,31 @@ def load(algo: str, variant: str, path: str | Path | None = None, overrides: Ite
         overridden.add(key)
     _check_own_keys(params, source)
     _check_constructor_keys(algo, params, lambda key: "an override" if key in overridden else source)
-    return params
+    return for_lines(algo, params)
+
+
+#: SB3's defaults of the keys that set how much one update sees, for one line (the paper's).
+ONE_LINE_ROLLOUT = {"ppo": {"n_steps": 2048}, "dqn": {"train_freq": 4, "gradient_steps": 1}, "a2c": {"n_steps": 5}}
+
+
+def for_lines(algo: str, params: dict[str, Any]) -> dict[str, Any]:
+    """``params`` with the rollout keys mapped from one line to ``params["n_envs"]`` lines (see the
+    module docstring); keys given explicitly are kept as they are. One line: unchanged."""
+    n = params["n_envs"]
+    if n == 1:
+        return params
+    if n & (n - 1) or n > 2048:
+        raise ValueError(f"n_envs = {n} is not valid for the one-line to N-line mapping: allowed a power of two, 1 .. 2048")
+    mapped = dict(params)
+    if algo == "ppo" and "n_steps" not in params:
+        mapped["n_steps"] = ONE_LINE_ROLLOUT["ppo"]["n_steps"] // n
+    elif algo == "dqn" and "train_freq" not in params and "gradient_steps" not in params:
+        per_gradient_step = ONE_LINE_ROLLOUT["dqn"]["train_freq"] // ONE_LINE_ROLLOUT["dqn"]["gradient_steps"]
+        mapped["train_freq"] = max(1, per_gradient_step // n)
+        mapped["gradient_steps"] = mapped["train_freq"] * n // per_gradient_step
+    elif algo == "a2c" and "n_steps" not in params:
+        mapped["n_steps"] = max(1, ONE_LINE_ROLLOUT["a2c"]["n_steps"] // n)
+    return mapped
 
 
 def _check_own_keys(params: dict[str, Any], source: str) -> None:
