@@ -40,3 +40,8 @@ register(
     max_episode_steps=50,
     vector_entry_point="sorting_line_gym.vector:SortingLineVectorEnv",
 )
+register(
+    id="SortingLineEvolving-v0",
+    entry_point="sorting_line_gym.envs.evolving:SortingLineEvolvingEnv",
+    max_episode_steps=50,
+)

@@ -76,6 +76,7 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
             host: HostedLine::with_evolution(params.line.clone(), seed, params.evolution.clone(), clock, params.mode),
             counters: LineCounters::new(namespace),
             announced_tick: None,
+            counted_tick: None,
             evolution_events: 0,
         });
     }
@@ -236,8 +237,12 @@ struct LineEndpoints {
 struct LineRuntime {
     host: HostedLine,
     counters: LineCounters,
-    /// The tick whose pending evolution events were announced (once per tick).
+    /// The tick whose pending evolution events were announced since the last reset (a reset
+    /// announces them again after its own, so a client that reset knows what its first step
+    /// brings).
     announced_tick: Option<u64>,
+    /// The newest tick whose events were counted (they are counted once however often announced).
+    counted_tick: Option<u64>,
     /// Evolution events announced so far.
     evolution_events: u64,
 }
@@ -406,6 +411,7 @@ impl LineEndpoints {
         let sent = shared.offer(&self.reset_event, &|| self.show("events/reset"), || ResetEvent::of(&r.host, seeded));
         r.counters.count_published(sent);
         if r.host.evolving() {
+            r.announced_tick = None;
             let line = r.host.line();
             let indices: Vec<usize> = line.evolution().events_at(At::Episode(line.episode())).map(|(i, _)| i).collect();
             let settings = line.settings();
@@ -440,7 +446,13 @@ impl LineEndpoints {
                 ),
             );
         }
-        r.evolution_events += indices.len() as u64;
+        let tick = r.host.line().tick();
+        if at_reset || r.counted_tick != Some(tick) {
+            r.evolution_events += indices.len() as u64;
+        }
+        if !at_reset {
+            r.counted_tick = Some(tick);
+        }
         r.counters.count_published(shared.offer(publisher, &|| self.show("events/evolution"), || message));
         if k == 0 {
             shared.update_parameters(settings);

@@ -42,8 +42,8 @@ EPISODE_2 = [13, 19, 4, 25, 16, 28, 10, 7, 23, 1]
 BATCH_STEP = 2  # this step of episode 1 goes through batch/cmd with a mode the machine lacks
 
 
-def trace(schedule_file, tokens) -> list[dict]:
-    argv = [str(h.node_binary()), "trace", "--setup", "B", "--variant", "advanced", "--seed", str(SEED),
+def trace(schedule_file, tokens, seed: int = SEED) -> list[dict]:
+    argv = [str(h.node_binary()), "trace", "--setup", "B", "--variant", "advanced", "--seed", str(seed),
             "--evolution", str(schedule_file), "--actions", ",".join(map(str, tokens))]
     out = subprocess.run(argv, capture_output=True, text=True, timeout=30, check=True).stdout
     return [json.loads(line) for line in out.splitlines()]
@@ -184,3 +184,110 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
                    lambda: str(c.diagnostics[-1][1] if c.diagnostics else None))
     assert "rejected sort mode 2" in node.log() and "[sort_modes_off]" in node.log(), node.log_tail()
     assert "sensors/ratio appears" in node.log() and "cmd/sort_mode appears" in node.log(), node.log_tail()
+
+
+# --------------------------------------------------------------------------------------------
+# Gymnasium: SortingLineEvolving-v0
+
+# Basic hardware until episode 3 (the third reset), then both upgrades; a drift mid-episode 3.
+ENV_SCHEDULE = """\
+events:
+  - at: {episode: 0}
+    sort_modes: false
+    ratio_sensor: false
+  - at: {episode: 3}
+    sort_modes: true
+    ratio_sensor: true
+  - at: {tick: 25}
+    obs_noise: 0.1
+"""
+ENV_EPISODE_STEPS = 10
+
+
+def make_env(schedule_file, **kwargs):
+    import gymnasium
+
+    import sorting_line_gym  # noqa: F401 - registers the ids
+
+    return gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", evolution=str(schedule_file), setup="B",
+                          max_episode_steps=ENV_EPISODE_STEPS, **kwargs)
+
+
+def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
+    import numpy as np
+
+    schedule = tmp_path / "env.yaml"
+    schedule.write_text(ENV_SCHEDULE)
+    seeds = [7, 8, 9]
+    rng = np.random.default_rng(3)
+    actions = [rng.integers(0, 30, ENV_EPISODE_STEPS).tolist() for _ in seeds]
+    env = make_env(schedule)
+    got, tokens = [], []
+    try:
+        for episode, (seed, acts) in enumerate(zip(seeds, actions), start=1):
+            obs, info = env.reset(seed=seed)
+            tokens.append(f"r{seed}")
+            masks = env.unwrapped.action_masks()
+            upgraded = episode >= 3
+            assert masks.tolist() == [upgraded or a % 3 == 0 for a in range(30)], (episode, masks)
+            assert info["settings"]["sort_modes"] == upgraded and info["settings"]["ratio_sensor"] == upgraded
+            assert (obs[1] == 0.5) != upgraded, f"episode {episode}: category {obs[1]}"
+            if episode == 3:
+                assert info["evolution"] == [{"at_reset": True, "episode": 3, "tick": 20,
+                                              "changed": {"sort_modes": "true", "ratio_sensor": "true"}}]
+            got.append(("reset", obs.tolist()))
+            for action in acts:
+                obs, reward, terminated, truncated, info = env.step(action)
+                tokens.append(str(action))
+                got.append(("step", obs.tolist(), reward, info["mode"]))
+                assert (obs[1] == 0.5) != upgraded
+                if info["line_tick"] == 25:
+                    assert info["evolution"] == [{"at_reset": False, "episode": 3, "tick": 25,
+                                                  "changed": {"obs_noise": "0.1"}}], info["evolution"]
+                    assert info["settings"]["obs_noise"] == 0.1
+            assert truncated and not terminated
+    finally:
+        env.close()
+
+    expected = []
+    for entry in trace(schedule, tokens, seed=seeds[0])[1:]:
+        category = entry["category_reading"]
+        category = 0.5 if category == 3 else float(category)
+        if "reset" in entry:
+            expected.append(("reset", [entry["reset"]["observation"]["quantity"], category]))
+        else:
+            s = entry["step"]
+            expected.append(("step", [s["observation"]["quantity"], category], s["reward"],
+                             h.MODES[s["action"]["mode"]]))
+    # float32 observations: compare the readings (two decimals) at float32 precision.
+    as32 = lambda rows: [tuple(np.float32(v).item() if isinstance(v, float) else v for v in r[1]) for r in rows]
+    assert as32(got) == as32(expected)
+    assert [r[2:] for r in got] == [r[2:] for r in expected]
+
+
+def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
+    import gymnasium
+    from sb3_contrib import MaskablePPO
+
+    schedule = tmp_path / "env.yaml"
+    schedule.write_text(ENV_SCHEDULE)
+    picks: list[tuple[bool, bool]] = []  # (action allowed, modes on) per step
+
+    class Recorder(gymnasium.Wrapper):
+        def action_masks(self):
+            return self.env.get_wrapper_attr("action_masks")()
+
+        def step(self, action):
+            picks.append((bool(self.action_masks()[int(action)]), bool(self.action_masks().all())))
+            return self.env.step(action)
+
+    env = Recorder(make_env(schedule))
+    try:
+        model = MaskablePPO("MlpPolicy", env, n_steps=40, batch_size=40, n_epochs=1, seed=3, device="cpu")
+        model.learn(80)
+    finally:
+        env.close()
+    assert len(picks) >= 80
+    assert all(allowed for allowed, _ in picks), [i for i, (ok, _) in enumerate(picks) if not ok]
+    before = [modes for _, modes in picks[: 2 * ENV_EPISODE_STEPS]]
+    assert not any(before) and all(modes for _, modes in picks[2 * ENV_EPISODE_STEPS:]), "the upgrade at episode 3"
