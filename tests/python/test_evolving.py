@@ -291,3 +291,57 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
     assert all(allowed for allowed, _ in picks), [i for i, (ok, _) in enumerate(picks) if not ok]
     before = [modes for _, modes in picks[: 2 * ENV_EPISODE_STEPS]]
     assert not any(before) and all(modes for _, modes in picks[2 * ENV_EPISODE_STEPS:]), "the upgrade at episode 3"
+
+
+# --------------------------------------------------------------------------------------------
+# Bags: record an evolving run, replay it exactly
+
+
+def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
+    from bag_golden import BagProcess
+
+    from sorting_line_gym.bag import open_bag
+    from sorting_line_gym.bag.replay import replay
+
+    schedule = tmp_path / "schedule.yaml"
+    schedule.write_text(SCHEDULE)
+    ns = namespace("bag")
+    node = start_node("--setup", "B", "--variant", "advanced", "--seed", SEED, "--evolution", schedule,
+                      "--ros-args", "-r", f"__ns:={ns}")
+    c = client_factory(ns, "basic", node_proc=node, mode_topic=True)
+    c.wait_connected()
+    out = tmp_path / "evolving"
+    recorder = BagProcess(["record", "--namespace", ns, "-o", out], tmp_path / "record.log")
+    recorder.wait_for_output("recording", 20.0, ros)
+    for rel in ("cmd/speed", "cmd/sort_mode"):
+        ros.spin_until(lambda: f"matched {ns}/{rel}: 1 publisher(s)" in recorder.log(), 20.0,
+                       f"the recorder to match our {rel}", recorder.describe)
+
+    def step(action: int):
+        speed, mode = h.decode_action("advanced", action)
+        c.send_mode(mode)  # before the upgrade only the recorder reads it: the node has no cmd/sort_mode
+        c.send_speed(speed)
+        c.wait_state(c.stamp + c.period_ns)
+        c.stamp += c.period_ns
+
+    c.reset(SEED)
+    for action in EPISODE_1:
+        step(action)
+    c.reset()
+    for tick, action in enumerate(EPISODE_2, start=len(EPISODE_1)):
+        if tick == UPGRADE_TICK:  # the node's cmd/sort_mode appears: ours must reach it
+            ros.spin_until(lambda: c.mode_pub.get_subscription_count() >= 2, 10, "the node's cmd/sort_mode", c.context)
+        step(action)
+    ros.spin_for(0.3)
+    assert recorder.stop() == 0, recorder.describe()
+
+    bag = open_bag(out)
+    assert bag.info.node["evolution"] == SCHEDULE and bag.info.node["evolution_file"] == str(schedule)
+    evolution = [m.plain for m in bag.on(f"{ns}/events/evolution")]
+    assert [(e["at_reset"], e["episode"], e["tick"], e["event_indices"]) for e in evolution] == [
+        (True, 1, 0, []), (False, 1, 4, [1]), (False, 1, 6, [2]), (True, 2, 10, [3]), (False, 2, 14, [4])]
+    result = replay(out)
+    assert result.identical, result.report()
+    assert result.comparison.compared["events/evolution"] == 5
+    assert result.comparison.compared["state"] == len(c.since_reset("state")) == 2 + len(EPISODE_1) + len(EPISODE_2)
+    assert "sensors/ratio" not in result.comparison.compared and any("schedule stored in the bag" in n for n in result.notes)
