@@ -55,6 +55,17 @@ def step_view(entry: dict) -> dict:
     return view
 
 
+def evolving_line(tmp_path, start_node, client_factory, ns: str):
+    """A lock-step node running advanced B by SCHEDULE in `ns`, and a client of its line that
+    publishes cmd/sort_mode (the basic-variant client: it does not wait for the node's, which
+    appears only with the machine upgrade). Returns (schedule file, ns, node, client)."""
+    schedule = tmp_path / "schedule.yaml"
+    schedule.write_text(SCHEDULE)
+    node = start_node("--setup", "B", "--variant", "advanced", "--seed", SEED, "--evolution", schedule,
+                      "--ros-args", "-r", f"__ns:={ns}")
+    return schedule, ns, node, client_factory(ns, "basic", node_proc=node, mode_topic=True)
+
+
 def test_bad_schedule_fails_at_start_naming_the_event(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("events:\n  - at: {tick: 5}\n    obs_noise: 0.1\n  - at: {tick: 500}\n    threshold: 1.2\n")
@@ -71,12 +82,7 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     from rcl_interfaces.srv import GetParameters
     from sorting_line_interfaces.msg import EvolutionEvent, LineCommands, MaterialRatio
 
-    schedule = tmp_path / "schedule.yaml"
-    schedule.write_text(SCHEDULE)
-    ns = namespace("evo")
-    node = start_node("--setup", "B", "--variant", "advanced", "--seed", SEED, "--evolution", schedule,
-                      "--ros-args", "-r", f"__ns:={ns}")
-    c = client_factory(ns, "basic", node_proc=node, mode_topic=True)
+    schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("evo"))
     events: list = []
     probe.create_subscription(EvolutionEvent, f"{ns}/events/evolution", events.append, 10)
     ratios: list = []
@@ -303,12 +309,7 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     from sorting_line_gym.bag import open_bag
     from sorting_line_gym.bag.replay import replay
 
-    schedule = tmp_path / "schedule.yaml"
-    schedule.write_text(SCHEDULE)
-    ns = namespace("bag")
-    node = start_node("--setup", "B", "--variant", "advanced", "--seed", SEED, "--evolution", schedule,
-                      "--ros-args", "-r", f"__ns:={ns}")
-    c = client_factory(ns, "basic", node_proc=node, mode_topic=True)
+    schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("bag"))
     c.wait_connected()
     out = tmp_path / "evolving"
     recorder = BagProcess(["record", "--namespace", ns, "-o", out], tmp_path / "record.log")
