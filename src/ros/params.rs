@@ -14,6 +14,7 @@ use serde_yaml::Value;
 
 use super::names::Names;
 use super::options::{NodeArgs, TickMode};
+use crate::sim::config::{ACTION_PENALTY_ALLOWED, MAX_STEPS_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED};
 use crate::sim::evolution::Schedule;
 use crate::sim::{LineConfig, Setup};
 
@@ -68,10 +69,10 @@ pub const MAX_SEED: u64 = i64::MAX as u64;
 pub const PARAMETERS: &[(&str, &str)] = &[
     ("variant", "basic or advanced"),
     ("input", "random, seasonal or seasonal3"),
-    ("obs_noise", "0.0 ..= 1.0"),
-    ("action_penalty", "0.0 ..= 10.0"),
-    ("threshold", "0.0 ..< 1.0"),
-    ("max_steps", "1 ..= 1000000"),
+    ("obs_noise", OBS_NOISE_ALLOWED),
+    ("action_penalty", ACTION_PENALTY_ALLOWED),
+    ("threshold", THRESHOLD_ALLOWED),
+    ("max_steps", MAX_STEPS_ALLOWED),
     ("seed", "0 ..= 9223372036854775807 (a ROS integer parameter is 64-bit signed; seed + k for k < lines included)"),
     ("mode", "lockstep or realtime"),
     ("rate", "0.0 <.. 100000.0 (ticks per second)"),

@@ -114,6 +114,13 @@ pub const OBS_NOISE_RANGE: (f64, f64) = (0.0, 1.0);
 pub const ACTION_PENALTY_RANGE: (f64, f64) = (0.0, 10.0);
 pub const THRESHOLD_RANGE: (f64, f64) = (0.0, 1.0);
 
+/// The ranges above as every error message and parameter description writes them (`..=` closed,
+/// `..<` open at the top); a test checks that each text says what its numbers say.
+pub const OBS_NOISE_ALLOWED: &str = "0.0 ..= 1.0";
+pub const ACTION_PENALTY_ALLOWED: &str = "0.0 ..= 10.0";
+pub const THRESHOLD_ALLOWED: &str = "0.0 ..< 1.0";
+pub const MAX_STEPS_ALLOWED: &str = "1 ..= 1000000";
+
 impl LineConfig {
     /// The configuration of one of the paper's setups (threshold 0.7, 50-step episodes).
     pub fn for_setup(setup: Setup, variant: Variant) -> Self {
@@ -129,17 +136,17 @@ impl LineConfig {
     /// The allowed range of `obs_noise`: the one check for every source of the value (flags,
     /// parameter files, ROS parameters, evolution schedules).
     pub fn check_obs_noise(value: f64) -> Result<(), ConfigError> {
-        check_range("obs_noise", value, OBS_NOISE_RANGE.0, OBS_NOISE_RANGE.1, false, "0.0 ..= 1.0")
+        check_range("obs_noise", value, OBS_NOISE_RANGE.0, OBS_NOISE_RANGE.1, false, OBS_NOISE_ALLOWED)
     }
 
     /// The allowed range of `action_penalty` (see [`LineConfig::check_obs_noise`]).
     pub fn check_action_penalty(value: f64) -> Result<(), ConfigError> {
-        check_range("action_penalty", value, ACTION_PENALTY_RANGE.0, ACTION_PENALTY_RANGE.1, false, "0.0 ..= 10.0")
+        check_range("action_penalty", value, ACTION_PENALTY_RANGE.0, ACTION_PENALTY_RANGE.1, false, ACTION_PENALTY_ALLOWED)
     }
 
     /// The allowed range of `threshold` (see [`LineConfig::check_obs_noise`]).
     pub fn check_threshold(value: f64) -> Result<(), ConfigError> {
-        check_range("threshold", value, THRESHOLD_RANGE.0, THRESHOLD_RANGE.1, true, "0.0 ..< 1.0")
+        check_range("threshold", value, THRESHOLD_RANGE.0, THRESHOLD_RANGE.1, true, THRESHOLD_ALLOWED)
     }
 
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -150,7 +157,7 @@ impl LineConfig {
             return Err(ConfigError {
                 field: "max_steps",
                 value: self.max_steps.to_string(),
-                allowed: "1 ..= 1000000",
+                allowed: MAX_STEPS_ALLOWED,
             });
         }
         Ok(())
@@ -234,5 +241,14 @@ mod tests {
             assert_eq!(v.to_string().parse::<Variant>().unwrap(), v);
         }
         assert!("fast".parse::<Variant>().unwrap_err().contains("allowed basic, advanced"));
+    }
+
+    #[test]
+    fn allowed_texts_say_what_the_ranges_are() {
+        let closed = |(lo, hi): (f64, f64)| format!("{lo:.1} ..= {hi:.1}");
+        assert_eq!(OBS_NOISE_ALLOWED, closed(OBS_NOISE_RANGE));
+        assert_eq!(ACTION_PENALTY_ALLOWED, closed(ACTION_PENALTY_RANGE));
+        assert_eq!(THRESHOLD_ALLOWED, format!("{:.1} ..< {:.1}", THRESHOLD_RANGE.0, THRESHOLD_RANGE.1));
+        assert_eq!(MAX_STEPS_ALLOWED, format!("1 ..= {MAX_EPISODE_STEPS}"));
     }
 }
