@@ -246,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--evaluations", type=int, default=20, help="evaluation episodes (seeds 10000...)")
     parser.add_argument("--out", type=Path, default=Path("results/transfer"))
     parser.add_argument("--torch-threads", type=int, default=1)
+    parser.add_argument("--report-only", action="store_true",
+                        help="train nothing: table and plot of the runs already in OUT/transfer.json")
     args = parser.parse_args(argv)
     if args.before < 1 or args.after < WINDOW:
         parser.error(f"--before must be >= 1 and --after >= {WINDOW}")
@@ -257,8 +259,10 @@ def main(argv: list[str] | None = None) -> int:
     results_file = args.out / "transfer.json"
     done = json.loads(results_file.read_text()) if results_file.exists() else {"runs": []}
     runs = [r for r in done["runs"] if r["before"] == args.before and r["after"] == args.after]
-    baselines = {}
+    baselines = done.get("baselines", {})
     for scenario in args.scenarios:
+        if args.report_only:
+            continue
         evolving, changed = schedules(scenario, args.before, args.out)
         # Before: basic B for the upgrade, advanced B for the drift; after: the changed line.
         before_variant = "basic" if scenario == "upgrade" else "advanced"
@@ -273,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
             runs.append(run_seed(scenario, seed, args.before, args.after, args.evaluations, args.out, log))
             results_file.write_text(json.dumps({"runs": runs, "baselines": baselines}, indent=1))
     results_file.write_text(json.dumps({"runs": runs, "baselines": baselines}, indent=1))
-    chosen = [r for r in runs if r["scenario"] in args.scenarios and r["seed"] in args.seeds]
+    chosen = [r for r in runs if r["scenario"] in args.scenarios and (args.report_only or r["seed"] in args.seeds)]
     plot(chosen, baselines, args.out)
     text = table(chosen, baselines)
     (args.out / "transfer.md").write_text(text + "\n")
