@@ -346,3 +346,22 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     assert result.comparison.compared["events/evolution"] == 5
     assert result.comparison.compared["state"] == len(c.since_reset("state")) == 2 + len(EPISODE_1) + len(EPISODE_2)
     assert "sensors/ratio" not in result.comparison.compared and any("schedule stored in the bag" in n for n in result.notes)
+
+    # The events are compared: a recorded announcement with another threshold is named.
+    import dataclasses
+
+    from sorting_line_gym.bag import rewrite_bag
+    from sorting_line_gym.bag.schema import typestore
+
+    store = typestore()
+
+    def edit(m):
+        if m.topic.endswith("/events/evolution") and m.plain["tick"] == 4 and not m.plain["at_reset"]:
+            return dataclasses.replace(store.deserialize_cdr(m.data, m.msgtype), threshold=0.75)
+        return None
+
+    assert rewrite_bag(out, tmp_path / "tampered", edit) == 1
+    tampered = replay(tmp_path / "tampered")
+    assert not tampered.identical
+    assert (tampered.difference.topic, tampered.difference.field, tampered.difference.recorded,
+            tampered.difference.replayed) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
