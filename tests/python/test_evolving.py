@@ -365,3 +365,32 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     assert not tampered.identical
     assert (tampered.difference.topic, tampered.difference.field, tampered.difference.recorded,
             tampered.difference.replayed) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
+
+
+def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, start_node, client_factory, namespace, ros):
+    """The real `ros2 topic list`: no sensors/ratio and no cmd/sort_mode until the upgrade (here at
+    the first reset), both after it."""
+    import time
+
+    schedule = tmp_path / "upgrade-at-1.yaml"
+    schedule.write_text("events:\n  - at: {episode: 0}\n    sort_modes: false\n    ratio_sensor: false\n"
+                        "  - at: {episode: 1}\n    sort_modes: true\n    ratio_sensor: true\n")
+    ns = namespace("cli")
+    node = start_node("--setup", "B", "--variant", "advanced", "--evolution", schedule, "--ros-args", "-r", f"__ns:={ns}")
+    c = client_factory(ns, "basic", node_proc=node)
+    c.wait_connected()
+    hardware = {f"{ns}/sensors/ratio", f"{ns}/cmd/sort_mode"}
+
+    def listed(want, timeout: float = 30.0) -> set[str]:
+        deadline = time.monotonic() + timeout
+        while True:
+            topics = set(ros2_daemon.run("topic", "list", timeout=30).stdout.split())
+            if want(topics) or time.monotonic() > deadline:
+                return topics
+            time.sleep(0.5)
+
+    before = listed(lambda t: f"{ns}/state" in t and f"{ns}/events/evolution" in t)
+    assert f"{ns}/state" in before and not hardware & before, sorted(t for t in before if t.startswith(ns))
+    c.reset(1)
+    after = listed(lambda t: hardware <= t)
+    assert hardware <= after, sorted(t for t in after if t.startswith(ns))
