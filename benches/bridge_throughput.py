@@ -247,7 +247,7 @@ def make_subject(n: int) -> Subject:
 
 def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
     import numpy as np
-    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_gym import SortingLineVectorEnv
 
     env = SortingLineVectorEnv(num_envs=lines, setup="A", variant="basic", max_episode_steps=max_episode_steps)
     env.reset(seed=1)

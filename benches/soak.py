@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 
 import ros_harness as h  # noqa: E402
-from sorting_line_gym.vocabulary import EPISODE_STEPS, SETUPS, VARIANTS  # noqa: E402
+from sorting_line_gym.line.vocabulary import EPISODE_STEPS, SETUPS, VARIANTS  # noqa: E402
 
 
 def progress(msg: str) -> None:
@@ -173,9 +173,9 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
     """Runs the soak in this process (rclpy must be importable; the caller ensures isolation)."""
     import numpy as np
     from node_lockstep import cpu_times, loadavg, steal_percent
-    from sorting_line_gym.env import SEED_BOUND
-    from sorting_line_gym.transport import BridgeTimeout
-    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_gym.envs.env import SEED_BOUND
+    from sorting_line_gym import BridgeTimeout
+    from sorting_line_gym import SortingLineVectorEnv
 
     result = SoakResult(load_before=loadavg(), config=dict(ticks=ticks, lines=lines, setup=setup, variant=variant,
                                                            seed=seed, window=window, verify_episodes=verify_episodes))

@@ -10,7 +10,7 @@ tree: the algorithm with the paper's hyperparameters (``hyperparams/<algo>.yml``
 bar on, the same torch thread count, and the wall time of ``model.learn()`` alone (env start-up
 and saving excluded on both sides). The reference (Storm-131/2024_Sorting_Env, read unmodified
 from ``--reference``) is trained as its ``utils/benchmark.py`` does: ``reset(seed=100)``, Monitor,
-``check_env``. Ours is ``sorting_line_gym.train.train`` (a node process, lock-step over DDS).
+``check_env``. Ours is ``sorting_line_gym.training.train.train`` (a node process, lock-step over DDS).
 
 Prints both wall times, steps/s, the ratio, load average and CPU steal; ``--rounds N`` alternates
 the two N times and reports medians. DDS stays on loopback: as root the script re-executes itself
@@ -30,7 +30,7 @@ from unittest.mock import MagicMock
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 import ros_harness as h  # noqa: E402
-from sorting_line_gym.vocabulary import SETUPS, THRESHOLD, VARIANTS  # noqa: E402
+from sorting_line_gym.line.vocabulary import SETUPS, THRESHOLD, VARIANTS  # noqa: E402
 
 #: The reference env's name of each input generator.
 REFERENCE_INPUTS = {"random": "r", "seasonal": "s9"}
@@ -52,7 +52,7 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
     from stable_baselines3.common.env_checker import check_env
     from stable_baselines3.common.monitor import Monitor
 
-    from sorting_line_gym import hyperparams
+    from sorting_line_gym.training import hyperparams
 
     sys.path.insert(0, str(ref_dir))
     # The reference's env modules import cv2 and seaborn at top level for plotting only; where they
@@ -82,8 +82,8 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
 
 
 def time_ours(algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path) -> float:
-    from sorting_line_gym import hyperparams
-    from sorting_line_gym.train import train
+    from sorting_line_gym.training import hyperparams
+    from sorting_line_gym.training.train import train
 
     params = hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}"])
     run = train(algo, setup, variant, seed=42, out=out, params=params, tensorboard=tb, progress=True, torch_threads=threads)

@@ -80,7 +80,7 @@ def descendants(pid: int) -> list[int]:
 
 def server_pids() -> list[int]:
     """Supervisors and nodes of the line servers in this network namespace (the subject's)."""
-    from sorting_line_gym.transport import host_state_directory, network_namespace
+    from sorting_line_gym.line.host import host_state_directory, network_namespace
 
     pids = []
     for info in host_state_directory().glob("*/s*.json"):
@@ -116,7 +116,7 @@ def measure_here(key: str, steps: int, raw_steps: int) -> dict:
     n = int(n)
     started = time.perf_counter()
     if kind == "ours":
-        from sorting_line_gym.vector import SortingLineVectorEnv
+        from sorting_line_gym import SortingLineVectorEnv
 
         env = SortingLineVectorEnv(num_envs=n, setup="A", variant="basic", max_episode_steps=50)
     else:

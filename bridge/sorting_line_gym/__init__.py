@@ -8,40 +8,55 @@ By default each environment starts, owns and stops its own node process (``node=
 namespace of its own; ``node="shared"`` leases a line of this host's line server (many envs per
 host); ``node="attach"`` uses a node already serving ``namespace``. Nothing starts before the
 first ``reset()``. Under the hood every step is a lock-step round trip over ROS 2 topics (see
-``transport``).
+``ros.links``).
 
-Modules: ``transport`` (rclpy plumbing, the node process, waiting with timeouts, the fork rule),
-``line_server`` and ``line_supervisor`` (line servers and leases), ``env`` (the single-line
-environment), ``vector`` (N lines of one node as a Gymnasium VectorEnv), ``sb3_vec_env`` (the same
-as an SB3 VecEnv), ``zoo`` (RL Zoo conf files), ``render`` (the dashboard).
+Subpackages, by what they depend on (each builds only on those before it):
+``line`` (nothing ROS: the vocabulary, options, the node process, line servers), ``ros`` (rclpy:
+context, waits, links, the batch codec, the bank of lines), ``envs`` (the Gymnasium and SB3
+environments, the dashboard), ``agents``, ``training`` (SB3), ``reports`` (evaluation, benchmark,
+plots), ``bag`` (record, play, replay). ``zoo`` holds RL Zoo conf files, ``evolutions`` ready
+schedules of the evolving line.
+
+``import sorting_line_gym`` registers the Gymnasium ids and imports neither rclpy nor SB3: the
+environment classes below load on first use.
 """
 
 from gymnasium.envs.registration import register
 
-from .env import SortingLineEnv
-from .transport import BridgeError, BridgeTimeout
+from .line.errors import BridgeError, BridgeTimeout
+from .line.vocabulary import ENV_IDS, EPISODE_STEPS
 
-__all__ = ["SortingLineEnv", "BridgeError", "BridgeTimeout"]
+__all__ = ["SortingLineEnv", "SortingLineVectorEnv", "SortingLineSB3VecEnv", "BridgeError", "BridgeTimeout"]
+
+_LAZY = {
+    "SortingLineEnv": "envs.env",
+    "SortingLineVectorEnv": "envs.vector",
+    "SortingLineSB3VecEnv": "envs.sb3_vec_env",
+}
+
+
+def __getattr__(name: str):
+    # PEP 562: the environment classes pull in rclpy (and SB3, torch), which registering the ids,
+    # or RL Zoo's --gym-packages, must not need.
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 # max_episode_steps here is the TimeLimit gymnasium.make applies (and overrides with its own
 # max_episode_steps argument, which it never passes to the env): the env itself then leaves
 # truncation to that wrapper.
-register(
-    id="SortingLine-v0",
-    entry_point="sorting_line_gym.env:SortingLineEnv",
-    kwargs={"variant": "basic"},
-    max_episode_steps=50,
-    vector_entry_point="sorting_line_gym.vector:SortingLineVectorEnv",
-)
-register(
-    id="SortingLineAdvanced-v0",
-    entry_point="sorting_line_gym.env:SortingLineEnv",
-    kwargs={"variant": "advanced"},
-    max_episode_steps=50,
-    vector_entry_point="sorting_line_gym.vector:SortingLineVectorEnv",
-)
+for _variant, _env_id in ENV_IDS.items():
+    register(
+        id=_env_id,
+        entry_point="sorting_line_gym.envs.env:SortingLineEnv",
+        kwargs={"variant": _variant},
+        max_episode_steps=EPISODE_STEPS,
+        vector_entry_point="sorting_line_gym.envs.vector:SortingLineVectorEnv",
+    )
 register(
     id="SortingLineEvolving-v0",
     entry_point="sorting_line_gym.envs.evolving:SortingLineEvolvingEnv",
-    max_episode_steps=50,
+    max_episode_steps=EPISODE_STEPS,
 )

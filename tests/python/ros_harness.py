@@ -45,8 +45,8 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
-from sorting_line_gym import vocabulary
-from sorting_line_gym.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
+from sorting_line_gym.line import vocabulary
+from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
@@ -152,9 +152,9 @@ def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]
 
 
 def node_binary() -> Path:
-    """The node binary the bridge uses too (``sorting_line_gym.transport.find_node_binary``:
+    """The node binary the bridge uses too (``sorting_line_gym.line.process.find_node_binary``:
     $SORTING_LINE_BIN, else this checkout's release build, else PATH)."""
-    from sorting_line_gym.transport import find_node_binary  # here: rclpy loads after ros_environment()
+    from sorting_line_gym.line.process import find_node_binary  # here: rclpy loads after ros_environment()
 
     return Path(find_node_binary())
 

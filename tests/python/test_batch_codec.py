@@ -1,4 +1,4 @@
-"""The batch messages' numpy codec (bridge/sorting_line_gym/batch_codec.py) against rclpy's own
+"""The batch messages' numpy codec (bridge/sorting_line_gym/ros/batch_codec.py) against rclpy's own
 serialisation: whatever the codec reads or writes, rclpy must read or write the same values. No
 node is needed; rclpy serialises in-process.
 
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from sorting_line_gym.batch_codec import PRIMITIVES, BatchCodec, from_message
-from sorting_line_gym.vocabulary import sim_seconds, state_info
+from sorting_line_gym.ros.batch_codec import PRIMITIVES, BatchCodec, from_message
+from sorting_line_gym.line.vocabulary import sim_seconds, state_info
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates
 
 TYPECODES = {"<i4": "i", "<u4": "I", "<u8": "Q", "<f8": "d", "u1": "B"}

@@ -35,10 +35,8 @@ import numpy as np
 import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
-from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
-from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
-from sorting_line_gym.vector import SortingLineVectorEnv
-from sorting_line_gym.vocabulary import MAX_EPISODE_STEPS
+from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv, SortingLineSB3VecEnv, SortingLineVectorEnv
+from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -110,6 +108,16 @@ def assert_step(variant: str, obs, reward, info: dict, entry: dict, where: str) 
     }
     diff = {k: (got[k], want[k]) for k in want if got[k] != want[k]}
     assert not diff, f"{where}: info differs from the library (env, library): {diff}"
+
+
+def assert_episode_follows_trace(env, setup: str, variant: str, seed: int, actions, what: str) -> None:
+    """reset(seed) then ``actions`` on ``env`` == `sorting_line trace` of the same, step by step."""
+    want = trace(setup, variant, seed, actions)
+    obs, _ = env.reset(seed=seed)
+    assert_obs(obs, variant, want[0]["reset"]["observation"], f"{what} reset")
+    for t, a in enumerate(actions, start=1):
+        obs, reward, _, _, info = env.step(a)
+        assert_step(variant, obs, reward, info, want[t], f"{what} step {t}")
 
 
 def fixed_actions(n_actions: int, count: int, seed: int) -> list[int]:
@@ -534,13 +542,7 @@ def test_killed_node_fails_the_next_step_then_a_new_env_works(make_env):
 
     fresh = make_env(BASIC, setup="A")
     assert fresh.unwrapped.namespace != namespace
-    actions = [4, 5, 6, 7, 8]
-    want = trace("A", "basic", 1, actions)
-    obs, _ = fresh.reset(seed=1)
-    assert_obs(obs, "basic", want[0]["reset"]["observation"], "fresh env reset")
-    for t, a in enumerate(actions, start=1):
-        obs, reward, _, _, info = fresh.step(a)
-        assert_step("basic", obs, reward, info, want[t], f"fresh env step {t}")
+    assert_episode_follows_trace(fresh, "A", "basic", 1, [4, 5, 6, 7, 8], "fresh env")
 
 
 def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
@@ -553,6 +555,8 @@ def test_attach_to_nothing_times_out_naming_the_namespace(make_env):
     elapsed = time.monotonic() - start
     assert elapsed < 1.5 + 0.5, f"reset gave up after {elapsed:.2f} s (startup_timeout 1.5 s)"
     assert namespace in str(excinfo.value), f"the error does not name {namespace}: {excinfo.value}"
+    missing = f"not yet discovered: {namespace} reset service, {namespace} cmd/speed reader, {namespace} state writer"
+    assert missing in str(excinfo.value), f"the error does not list the endpoints it lacks: {excinfo.value}"
 
 
 def test_attach_to_a_running_node(make_env):
@@ -560,13 +564,7 @@ def test_attach_to_a_running_node(make_env):
     owner = make_env(None, setup="B", variant="basic")
     owner.reset(seed=0)  # envs start their node at the first reset
     guest = make_env(BASIC, setup="B", node="attach", namespace=owner.namespace)
-    actions = [2, 3, 9, 0]
-    want = trace("B", "basic", 8, actions)
-    obs, _ = guest.reset(seed=8)
-    assert_obs(obs, "basic", want[0]["reset"]["observation"], "attached reset")
-    for t, a in enumerate(actions, start=1):
-        obs, reward, _, _, info = guest.step(a)
-        assert_step("basic", obs, reward, info, want[t], f"attached step {t}")
+    assert_episode_follows_trace(guest, "B", "basic", 8, [2, 3, 9, 0], "attached")
     guest.close()
     assert owner.bank.process.alive(), "closing an attached env stopped the node it does not own"
 

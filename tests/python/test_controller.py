@@ -37,7 +37,7 @@ from ros_harness import NS_PER_S, show_ns, stamp_ns
 from sorting_line_gym import SortingLineEnv
 from sorting_line_gym.agents import (START_SPEED_INDEX, ConstantAgent, RandomAgent, RuleBasedAgent, level,
                                      load_policy, make_agent)
-from sorting_line_gym.vocabulary import SPEEDS
+from sorting_line_gym.line.vocabulary import SPEEDS
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),
 # but once, while other jobs loaded this shared 2-core machine, 38 of 60 ticks were late

@@ -736,7 +736,7 @@ def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reade
     reads and counts them on /diagnostics; a reader that subscribes later gets every tick from
     then on, the same values the batch carries."""
     import numpy as np
-    from sorting_line_gym.vector import SortingLineVectorEnv
+    from sorting_line_gym import SortingLineVectorEnv
     from sorting_line_interfaces.msg import LineState, MaterialInput
 
     ns = namespace("unread")

@@ -33,7 +33,7 @@ import pytest
 
 import ros_harness as h
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
-from sorting_line_gym.vector import SortingLineVectorEnv
+from sorting_line_gym import SortingLineVectorEnv
 from bag_golden import BagProcess, wait_for_command_writers
 from sorting_line_gym.bag.bagfile import open_bag
 from sorting_line_gym.bag.replay import replay

@@ -1,4 +1,4 @@
-"""The dashboard renderer (bridge/sorting_line_gym/render.py): headless, deterministic, no ROS.
+"""The dashboard renderer (bridge/sorting_line_gym/envs/render.py): headless, deterministic, no ROS.
 
 Runs in the normal test session (launch_scripts/test.sh). On its own, outside the isolated network
 namespace that conftest.py insists on for the ROS tests:
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sorting_line_gym import render
-from sorting_line_gym.vocabulary import SPEEDS
+from sorting_line_gym.envs import render
+from sorting_line_gym.line.vocabulary import SPEEDS
 
 DashboardFrame = render.DashboardFrame
 LiveDashboard = render.LiveDashboard

@@ -60,7 +60,7 @@ def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
 
 @pytest.mark.parametrize("agent,setup,variant", [("rba", "D", "basic"), ("rba-hold", "B", "advanced")])
 def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, capsys):
-    from sorting_line_gym import evaluate
+    from sorting_line_gym.reports import evaluate
 
     argv = ["--agent", agent, "--setup", setup, "--variant", variant, "--episodes", "3", "--json", "--out", str(tmp_path)]
     assert evaluate.main(argv) == 0
@@ -87,7 +87,7 @@ def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, ca
     ],
 )
 def test_eval_rejects_bad_arguments(argv, names, capsys):
-    from sorting_line_gym import evaluate
+    from sorting_line_gym.reports import evaluate
 
     assert evaluate.main(argv) == 2  # before any node is started
     assert names in capsys.readouterr().err
@@ -95,7 +95,7 @@ def test_eval_rejects_bad_arguments(argv, names, capsys):
 
 def tiny_training(algo: str, out: Path) -> dict:
     """sorting-line-train's main, in this process (it spawns its node like the console script)."""
-    from sorting_line_gym import train
+    from sorting_line_gym.training import train
 
     hp = {"ppo": ["--hp", "n_steps=128", "--hp", "batch_size=64", "--hp", "n_epochs=2"],
           "dqn": ["--hp", "learning_starts=64"],
@@ -133,7 +133,7 @@ def test_training_writes_model_kpis_and_is_deterministic(tmp_path):
     second = tiny_training("ppo", tmp_path / "b")
     assert policy_weights(Path(second["model_path"])) == policy_weights(model)
 
-    from sorting_line_gym.evaluate import evaluate
+    from sorting_line_gym.reports.evaluate import evaluate
 
     evals = [evaluate(f"ppo:{model}", "B", "advanced", episodes=2) for _ in range(2)]
     assert evals[0].per_episode == evals[1].per_episode
@@ -159,7 +159,7 @@ def test_dqn_and_a2c_train_through_ros(algo, tmp_path):
     ],
 )
 def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
-    from sorting_line_gym import train
+    from sorting_line_gym.training import train
 
     assert train.main(["--algo", "ppo", "--setup", "A", "--out", str(tmp_path), "--no-progress", *argv]) == 2
     assert names in capsys.readouterr().err
@@ -167,7 +167,7 @@ def test_train_rejects_bad_hyperparameters(argv, names, tmp_path, capsys):
 
 
 def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
-    from sorting_line_gym import hyperparams
+    from sorting_line_gym.training import hyperparams
 
     path = tmp_path / "mine.yml"
     path.write_text("SortingLine-v0: {n_timesteps: 5000, policy: MlpPolicy, n_envs: 2, episode_steps: 250, gamma: 0.5}\n")
@@ -184,7 +184,7 @@ def test_console_scripts_are_installed(tmp_path):
 
 
 def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
-    from sorting_line_gym import benchmark
+    from sorting_line_gym.reports import benchmark
 
     out = tmp_path / "bench"
     argv = ["--setups", "B", "--variants", "advanced", "--agents", "rba", "rba-hold", "--out", str(out)]
@@ -236,6 +236,7 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
          "--train-seeds", "42", "43", "--timesteps", "200000", "--jobs", "2", "--out", str(tmp_path / "bench")],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
     )
+    workers: list[int] = []
     try:
         deadline = time.monotonic() + 90
         nodes: list[int] = []
@@ -256,4 +257,7 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
     finally:
         if bench.poll() is None:
             bench.kill()
-            bench.communicate()
+        for p in workers:
+            if alive(p):
+                os.kill(p, signal.SIGKILL)  # else they keep the pipes open and communicate() never returns
+        bench.communicate(timeout=30)

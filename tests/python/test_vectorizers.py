@@ -26,9 +26,7 @@ import numpy as np
 import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
-from sorting_line_gym import SortingLineEnv
-from sorting_line_gym.sb3_vec_env import SortingLineSB3VecEnv
-from sorting_line_gym.vector import SortingLineVectorEnv
+from sorting_line_gym import SortingLineSB3VecEnv, SortingLineVectorEnv
 from test_bridge import assert_obs, assert_step, fixed_actions, node_binary, trace
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -246,6 +244,14 @@ actions = json.loads(sys.argv[6])
 envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", setup=setup, node="shared")
 obs, _ = envs.reset(seed=seed)
 episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
+if len(sys.argv) > 7:  # a barrier: every process holds its leases before any steps or lets go
+    import pathlib, time
+    barrier, parties = pathlib.Path(sys.argv[7]), int(sys.argv[8])
+    (barrier / f"leased_{seed}").touch()
+    deadline = time.monotonic() + 180
+    while len(list(barrier.glob("leased_*"))) < parties:
+        assert time.monotonic() < deadline, "the other processes did not lease their lines within 180 s"
+        time.sleep(0.05)
 for t in range(steps):
     obs, rewards, terminated, truncated, info = envs.step(np.array(actions[t]))
     record_step(episodes, obs, rewards, lambda k: {key: info[key][k] for key in KEYS})
@@ -266,16 +272,19 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
         script = tmp_path / f"sync_{s}.py"
         script.write_text(RECORDER + SYNC_IN_A_PROCESS)
         by_step = [[per_env[s][k][t] for k in range(n)] for t in range(steps)]
-        procs.append(subprocess.Popen([sys.executable, str(script), BASIC, "A", str(s), str(steps), str(n), json.dumps(by_step)],
+        # The barrier makes "at once" certain: on a loaded machine one script could otherwise finish
+        # (and free its lines) before the other leases any, and reusing freed lines is correct.
+        procs.append(subprocess.Popen([sys.executable, str(script), BASIC, "A", str(s), str(steps), str(n), json.dumps(by_step),
+                                       str(tmp_path), str(len(seeds))],
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     outs = []
     for p in procs:
         try:
-            stdout, stderr = p.communicate(timeout=240)
+            stdout, stderr = p.communicate(timeout=300)
         except subprocess.TimeoutExpired:
             for q in procs:
                 q.kill()
-            pytest.fail("a vector env process did not finish within 240 s (a hang)")
+            pytest.fail("a vector env process did not finish within 300 s (a hang)")
         assert p.returncode == 0, f"vector env process failed ({p.returncode}):\n{stderr[-4000:]}"
         outs.append(json.loads(stdout.strip().splitlines()[-1]))
     assert not set(outs[0]["namespaces"]) & set(outs[1]["namespaces"]), "both processes drove the same line"

@@ -1,4 +1,4 @@
-"""The Python vocabulary (sorting_line_gym.vocabulary) against the Rust library, the source of
+"""The Python vocabulary (sorting_line_gym.line.vocabulary) against the Rust library, the source of
 truth, and its codec against itself: one line and N lines give the same answers.
 
 No ROS: the Rust side speaks through ``sorting_line vocabulary`` (its own constants as JSON), so a
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import ros_harness as h
-from sorting_line_gym import vocabulary as v
+from sorting_line_gym.line import vocabulary as v
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ import argparse
 import signal
 import sys
 
-from ..transport import BridgeError
+from ..line.errors import BridgeError
 from .bagfile import BagError, describe, open_bag
 
 EXIT_DIFFERENT, EXIT_BAD_INPUT, EXIT_FAILED = 1, 2, 3

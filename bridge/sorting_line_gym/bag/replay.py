@@ -41,7 +41,9 @@ import time
 from pathlib import Path
 from dataclasses import dataclass, field
 
-from ..transport import BridgeTimeout, LineLink, NodeProcess, private_namespace
+from ..line.errors import BridgeTimeout
+from ..line.process import NodeProcess, private_namespace
+from ..ros.links import LineLink
 from .bagfile import Bag, BagError, BagMessage, open_bag
 from .compare import Comparison, Difference, compare, shifted
 from .rosnode import ToolNode
@@ -170,7 +172,7 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
     """Replays the bag at ``path`` (see the module docstring) in three phases: plan (what to send,
     from the bag alone), drive (a fresh node, fed resets and commands tick by tick) and compare
     (what it published against the recording). Raises BagError for a bag that cannot be
-    replayed, transport.BridgeError when the replay node fails; a difference is a result."""
+    replayed, BridgeError when the replay node fails; a difference is a result."""
     started = time.monotonic()
     plan = _plan(open_bag(path), overrides)
     result = ReplayResult(plan.bag, plan.options)

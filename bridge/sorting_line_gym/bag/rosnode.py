@@ -1,6 +1,6 @@
 """The rclpy side the bag tools share: a context, node and executor of their own (so that the
 tools run inside a process that uses rclpy for something else, such as a test session, without
-touching its context), QoS, raw endpoints, and waiting through :class:`~..transport.Waiter`
+touching its context), QoS, raw endpoints, and waiting through :class:`~sorting_line_gym.ros.waits.Waiter`
 (every wait has a timeout and an error naming what it waited for)."""
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..transport import NodeProcess, Waiter
+from ..line.process import NodeProcess
+from ..ros.waits import Waiter
 from .schema import rclpy_class
 
 #: Deep reliable queues: a tool that falls behind for a moment (a busy machine) catches up

@@ -53,10 +53,10 @@ import yaml
 
 from sorting_line_interfaces.msg import EvolutionEvent
 
-from ..bank import LineBank
-from ..env import SEED_BOUND, action_space, observation_space
-from ..options import LineOptions
-from ..vocabulary import MODE_COUNT, decode_action, line_infos, observations, sim_seconds, state_info
+from ..line.options import LineOptions
+from ..line.vocabulary import MODE_COUNT, decode_action, line_infos, observations, sim_seconds, state_info
+from ..ros.bank import LineBank
+from .env import SEED_BOUND, action_space, observation_space
 
 #: The ready schedules, by name.
 EVOLUTIONS_DIR = Path(__file__).resolve().parent.parent / "evolutions"

@@ -101,7 +101,7 @@ def evaluate(model, env, episodes: int, seed: int, mode0: bool) -> list[float]:
 
 
 def rule_based(setup: str, variant: str, schedule: Path | None, episodes: int, seed: int) -> dict[str, float]:
-    from ..transport import find_node_binary
+    from ..line.process import find_node_binary
 
     out = {}
     for agent in ("rba", "rba-hold"):

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..vocabulary import ENV_IDS
-from ..hyperparams import load, split
+from ..line.vocabulary import ENV_IDS
+from ..training.hyperparams import load, split
 
 
 def zoo_hyperparams(algo: str) -> dict[str, dict[str, Any]]:

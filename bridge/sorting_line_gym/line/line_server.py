@@ -22,7 +22,7 @@ node binary, and the network namespace (DDS does not cross it; the file system d
 A supervisor starts its node (which dies with it), then stops both when no line has been leased
 for ``line_supervisor.IDLE_EXIT`` seconds, or when the node dies. Servers are started detached from the env that
 started them: they serve every process on the host, and outlive the first one. Leasing happens
-while the env holds the host's lock for joining the graph (``transport.joining_graph``).
+while the env holds the host's lock for joining the graph (``host.joining_graph``).
 """
 
 from __future__ import annotations
@@ -37,8 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import line_supervisor
+from .errors import BridgeError, BridgeTimeout
+from .host import host_state_directory, network_namespace
 from .line_supervisor import held, server_info, server_running, try_lock
-from .transport import BridgeError, BridgeTimeout, find_node_binary, host_state_directory, network_namespace
+from .process import find_node_binary
 
 #: Environment variables that decide which DDS graph a node joins.
 _GRAPH_ENV = ("ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",

@@ -57,18 +57,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .bank import LineBank
-from .options import LineOptions
-from .transport import stamp_key
-from .vocabulary import ACTION_COUNTS, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
+from ..line.options import LineOptions
+from ..line.vocabulary import ACTION_COUNTS, CATEGORIES, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
 
 
 def observation_space(variant: str) -> spaces.Box:
+    """The reading (0..1); on the advanced line, then the ratio category. One bound for both, the
+    highest category (2), as the reference implementation's space has it (saved models check it)."""
     if variant == "advanced":
-        return spaces.Box(low=0.0, high=2.0, shape=(2,), dtype=np.float32)
+        return spaces.Box(low=0.0, high=float(max(CATEGORIES.values())), shape=(2,), dtype=np.float32)
     return spaces.Box(low=0.0, high=1.0, shape=(1,), dtype=np.float32)
 
 
@@ -101,6 +101,10 @@ class SortingLineEnv(gym.Env):
         self.render_mode = render_mode
         self.observation_space = observation_space(variant)
         self.action_space = action_space(variant)
+        # rclpy loads with the first env made, not with `import sorting_line_gym` (registration,
+        # RL Zoo's --gym-packages); the bank itself connects only at the first reset().
+        from ..ros.bank import LineBank
+
         self.bank = LineBank(options, watch_sensors=render_mode is not None)
         self._history = None
         self._live = None
@@ -196,10 +200,10 @@ class _History:
         s = self.states
         if not s:
             return self.START_INPUT, self.START_BELT, self.START_MACHINE
-        entered, belt = self.bank.sensor_readings(0, stamp_key(s[-1].header.stamp))
+        entered, belt = self.bank.sensor_readings(0, s[-1].header.stamp)
         machine = self.START_BELT
         if len(s) > 1:
-            _, before = self.bank.sensor_readings(0, stamp_key(s[-2].header.stamp))
+            _, before = self.bank.sensor_readings(0, s[-2].header.stamp)
             machine = (before.amount_a, before.amount_b)
         return (entered.amount_a, entered.amount_b), (belt.amount_a, belt.amount_b), machine
 

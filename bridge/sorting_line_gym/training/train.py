@@ -26,8 +26,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from ..line.vocabulary import SETUPS, VARIANTS, check_setup
 from . import hyperparams
-from .vocabulary import SETUPS, VARIANTS, check_setup
 
 
 @dataclass
@@ -61,11 +61,11 @@ def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int)
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     if n_envs == 1:
-        from .env import SortingLineEnv
+        from ..envs.env import SortingLineEnv
 
         venv = DummyVecEnv([lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps)])
     else:
-        from .sb3_vec_env import SortingLineSB3VecEnv
+        from ..envs.sb3_vec_env import SortingLineSB3VecEnv
 
         venv = SortingLineSB3VecEnv(num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps)
     return VecMonitor(venv)

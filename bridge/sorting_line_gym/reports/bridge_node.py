@@ -16,8 +16,8 @@ import sys
 import gymnasium as gym
 import numpy as np
 
-from .transport import BridgeError
-from .vocabulary import ENV_IDS, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
+from ..line.errors import BridgeError
+from ..line.vocabulary import ENV_IDS, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
 
 
 def parse_agent(text: str, variant: str):
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{i:7d} {args.seed + i:5d} {total:7.2f} {np.mean(speeds):10.2f} {info['purity']:7.3f} {info['speed_changes']:14d}")
         print(f"mean reward {np.mean(rewards):.2f} +- {np.std(rewards):.2f} over {args.episodes} episodes")
         if args.dashboard:
-            from .render import save_dashboard
+            from ..envs.render import save_dashboard
 
             save_dashboard(env.unwrapped.dashboard_frame(), args.dashboard)
             print(f"dashboard: {args.dashboard}")

@@ -37,8 +37,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .transport import find_node_binary
-from .vocabulary import (
+from ..line.process import find_node_binary
+from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,
     MODES,
@@ -189,8 +189,8 @@ class TrainedAgent(Agent):
     (``act`` decodes it into speed index and mode)."""
 
     def __init__(self, algo: str, path: str, variant: str):
-        from .env import action_space
-        from .hyperparams import algorithm_class
+        from ..envs.env import action_space
+        from ..training.hyperparams import algorithm_class
 
         self.variant = check_variant(variant)
         self.name = f"{algo}:{path}"
@@ -216,7 +216,7 @@ def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> 
     """An agent by its command-line name: ``rba``, ``rba-hold``, ``random`` (seeded with ``seed``),
     ``constant:K``, ``constant:K:M`` or ``constant:K:cat`` (K = 0..9, M = 0..2), or a saved model
     ``ppo:PATH``, ``dqn:PATH``, ``a2c:PATH``."""
-    from .hyperparams import ALGOS
+    from ..training.hyperparams import ALGOS
 
     algo, sep, path = spec.partition(":")
     if sep and algo in ALGOS:

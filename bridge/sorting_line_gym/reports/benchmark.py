@@ -34,8 +34,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Optional
 
-from .vocabulary import SETUPS, VARIANTS
-from .hyperparams import ALGOS
+from ..line.vocabulary import SETUPS, VARIANTS
+from ..training.hyperparams import ALGOS
 
 BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
@@ -69,9 +69,9 @@ def plan(setups, variants, agents, train_seeds) -> list[Cell]:
 
 def run_cell(cell: Cell, out: Path, timesteps: int, n_envs: int, progress: bool) -> dict[str, Any]:
     """Trains (RL) and evaluates one cell; writes and returns its record. Runs in a worker."""
-    from . import hyperparams
+    from ..training import hyperparams
     from .evaluate import evaluate
-    from .train import train
+    from ..training.train import train
 
     start = time.perf_counter()
     record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
@@ -240,6 +240,15 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _die_with_the_benchmark() -> None:
+    """Worker initializer: the kernel kills this worker when the benchmark process dies, however
+    it dies (a worker in an rclpy wait ignores SIGTERM, and a killed benchmark runs no handler)."""
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
     """Kills the pool's workers at once (their nodes get SIGTERM through their parent-death
     signal): a worker would otherwise finish its cell, a training of several minutes, and rclpy's
@@ -263,7 +272,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
         return
     # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context, initializer=_die_with_the_benchmark) as pool:
         try:
             pending = {}
             queue = list(todo)

@@ -30,8 +30,8 @@ from matplotlib.figure import Figure
 
 # MODE_NAMES: the advanced line's sort modes by number. START_SPEED: the belt speed after a reset,
 # which the first step's speed is compared with (as the line's penalty does).
-from .vocabulary import MODE_LABELS as MODE_NAMES
-from .vocabulary import START_SPEED, VARIANTS
+from ..line.vocabulary import MODE_LABELS as MODE_NAMES
+from ..line.vocabulary import START_SPEED, VARIANTS
 
 __all__ = [
     "DashboardFrame",

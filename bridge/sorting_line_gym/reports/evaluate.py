@@ -28,8 +28,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
 
-from .agents import Agent, make_agent
-from .vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
+from ..agents.policies import Agent, make_agent
+from ..line.vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
 
 #: The paper's evaluation protocol (episodes of EPISODE_STEPS steps).
 FIRST_SEED = 42
@@ -149,7 +149,7 @@ def evaluate(
 ) -> Evaluation:
     """Evaluates ``agent_spec`` on a node of its own; saves the first episode's dashboard to
     ``dashboard`` if given."""
-    from .env import SortingLineEnv
+    from ..envs.env import SortingLineEnv
 
     check_setup(setup)
     check_variant(variant)
@@ -162,7 +162,7 @@ def evaluate(
         for i in range(episodes):
             per_episode.append(run_episode(env, agent, seed + i))
             if i == 0 and dashboard is not None:
-                from .render import save_dashboard
+                from ..envs.render import save_dashboard
 
                 save_dashboard(env.dashboard_frame(), dashboard)
             if on_episode is not None:
@@ -174,7 +174,7 @@ def evaluate(
 
 def file_stem(agent_spec: str, setup: str, variant: str) -> str:
     """A file name for an agent spec: a model path becomes its file's stem."""
-    from .hyperparams import ALGOS
+    from ..training.hyperparams import ALGOS
 
     algo, sep, path = agent_spec.partition(":")
     name = f"{algo}-{Path(path).stem}" if sep and algo in ALGOS else agent_spec.replace(":", "-")

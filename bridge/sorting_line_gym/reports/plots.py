@@ -27,8 +27,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from .transport import find_node_binary
-from .vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
+from ..line.process import find_node_binary
+from ..line.vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
 
 AGENT_COLORS = {
     "random": "#9e9e9e",

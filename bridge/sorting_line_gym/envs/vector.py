@@ -21,10 +21,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .bank import LineBank
+from ..line.options import LineOptions
+from ..line.vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
+from ..ros.bank import LineBank
 from .env import SEED_BOUND, action_space, observation_space
-from .options import LineOptions
-from .vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
 
 
 class Lines:

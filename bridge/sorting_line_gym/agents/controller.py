@@ -45,9 +45,9 @@ from rclpy.utilities import remove_ros_args
 
 from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
 
-from .agents import Agent, RuleBasedAgent
-from .transport import QOS, publish_commands
-from .vocabulary import SETUPS, SPEEDS, VARIANTS, speed_index_of
+from ..line.vocabulary import SETUPS, SPEEDS, VARIANTS, speed_index_of
+from ..ros.links import QOS, publish_commands
+from .policies import Agent, RuleBasedAgent
 
 NS_PER_S = 1_000_000_000
 #: Ticks whose readings are still incomplete that the controller keeps; older ones are dropped.

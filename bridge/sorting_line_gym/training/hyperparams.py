@@ -22,7 +22,7 @@ from typing import Any, Callable, Iterable
 
 import yaml
 
-from .vocabulary import ENV_IDS, check_variant  # ENV_IDS: the keys of the hyperparameter files
+from ..line.vocabulary import ENV_IDS, check_variant  # ENV_IDS: the keys of the hyperparameter files
 
 #: The algorithms sorting-line-train knows, by their command-line name.
 ALGOS = ("ppo", "dqn", "a2c")
@@ -62,7 +62,7 @@ def load(algo: str, variant: str, path: str | Path | None = None, overrides: Ite
     env_id = ENV_IDS[check_variant(variant)]
     if path is None:
         source = f"sorting_line_gym/hyperparams/{algo}.yml"
-        text = importlib.resources.files("sorting_line_gym").joinpath("hyperparams", f"{algo}.yml").read_text()
+        text = importlib.resources.files(__package__).joinpath("hyperparams", f"{algo}.yml").read_text()
     else:
         source = str(path)
         try:

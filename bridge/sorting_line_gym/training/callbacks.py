@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from .vocabulary import THRESHOLD
+from ..line.vocabulary import THRESHOLD
 
 
 class LineKpiCallback(BaseCallback):

@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from .vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import SETUPS, VARIANTS
 
 #: (setup, variant, algorithm) -> (speed %, purity %, reward), as printed in the paper's Table 1.
 TABLE_1: dict[tuple[str, str, str], tuple[float, float, float]] = {

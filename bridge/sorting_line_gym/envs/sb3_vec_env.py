@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
+from ..line.options import LineOptions
+from ..line.vocabulary import EPISODE_STEPS, line_infos
 from .env import action_space, observation_space
-from .options import LineOptions
 from .vector import Lines
-from .vocabulary import EPISODE_STEPS, line_infos
 
 
 class SortingLineSB3VecEnv(VecEnv):

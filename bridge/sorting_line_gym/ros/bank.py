@@ -10,29 +10,23 @@ from __future__ import annotations
 
 import itertools
 import os
+import time
 from typing import Sequence
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
+from builtin_interfaces.msg import Time
 from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
-from . import line_server
-from .options import LineOptions
-from .transport import (
-    QOS,
-    BatchLink,
-    BridgeError,
-    LineLink,
-    NodeProcess,
-    Waiter,
-    acquire_rclpy,
-    fork_error,
-    joining_graph,
-    private_namespace,
-    release_rclpy,
-    stamp_key,
-)
+from ..line import line_server
+from ..line.errors import BridgeError
+from ..line.host import joining_graph
+from ..line.options import LineOptions
+from ..line.process import NodeProcess, private_namespace
+from .context import acquire_rclpy, fork_error, release_rclpy
+from .links import QOS, BatchLink, LineLink, stamp_key
+from .waits import Waiter
 
 #: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
 #: retried: the first exchange after discovery is lost now and then (late matching), and a short
@@ -138,10 +132,11 @@ class LineBank:
     def __len__(self) -> int:
         return self._lines
 
-    def sensor_readings(self, k: int, key: tuple[int, int], timeout: float = 2.0) -> tuple[MaterialInput, BeltOccupancy]:
-        """Line k's ``input`` and ``belt/occupancy`` messages of the tick stamped ``key`` (needs
+    def sensor_readings(self, k: int, stamp: Time, timeout: float = 2.0) -> tuple[MaterialInput, BeltOccupancy]:
+        """Line k's ``input`` and ``belt/occupancy`` messages of the tick stamped ``stamp`` (needs
         ``watch_sensors``). They travel on their own topics and may arrive after the tick's state,
         so this spins until both are in."""
+        key = stamp_key(stamp)
         store = self.sensors[k]
         self.waiter.until(
             lambda: key in store["input"] and key in store["belt"],
@@ -151,15 +146,24 @@ class LineBank:
         return store["input"][key], store["belt"][key]
 
     # ----------------------------------------------------------------------------------------
-    def _connect(self) -> None:
-        self.waiter.until(
+    def _connect(self, deadline: float) -> None:
+        self.waiter.until_deadline(
             lambda: all(link.endpoints_matched(self.node) for link in self.links)
             and (self.batch is None or self.batch.matched(self.node))
             and all(sub.get_publisher_count() > 0 for sub in self._watched),
+            deadline,
             self.startup_timeout,
-            lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics)",
+            lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics; {self._unmatched()})",
         )
         self._connected = True
+
+    def _unmatched(self) -> str:
+        """What discovery still lacks, e.g. "not yet discovered: /ns/line_3 reset service" (when a
+        node's endpoints go missing, which ones is the first clue to why)."""
+        missing = [f"{link.namespace} {what}" for link in self.links for what, ok in link.matching(self.node).items() if not ok]
+        if self.batch is not None:
+            missing += [f"{self.namespace} {what}" for what, ok in self.batch.matching(self.node).items() if not ok]
+        return "not yet discovered: " + ", ".join(missing) if missing else "all discovered"
 
     def reset(self, seeds: dict[int, int | None]):
         """Resets the given lines (index -> seed, None = the node's streams carry on) and returns
@@ -175,11 +179,14 @@ class LineBank:
             self._check_usable()
             return self._reset_once(seeds)
         with joining_graph(self.startup_timeout):
+            # Once it is this bank's turn, startup_timeout bounds the rest of the start: rclpy,
+            # the node (or the lease), discovery.
+            deadline = time.monotonic() + self.startup_timeout
             self.open()
-            return self._handshake(seeds)
+            return self._handshake(seeds, deadline)
 
-    def _handshake(self, seeds: dict[int, int | None]):
-        self._connect()
+    def _handshake(self, seeds: dict[int, int | None], deadline: float):
+        self._connect(deadline)
         if self.batch is not None:
             first_state = self.batch.saw_current_ticks
         else:

@@ -1,0 +1,5 @@
+"""The line without ROS: its vocabulary (setups, speeds, modes, the spaces' numbers), the options an
+environment is made with, the errors, the node as a child process, and what the environments of one
+host share (state directory, line servers, the lock for joining the graph).
+
+Nothing here imports rclpy or Stable-Baselines3: every other layer builds on it."""

@@ -1,0 +1,61 @@
+"""What the environments of one host share: a per-user state directory, the network namespace
+(DDS traffic does not cross it, files do), and the lock for joining the DDS graph one at a time."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from .errors import BridgeTimeout
+
+
+def host_state_directory() -> Path:
+    """Where this host's bridges coordinate (line servers, joining the graph), per user."""
+    path = Path(tempfile.gettempdir()) / f"sorting_line_gym-{os.getuid()}"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def network_namespace() -> str:
+    """This process's network namespace: DDS traffic does not cross it, files do."""
+    try:
+        return os.readlink("/proc/self/ns/net")
+    except OSError:
+        return "host"
+
+
+@contextlib.contextmanager
+def joining_graph(timeout: float):
+    """Holds this host's lock for joining the DDS graph of ``ROS_DOMAIN_ID`` (per network
+    namespace) while a bank starts its participant and node and discovers the node's endpoints.
+
+    Measured (benches/discovery.py, README "Many envs per host"): when several client and node
+    participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast
+    DDS and RustDDS lose some endpoint announcements between them for good (a node's reset
+    service never becomes ready for its client, even after 60 s); one participant pair joining at
+    a time discovers completely, whatever the number of participants. Waiting for the lock counts
+    against ``timeout``; a holder that dies frees it at once (flock)."""
+    digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
+    path = host_state_directory() / f"join-{digest}.lock"
+    deadline = time.monotonic() + timeout
+    with open(path, "a+") as f:
+        while True:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise BridgeTimeout(
+                        f"timed out after {timeout:g} s waiting for other environments of this host to join "
+                        f"the DDS graph (lock {path})"
+                    ) from None
+                time.sleep(0.01)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)

@@ -1,0 +1,92 @@
+"""rclpy, initialised once per process and never used across a fork.
+
+rclpy over Fast DDS is not fork-safe (shared/platform/ros2-without-a-ros-install.md): the fork
+hooks here remember whether rclpy was live when a process forked, so that a child's first use
+fails at once with an error naming the cause and the fix instead of blocking forever."""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import rclpy
+
+from ..line.errors import BridgeError
+
+
+_rclpy_lock = threading.Lock()
+_rclpy_users = 0
+_rclpy_ours = False
+#: In a forked child: the pid of the parent, when rclpy (so DDS: Fast DDS's threads, sockets and
+#: locks) was live there at the fork. Set by the fork hooks below, inherited by the child.
+_forked_from_live: int | None = None
+
+
+def _default_context_live() -> bool:
+    """Whether rclpy's default context is initialised. Reads the attribute without rclpy's lock
+    (this runs in a fork hook)."""
+    import rclpy.utilities
+
+    context = getattr(rclpy.utilities, "g_default_context", None)
+    return context is not None and context.handle is not None
+
+
+def _before_fork() -> None:
+    global _forked_from_live
+    if _forked_from_live is None and (_rclpy_users > 0 or _default_context_live()):
+        _forked_from_live = os.getpid()
+
+
+def _after_fork_in_parent() -> None:
+    global _forked_from_live
+    if _forked_from_live == os.getpid():
+        _forked_from_live = None
+
+
+os.register_at_fork(before=_before_fork, after_in_parent=_after_fork_in_parent)
+
+
+def fork_error() -> BridgeError | None:
+    """The error to raise when this process was forked from one where rclpy was live, else None.
+
+    rclpy over Fast DDS is not fork-safe: the child inherits the context's memory but not the
+    threads that serve it, so its first wait blocks forever on a lock a vanished thread held."""
+    if _forked_from_live is None or _forked_from_live == os.getpid():
+        return None
+    return BridgeError(
+        f"rclpy/DDS is not fork-safe: a context initialised in pid {_forked_from_live} cannot be used in pid "
+        f"{os.getpid()}, a process forked from it. Make the environments in the child (sorting_line_gym "
+        "envs connect at their first reset(), so constructing them before the fork is fine as long as "
+        "nothing used rclpy yet), or start the children with the multiprocessing context 'spawn' or "
+        "'forkserver' (e.g. AsyncVectorEnv(..., context='spawn'), SubprocVecEnv(..., start_method='spawn'))"
+    )
+
+
+def check_not_forked() -> None:
+    error = fork_error()
+    if error is not None:
+        raise error
+
+
+def acquire_rclpy() -> None:
+    """Initialises rclpy if nobody has; paired with :func:`release_rclpy`. Raises instead of
+    blocking when this process was forked from one where rclpy was live (:func:`fork_error`)."""
+    global _rclpy_users, _rclpy_ours
+    check_not_forked()
+    with _rclpy_lock:
+        if _rclpy_users == 0 and not rclpy.ok():
+            rclpy.init()
+            _rclpy_ours = True
+        _rclpy_users += 1
+
+
+def release_rclpy() -> None:
+    """Shuts rclpy down when the last user that needed it to be initialised is gone."""
+    global _rclpy_users, _rclpy_ours
+    if fork_error() is not None:
+        return  # the inherited context is not ours to shut down here
+    with _rclpy_lock:
+        _rclpy_users = max(0, _rclpy_users - 1)
+        if _rclpy_users == 0 and _rclpy_ours and rclpy.ok():
+            rclpy.shutdown()
+            _rclpy_ours = False
