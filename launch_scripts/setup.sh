@@ -3,7 +3,8 @@
 #   1. .venv/ at the repository root (python3.11)
 #   2. the pinned ros-jazzy-* wheels of launch_scripts/requirements-ros.txt (rclpy + Fast DDS, messages,
 #      and the rosidl/ament build tools)
-#   3. msg/ (ROS package sorting_line_interfaces) compiled with plain CMake and installed INTO .venv/,
+#   3. msg/ (ROS package sorting_line_interfaces) and msg/simulation_interfaces/ (the standard's
+#      simulator-control interfaces, which no wheel provides) compiled with plain CMake and installed INTO .venv/,
 #      so `.venv/bin/python -c "from sorting_line_interfaces.msg import LineState"` works with nothing
 #      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
 #   4. bridge/ (Python package sorting_line_gym) installed editable into .venv/
@@ -105,14 +106,14 @@ install_wheels() {
     return
   fi
   say "wheels: installing requirements-ros.txt and requirements-bridge.txt (torch brings ~4 GB of CUDA libraries)"
-  rm -f "$STATE/pip.stamp" "$STATE/interfaces.stamp"
+  rm -f "$STATE/pip.stamp" "$STATE/sorting_line_interfaces.stamp" "$STATE/simulation_interfaces.stamp"
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
     die "pip install -r $REQ -r $REQ_BRIDGE failed"
   write_stamp pip "$key"
 }
 
 # ---------------------------------------------------------------------------------------------
-# 3. sorting_line_interfaces (msg/) -> .venv
+# 3. the interface packages (msg/: sorting_line_interfaces; msg/simulation_interfaces/) -> .venv
 # ---------------------------------------------------------------------------------------------
 # Trap: the wheels' exported CMake files (share/*/cmake/*.cmake, the *__rosidl_generator_pyExport
 # ones) hard-code the include dirs of the interpreter that built the wheels
@@ -136,46 +137,58 @@ fix_wheel_cmake_paths() {
   fi
 }
 
-iface_key() {
+# An interface package: NAME, its source dir, and a Python import that proves it works.
+# sorting_line_interfaces is msg/; simulation_interfaces (the standard's simulator-control
+# interfaces, no wheel exists) is msg/simulation_interfaces/, a package of its own inside it.
+iface_key() { # NAME DIR
   {
     echo "recipe=$RECIPE"
     cat "$STATE/pip.stamp"
-    # every file of the package, names and contents
-    (cd "$MSG_DIR" && find . -type f ! -name '.*' ! -name '*~' -print0 | LC_ALL=C sort -z |
-      xargs -0 sha256sum)
+    # every file of the package (not of a package nested in it), names and contents
+    (cd "$2" && find . -mindepth 1 -type d -exec test -f '{}/package.xml' \; -prune -o \
+      -type f ! -name '.*' ! -name '*~' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum)
   } | sha
 }
 
-iface_installed() {
-  [[ -f "$VENV/lib/python3.11/site-packages/sorting_line_interfaces/msg/__init__.py" ]]
+iface_installed() { # NAME
+  [[ -f "$VENV/lib/python3.11/site-packages/$1/msg/__init__.py" ]]
 }
 
 # Remove the files of a previous install (a deleted .msg must not survive in site-packages).
-uninstall_interfaces() {
-  local manifest="$STATE/interfaces_install_manifest.txt" f
+uninstall_interfaces() { # NAME
+  local manifest="$STATE/${1}_install_manifest.txt" f
+  # Earlier set-ups named the manifest (and stamp) of sorting_line_interfaces without the package.
+  [[ "$1" == sorting_line_interfaces && -f "$STATE/interfaces_install_manifest.txt" ]] &&
+    mv "$STATE/interfaces_install_manifest.txt" "$manifest"
   [[ -f "$manifest" ]] || return 0
   while IFS= read -r f; do
     [[ "$f" == "$VENV"/* ]] && rm -f -- "$f"
   done <"$manifest"
-  rm -rf "$VENV/lib/python3.11/site-packages/sorting_line_interfaces"
+  rm -rf "$VENV/lib/python3.11/site-packages/$1"
   rm -f "$manifest"
 }
 
-build_interfaces() {
-  local key build logs jobs
-  key="$(iface_key)"
-  if stamp_matches interfaces "$key" && iface_installed; then
-    say "interfaces: up to date (msg/ unchanged)"
+build_interfaces() { # NAME DIR IMPORT_CHECK
+  local name="$1" dir="$2" check="$3" key build logs jobs
+  key="$(iface_key "$name" "$dir")"
+  if stamp_matches "$name" "$key" && iface_installed "$name"; then
+    say "interfaces: $name up to date"
+    return
+  fi
+  # Provided by something else in the venv (a wheel): use that, as with a ROS install.
+  if [[ ! -f "$STATE/${name}_install_manifest.txt" && ! ( "$name" == sorting_line_interfaces &&
+    -f "$STATE/interfaces_install_manifest.txt" ) ]] && iface_installed "$name"; then
+    say "interfaces: $name is already installed in .venv by another package; not building our copy"
     return
   fi
   command -v cc >/dev/null 2>&1 && command -v c++ >/dev/null 2>&1 ||
     die "C/C++ compilers missing; Debian: apt-get install build-essential"
   fix_wheel_cmake_paths
-  rm -f "$STATE/interfaces.stamp"
-  uninstall_interfaces
+  rm -f "$STATE/$name.stamp" "$STATE/interfaces.stamp"
+  uninstall_interfaces "$name"
 
-  build="$STATE/build"
-  logs="$STATE/logs"
+  build="$STATE/build/$name"
+  logs="$STATE/logs/$name"
   jobs="$(nproc 2>/dev/null || echo 2)"
   rm -rf "$build"
   mkdir -p "$build" "$logs"
@@ -185,35 +198,35 @@ build_interfaces() {
     -u ROS_DISTRO -u ROS_VERSION -u PYTHONHOME
     "PATH=$VENV/bin:$PATH" "AMENT_PREFIX_PATH=$VENV" "CMAKE_PREFIX_PATH=$VENV"
     "CMAKE_BUILD_PARALLEL_LEVEL=$jobs")
-  run_logged() { # name cmd...
-    local name="$1"; shift
-    if ! "${envv[@]}" "$@" >"$logs/$name.log" 2>&1; then
-      tail -n 40 "$logs/$name.log" >&2
-      die "interfaces: $name failed (full log: $logs/$name.log)"
+  run_logged() { # step cmd...
+    local step="$1"; shift
+    if ! "${envv[@]}" "$@" >"$logs/$step.log" 2>&1; then
+      tail -n 40 "$logs/$step.log" >&2
+      die "interfaces: $name: $step failed (full log: $logs/$step.log)"
     fi
   }
 
-  say "interfaces: configuring msg/ (CMake $("$VENV/bin/cmake" --version | head -1 | awk '{print $3}'))"
-  run_logged configure "$VENV/bin/cmake" -S "$MSG_DIR" -B "$build" \
+  say "interfaces: configuring $name (CMake $("$VENV/bin/cmake" --version | head -1 | awk '{print $3}'))"
+  run_logged configure "$VENV/bin/cmake" -S "$dir" -B "$build" \
     -DCMAKE_BUILD_TYPE=Release \
     -DCMAKE_INSTALL_PREFIX="$VENV" \
     -DPython3_EXECUTABLE="$VENV/bin/python" \
     -DPython3_FIND_VIRTUALENV=ONLY \
     -DBUILD_TESTING=OFF \
     -DSORTING_LINE_INTERFACES_PYTHON_ONLY=ON
-  say "interfaces: building (-j$jobs)"
+  say "interfaces: building $name (-j$jobs)"
   run_logged build "$VENV/bin/cmake" --build "$build" -j "$jobs"
-  say "interfaces: installing into .venv"
+  say "interfaces: installing $name into .venv"
   run_logged install "$VENV/bin/cmake" --install "$build"
-  cp "$build/install_manifest.txt" "$STATE/interfaces_install_manifest.txt"
+  cp "$build/install_manifest.txt" "$STATE/${name}_install_manifest.txt"
   [[ "${SORTING_LINE_KEEP_BUILD:-0}" == 1 ]] || rm -rf "$build"
 
   # Prove it, from a clean environment (nothing sourced).
   env -u PYTHONPATH -u AMENT_PREFIX_PATH -u LD_LIBRARY_PATH -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
-    "$VENV/bin/python" -c 'from sorting_line_interfaces.msg import LineState; from sorting_line_interfaces.srv import ResetLine' ||
-    die "interfaces: installed, but the import check failed"
-  write_stamp interfaces "$key"
-  say "interfaces: sorting_line_interfaces installed"
+    "$VENV/bin/python" -c "$check" ||
+    die "interfaces: $name installed, but the import check failed"
+  write_stamp "$name" "$key"
+  say "interfaces: $name installed"
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -250,7 +263,10 @@ make_venv
 PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.implementation.cache_tag)')"
 mkdir -p "$STATE"
 install_wheels
-build_interfaces
+build_interfaces simulation_interfaces "$MSG_DIR/simulation_interfaces" \
+  'from simulation_interfaces.srv import StepSimulation; from simulation_interfaces.action import SimulateSteps'
+build_interfaces sorting_line_interfaces "$MSG_DIR" \
+  'from sorting_line_interfaces.msg import LineState; from sorting_line_interfaces.srv import ResetLine'
 install_bridge
 build_rust
 say "done (source launch_scripts/env.sh to use the venv with the project's ROS settings)"

@@ -1,12 +1,14 @@
 //! What the node reports about itself: per-line counters (ticks, episodes, commands accepted and
-//! rejected by reason) published on /diagnostics, and logging of rejections that says each
-//! reason once and then at most once per interval, so a flood of bad commands cannot flood the log.
+//! rejected by reason) and the simulation's (its state, simulation_interfaces requests answered and
+//! refused by result code) published on /diagnostics, and logging of rejections that says each
+//! reason once and then at most once per interval, so a flood of bad requests cannot flood the log.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use super::messages::{DiagnosticStatus, KeyValue, DIAGNOSTIC_OK, DIAGNOSTIC_WARN};
 use super::protocol::{Rejection, REJECTIONS};
+use super::simulation::{code, Refusal, SimState};
 
 /// How often a repeated rejection reason may be logged again.
 pub const LOG_INTERVAL: Duration = Duration::from_secs(5);
@@ -24,8 +26,33 @@ pub struct LineCounters {
     pub unread: u64,
     /// For the tick rate and the warning level: values at the last report.
     last_report: (Instant, u64, u64),
-    /// Per reason: when it was last logged and how many were not logged since.
-    log_state: BTreeMap<Rejection, (Instant, u64)>,
+    log: LogThrottle<Rejection>,
+}
+
+/// Logs each kind of rejection once, then at most once per [`LOG_INTERVAL`], counting the rest.
+#[derive(Debug, Default)]
+struct LogThrottle<K: Ord> {
+    /// Per kind: when it was last logged and how many were not logged since.
+    state: BTreeMap<K, (Instant, u64)>,
+}
+
+impl<K: Ord + Copy> LogThrottle<K> {
+    /// None when this kind was logged less than LOG_INTERVAL ago; otherwise the suffix to log
+    /// ("" or " (N more like it since the last report)").
+    fn due(&mut self, kind: K) -> Option<String> {
+        let now = Instant::now();
+        match self.state.get_mut(&kind) {
+            Some((last, suppressed)) if now.duration_since(*last) < LOG_INTERVAL => {
+                *suppressed += 1;
+                None
+            }
+            entry => {
+                let suppressed = entry.map(|(_, s)| *s).unwrap_or(0);
+                self.state.insert(kind, (now, 0));
+                Some(if suppressed > 0 { format!(" ({suppressed} more like it since the last report)") } else { String::new() })
+            }
+        }
+    }
 }
 
 impl LineCounters {
@@ -39,7 +66,7 @@ impl LineCounters {
             published: 0,
             unread: 0,
             last_report: (Instant::now(), 0, 0),
-            log_state: BTreeMap::new(),
+            log: LogThrottle { state: BTreeMap::new() },
         }
     }
 
@@ -59,24 +86,13 @@ impl LineCounters {
     /// Counts a rejection and returns the log line to print, if this reason is due one.
     pub fn reject(&mut self, reason: Rejection, topic: &str, detail: &str) -> Option<String> {
         *self.rejected.entry(reason).or_default() += 1;
-        let now = Instant::now();
-        match self.log_state.get_mut(&reason) {
-            Some((last, suppressed)) if now.duration_since(*last) < LOG_INTERVAL => {
-                *suppressed += 1;
-                None
-            }
-            entry => {
-                let suppressed = entry.map(|(_, s)| *s).unwrap_or(0);
-                self.log_state.insert(reason, (now, 0));
-                let more = if suppressed > 0 { format!(" ({suppressed} more like it since the last report)") } else { String::new() };
-                Some(format!(
-                    "{}/{topic}: rejected {detail}: {} [{}]{more}; the line keeps its last valid command",
-                    self.namespace.trim_end_matches('/'),
-                    reason.explain(),
-                    reason.key()
-                ))
-            }
-        }
+        let more = self.log.due(reason)?;
+        Some(format!(
+            "{}/{topic}: rejected {detail}: {} [{}]{more}; the line keeps its last valid command",
+            self.namespace.trim_end_matches('/'),
+            reason.explain(),
+            reason.key()
+        ))
     }
 
     /// The DiagnosticStatus of this line; `extra` adds node-wide values (seed, mode, ...).
@@ -116,6 +132,72 @@ impl LineCounters {
     }
 }
 
+/// Counters of the simulation_interfaces services (node-wide: they act on every line).
+#[derive(Debug)]
+pub struct SimulationCounters {
+    /// The node's private namespace (`<ns>/<node name>`), where the services are.
+    pub node: String,
+    pub answered_ok: u64,
+    /// Requests refused, per result code.
+    pub refused: BTreeMap<u8, u64>,
+    /// Simulation steps run by StepSimulation.
+    pub steps: u64,
+    refused_at_last_report: u64,
+    log: LogThrottle<u8>,
+}
+
+impl SimulationCounters {
+    pub fn new(node: String) -> Self {
+        SimulationCounters {
+            node,
+            answered_ok: 0,
+            refused: BTreeMap::new(),
+            steps: 0,
+            refused_at_last_report: 0,
+            log: LogThrottle { state: BTreeMap::new() },
+        }
+    }
+
+    pub fn total_refused(&self) -> u64 {
+        self.refused.values().sum()
+    }
+
+    /// Counts a refused request of `service` and returns the log line, if this code is due one.
+    pub fn refuse(&mut self, service: &str, request: &str, refusal: &Refusal) -> Option<String> {
+        *self.refused.entry(refusal.code).or_default() += 1;
+        let more = self.log.due(refusal.code)?;
+        Some(format!(
+            "{}/{service}: refused {request}: {} [{}]{more}",
+            self.node.trim_end_matches('/'),
+            refusal.message,
+            code::name(refusal.code)
+        ))
+    }
+
+    /// The DiagnosticStatus "sorting_line: simulation" (hardware_id: the node's private namespace).
+    pub fn status(&mut self, state: SimState, stepping: Option<(u64, u64)>) -> DiagnosticStatus {
+        let kv = |key: &str, value: String| KeyValue { key: key.to_string(), value };
+        let mut values = vec![
+            kv("simulation_state", state.name().to_string()),
+            kv("step_in_progress", stepping.map_or_else(|| "none".to_string(), |(done, n)| format!("{done}/{n}"))),
+            kv("steps_stepped", self.steps.to_string()),
+            kv("requests_ok", self.answered_ok.to_string()),
+            kv("requests_refused", self.total_refused().to_string()),
+        ];
+        for c in code::REFUSALS {
+            values.push(kv(&format!("refused_{}", code::name(c)), self.refused.get(&c).copied().unwrap_or(0).to_string()));
+        }
+        let recent = self.total_refused() - self.refused_at_last_report;
+        self.refused_at_last_report = self.total_refused();
+        let (level, message) = if recent > 0 {
+            (DIAGNOSTIC_WARN, format!("{recent} simulation_interfaces requests refused since the last report"))
+        } else {
+            (DIAGNOSTIC_OK, state.name().to_string())
+        };
+        DiagnosticStatus { level, name: "sorting_line: simulation".to_string(), message, hardware_id: self.node.clone(), values }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,5 +218,19 @@ mod tests {
         assert_eq!(get("commands_rejected"), "101");
         assert_eq!(get("rejected_invalid_speed"), "100");
         assert_eq!(c.status(vec![]).level, DIAGNOSTIC_OK, "no new rejections since");
+    }
+
+    #[test]
+    fn counts_refused_simulation_requests_per_result_code() {
+        let mut c = SimulationCounters::new("/plant/sorting_line".into());
+        let refusal = Refusal { code: code::INCORRECT_STATE, message: "the simulation is PLAYING".into() };
+        let line = c.refuse("step_simulation", "steps 50", &refusal).unwrap();
+        assert_eq!(line, "/plant/sorting_line/step_simulation: refused steps 50: the simulation is PLAYING [incorrect_state]");
+        assert!(c.refuse("step_simulation", "steps 50", &refusal).is_none(), "once per interval");
+        let status = c.status(SimState::Playing, None);
+        let get = |k: &str| status.values.iter().find(|v| v.key == k).unwrap().value.clone();
+        assert_eq!((get("refused_incorrect_state"), get("requests_refused"), get("simulation_state")), ("2".into(), "2".into(), "PLAYING".into()));
+        assert_eq!(status.level, DIAGNOSTIC_WARN);
+        assert_eq!(c.status(SimState::Playing, None).level, DIAGNOSTIC_OK);
     }
 }

@@ -7,6 +7,8 @@
 //! - `discovery`: the DDS participant as ROS 2's discovery variables ask; `type_hash`: the
 //!   RIHS01 type hashes every endpoint announces.
 //! - `protocol`: lock-step/realtime command handling of one line, without I/O.
+//! - `simulation`: the node as a standard simulator (simulation_interfaces: state, step, reset,
+//!   features), as rules without I/O; `simulation_interfaces`: the standard's types on the wire.
 //! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire.
 //! - `node`: the DDS participant and the event loop.
 
@@ -22,6 +24,8 @@ pub mod params;
 pub mod protocol;
 pub mod qos;
 pub mod ros_args;
+pub mod simulation;
+pub mod simulation_interfaces;
 pub mod type_hash;
 pub mod type_hash_table;
 

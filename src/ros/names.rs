@@ -57,6 +57,17 @@ impl Names {
         self.remapped(join(line_ns, relative))
     }
 
+    /// The absolute name of `relative` in the node's private namespace (`~/relative`:
+    /// `<namespace>/<node name>/relative`), after remaps.
+    pub fn private(&self, relative: &str) -> String {
+        self.remapped(join(&self.fully_qualified(), relative))
+    }
+
+    /// The node's fully qualified name, `<namespace>/<node name>`.
+    pub fn fully_qualified(&self) -> String {
+        join(&self.namespace, &self.node_name)
+    }
+
     /// An absolute name such as "/clock", after remaps.
     pub fn global(&self, absolute: &str) -> String {
         self.remapped(absolute.to_string())

@@ -1,7 +1,9 @@
 //! The running node: one DDS participant (set up from ROS 2's discovery variables), one ROS node, and
-//! for each hosted line its publishers, subscriptions and `reset` service. A single async task
-//! waits on all inputs at once (commands, service requests, the realtime timer, the diagnostics
-//! timer, SIGINT/SIGTERM), so an idle node in lock-step uses no CPU.
+//! for each hosted line its publishers, subscriptions and `reset` service, plus the standard
+//! simulator-control services (simulation_interfaces, rules in `simulation`) in the node's private
+//! namespace. A single async task waits on all inputs at once (commands, service requests, the
+//! realtime timer, a StepSimulation in progress, the diagnostics timer, SIGINT/SIGTERM), so an
+//! idle node in lock-step uses no CPU.
 //!
 //! The line's hardware shows in the graph: `sensors/ratio` is published while the line has its
 //! ratio sensor, `cmd/sort_mode` subscribed while its machine has sort modes. On an evolving line
@@ -16,7 +18,9 @@ use std::time::{Duration, Instant};
 
 use async_signal::{Signal, Signals};
 use futures::channel::oneshot;
-use futures::stream::{self, LocalBoxStream, StreamExt};
+use futures::future::{FutureExt, LocalBoxFuture};
+use futures::stream::{self, FuturesUnordered, LocalBoxStream, StreamExt};
+use ros2_client::action::{ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle};
 use ros2_client::{
     Context, Gid, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
     Server, ServiceMapping, Subscription,
@@ -24,7 +28,7 @@ use ros2_client::{
 use serde::Serialize;
 
 use super::clock::SimClock;
-use super::diagnostics::LineCounters;
+use super::diagnostics::{LineCounters, SimulationCounters};
 use super::discovery::Discovery;
 use super::messages::*;
 use super::names::{Names, NODE_NAME};
@@ -32,8 +36,10 @@ use super::options::{NodeArgs, TickMode};
 use super::param_descriptors::{descriptors, EVOLVING_PARAMETERS};
 use super::params::NodeParams;
 use super::protocol::{batch_commands, batch_resets, Accepted, BatchModes, Client, Command, HostedLine, Rejection, TimerTick};
-use super::qos::default_profile;
+use super::qos::{action_status_profile, default_profile};
 use super::ros_args::RosArgs;
+use super::simulation::{self, code, reset_scope, step_request, transition, ResetScope, SimState, Transition};
+use super::simulation_interfaces::*;
 use crate::sim::evolution::{At, Settings};
 use crate::sim::Observation;
 
@@ -85,6 +91,8 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let batch_cmd = subscription::<LineCommands>(&mut node, &names.topic(&names.namespace, "batch/cmd"))?;
     let batch_state = publisher::<LineStates>(&mut node, &names.topic(&names.namespace, "batch/state"))?;
     let batch_reset = server(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?;
+    let sim = SimulationServers::new(&mut node, &names)?;
+    let simulate_steps = simulate_steps_server(&mut node, &names)?;
     let spinner = node.spinner().map_err(|e| format!("cannot start the node's spinner: {e:?}"))?;
     let shared = Shared {
         clock_pub,
@@ -92,6 +100,9 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
         batch_cmd,
         batch_state,
         batch_reset,
+        sim,
+        simulate_steps,
+        fully_qualified_name: names.fully_qualified(),
         params: params.clone(),
         parameter_values,
         new_streams: RefCell::new(Vec::new()),
@@ -211,6 +222,181 @@ where
     .map_err(|e| format!("cannot serve {absolute}: {e:?}"))
 }
 
+/// The simulation_interfaces services, in the node's private namespace (`~/...`), as Gazebo
+/// serves them under its node's name.
+struct SimulationServers {
+    features: Server<GetSimulatorFeaturesRequest, GetSimulatorFeaturesResponse>,
+    get_state: Server<GetSimulationStateRequest, GetSimulationStateResponse>,
+    set_state: Server<SetSimulationStateRequest, SetSimulationStateResponse>,
+    step: Server<StepSimulationRequest, StepSimulationResponse>,
+    reset: Server<ResetSimulationRequest, ResetSimulationResponse>,
+}
+
+/// A request to one of the [`SimulationServers`], decoded.
+#[derive(Clone, Copy, Debug)]
+enum SimRequest {
+    Features,
+    GetState,
+    SetState(u8),
+    Step(u64),
+    Reset(u8),
+}
+
+impl SimRequest {
+    /// The service's name in the private namespace.
+    fn service(self) -> &'static str {
+        let index = match self {
+            SimRequest::Features => 0,
+            SimRequest::GetState => 1,
+            SimRequest::SetState(_) => 2,
+            SimRequest::Step(_) => 3,
+            SimRequest::Reset(_) => 4,
+        };
+        SERVICES[index].0
+    }
+
+    fn describe(self) -> String {
+        match self {
+            SimRequest::Features | SimRequest::GetState => "the request".to_string(),
+            SimRequest::SetState(state) => format!("state {state}"),
+            SimRequest::Step(steps) => format!("steps {steps}"),
+            SimRequest::Reset(scope) => format!("scope {scope}"),
+        }
+    }
+}
+
+impl SimulationServers {
+    fn new(node: &mut Node, names: &Names) -> Result<Self, String> {
+        let at = |k: usize| names.private(SERVICES[k].0);
+        let ty = |k: usize| service_type(SERVICES[k].1);
+        Ok(SimulationServers {
+            features: server(node, &at(0), ty(0))?,
+            get_state: server(node, &at(1), ty(1))?,
+            set_state: server(node, &at(2), ty(2))?,
+            step: server(node, &at(3), ty(3))?,
+            reset: server(node, &at(4), ty(4))?,
+        })
+    }
+
+    fn events(&self) -> Vec<LocalBoxStream<'_, Event>> {
+        fn tag<R>(
+            request: fn(R) -> SimRequest,
+        ) -> impl Fn(ros2_client::ReadResult<(RmwRequestId, R)>) -> Event {
+            move |r| Event::Sim(r.map(|(id, req)| (id, request(req))).map_err(|e| format!("{e:?}")))
+        }
+        vec![
+            self.features.receive_request_stream().map(tag(|_| SimRequest::Features)).boxed_local(),
+            self.get_state.receive_request_stream().map(tag(|_| SimRequest::GetState)).boxed_local(),
+            self.set_state.receive_request_stream().map(tag(|r: SetSimulationStateRequest| SimRequest::SetState(r.state.state))).boxed_local(),
+            self.step.receive_request_stream().map(tag(|r: StepSimulationRequest| SimRequest::Step(r.steps))).boxed_local(),
+            self.reset.receive_request_stream().map(tag(|r: ResetSimulationRequest| SimRequest::Reset(r.scope))).boxed_local(),
+        ]
+    }
+
+    /// Answers `request` with `result` (and the state, for GetSimulationState).
+    async fn reply(&self, id: RmwRequestId, request: SimRequest, result: SimResult, state: SimState) {
+        let sent = match request {
+            SimRequest::Features => {
+                let features = SimulatorFeatures {
+                    features: simulation::features(),
+                    spawn_formats: Vec::new(),
+                    custom_info: "sorting_line: PAUSED is lock-step (commands or StepSimulation advance the lines), \
+                                  PLAYING is realtime at the rate parameter; one step is one tick of every line"
+                        .to_string(),
+                };
+                self.features.async_send_response(id, GetSimulatorFeaturesResponse { features }).await.map_err(|e| format!("{e:?}"))
+            }
+            SimRequest::GetState => {
+                let response = GetSimulationStateResponse { state: SimulationState { state: state.code() }, result };
+                self.get_state.async_send_response(id, response).await.map_err(|e| format!("{e:?}"))
+            }
+            SimRequest::SetState(_) => {
+                self.set_state.async_send_response(id, SetSimulationStateResponse { result }).await.map_err(|e| format!("{e:?}"))
+            }
+            SimRequest::Step(_) => {
+                self.step.async_send_response(id, StepSimulationResponse { result }).await.map_err(|e| format!("{e:?}"))
+            }
+            SimRequest::Reset(_) => {
+                self.reset.async_send_response(id, ResetSimulationResponse { result }).await.map_err(|e| format!("{e:?}"))
+            }
+        };
+        if let Err(error) = sent {
+            log("WARN", format!("{}: cannot send the response: {error}", request.service()));
+        }
+    }
+}
+
+fn ok() -> SimResult {
+    SimResult { result: code::OK, error_message: String::new() }
+}
+
+type SimulateStepsServer = AsyncActionServer<SimulateStepsGoal, SimulateStepsResult, SimulateStepsFeedback>;
+type StepsGoal = ExecutingGoalHandle<SimulateStepsGoal>;
+
+/// The SimulateSteps action server, in the node's private namespace (`~/simulate_steps`), with
+/// rcl_action's QoS (the status topic is transient-local).
+fn simulate_steps_server(node: &mut Node, names: &Names) -> Result<SimulateStepsServer, String> {
+    let absolute = names.private(ACTION.0);
+    let qos = ActionServerQosPolicies {
+        goal_service: default_profile(),
+        result_service: default_profile(),
+        cancel_service: default_profile(),
+        feedback_publisher: default_profile(),
+        status_publisher: action_status_profile(),
+    };
+    let server = node
+        .create_action_server(ServiceMapping::Enhanced, &topic_name(&absolute)?, &action_type(), qos)
+        .map_err(|e| format!("cannot serve the action {absolute}: {e:?}"))?;
+    Ok(AsyncActionServer::new(server))
+}
+
+/// Whom a finished StepSimulation answers: a service request, or a SimulateSteps goal.
+#[derive(Clone, Copy)]
+enum StepReply {
+    Service(RmwRequestId),
+    Action(StepsGoal),
+}
+
+/// A StepSimulation (or SimulateSteps goal) in progress: whom to answer, steps done and asked.
+struct StepJob {
+    reply: StepReply,
+    done: u64,
+    steps: u64,
+}
+
+/// Ends a SimulateSteps goal: the result goes out when the client asks for it (ros2-client's
+/// `send_result_response` waits for that request), so it runs beside the node's loop.
+fn finish_goal<'a>(
+    server: &'a SimulateStepsServer,
+    goal: StepsGoal,
+    status: GoalEndStatus,
+    result: SimResult,
+) -> LocalBoxFuture<'a, ()> {
+    async move {
+        if let Err(e) = server.send_result_response(goal, status, SimulateStepsResult { result }).await {
+            log("WARN", format!("{}: cannot send a goal's result: {e:?}", ACTION.0));
+        }
+    }
+    .boxed_local()
+}
+
+/// /clock: follows the line that is furthest ahead and goes back only when the simulation's time
+/// is reset.
+#[derive(Default)]
+struct ClockState {
+    last: Option<Time>,
+}
+
+impl ClockState {
+    fn publish(&mut self, shared: &Shared, runtimes: &[LineRuntime]) {
+        let newest = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
+        if self.last.is_none_or(|last| newest > last) {
+            self.last = Some(newest);
+            shared.offer(&shared.clock_pub, &|| "/clock".to_string(), || Clock { clock: newest });
+        }
+    }
+}
+
 /// The ROS endpoints of one line. The fixed ones do not change while serving, so the input
 /// streams can borrow them while the line's state ([`LineRuntime`]) is mutated; those of the
 /// line's hardware (ratio sensor, sort modes) come and go with it ([`Self::fit_hardware`]).
@@ -256,6 +442,9 @@ struct Shared {
     batch_cmd: Subscription<LineCommands>,
     batch_state: Publisher<LineStates>,
     batch_reset: Server<ResetLinesRequest, ResetLinesResponse>,
+    sim: SimulationServers,
+    simulate_steps: SimulateStepsServer,
+    fully_qualified_name: String,
     params: NodeParams,
     parameter_values: ParameterValues,
     /// Input streams of endpoints created while serving, for the node's select to take in.
@@ -419,6 +608,16 @@ impl LineEndpoints {
         }
     }
 
+    /// On an evolving line: the announcement of the line as built (its episode-0 events), as the
+    /// node starts and after a ResetSimulation rebuilt it.
+    fn announce_start(&self, shared: &Shared, k: usize, r: &mut LineRuntime) {
+        if r.host.evolving() {
+            let settings = r.host.line().settings();
+            let indices: Vec<usize> = r.host.line().evolution().events_at(At::Episode(0)).map(|(i, _)| i).collect();
+            self.announce(shared, k, r, true, &indices, &settings);
+        }
+    }
+
     /// Announces the events due at the start of the step line k waits for, once.
     fn announce_tick_events(&self, shared: &Shared, k: usize, r: &mut LineRuntime) {
         let tick = r.host.line().tick();
@@ -495,47 +694,56 @@ enum Event {
     /// A command on line k's own topic (named), with its sender and stamp.
     Command(usize, &'static str, Result<(Client, Time, Command), String>),
     Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
+    /// A simulation_interfaces request.
+    Sim(Result<(RmwRequestId, SimRequest), String>),
+    /// A new SimulateSteps goal, or a request to cancel goals.
+    Goal(Result<NewGoalHandle<SimulateStepsGoal>, String>),
+    Cancel(Result<CancelHandle, String>),
 }
 
 fn show_stamp(t: Time) -> String {
     format!("{}.{:09}", t.sec, t.nanosec)
 }
 
-/// The node's one task: waits on every input, handles each completely, repeats until a signal.
+/// The node's one task: waits on every input, handles each completely, repeats until a signal
+/// (or a SetSimulationState to QUITTING).
 async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared: &Shared, signals: Signals) {
-    let mut clock_time = Time::default();
-    let mut publish_clock = |runtimes: &[LineRuntime]| {
-        // With several lines, /clock follows the line that is furthest ahead and never goes back.
-        let newest = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
-        if newest > clock_time {
-            clock_time = newest;
-            shared.offer(&shared.clock_pub, &|| "/clock".to_string(), || Clock { clock: newest });
-        }
-    };
+    let mut clock = ClockState::default();
     for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
         // The line as built: its episode-0 events applied (announced, and line 0's parameters
         // set, like those of any later reset).
-        if r.host.evolving() {
-            let settings = r.host.line().settings();
-            let indices: Vec<usize> = r.host.line().evolution().events_at(At::Episode(0)).map(|(i, _)| i).collect();
-            e.announce(shared, k, r, true, &indices, &settings);
-        }
+        e.announce_start(shared, k, r);
         e.publish_tick(shared, k, r);
     }
-    publish_clock(runtimes);
+    clock.publish(shared, runtimes);
 
     let batch = shared.batch_cmd.async_stream().map(|r| Event::Batch(r.map_err(|e| format!("{e:?}")))).boxed_local();
     let resets =
         shared.batch_reset.receive_request_stream().map(|r| Event::BatchReset(r.map_err(|e| format!("{e:?}")))).boxed_local();
-    let mut events =
-        stream::select_all(endpoints.iter().enumerate().flat_map(|(k, e)| e.events(k)).chain([batch, resets]));
+    let action = &shared.simulate_steps;
+    let goals = stream::unfold((), move |()| async move {
+        Some((Event::Goal(action.receive_new_goal().await.map_err(|e| format!("{e:?}"))), ()))
+    })
+    .boxed_local();
+    let cancels = stream::unfold((), move |()| async move {
+        Some((Event::Cancel(action.receive_cancel_request().await.map_err(|e| format!("{e:?}"))), ()))
+    })
+    .boxed_local();
+    let mut events = stream::select_all(
+        endpoints
+            .iter()
+            .enumerate()
+            .flat_map(|(k, e)| e.events(k))
+            .chain([batch, resets, goals, cancels])
+            .chain(shared.sim.events()),
+    );
+    let mut finishing: FuturesUnordered<LocalBoxFuture<'_, ()>> = FuturesUnordered::new();
     let mut signals = signals.fuse();
-    let realtime = shared.params.mode == TickMode::Realtime;
-    let mut timer = StreamExt::fuse(if realtime {
-        smol::Timer::interval(Duration::from_secs_f64(1.0 / shared.params.rate))
-    } else {
-        smol::Timer::never()
-    });
+    let period = Duration::from_secs_f64(1.0 / shared.params.rate);
+    let mut sim = SimState::initial(shared.params.mode);
+    let mut timer = StreamExt::fuse(if sim == SimState::Playing { smol::Timer::interval(period) } else { smol::Timer::never() });
+    let mut job: Option<StepJob> = None;
+    let mut sim_counters = SimulationCounters::new(shared.fully_qualified_name.clone());
     let mut diagnostics = StreamExt::fuse(smol::Timer::interval(DIAGNOSTICS_PERIOD));
     let started = Instant::now();
 
@@ -544,6 +752,10 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
         for new in shared.new_streams.borrow_mut().drain(..) {
             events.push(new);
         }
+        // A StepSimulation in progress runs one step per turn of the loop, so other requests,
+        // commands and signals are served between its steps.
+        let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> =
+            if job.is_some() { futures::future::ready(()).boxed_local().fuse() } else { futures::future::pending().boxed_local().fuse() };
         // Fair (random among ready inputs): a biased order would let a flood of commands starve
         // the realtime timer and /diagnostics.
         futures::select! {
@@ -551,7 +763,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 Event::Batch(received) => {
                     if handle_batch(endpoints, runtimes, shared, received) {
                         shared.publish_batch_state(runtimes);
-                        publish_clock(runtimes);
+                        clock.publish(shared, runtimes);
                     }
                 }
                 Event::Command(k, topic, received) => {
@@ -560,7 +772,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         Err(error) => Err(malformed(&error)),
                     };
                     if settle(&endpoints[k], k, &mut runtimes[k], shared, topic, result) {
-                        publish_clock(runtimes);
+                        clock.publish(shared, runtimes);
                     }
                 }
                 Event::BatchReset(Ok((request_id, request))) => {
@@ -576,7 +788,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         log("WARN", format!("batch/reset: cannot send the response: {error:?}"));
                     }
                     shared.publish_batch_state(runtimes);
-                    publish_clock(runtimes);
+                    clock.publish(shared, runtimes);
                 }
                 Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
                 Event::Reset(k, Ok((request_id, request))) => {
@@ -587,30 +799,151 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
                     }
                     shared.publish_batch_state(runtimes);
-                    publish_clock(runtimes);
+                    clock.publish(shared, runtimes);
                 }
                 Event::Reset(k, Err(error)) => {
                     log("WARN", format!("{}/reset: unreadable request: {error}", endpoints[k].namespace));
                 }
-            },
-            _ = timer.select_next_some() => {
-                for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
-                    match r.host.timer_tick() {
-                        TimerTick::Stepped(_) => {
-                            r.counters.ticks += 1;
-                            e.publish_tick(shared, k, r);
+                Event::Sim(Ok((id, request))) => {
+                    let stepping = job.as_ref().map(|j| (j.done, j.steps));
+                    let outcome: Result<(), simulation::Refusal> = match request {
+                        SimRequest::Features | SimRequest::GetState => Ok(()),
+                        SimRequest::SetState(target) => match transition(sim, target, stepping) {
+                            Ok(Transition::To { to, reset }) => {
+                                if reset {
+                                    reset_simulation(endpoints, runtimes, shared, ResetScope::ALL, &mut clock);
+                                }
+                                sim = to;
+                                for r in runtimes.iter_mut() {
+                                    r.host.set_mode(to.tick_mode());
+                                    r.host.set_halted(to.halted());
+                                }
+                                if to == SimState::Playing {
+                                    timer.get_mut().set_interval(period);
+                                } else {
+                                    *timer.get_mut() = smol::Timer::never();
+                                }
+                                log("INFO", format!("simulation {}", to.name()));
+                                Ok(())
+                            }
+                            Ok(Transition::Quit) => {
+                                sim_counters.answered_ok += 1;
+                                shared.sim.reply(id, request, ok(), sim).await;
+                                log("INFO", "simulation QUITTING (SetSimulationState): leaving the graph");
+                                break;
+                            }
+                            Err(refusal) => Err(refusal),
+                        },
+                        SimRequest::Step(steps) => match step_request(sim, steps, stepping) {
+                            Ok(0) => Ok(()),
+                            Ok(steps) => {
+                                job = Some(start_job(runtimes, StepReply::Service(id), steps));
+                                continue; // answered when the steps are done
+                            }
+                            Err(refusal) => Err(refusal),
+                        },
+                        SimRequest::Reset(scope) => reset_scope(scope, stepping)
+                            .map(|scope| reset_simulation(endpoints, runtimes, shared, scope, &mut clock)),
+                    };
+                    let result = match outcome {
+                        Ok(()) => {
+                            sim_counters.answered_ok += 1;
+                            ok()
                         }
-                        TimerTick::Reset(_) => {
-                            r.counters.episodes += 1;
-                            e.publish_reset_events(shared, k, r, false);
-                            e.publish_tick(shared, k, r);
+                        Err(refusal) => {
+                            if let Some(line) = sim_counters.refuse(request.service(), &request.describe(), &refusal) {
+                                log("WARN", line);
+                            }
+                            SimResult { result: refusal.code, error_message: refusal.message }
+                        }
+                    };
+                    shared.sim.reply(id, request, result, sim).await;
+                }
+                Event::Sim(Err(error)) => log("WARN", format!("simulation_interfaces: unreadable request: {error}")),
+                Event::Goal(Ok(handle)) => {
+                    let stepping = job.as_ref().map(|j| (j.done, j.steps));
+                    let Some(goal) = action.get_new_goal(handle) else {
+                        log("WARN", format!("{}: a new goal vanished before it was read", ACTION.0));
+                        continue;
+                    };
+                    // Accepted either way: a refused goal ends at once with the reason in its result.
+                    let executing = match action.accept_goal(handle).await {
+                        Ok(accepted) => action.start_executing_goal(accepted).await,
+                        Err(e) => Err(e),
+                    };
+                    let executing = match executing {
+                        Ok(executing) => executing,
+                        Err(e) => {
+                            log("WARN", format!("{}: cannot accept a goal: {e:?}", ACTION.0));
+                            continue;
+                        }
+                    };
+                    match step_request(sim, goal.steps, stepping) {
+                        Ok(0) => {
+                            sim_counters.answered_ok += 1;
+                            finishing.push(finish_goal(action, executing, GoalEndStatus::Succeeded, ok()));
+                        }
+                        Ok(steps) => job = Some(start_job(runtimes, StepReply::Action(executing), steps)),
+                        Err(refusal) => {
+                            if let Some(line) = sim_counters.refuse(ACTION.0, &format!("steps {}", goal.steps), &refusal) {
+                                log("WARN", line);
+                            }
+                            let result = SimResult { result: refusal.code, error_message: refusal.message };
+                            finishing.push(finish_goal(action, executing, GoalEndStatus::Aborted, result));
                         }
                     }
                 }
-                shared.publish_batch_state(runtimes);
-                publish_clock(runtimes);
+                Event::Goal(Err(error)) => log("WARN", format!("{}: unreadable goal: {error}", ACTION.0)),
+                Event::Cancel(Ok(cancel)) => {
+                    // Only the goal in progress can be canceled: every other one has ended.
+                    let current = match job.as_ref().map(|j| (j.reply, j.done, j.steps)) {
+                        Some((StepReply::Action(goal), done, steps)) if cancel.contains_goal(&goal.goal_id()) => Some((goal, done, steps)),
+                        _ => None,
+                    };
+                    if let Err(e) = action.respond_to_cancel_requests(&cancel, current.map(|(g, _, _)| g.goal_id()).into_iter()).await {
+                        log("WARN", format!("{}: cannot answer a cancel request: {e:?}", ACTION.0));
+                    }
+                    if let Some((goal, done, steps)) = current {
+                        end_job(runtimes);
+                        job = None;
+                        let result = SimResult {
+                            result: code::OPERATION_FAILED,
+                            error_message: format!("canceled after {done} of {steps} steps"),
+                        };
+                        finishing.push(finish_goal(action, goal, GoalEndStatus::Canceled, result));
+                    }
+                }
+                Event::Cancel(Err(error)) => log("WARN", format!("{}: unreadable cancel request: {error}", ACTION.0)),
             },
-            _ = diagnostics.select_next_some() => publish_diagnostics(runtimes, shared, started),
+            _ = step_now => {
+                if let Some(j) = job.as_mut() {
+                    tick_all(endpoints, runtimes, shared, &mut clock);
+                    j.done += 1;
+                    sim_counters.steps += 1;
+                    if let StepReply::Action(goal) = j.reply {
+                        let feedback = SimulateStepsFeedback { completed_steps: j.done, remaining_steps: j.steps - j.done };
+                        if let Err(e) = action.publish_feedback(goal, feedback).await {
+                            log("WARN", format!("{}: cannot publish feedback: {e:?}", ACTION.0));
+                        }
+                    }
+                    if j.done == j.steps {
+                        let reply = j.reply;
+                        end_job(runtimes);
+                        job = None;
+                        sim_counters.answered_ok += 1;
+                        match reply {
+                            StepReply::Service(id) => shared.sim.reply(id, SimRequest::Step(0), ok(), sim).await,
+                            StepReply::Action(goal) => finishing.push(finish_goal(action, goal, GoalEndStatus::Succeeded, ok())),
+                        }
+                    }
+                }
+            },
+            () = finishing.select_next_some() => {},
+            _ = timer.select_next_some() => tick_all(endpoints, runtimes, shared, &mut clock),
+            _ = diagnostics.select_next_some() => {
+                let stepping = job.as_ref().map(|j| (j.done, j.steps));
+                publish_diagnostics(runtimes, shared, started, sim_counters.status(sim, stepping));
+            },
             signal = signals.select_next_some() => {
                 let name = match signal { Ok(Signal::Int) => "SIGINT", Ok(Signal::Term) => "SIGTERM", _ => "a signal" };
                 log("INFO", format!("received {name}: leaving the graph"));
@@ -618,6 +951,76 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
             },
         }
     }
+}
+
+/// Starts a StepSimulation (or SimulateSteps goal) of `steps` > 0. Realtime rules while stepping:
+/// a command updates the held command (the next step uses it) instead of completing a tick.
+fn start_job(runtimes: &mut [LineRuntime], reply: StepReply, steps: u64) -> StepJob {
+    for r in runtimes.iter_mut() {
+        r.host.set_mode(TickMode::Realtime);
+    }
+    StepJob { reply, done: 0, steps }
+}
+
+/// Back to lock-step (PAUSED) after a step job.
+fn end_job(runtimes: &mut [LineRuntime]) {
+    for r in runtimes.iter_mut() {
+        r.host.set_mode(TickMode::Lockstep);
+    }
+}
+
+/// One tick of every line on its held command, as the realtime timer and StepSimulation run it:
+/// a line at its time limit starts a new episode instead (its random streams carry on).
+fn tick_all(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared: &Shared, clock: &mut ClockState) {
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
+        match r.host.timer_tick() {
+            TimerTick::Stepped(_) => {
+                r.counters.ticks += 1;
+                e.publish_tick(shared, k, r);
+            }
+            TimerTick::Reset(_) => {
+                r.counters.episodes += 1;
+                e.publish_reset_events(shared, k, r, false);
+                e.publish_tick(shared, k, r);
+            }
+        }
+    }
+    shared.publish_batch_state(runtimes);
+    clock.publish(shared, runtimes);
+}
+
+/// ResetSimulation (and stopping): every line back to how it was built (state), the stamps and
+/// /clock back to 0 (time), or both; then each line's tick is published again (with the reset
+/// event, seeded, when the state was reset).
+fn reset_simulation(
+    endpoints: &[LineEndpoints],
+    runtimes: &mut [LineRuntime],
+    shared: &Shared,
+    scope: ResetScope,
+    clock: &mut ClockState,
+) {
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
+        if scope.state {
+            r.host.restart();
+            r.counters.episodes += 1;
+            // The line as built again: its schedule starts over.
+            (r.announced_tick, r.counted_tick, r.evolution_events) = (None, None, 0);
+        }
+        if scope.time {
+            r.host.rewind_time();
+        }
+        if scope.state {
+            let sent = shared.offer(&e.reset_event, &|| e.show("events/reset"), || ResetEvent::of(&r.host, true));
+            r.counters.count_published(sent);
+            e.announce_start(shared, k, r);
+        }
+        e.publish_tick(shared, k, r);
+    }
+    if scope.time {
+        clock.last = None;
+    }
+    shared.publish_batch_state(runtimes);
+    clock.publish(shared, runtimes);
 }
 
 /// Resets one line and publishes its new tick (and the reset event, for bags).
@@ -735,7 +1138,7 @@ fn settle(e: &LineEndpoints, k: usize, r: &mut LineRuntime, shared: &Shared, top
     }
 }
 
-fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: Instant) {
+fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: Instant, simulation: DiagnosticStatus) {
     let p = &shared.params;
     let status = runtimes
         .iter_mut()
@@ -749,7 +1152,7 @@ fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: I
                 kv("sim_time", show_stamp(r.host.stamp())),
                 kv("variant", p.line.variant.to_string()),
                 kv("input", line.config().input.to_string()),
-                kv("mode", format!("{:?}", p.mode).to_lowercase()),
+                kv("mode", format!("{:?}", r.host.mode()).to_lowercase()),
                 kv("uptime_s", format!("{:.0}", started.elapsed().as_secs_f64())),
                 kv("owner", show_client(r.host.owner())),
             ];
@@ -772,6 +1175,7 @@ fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: I
             }
             r.counters.status(extra)
         })
+        .chain([simulation])
         .collect();
     let stamp = runtimes.iter().map(|r| r.host.stamp()).max().unwrap_or_default();
     let array = DiagnosticArray { header: Header { stamp, frame_id: String::new() }, status };

@@ -67,9 +67,11 @@ pub enum Rejection {
     NotOwner,
     /// A sort mode other than 0 while the evolving line's machine has no sort modes.
     SortModesOff,
+    /// The simulation is STOPPED (simulation_interfaces): no tick happens until it plays or pauses.
+    Stopped,
 }
 
-pub const REJECTIONS: [Rejection; 10] = [
+pub const REJECTIONS: [Rejection; 11] = [
     Rejection::InvalidSpeed,
     Rejection::UnknownMode,
     Rejection::ModeOnBasicLine,
@@ -80,6 +82,7 @@ pub const REJECTIONS: [Rejection; 10] = [
     Rejection::Malformed,
     Rejection::NotOwner,
     Rejection::SortModesOff,
+    Rejection::Stopped,
 ];
 
 impl Rejection {
@@ -96,6 +99,7 @@ impl Rejection {
             Rejection::Malformed => "malformed",
             Rejection::NotOwner => "not_owner",
             Rejection::SortModesOff => "sort_modes_off",
+            Rejection::Stopped => "stopped",
         }
     }
 
@@ -116,6 +120,7 @@ impl Rejection {
             Rejection::SortModesOff => {
                 "the sorting machine has no sort modes now (before its machine upgrade): only mode 0 is valid"
             }
+            Rejection::Stopped => "the simulation is STOPPED; set it to PAUSED or PLAYING (~/set_simulation_state)",
         }
     }
 }
@@ -172,6 +177,10 @@ pub struct HostedLine {
     newest_stamp: [i64; 2],
     /// The client whose command was accepted first in this episode; None until then.
     owner: Option<Client>,
+    /// The simulation is STOPPED: every command is rejected.
+    halted: bool,
+    /// What the line was built from, for a reset of the simulation's state.
+    start: (LineConfig, u64),
 }
 
 impl HostedLine {
@@ -182,6 +191,8 @@ impl HostedLine {
     /// A hosted line that evolves by `schedule` (see the module docs for its commands).
     pub fn with_evolution(config: LineConfig, seed: u64, schedule: Schedule, clock: SimClock, mode: TickMode) -> Self {
         HostedLine {
+            start: (config.clone(), seed),
+            halted: false,
             line: Line::with_evolution(config, seed, schedule),
             clock,
             mode,
@@ -206,6 +217,53 @@ impl HostedLine {
     /// The client driving this episode, if any command has been accepted in it.
     pub fn owner(&self) -> Option<Client> {
         self.owner
+    }
+
+    /// How the line ticks now (the simulation's state decides: PLAYING is realtime).
+    pub fn mode(&self) -> TickMode {
+        self.mode
+    }
+
+    /// Switches between lock-step and realtime. Entering lock-step, the current tick waits for
+    /// commands stamped with it: a command a realtime line held for its next timer tick does not
+    /// answer it.
+    pub fn set_mode(&mut self, mode: TickMode) {
+        if mode == TickMode::Lockstep {
+            self.pending_speed = None;
+            self.pending_mode = None;
+        }
+        self.mode = mode;
+    }
+
+    /// STOPPED (true): every command is rejected until the simulation plays or pauses again.
+    pub fn set_halted(&mut self, halted: bool) {
+        self.halted = halted;
+    }
+
+    /// The line as it was built: its seed's random streams from the start, episode 0, the start
+    /// speed, no owner. The tick counter runs on (see [`Self::rewind_time`]).
+    pub fn restart(&mut self) -> Observation {
+        let (config, seed) = self.start.clone();
+        self.line = Line::with_evolution(config, seed, self.line.evolution().clone());
+        self.clear_episode();
+        self.tick += 1;
+        self.line.observation()
+    }
+
+    /// The tick counter, and so the stamps, back to 0. Commands stamped before are stale or name
+    /// ticks that do not exist (yet); realtime watermarks start again.
+    pub fn rewind_time(&mut self) {
+        self.tick = 0;
+        self.pending_speed = None;
+        self.pending_mode = None;
+        self.newest_stamp = [i64::MIN; 2];
+    }
+
+    fn clear_episode(&mut self) {
+        self.pending_speed = None;
+        self.pending_mode = None;
+        self.held = Action::new(START_SPEED_INDEX, SortMode::Basic);
+        self.owner = None;
     }
 
     fn advanced(&self) -> bool {
@@ -240,10 +298,7 @@ impl HostedLine {
     /// Starts a new episode at a new tick (stamps never repeat, so old commands become stale).
     pub fn reset(&mut self, seed: Option<u64>) -> Observation {
         self.tick += 1;
-        self.pending_speed = None;
-        self.pending_mode = None;
-        self.held = Action::new(START_SPEED_INDEX, SortMode::Basic);
-        self.owner = None;
+        self.clear_episode();
         self.line.reset(seed)
     }
 
@@ -269,6 +324,9 @@ impl HostedLine {
     }
 
     fn admit(&self, client: Client) -> Result<(), Rejection> {
+        if self.halted {
+            return Err(Rejection::Stopped);
+        }
         match self.owner {
             Some(owner) if owner != client => Err(Rejection::NotOwner),
             _ => Ok(()),
@@ -707,5 +765,36 @@ mod tests {
         h.reset(Some(3));
         let TimerTick::Stepped(out) = h.timer_tick() else { panic!() };
         assert_eq!(out.action.speed_index, START_SPEED_INDEX, "an explicit reset returns to the start speed");
+    }
+
+    #[test]
+    fn a_simulation_reset_restarts_the_line_as_built_and_can_rewind_time() {
+        let mut h = host(Variant::Basic, TickMode::Lockstep);
+        let first: Vec<_> = (0..50).map(|_| h.on_speed(h.stamp(), 0.3).unwrap()).collect();
+        h.reset(None);
+        h.on_speed(h.stamp(), 0.3).unwrap();
+        let before = h.tick();
+        h.restart();
+        assert_eq!((h.tick(), h.line().episode(), h.line().step_count()), (before + 1, 0, 0), "time runs on");
+        let again: Vec<_> = (0..50).map(|_| h.on_speed(h.stamp(), 0.3).unwrap()).collect();
+        assert_eq!(first, again, "the seed's streams from the start");
+        h.rewind_time();
+        assert_eq!(h.stamp(), Time::default());
+        assert_eq!(h.on_speed(SimClock::new(0.5).stamp(1), 0.3), Err(Rejection::UnknownTick), "old stamps name no tick");
+    }
+
+    #[test]
+    fn a_stopped_line_rejects_commands_and_a_mode_switch_clears_pending_ones() {
+        let mut h = host(Variant::Advanced, TickMode::Lockstep);
+        h.set_halted(true);
+        assert_eq!(h.command_from([1; 12], h.stamp(), Command::Speed(0.3)), Err(Rejection::Stopped));
+        h.set_halted(false);
+        h.set_mode(TickMode::Realtime);
+        assert_eq!(h.command_from([1; 12], h.stamp(), Command::Speed(0.3)), Ok(Accepted::Stored));
+        h.set_mode(TickMode::Lockstep);
+        assert_eq!(h.mode(), TickMode::Lockstep);
+        // The realtime speed does not answer the lock-step tick: a mode alone does not complete it.
+        assert_eq!(h.command_from([1; 12], h.stamp(), Command::Mode(1)), Ok(Accepted::Stored));
+        assert!(matches!(h.command_from([1; 12], h.stamp(), Command::Speed(0.5)), Ok(Accepted::Stepped(_))));
     }
 }

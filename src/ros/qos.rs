@@ -28,3 +28,12 @@ pub fn reliable(depth: usize) -> QosProfile {
 pub fn default_profile() -> QosProfile {
     reliable(10)
 }
+
+/// An action's goal status topic, as rcl_action publishes it: reliable, transient-local,
+/// keep-last 1 (a late client still gets the current statuses; rclpy asks for exactly this).
+pub fn action_status_profile() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::Wait(MAX_BLOCKING))
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 })
+}

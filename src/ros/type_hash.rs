@@ -3,7 +3,8 @@
 //! Jazzy subscribers warn about endpoints without one. The hashes are rosidl's
 //! ([`super::type_hash_table`], generated and checked against rosidl's output); this module maps
 //! a DDS type name to the ROS type it belongs to. A service's request and reply endpoints carry
-//! the hashes of `<Service>_Request` and `<Service>_Response`, as an rclpy service does.
+//! the hashes of `<Service>_Request` and `<Service>_Response`, as an rclpy service does; an action's
+//! those of `<Action>_SendGoal_Request` ... and `<Action>_FeedbackMessage`.
 
 use super::type_hash_table::TYPE_HASHES;
 
@@ -19,6 +20,8 @@ pub fn ros_type_name(dds_type_name: &str) -> Option<String> {
     let name = match kind {
         "msg" => name,
         "srv" if name.ends_with("_Request") || name.ends_with("_Response") => name,
+        // An action's goal and result services and its feedback topic.
+        "action" if name.ends_with("_Request") || name.ends_with("_Response") || name.ends_with("_FeedbackMessage") => name,
         _ => return None,
     };
     Some(format!("{pkg}/{kind}/{name}"))
@@ -54,6 +57,12 @@ mod tests {
             ros_type_name("rcl_interfaces::srv::dds_::GetParameters_Response_").as_deref(),
             Some("rcl_interfaces/srv/GetParameters_Response")
         );
+        assert_eq!(
+            ros_type_name("simulation_interfaces::action::dds_::SimulateSteps_FeedbackMessage_").as_deref(),
+            Some("simulation_interfaces/action/SimulateSteps_FeedbackMessage")
+        );
+        assert!(!endpoint_user_data("simulation_interfaces::action::dds_::SimulateSteps_SendGoal_Request_").is_empty());
+        assert!(!endpoint_user_data("action_msgs::msg::dds_::GoalStatusArray_").is_empty());
         assert_eq!(ros_type_name("DCPSParticipant"), None);
         assert_eq!(ros_type_name("a::srv::dds_::X_"), None);
     }

@@ -14,7 +14,7 @@ Building needs PyPI, and the tests run in a network namespace without it, so lau
 builds the venv before it enters the namespace (`python tests/python/ros2_cli.py --build`); inside
 the namespace the tests only look the venv up.
 
-The project's own interfaces (sorting_line_interfaces, compiled into .venv by setup.sh) are made
+The project's interfaces (sorting_line_interfaces and simulation_interfaces, compiled into .venv by setup.sh) are made
 visible to the CLI through an overlay prefix of symbolic links to exactly the files of their install
 manifest, put on PYTHONPATH / AMENT_PREFIX_PATH / LD_LIBRARY_PATH: the rest of .venv (torch, a second
 rclpy) stays out of the CLI's interpreter.
@@ -36,7 +36,9 @@ from typing import Optional
 
 ROOT = Path(__file__).resolve().parents[2]
 PROJECT_VENV = ROOT / ".venv"
-INTERFACES_MANIFEST = PROJECT_VENV / ".sorting_line" / "interfaces_install_manifest.txt"
+# What launch_scripts/setup.sh compiled into .venv (the standard's simulation_interfaces too: no wheel has it).
+INTERFACES_MANIFESTS = [PROJECT_VENV / ".sorting_line" / f"{package}_install_manifest.txt"
+                        for package in ("sorting_line_interfaces", "simulation_interfaces")]
 BUILD_TIMEOUT = 900.0  # s; the README says ~45 s on a quiet machine
 
 
@@ -113,10 +115,11 @@ def build(tools: Path, log=sys.stdout) -> Path:
 
 
 def interfaces_overlay(dest: Path) -> Path:
-    """A prefix holding links to the installed sorting_line_interfaces files only (see the module doc)."""
-    if not INTERFACES_MANIFEST.is_file():
-        raise RuntimeError(f"{INTERFACES_MANIFEST} missing: run launch_scripts/setup.sh first")
-    for line in INTERFACES_MANIFEST.read_text().splitlines():
+    """A prefix holding links to the interface packages' installed files only (see the module doc)."""
+    missing = [m for m in INTERFACES_MANIFESTS if not m.is_file()]
+    if missing:
+        raise RuntimeError(f"{', '.join(map(str, missing))} missing: run launch_scripts/setup.sh first")
+    for line in (line for m in INTERFACES_MANIFESTS for line in m.read_text().splitlines()):
         src = Path(line.strip())
         if not line.strip() or not src.exists():
             continue

@@ -57,8 +57,9 @@ def test_endpoints_announce_rosidls_hashes_and_clock_has_one_type(ros, start_nod
         expected = type_hashes.expected()
         # Every endpoint the node makes: the advanced line's 5 publishers and 2 subscriptions,
         # batch/cmd and batch/state, /clock, /diagnostics, /rosout, /parameter_events, and a
-        # request and a reply endpoint for reset, batch/reset and the six parameter services.
-        want = 5 + 2 + 2 + 4 + 2 * 8
+        # request and a reply endpoint for reset, batch/reset, the six parameter services and the
+        # five simulation_interfaces services.
+        want = 5 + 2 + 2 + 4 + 2 * (8 + 5)
 
         def all_there():
             eps = endpoints_of(probe, "sorting_line", ns)

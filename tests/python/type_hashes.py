@@ -35,15 +35,24 @@ EXTERNAL = [
     "rcl_interfaces/srv/SetParameters",
     "rcl_interfaces/srv/SetParametersAtomically",
     "rmw_dds_common/msg/ParticipantEntitiesInfo",
+    # every action server's status topic and cancel service (simulation_interfaces' SimulateSteps)
+    "action_msgs/msg/GoalStatusArray",
+    "action_msgs/srv/CancelGoal",
 ]
 
 
+# Interface packages built from this repository (by setup.sh): package -> its directory.
+PACKAGES = {"sorting_line_interfaces": ROOT / "msg", "simulation_interfaces": ROOT / "msg" / "simulation_interfaces"}
+
+
 def our_interfaces() -> list[str]:
-    """sorting_line_interfaces/msg/X and srv/X for every file in msg/."""
+    """pkg/msg/X, pkg/srv/X and pkg/action/X for every interface file of the packages built from
+    msg/ (the node serves every service and action of simulation_interfaces we build)."""
     names = []
-    for kind in ("msg", "srv"):
-        for f in sorted((ROOT / "msg" / kind).glob(f"*.{kind}")):
-            names.append(f"sorting_line_interfaces/{kind}/{f.stem}")
+    for package, directory in PACKAGES.items():
+        for kind in ("msg", "srv", "action"):
+            for f in sorted((directory / kind).glob(f"*.{kind}")):
+                names.append(f"{package}/{kind}/{f.stem}")
     return names
 
 
@@ -63,8 +72,12 @@ def rosidl_hash(type_name: str, file_type: str | None = None) -> str:
 
 def endpoint_types(type_name: str) -> list[str]:
     """The types whose hashes endpoints announce: a message's own; for a service, its request
-    and response (what rmw_fastrtps puts on the request and reply endpoints)."""
+    and response (what rmw_fastrtps puts on the request and reply endpoints); for an action, those
+    of its goal and result services and its feedback message."""
     pkg, kind, name = type_name.split("/")
+    if kind == "action":
+        return [f"{type_name}_{part}" for part in ("SendGoal_Request", "SendGoal_Response", "GetResult_Request",
+                                                   "GetResult_Response", "FeedbackMessage")]
     return [type_name] if kind == "msg" else [f"{type_name}_Request", f"{type_name}_Response"]
 
 
