@@ -416,6 +416,8 @@ fn run_vocabulary() -> Result<(), String> {
         "threshold": defaults.threshold,
         "episode_steps": defaults.max_steps,
         "max_episode_steps": MAX_EPISODE_STEPS,
+        "category_unknown_code": sorting_line::sim::evolution::CATEGORY_UNKNOWN_CODE,
+        "category_unknown_observation": sorting_line::sim::evolution::CATEGORY_UNKNOWN_OBSERVATION,
     });
     let mut out = io::stdout().lock();
     writeln!(out, "{vocabulary}").map_err(|e| e.to_string())

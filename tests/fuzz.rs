@@ -34,7 +34,7 @@ use sorting_line::ros::names::Names;
 use sorting_line::ros::options::{NodeArgs, TickMode};
 use sorting_line::ros::params::{load_params_file, NodeParams, PARAMETERS};
 use sorting_line::ros::protocol::{
-    batch_commands, batch_resets, Accepted, BatchReset, Client, Command, HostedLine, Rejection, TimerTick, REJECTIONS,
+    batch_commands, batch_resets, Accepted, BatchModes, BatchReset, Client, Command, HostedLine, Rejection, TimerTick, REJECTIONS,
 };
 use sorting_line::ros::ros_args::RosArgs;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
@@ -351,9 +351,10 @@ fn report_commands(name: &str, (cases, commands, skipped, by_reason): (u32, u64,
         reasons.join(", ")
     );
     for reason in REJECTIONS {
-        // Malformed comes from decoding and Stopped from the simulation state (STOPPED), not from a
-        // command's content: protocol's unit tests and test_simulation_interfaces.py cover them.
-        let reachable = !matches!(reason, Rejection::Malformed | Rejection::Stopped) && (name == "lockstep" || !matches!(
+        // Malformed comes from decoding, Stopped from the simulation state (STOPPED) and SortModesOff
+        // from an evolving line without modes, not from a command's content: the protocol's unit
+        // tests, test_simulation_interfaces.py and test_evolving.py cover them.
+        let reachable = !matches!(reason, Rejection::Malformed | Rejection::SortModesOff | Rejection::Stopped) && (name == "lockstep" || !matches!(
             reason,
             Rejection::Stale | Rejection::Duplicate | Rejection::EpisodeOver
         ));
@@ -459,7 +460,7 @@ fn fuzz_batch_commands() {
             let mut pending = vec![(false, false); lines];
             for batch in &batches {
                 let cmd = batch_message(batch, &noisy);
-                let entries = match batch_commands(&cmd, lines, variant) {
+                let entries = match batch_commands(&cmd, lines, BatchModes::of(variant, false)) {
                     Err(detail) => {
                         prop_assert!(batch.misshapen.is_some(), "a well-formed batch was refused: {detail}");
                         prop_assert!(detail.contains(&format!("for {lines} lines")), "{detail}");

@@ -55,3 +55,8 @@ for _variant, _env_id in ENV_IDS.items():
         max_episode_steps=EPISODE_STEPS,
         vector_entry_point="sorting_line_gym.envs.vector:SortingLineVectorEnv",
     )
+register(
+    id="SortingLineEvolving-v0",
+    entry_point="sorting_line_gym.envs.evolving:SortingLineEvolvingEnv",
+    max_episode_steps=EPISODE_STEPS,
+)

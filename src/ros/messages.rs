@@ -7,6 +7,7 @@ use ros2_client::{Message, MessageTypeName, ServiceTypeName};
 use serde::{Deserialize, Serialize};
 
 use super::protocol::HostedLine;
+use crate::sim::evolution::{Event, FaultKind, Settings};
 use crate::sim::Observation;
 
 /// The interface package built from msg/.
@@ -121,6 +122,27 @@ pub struct ResetEvent {
     /// Whether the streams restarted from `seed` (a seeded reset) or carried on: a replay of a
     /// bag needs to know, and the same seed twice in a row cannot tell.
     pub seeded: bool,
+}
+
+/// sorting_line_interfaces/EvolutionEvent: events of a line's evolution schedule that applied
+/// (or, for a tick, are about to), and the line's whole setup after them (msg/EvolutionEvent.msg).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EvolutionEvent {
+    pub header: Header,
+    pub episode: u32,
+    pub tick: u64,
+    pub at_reset: bool,
+    pub event_indices: Vec<u32>,
+    pub changed: Vec<String>,
+    pub values: Vec<String>,
+    pub obs_noise: f64,
+    pub action_penalty: f64,
+    pub threshold: f64,
+    pub input: String,
+    pub sort_modes: bool,
+    pub ratio_sensor: bool,
+    pub input_fault: String,
+    pub input_fault_ticks: u32,
 }
 
 /// sorting_line_interfaces/LineCommands: one command per line, for vectorised clients.
@@ -287,6 +309,7 @@ messages! {
     SpeedCommand => (INTERFACES, "SpeedCommand"),
     SortModeCommand => (INTERFACES, "SortModeCommand"),
     ResetEvent => (INTERFACES, "ResetEvent"),
+    EvolutionEvent => (INTERFACES, "EvolutionEvent"),
     LineCommands => (INTERFACES, "LineCommands"),
     LineStates => (INTERFACES, "LineStates"),
     Clock => ("rosgraph_msgs", "Clock"),
@@ -374,6 +397,66 @@ impl ResetEvent {
     }
 }
 
+impl EvolutionEvent {
+    /// `events/evolution`: the events `indices` of the line's schedule, at the reset that started
+    /// the current episode (`at_reset`) or at the start of the tick the line waits at, and the
+    /// line's `settings` once they applied.
+    pub fn of(host: &HostedLine, at_reset: bool, indices: &[usize], settings: &Settings) -> Self {
+        let line = host.line();
+        let events = &line.evolution().events;
+        let (mut changed, mut values) = (Vec::new(), Vec::new());
+        for &i in indices {
+            for (field, value) in event_changes(&events[i]) {
+                changed.push(field.to_string());
+                values.push(value);
+            }
+        }
+        let fault = settings.input_fault;
+        EvolutionEvent {
+            header: Header::of(host),
+            episode: line.episode(),
+            tick: line.tick(),
+            at_reset,
+            event_indices: indices.iter().map(|&i| i as u32).collect(),
+            changed,
+            values,
+            obs_noise: settings.obs_noise,
+            action_penalty: settings.action_penalty,
+            threshold: settings.threshold,
+            input: settings.input.to_string(),
+            sort_modes: settings.sort_modes,
+            ratio_sensor: settings.ratio_sensor,
+            input_fault: fault.map(|f| fault_name(f.kind).to_string()).unwrap_or_default(),
+            input_fault_ticks: fault.map_or(0, |f| f.remaining),
+        }
+    }
+}
+
+fn fault_name(kind: FaultKind) -> &'static str {
+    match kind {
+        FaultKind::Stuck => "stuck",
+        FaultKind::Dropped => "dropped",
+    }
+}
+
+/// The fields an event sets, with their new values as YAML scalars, in the message's order.
+pub fn event_changes(event: &Event) -> Vec<(&'static str, String)> {
+    let mut out = Vec::new();
+    let mut put = |field, value: Option<String>| {
+        if let Some(value) = value {
+            out.push((field, value));
+        }
+    };
+    put("obs_noise", event.obs_noise.map(|v| v.to_string()));
+    put("action_penalty", event.action_penalty.map(|v| v.to_string()));
+    put("threshold", event.threshold.map(|v| v.to_string()));
+    put("input", event.input.map(|v| v.to_string()));
+    put("sort_modes", event.sort_modes.map(|v| v.to_string()));
+    put("ratio_sensor", event.ratio_sensor.map(|v| v.to_string()));
+    put("input_fault", event.input_fault.map(|f| format!("{} {}", fault_name(f.kind), f.ticks)));
+    out
+}
+
 impl LineState {
     /// The `state` message of a line's current tick. Right after a reset no step has happened:
     /// it reports the start state with reward 0.
@@ -407,7 +490,7 @@ impl LineState {
             container_b_false: count(containers.b_false),
             speed_changes: line.speed_changes(),
             observation_quantity: observation.quantity,
-            observation_category: observation.category as u8,
+            observation_category: host.category_reading(),
             terminated: false,
             truncated: line.truncated(),
         }
@@ -435,7 +518,7 @@ impl ResetLineResponse {
             episode: line.episode(),
             stamp: host.stamp(),
             quantity: observation.quantity,
-            category: observation.category as u8,
+            category: host.category_reading(),
         }
     }
 }
@@ -476,6 +559,7 @@ mod tests {
         check("msg/SpeedCommand.msg", serde_yaml::to_value(SpeedCommand::default()).unwrap());
         check("msg/SortModeCommand.msg", serde_yaml::to_value(SortModeCommand::default()).unwrap());
         check("msg/ResetEvent.msg", serde_yaml::to_value(ResetEvent::default()).unwrap());
+        check("msg/EvolutionEvent.msg", serde_yaml::to_value(EvolutionEvent::default()).unwrap());
         check("msg/LineCommands.msg", serde_yaml::to_value(LineCommands::default()).unwrap());
         check("msg/LineStates.msg", serde_yaml::to_value(LineStates::default()).unwrap());
         let batch = fields("srv/ResetLines.srv");

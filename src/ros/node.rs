@@ -4,10 +4,20 @@
 //! namespace. A single async task waits on all inputs at once (commands, service requests, the
 //! realtime timer, a StepSimulation in progress, the diagnostics timer, SIGINT/SIGTERM), so an
 //! idle node in lock-step uses no CPU.
+//!
+//! The line's hardware shows in the graph: `sensors/ratio` is published while the line has its
+//! ratio sensor, `cmd/sort_mode` subscribed while its machine has sort modes. On an evolving line
+//! (`--evolution FILE`) they appear and go with the upgrades of its schedule
+//! ([`LineEndpoints::fit_hardware`]); each point at which events apply is announced on
+//! `events/evolution` before the state it concerns, and the parameters they change (line 0's) are
+//! updated through `/parameter_events`.
 
+use std::cell::RefCell;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use async_signal::{Signal, Signals};
+use futures::channel::oneshot;
 use futures::future::{FutureExt, LocalBoxFuture};
 use futures::stream::{self, FuturesUnordered, LocalBoxStream, StreamExt};
 use ros2_client::action::{ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle};
@@ -23,14 +33,15 @@ use super::discovery::Discovery;
 use super::messages::*;
 use super::names::{Names, NODE_NAME};
 use super::options::{NodeArgs, TickMode};
-use super::param_descriptors::descriptors;
+use super::param_descriptors::{descriptors, EVOLVING_PARAMETERS};
 use super::params::NodeParams;
-use super::protocol::{batch_commands, batch_resets, Accepted, Client, Command, HostedLine, Rejection, TimerTick};
+use super::protocol::{batch_commands, batch_resets, Accepted, BatchModes, Client, Command, HostedLine, Rejection, TimerTick};
 use super::qos::{action_status_profile, default_profile};
 use super::ros_args::RosArgs;
 use super::simulation::{self, code, reset_scope, step_request, transition, ResetScope, SimState, Transition};
 use super::simulation_interfaces::*;
-use crate::sim::{Observation, Variant};
+use crate::sim::evolution::{At, Settings};
+use crate::sim::Observation;
 
 /// How often /diagnostics is published (wall time).
 const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
@@ -56,17 +67,23 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let participant = discovery.participant()?;
     let context = Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
     let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
-    let mut node = context.new_node(node_name, node_options(&params)).map_err(|e| format!("cannot create the node: {e:?}"))?;
+    let (options, parameter_values) = node_options(&params);
+    let mut node = context.new_node(node_name, options).map_err(|e| format!("cannot create the node: {e:?}"))?;
 
     let clock = SimClock::new(params.tick_period);
     let mut endpoints = Vec::new();
     let mut runtimes = Vec::new();
     for k in 0..params.lines {
         let namespace = names.line_namespace(k, params.lines);
-        endpoints.push(LineEndpoints::new(&mut node, &names, &namespace, params.line.variant)?);
+        let evolving = !params.evolution.is_empty();
+        endpoints.push(LineEndpoints::new(&mut node, &names, &namespace, evolving)?);
+        let seed = params.seed + u64::from(k);
         runtimes.push(LineRuntime {
-            host: HostedLine::new(params.line.clone(), params.seed + u64::from(k), clock, params.mode),
+            host: HostedLine::with_evolution(params.line.clone(), seed, params.evolution.clone(), clock, params.mode),
             counters: LineCounters::new(namespace),
+            announced_tick: None,
+            counted_tick: None,
+            evolution_events: 0,
         });
     }
     let clock_pub = publisher::<Clock>(&mut node, &names.global("/clock"))?;
@@ -87,13 +104,15 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
         simulate_steps,
         fully_qualified_name: names.fully_qualified(),
         params: params.clone(),
-        node,
+        parameter_values,
+        new_streams: RefCell::new(Vec::new()),
+        node: RefCell::new(node),
     };
 
     log(
         "INFO",
         format!(
-            "{}/{} up on {}: {} {} line(s), {} input, {:?}, seed {}{}",
+            "{}/{} up on {}: {} {} line(s), {} input, {:?}, seed {}{}{}",
             names.namespace.trim_end_matches('/'),
             names.node_name,
             discovery.summary(),
@@ -102,7 +121,12 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
             params.line.input,
             params.mode,
             params.seed,
-            if params.mode == TickMode::Realtime { format!(", {} Hz", params.rate) } else { String::new() }
+            if params.mode == TickMode::Realtime { format!(", {} Hz", params.rate) } else { String::new() },
+            if params.evolution.is_empty() {
+                String::new()
+            } else {
+                format!(", evolving by {} ({} events)", params.evolution_file, params.evolution.events.len())
+            }
         ),
     );
     let spin = async move {
@@ -120,9 +144,14 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     Ok(())
 }
 
+/// The values the parameter validator accepts: the current ones. The node itself moves them
+/// when its evolution schedule changes a setting ([`Shared::update_parameters`]).
+type ParameterValues = Arc<Mutex<Vec<(&'static str, ParameterValue)>>>;
+
 /// Declares every parameter with its value. They are fixed for the run: changing the dynamics
-/// mid-run would silently break every trajectory, so set requests are refused with a reason.
-fn node_options(params: &NodeParams) -> NodeOptions {
+/// mid-run would silently break every trajectory, so set requests are refused with a reason
+/// (only the node's own evolution schedule moves the values it names).
+fn node_options(params: &NodeParams) -> (NodeOptions, ParameterValues) {
     let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(true);
     let mut declared = Vec::new();
     for (name, value) in params.as_values() {
@@ -141,13 +170,17 @@ fn node_options(params: &NodeParams) -> NodeOptions {
     for descriptor in descriptors() {
         options = options.describe_parameter(descriptor);
     }
+    let current = Arc::new(Mutex::new(declared));
+    let accepted = Arc::clone(&current);
     // The validator also sees the declarations themselves: those pass, any change is refused.
-    options.parameter_validator(Box::new(move |name: &str, value: &ParameterValue| {
-        match declared.iter().find(|(n, _)| *n == name) {
+    let options = options.parameter_validator(Box::new(move |name: &str, value: &ParameterValue| {
+        let values = accepted.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        match values.iter().find(|(n, _)| *n == name) {
             Some((_, v)) if v == value => Ok(()),
             _ => Err(format!("parameter {name} is fixed for the run: restart the node with the new value")),
         }
-    }))
+    }));
+    (options, current)
 }
 
 fn topic_name(absolute: &str) -> Result<Name, String> {
@@ -364,24 +397,40 @@ impl ClockState {
     }
 }
 
-/// The ROS endpoints of one line. They do not change while serving, so the input streams can
-/// borrow them while the line's state ([`LineRuntime`]) is mutated.
+/// The ROS endpoints of one line. The fixed ones do not change while serving, so the input
+/// streams can borrow them while the line's state ([`LineRuntime`]) is mutated; those of the
+/// line's hardware (ratio sensor, sort modes) come and go with it ([`Self::fit_hardware`]).
 struct LineEndpoints {
     namespace: String,
     input: Publisher<MaterialInput>,
     belt: Publisher<BeltOccupancy>,
-    ratio: Option<Publisher<MaterialRatio>>,
     state: Publisher<LineState>,
     reset_event: Publisher<ResetEvent>,
+    /// `events/evolution`, on an evolving line.
+    evolution: Option<Publisher<EvolutionEvent>>,
     speed_cmd: Subscription<SpeedCommand>,
-    mode_cmd: Option<Subscription<SortModeCommand>>,
     reset: Server<ResetLineRequest, ResetLineResponse>,
+    /// `sensors/ratio`, while the line has its ratio sensor.
+    ratio: RefCell<Option<Publisher<MaterialRatio>>>,
+    /// While `cmd/sort_mode` is subscribed: its stream (in the node's select) owns the
+    /// subscription and ends, dropping it, when this sender is dropped.
+    mode_cmd: RefCell<Option<oneshot::Sender<()>>>,
+    ratio_topic: String,
+    mode_topic: String,
 }
 
 /// The mutable part of one line: the simulation with its protocol, and its counters.
 struct LineRuntime {
     host: HostedLine,
     counters: LineCounters,
+    /// The tick whose pending evolution events were announced since the last reset (a reset
+    /// announces them again after its own, so a client that reset knows what its first step
+    /// brings).
+    announced_tick: Option<u64>,
+    /// The newest tick whose events were counted (they are counted once however often announced).
+    counted_tick: Option<u64>,
+    /// Evolution events announced so far.
+    evolution_events: u64,
 }
 
 /// Node-wide endpoints and settings. `batch/cmd` and `batch/state` (in the node's namespace)
@@ -397,8 +446,12 @@ struct Shared {
     simulate_steps: SimulateStepsServer,
     fully_qualified_name: String,
     params: NodeParams,
-    /// Last: the endpoints above are dropped before the node.
-    node: Node,
+    parameter_values: ParameterValues,
+    /// Input streams of endpoints created while serving, for the node's select to take in.
+    new_streams: RefCell<Vec<LocalBoxStream<'static, Event>>>,
+    /// Last: the endpoints above are dropped before the node. In a cell because endpoints are
+    /// created while serving (the line's hardware, [`LineEndpoints::fit_hardware`]).
+    node: RefCell<Node>,
 }
 
 impl Shared {
@@ -413,13 +466,43 @@ impl Shared {
     where
         M: Message + Serialize + std::fmt::Debug,
     {
-        if publisher.get_subscription_count(&self.node) == 0 {
+        if publisher.get_subscription_count(&self.node.borrow()) == 0 {
             return false;
         }
         if let Err(e) = publisher.publish(build()) {
             log("WARN", format!("cannot publish {}: {e:?}", topic()));
         }
         true
+    }
+
+    /// Moves the parameters an evolution event changed (line 0's settings) to their new values:
+    /// the validator accepts them first, then the node sets them, which publishes them on
+    /// `/parameter_events`.
+    fn update_parameters(&self, settings: &Settings) {
+        let now = [
+            ("obs_noise", ParameterValue::Double(settings.obs_noise)),
+            ("action_penalty", ParameterValue::Double(settings.action_penalty)),
+            ("threshold", ParameterValue::Double(settings.threshold)),
+            ("input", ParameterValue::String(settings.input.to_string())),
+        ];
+        debug_assert!(now.iter().map(|(n, _)| *n).eq(EVOLVING_PARAMETERS));
+        let mut changed = Vec::new();
+        {
+            let mut values = self.parameter_values.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            for (name, value) in now {
+                if let Some(slot) = values.iter_mut().find(|(n, _)| *n == name) {
+                    if slot.1 != value {
+                        slot.1 = value.clone();
+                        changed.push((name, value));
+                    }
+                }
+            }
+        }
+        for (name, value) in changed {
+            if let Err(e) = self.node.borrow().set_parameter(name, value) {
+                log("WARN", format!("cannot update parameter {name}: {e}"));
+            }
+        }
     }
 
     /// `batch/state`, when a vectorised client reads it (per-line clients and realtime lines
@@ -430,59 +513,173 @@ impl Shared {
 }
 
 impl LineEndpoints {
-    fn new(node: &mut Node, names: &Names, namespace: &str, variant: Variant) -> Result<Self, String> {
+    fn new(node: &mut Node, names: &Names, namespace: &str, evolving: bool) -> Result<Self, String> {
         let t = |relative: &str| names.topic(namespace, relative);
-        let advanced = variant == Variant::Advanced;
         let reset = server(node, &t("reset"), reset_service_type())?;
         Ok(LineEndpoints {
             namespace: namespace.to_string(),
             input: publisher(node, &t("input"))?,
             belt: publisher(node, &t("belt/occupancy"))?,
-            ratio: if advanced { Some(publisher(node, &t("sensors/ratio"))?) } else { None },
             state: publisher(node, &t("state"))?,
             reset_event: publisher(node, &t("events/reset"))?,
+            evolution: if evolving { Some(publisher(node, &t("events/evolution"))?) } else { None },
             speed_cmd: subscription(node, &t("cmd/speed"))?,
-            mode_cmd: if advanced { Some(subscription(node, &t("cmd/sort_mode"))?) } else { None },
             reset,
+            ratio: RefCell::new(None),
+            mode_cmd: RefCell::new(None),
+            ratio_topic: t("sensors/ratio"),
+            mode_topic: t("cmd/sort_mode"),
         })
+    }
+
+    fn show(&self, relative: &str) -> String {
+        format!("{}/{relative}", self.namespace.trim_end_matches('/'))
+    }
+
+    /// Makes the hardware endpoints match line k: `sensors/ratio` while its observation comes
+    /// with a ratio reading, `cmd/sort_mode` while the step it waits for runs with sort modes
+    /// (an upgrade due at that tick included, so a client can command the first upgraded step).
+    fn fit_hardware(&self, shared: &Shared, k: usize, host: &HostedLine) {
+        let sensor = host.line().ratio_sensor();
+        let mut ratio = self.ratio.borrow_mut();
+        if sensor != ratio.is_some() {
+            *ratio = None;
+            if sensor {
+                match publisher(&mut shared.node.borrow_mut(), &self.ratio_topic) {
+                    Ok(p) => *ratio = Some(p),
+                    Err(e) => log("ERROR", e),
+                }
+            }
+            if host.evolving() {
+                let how = if sensor { "appears (ratio sensor fitted)" } else { "goes (ratio sensor removed)" };
+                log("INFO", format!("{} {how}", self.show("sensors/ratio")));
+            }
+        }
+        let modes = host.takes_modes();
+        let mut mode_cmd = self.mode_cmd.borrow_mut();
+        if modes != mode_cmd.is_some() {
+            *mode_cmd = None; // ends the old stream, which drops its subscription
+            if modes {
+                match subscription::<SortModeCommand>(&mut shared.node.borrow_mut(), &self.mode_topic) {
+                    Ok(sub) => {
+                        let (stop, stopped) = oneshot::channel();
+                        shared.new_streams.borrow_mut().push(mode_commands(k, sub, stopped));
+                        *mode_cmd = Some(stop);
+                    }
+                    Err(e) => log("ERROR", e),
+                }
+            }
+            if host.evolving() {
+                let how = if modes { "appears (machine upgrade: sort modes)" } else { "goes (sort modes removed)" };
+                log("INFO", format!("{} {how}", self.show("cmd/sort_mode")));
+            }
+        }
     }
 
     /// Publishes everything that describes the current tick to the topics that have a reader
     /// (see [`Shared::offer`]); `state` last, because clients wait for it and by then the sensors
-    /// of the same tick are out.
-    fn publish_tick(&self, shared: &Shared, r: &mut LineRuntime) {
+    /// of the same tick are out. Before them: the hardware is fitted to the line and evolution
+    /// events due at the start of the coming step are announced.
+    fn publish_tick(&self, shared: &Shared, k: usize, r: &mut LineRuntime) {
+        self.fit_hardware(shared, k, &r.host);
+        self.announce_tick_events(shared, k, r);
         let host = &r.host;
-        let topic = |relative: &'static str| move || format!("{}/{relative}", self.namespace.trim_end_matches('/'));
+        let topic = |relative: &'static str| move || self.show(relative);
         let counters = &mut r.counters;
         counters.count_published(shared.offer(&self.input, &topic("input"), || MaterialInput::of(host)));
         counters.count_published(shared.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy::of(host)));
-        if let Some(ratio) = &self.ratio {
+        if let Some(ratio) = &*self.ratio.borrow() {
             counters.count_published(shared.offer(ratio, &topic("sensors/ratio"), || MaterialRatio::of(host)));
         }
         counters.count_published(shared.offer(&self.state, &topic("state"), || LineState::of(host)));
     }
 
-    fn publish_reset_event(&self, shared: &Shared, r: &mut LineRuntime, seeded: bool) {
-        let topic = || format!("{}/events/reset", self.namespace.trim_end_matches('/'));
-        let sent = shared.offer(&self.reset_event, &topic, || ResetEvent::of(&r.host, seeded));
+    /// A reset's `events/reset`, and on an evolving line its `events/evolution`: every reset
+    /// announces the setup the episode starts with, naming the episode's events (if any).
+    fn publish_reset_events(&self, shared: &Shared, k: usize, r: &mut LineRuntime, seeded: bool) {
+        let sent = shared.offer(&self.reset_event, &|| self.show("events/reset"), || ResetEvent::of(&r.host, seeded));
         r.counters.count_published(sent);
+        if r.host.evolving() {
+            r.announced_tick = None;
+            let line = r.host.line();
+            let indices: Vec<usize> = line.evolution().events_at(At::Episode(line.episode())).map(|(i, _)| i).collect();
+            let settings = line.settings();
+            self.announce(shared, k, r, true, &indices, &settings);
+        }
     }
 
-    /// The tagged input streams of this line.
+    /// On an evolving line: the announcement of the line as built (its episode-0 events), as the
+    /// node starts and after a ResetSimulation rebuilt it.
+    fn announce_start(&self, shared: &Shared, k: usize, r: &mut LineRuntime) {
+        if r.host.evolving() {
+            let settings = r.host.line().settings();
+            let indices: Vec<usize> = r.host.line().evolution().events_at(At::Episode(0)).map(|(i, _)| i).collect();
+            self.announce(shared, k, r, true, &indices, &settings);
+        }
+    }
+
+    /// Announces the events due at the start of the step line k waits for, once.
+    fn announce_tick_events(&self, shared: &Shared, k: usize, r: &mut LineRuntime) {
+        let tick = r.host.line().tick();
+        if r.announced_tick == Some(tick) {
+            return;
+        }
+        if let Some((indices, settings)) = r.host.line().pending_tick_events() {
+            r.announced_tick = Some(tick);
+            self.announce(shared, k, r, false, &indices, &settings);
+        }
+    }
+
+    fn announce(&self, shared: &Shared, k: usize, r: &mut LineRuntime, at_reset: bool, indices: &[usize], settings: &Settings) {
+        let Some(publisher) = &self.evolution else { return };
+        let message = EvolutionEvent::of(&r.host, at_reset, indices, settings);
+        if !indices.is_empty() {
+            log(
+                "INFO",
+                format!(
+                    "{}: evolution at episode {} tick {}: {}",
+                    self.namespace.trim_end_matches('/'),
+                    message.episode,
+                    message.tick,
+                    message.changed.iter().zip(&message.values).map(|(c, v)| format!("{c} = {v}")).collect::<Vec<_>>().join(", ")
+                ),
+            );
+        }
+        let tick = r.host.line().tick();
+        if at_reset || r.counted_tick != Some(tick) {
+            r.evolution_events += indices.len() as u64;
+        }
+        if !at_reset {
+            r.counted_tick = Some(tick);
+        }
+        r.counters.count_published(shared.offer(publisher, &|| self.show("events/evolution"), || message));
+        if k == 0 {
+            shared.update_parameters(settings);
+        }
+    }
+
+    /// The tagged input streams of this line's fixed endpoints.
     fn events(&self, k: usize) -> Vec<LocalBoxStream<'_, Event>> {
         let err = |e| format!("{e:?}");
         let speed = |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
-        let mode = |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
-        let mut streams = vec![
+        vec![
             self.speed_cmd.async_stream().map(move |r| Event::Command(k, "cmd/speed", r.map(speed).map_err(err))).boxed_local(),
             self.reset.receive_request_stream().map(move |r| Event::Reset(k, r.map_err(err))).boxed_local(),
-        ];
-        if let Some(mode_cmd) = &self.mode_cmd {
-            let stream = mode_cmd.async_stream().map(move |r| Event::Command(k, "cmd/sort_mode", r.map(mode).map_err(err)));
-            streams.push(stream.boxed_local());
-        }
-        streams
+        ]
     }
+}
+
+/// Line k's `cmd/sort_mode` commands, from a stream that owns the subscription and ends (dropping
+/// it, so the subscription leaves the graph) when `stop` fires or its sender is dropped.
+fn mode_commands(k: usize, sub: Subscription<SortModeCommand>, stop: oneshot::Receiver<()>) -> LocalBoxStream<'static, Event> {
+    let mode = |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
+    stream::unfold(sub, |sub| async move {
+        let received = sub.async_take().await;
+        Some((received, sub))
+    })
+    .map(move |r| Event::Command(k, "cmd/sort_mode", r.map(mode).map_err(|e| format!("{e:?}"))))
+    .take_until(stop)
+    .boxed_local()
 }
 
 /// Every line's current state, as arrays.
@@ -512,8 +709,11 @@ fn show_stamp(t: Time) -> String {
 /// (or a SetSimulationState to QUITTING).
 async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared: &Shared, signals: Signals) {
     let mut clock = ClockState::default();
-    for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
-        e.publish_tick(shared, r);
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
+        // The line as built: its episode-0 events applied (announced, and line 0's parameters
+        // set, like those of any later reset).
+        e.announce_start(shared, k, r);
+        e.publish_tick(shared, k, r);
     }
     clock.publish(shared, runtimes);
 
@@ -548,6 +748,10 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     let started = Instant::now();
 
     loop {
+        // Endpoints created since the last turn (the line's hardware) join the select.
+        for new in shared.new_streams.borrow_mut().drain(..) {
+            events.push(new);
+        }
         // A StepSimulation in progress runs one step per turn of the loop, so other requests,
         // commands and signals are served between its steps.
         let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> =
@@ -567,7 +771,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         Ok((client, stamp, command)) => apply(&mut runtimes[k], client, stamp, command),
                         Err(error) => Err(malformed(&error)),
                     };
-                    if settle(&endpoints[k], &mut runtimes[k], shared, topic, result) {
+                    if settle(&endpoints[k], k, &mut runtimes[k], shared, topic, result) {
                         clock.publish(shared, runtimes);
                     }
                 }
@@ -576,7 +780,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                         Ok(message) => ResetLinesResponse { success: true, message, states: batch_states(runtimes) },
                         Err(message) => {
                             // Counted like a malformed batch/cmd (on line 0), logged by the counters.
-                            settle(&endpoints[0], &mut runtimes[0], shared, "batch/reset", Err((Rejection::Malformed, format!("request ({message})"))));
+                            settle(&endpoints[0], 0, &mut runtimes[0], shared, "batch/reset", Err((Rejection::Malformed, format!("request ({message})"))));
                             ResetLinesResponse { success: false, message, states: batch_states(runtimes) }
                         }
                     };
@@ -589,7 +793,7 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                 Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
                 Event::Reset(k, Ok((request_id, request))) => {
                     let (e, r) = (&endpoints[k], &mut runtimes[k]);
-                    let observation = reset_line(e, r, shared, request.has_seed.then_some(request.seed));
+                    let observation = reset_line(e, k, r, shared, request.has_seed.then_some(request.seed));
                     let response = ResetLineResponse::of(&r.host, observation, request.has_seed);
                     if let Err(error) = e.reset.async_send_response(request_id, response).await {
                         log("WARN", format!("{}/reset: cannot send the response: {error:?}", e.namespace));
@@ -768,16 +972,16 @@ fn end_job(runtimes: &mut [LineRuntime]) {
 /// One tick of every line on its held command, as the realtime timer and StepSimulation run it:
 /// a line at its time limit starts a new episode instead (its random streams carry on).
 fn tick_all(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared: &Shared, clock: &mut ClockState) {
-    for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
         match r.host.timer_tick() {
             TimerTick::Stepped(_) => {
                 r.counters.ticks += 1;
-                e.publish_tick(shared, r);
+                e.publish_tick(shared, k, r);
             }
             TimerTick::Reset(_) => {
                 r.counters.episodes += 1;
-                e.publish_reset_event(shared, r, false);
-                e.publish_tick(shared, r);
+                e.publish_reset_events(shared, k, r, false);
+                e.publish_tick(shared, k, r);
             }
         }
     }
@@ -795,18 +999,22 @@ fn reset_simulation(
     scope: ResetScope,
     clock: &mut ClockState,
 ) {
-    for (e, r) in endpoints.iter().zip(runtimes.iter_mut()) {
+    for (k, (e, r)) in endpoints.iter().zip(runtimes.iter_mut()).enumerate() {
         if scope.state {
             r.host.restart();
             r.counters.episodes += 1;
+            // The line as built again: its schedule starts over.
+            (r.announced_tick, r.counted_tick, r.evolution_events) = (None, None, 0);
         }
         if scope.time {
             r.host.rewind_time();
         }
         if scope.state {
-            e.publish_reset_event(shared, r, true);
+            let sent = shared.offer(&e.reset_event, &|| e.show("events/reset"), || ResetEvent::of(&r.host, true));
+            r.counters.count_published(sent);
+            e.announce_start(shared, k, r);
         }
-        e.publish_tick(shared, r);
+        e.publish_tick(shared, k, r);
     }
     if scope.time {
         clock.last = None;
@@ -816,11 +1024,11 @@ fn reset_simulation(
 }
 
 /// Resets one line and publishes its new tick (and the reset event, for bags).
-fn reset_line(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, seed: Option<u64>) -> Observation {
+fn reset_line(e: &LineEndpoints, k: usize, r: &mut LineRuntime, shared: &Shared, seed: Option<u64>) -> Observation {
     let observation = r.host.reset(seed);
     r.counters.episodes += 1;
-    e.publish_reset_event(shared, r, seed.is_some());
-    e.publish_tick(shared, r);
+    e.publish_reset_events(shared, k, r, seed.is_some());
+    e.publish_tick(shared, k, r);
     observation
 }
 
@@ -834,7 +1042,7 @@ fn batch_reset(
 ) -> Result<String, String> {
     let resets = batch_resets(request, runtimes.len())?;
     for reset in &resets {
-        reset_line(&endpoints[reset.line], &mut runtimes[reset.line], shared, reset.seed);
+        reset_line(&endpoints[reset.line], reset.line, &mut runtimes[reset.line], shared, reset.seed);
     }
     Ok(format!("{} line(s) reset", resets.len()))
 }
@@ -850,22 +1058,23 @@ fn handle_batch(
     let (cmd, client) = match received {
         Ok((cmd, info)) => (cmd, client_of(&info)),
         Err(error) => {
-            settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err(malformed(&error)));
+            settle(&endpoints[0], 0, &mut runtimes[0], shared, "batch/cmd", Err(malformed(&error)));
             return false;
         }
     };
-    let entries = match batch_commands(&cmd, runtimes.len(), shared.params.line.variant) {
+    let modes = BatchModes::of(shared.params.line.variant, !shared.params.evolution.is_empty());
+    let entries = match batch_commands(&cmd, runtimes.len(), modes) {
         Ok(entries) => entries,
         Err(detail) => {
-            settle(&endpoints[0], &mut runtimes[0], shared, "batch/cmd", Err((Rejection::Malformed, detail)));
+            settle(&endpoints[0], 0, &mut runtimes[0], shared, "batch/cmd", Err((Rejection::Malformed, detail)));
             return false;
         }
     };
     let mut stepped = false;
-    for ((e, r), entry) in endpoints.iter().zip(runtimes.iter_mut()).zip(entries) {
+    for (k, ((e, r), entry)) in endpoints.iter().zip(runtimes.iter_mut()).zip(entries).enumerate() {
         for command in entry.commands() {
             let result = apply(r, client, entry.stamp, command);
-            stepped |= settle(e, r, shared, "batch/cmd", result);
+            stepped |= settle(e, k, r, shared, "batch/cmd", result);
         }
     }
     stepped
@@ -908,7 +1117,7 @@ fn malformed(error: &str) -> Refusal {
 
 /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
 /// whether the line stepped.
-fn settle(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, topic: &str, result: Result<Accepted, Refusal>) -> bool {
+fn settle(e: &LineEndpoints, k: usize, r: &mut LineRuntime, shared: &Shared, topic: &str, result: Result<Accepted, Refusal>) -> bool {
     match result {
         Ok(Accepted::Stored) => {
             r.counters.accepted += 1;
@@ -917,7 +1126,7 @@ fn settle(e: &LineEndpoints, r: &mut LineRuntime, shared: &Shared, topic: &str, 
         Ok(Accepted::Stepped(_)) => {
             r.counters.accepted += 1;
             r.counters.ticks += 1;
-            e.publish_tick(shared, r);
+            e.publish_tick(shared, k, r);
             true
         }
         Err((reason, detail)) => {
@@ -936,17 +1145,34 @@ fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: I
         .map(|r| {
             let line = r.host.line();
             let kv = |key: &str, value: String| KeyValue { key: key.to_string(), value };
-            let extra = vec![
+            let mut extra = vec![
                 kv("seed", line.seed().to_string()),
                 kv("episode", line.episode().to_string()),
                 kv("step", line.step_count().to_string()),
                 kv("sim_time", show_stamp(r.host.stamp())),
                 kv("variant", p.line.variant.to_string()),
-                kv("input", p.line.input.to_string()),
+                kv("input", line.config().input.to_string()),
                 kv("mode", format!("{:?}", r.host.mode()).to_lowercase()),
                 kv("uptime_s", format!("{:.0}", started.elapsed().as_secs_f64())),
                 kv("owner", show_client(r.host.owner())),
             ];
+            if r.host.evolving() {
+                // The evolution state: the setup now and how far the schedule has come.
+                let s = line.settings();
+                let fault = s.input_fault.map_or_else(|| "none".to_string(), |f| format!("{:?} {} ticks left", f.kind, f.remaining).to_lowercase());
+                extra.extend([
+                    kv("evolution_file", p.evolution_file.clone()),
+                    kv("evolution_events_applied", r.evolution_events.to_string()),
+                    kv("evolution_events_total", line.evolution().events.len().to_string()),
+                    kv("tick", line.tick().to_string()),
+                    kv("sort_modes", s.sort_modes.to_string()),
+                    kv("ratio_sensor", s.ratio_sensor.to_string()),
+                    kv("obs_noise", s.obs_noise.to_string()),
+                    kv("action_penalty", s.action_penalty.to_string()),
+                    kv("threshold", s.threshold.to_string()),
+                    kv("input_fault", fault),
+                ]);
+            }
             r.counters.status(extra)
         })
         .chain([simulation])

@@ -23,7 +23,11 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
     ("tick_period", "Simulated seconds per tick (the step of /clock and of every stamp)"),
     ("setup", "The paper's setup A, B, C or D (empty: none); sets input, obs_noise and action_penalty unless given explicitly"),
     ("use_sim_time", "Ignored: this node is the clock, it publishes /clock"),
+    ("evolution_file", "Evolution schedule every line follows (upgrades, drifts, sensor faults; empty: none); the values it changes are updated on /parameter_events"),
 ];
+
+/// The parameters an evolution schedule changes while the node runs (on /parameter_events).
+pub const EVOLVING_PARAMETERS: [&str; 4] = ["obs_noise", "action_penalty", "threshold", "input"];
 
 /// The numeric range of a parameter, if it has one.
 fn range(name: &str) -> NumericRange {
@@ -53,7 +57,11 @@ pub fn descriptors() -> Vec<ParameterDescriptor> {
             // ros2-client answers with the type of the current value.
             param_type: ParameterType::NotSet,
             description: DESCRIPTIONS.iter().find(|(n, _)| n == name).map(|(_, d)| d.to_string()).unwrap_or_default(),
-            additional_constraints: format!("{allowed}; fixed for the run: restart the node to change it"),
+            additional_constraints: if EVOLVING_PARAMETERS.contains(name) {
+                format!("{allowed}; fixed for the run but for the node's evolution schedule (evolution_file), which updates it")
+            } else {
+                format!("{allowed}; fixed for the run: restart the node to change it")
+            },
             read_only: true,
             dynamic_typing: false,
             range: range(name),

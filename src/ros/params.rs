@@ -15,6 +15,7 @@ use serde_yaml::Value;
 use super::names::Names;
 use super::options::{NodeArgs, TickMode};
 use crate::sim::config::{ACTION_PENALTY_ALLOWED, MAX_STEPS_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED};
+use crate::sim::evolution::Schedule;
 use crate::sim::{LineConfig, Setup};
 
 /// Everything the node needs to know before it starts.
@@ -31,6 +32,9 @@ pub struct NodeParams {
     pub lines: u32,
     /// Simulated seconds per tick.
     pub tick_period: f64,
+    /// The evolution schedule's file as given ("" for none) and the schedule read from it.
+    pub evolution_file: String,
+    pub evolution: Schedule,
 }
 
 impl Default for NodeParams {
@@ -43,6 +47,8 @@ impl Default for NodeParams {
             rate: 10.0,
             lines: 1,
             tick_period: 1.0,
+            evolution_file: String::new(),
+            evolution: Schedule::default(),
         }
     }
 }
@@ -74,6 +80,7 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("tick_period", "0.000001 ..= 3600.0 (seconds)"),
     ("setup", "A, B, C or D (sets input, obs_noise and action_penalty; those given explicitly override it)"),
     ("use_sim_time", "true or false (ignored: this node is the clock)"),
+    ("evolution_file", "a readable evolution schedule (YAML, see src/sim/evolution.rs), or empty for none"),
 ];
 
 fn allowed(name: &str) -> &'static str {
@@ -90,7 +97,7 @@ impl NodeParams {
             given.extend(load_params_file(file, names)?.into_iter().map(|(n, v)| (n, v, source.clone())));
         }
         given.extend(ros_params.iter().map(|(n, v)| (n.clone(), v.clone(), "--ros-args -p".to_string())));
-        given.extend(explicit_flags(args).into_iter().map(|(n, v)| (n.to_string(), v, format!("--{}", n.replace('_', "-")))));
+        given.extend(explicit_flags(args).into_iter().map(|(n, v)| (n.to_string(), v, flag_of(n))));
         // The preset first, so that every explicit value overrides it whatever its source.
         let (presets, values): (Vec<_>, Vec<_>) = given.iter().partition(|(name, _, _)| name == "setup");
         let mut p = NodeParams::default();
@@ -141,6 +148,11 @@ impl NodeParams {
             "rate" => self.rate = float()?,
             "lines" => self.lines = value.as_u64().and_then(|v| u32::try_from(v).ok()).ok_or_else(bad)?,
             "tick_period" => self.tick_period = float()?,
+            "evolution_file" => {
+                let file = text()?;
+                self.evolution = load_schedule(file).map_err(|e| format!("parameter {name} = {file} (from {source}): {e}"))?;
+                self.evolution_file = file.to_string();
+            }
             "use_sim_time" => {
                 value.as_bool().ok_or_else(bad)?;
             }
@@ -194,6 +206,7 @@ impl NodeParams {
             ("rate", Value::from(self.rate)),
             ("lines", Value::from(self.lines)),
             ("tick_period", Value::from(self.tick_period)),
+            ("evolution_file", Value::from(self.evolution_file.clone())),
         ]
     }
 }
@@ -222,7 +235,26 @@ fn explicit_flags(a: &NodeArgs) -> Vec<(&'static str, Value)> {
     push("rate", a.rate.map(Value::from));
     push("lines", a.lines.map(Value::from));
     push("tick_period", a.tick_period.map(Value::from));
+    push("evolution_file", a.evolution.as_ref().map(|p| Value::from(p.display().to_string())));
     v
+}
+
+/// The command-line flag of a parameter.
+fn flag_of(name: &str) -> String {
+    match name {
+        "evolution_file" => "--evolution".to_string(),
+        _ => format!("--{}", name.replace('_', "-")),
+    }
+}
+
+/// Reads and validates an evolution schedule file; "" is the empty schedule. The validation is
+/// the library's, so the error names the event, the field, the value and the allowed range.
+fn load_schedule(file: &str) -> Result<Schedule, String> {
+    if file.is_empty() {
+        return Ok(Schedule::default());
+    }
+    let text = std::fs::read_to_string(file).map_err(|e| format!("cannot read it: {e}"))?;
+    Schedule::from_yaml(&text)
 }
 
 /// Reads a parameter file: either a flat mapping of parameters, or the launch_ros form

@@ -11,7 +11,13 @@
 //!   go backwards.
 //!
 //! In both modes an invalid value (NaN, off the ten speeds, unknown mode) is rejected and the line
-//! keeps its last valid command. Every rejection carries a [`Rejection`] reason for the logs and
+//! keeps its last valid command.
+//!
+//! An evolving line (one with an evolution schedule) takes the advanced commands whatever its
+//! variant, because its hardware comes and goes: while its machine has no sort modes (before the
+//! machine upgrade, [`Line::sort_modes_at_next_step`]) a tick needs only the speed, mode 0 is
+//! accepted and does nothing, and modes 1 and 2 are rejected ([`Rejection::SortModesOff`]); with
+//! modes, a tick needs both commands, as on the advanced line. Every rejection carries a [`Rejection`] reason for the logs and
 //! /diagnostics.
 //!
 //! One client drives a line per episode: the first client ([`Client`], the DDS participant of the
@@ -35,6 +41,7 @@ use super::clock::SimClock;
 use super::messages::{LineCommands, ResetLinesRequest, Time};
 use super::options::TickMode;
 use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
+use crate::sim::evolution::{category_code, Schedule};
 use crate::sim::{Action, Line, LineConfig, Observation, SortMode, StepOutcome, Variant};
 
 /// Why a command was dropped.
@@ -58,11 +65,13 @@ pub enum Rejection {
     Malformed,
     /// Another client's commands drive this episode of the line.
     NotOwner,
+    /// A sort mode other than 0 while the evolving line's machine has no sort modes.
+    SortModesOff,
     /// The simulation is STOPPED (simulation_interfaces): no tick happens until it plays or pauses.
     Stopped,
 }
 
-pub const REJECTIONS: [Rejection; 10] = [
+pub const REJECTIONS: [Rejection; 11] = [
     Rejection::InvalidSpeed,
     Rejection::UnknownMode,
     Rejection::ModeOnBasicLine,
@@ -72,6 +81,7 @@ pub const REJECTIONS: [Rejection; 10] = [
     Rejection::EpisodeOver,
     Rejection::Malformed,
     Rejection::NotOwner,
+    Rejection::SortModesOff,
     Rejection::Stopped,
 ];
 
@@ -88,6 +98,7 @@ impl Rejection {
             Rejection::EpisodeOver => "episode_over",
             Rejection::Malformed => "malformed",
             Rejection::NotOwner => "not_owner",
+            Rejection::SortModesOff => "sort_modes_off",
             Rejection::Stopped => "stopped",
         }
     }
@@ -105,6 +116,9 @@ impl Rejection {
             Rejection::Malformed => "it could not be decoded",
             Rejection::NotOwner => {
                 "another client drives this episode of the line (one client per episode; a reset frees the line)"
+            }
+            Rejection::SortModesOff => {
+                "the sorting machine has no sort modes now (before its machine upgrade): only mode 0 is valid"
             }
             Rejection::Stopped => "the simulation is STOPPED; set it to PAUSED or PLAYING (~/set_simulation_state)",
         }
@@ -171,10 +185,15 @@ pub struct HostedLine {
 
 impl HostedLine {
     pub fn new(config: LineConfig, seed: u64, clock: SimClock, mode: TickMode) -> Self {
+        Self::with_evolution(config, seed, Schedule::default(), clock, mode)
+    }
+
+    /// A hosted line that evolves by `schedule` (see the module docs for its commands).
+    pub fn with_evolution(config: LineConfig, seed: u64, schedule: Schedule, clock: SimClock, mode: TickMode) -> Self {
         HostedLine {
             start: (config.clone(), seed),
             halted: false,
-            line: Line::new(config, seed),
+            line: Line::with_evolution(config, seed, schedule),
             clock,
             mode,
             tick: 0,
@@ -225,7 +244,7 @@ impl HostedLine {
     /// speed, no owner. The tick counter runs on (see [`Self::rewind_time`]).
     pub fn restart(&mut self) -> Observation {
         let (config, seed) = self.start.clone();
-        self.line = Line::new(config, seed);
+        self.line = Line::with_evolution(config, seed, self.line.evolution().clone());
         self.clear_episode();
         self.tick += 1;
         self.line.observation()
@@ -249,6 +268,31 @@ impl HostedLine {
 
     fn advanced(&self) -> bool {
         self.line.config().variant == Variant::Advanced
+    }
+
+    /// The category the line's observation reports on the wire: the true category of the next
+    /// batch on a line without a schedule (as the basic line has always carried it), the ratio
+    /// sensor's reading on an evolving line (3, unknown, while it has no ratio sensor).
+    pub fn category_reading(&self) -> u8 {
+        if self.evolving() {
+            category_code(self.line.category_reading())
+        } else {
+            self.line.observation().category as u8
+        }
+    }
+
+    /// Whether the line has an evolution schedule.
+    pub fn evolving(&self) -> bool {
+        !self.line.evolution().is_empty()
+    }
+
+    /// Whether the tick the line waits at takes (and in lock-step needs) a sort mode command.
+    pub fn takes_modes(&self) -> bool {
+        if self.evolving() {
+            self.line.sort_modes_at_next_step()
+        } else {
+            self.advanced()
+        }
     }
 
     /// Starts a new episode at a new tick (stamps never repeat, so old commands become stale).
@@ -300,10 +344,13 @@ impl HostedLine {
 
     /// Handles `cmd/sort_mode`.
     pub fn on_sort_mode(&mut self, stamp: Time, mode: u8) -> Result<Accepted, Rejection> {
-        if !self.advanced() {
+        if !self.advanced() && !self.evolving() {
             return Err(Rejection::ModeOnBasicLine);
         }
         let mode = SortMode::from_index(mode).ok_or(Rejection::UnknownMode)?;
+        if mode != SortMode::Basic && !self.takes_modes() {
+            return Err(Rejection::SortModesOff);
+        }
         self.check_stamp(stamp, self.pending_mode.is_some(), MODE)?;
         self.held.mode = mode;
         self.pending_mode = Some(mode);
@@ -350,7 +397,7 @@ impl HostedLine {
         if self.mode != TickMode::Lockstep {
             return Accepted::Stored;
         }
-        let mode_ready = !self.advanced() || self.pending_mode.is_some();
+        let mode_ready = !self.takes_modes() || self.pending_mode.is_some();
         match (self.pending_speed, mode_ready) {
             (Some(speed_index), true) => {
                 let mode = self.pending_mode.unwrap_or(SortMode::Basic);
@@ -407,12 +454,39 @@ impl BatchEntry {
     }
 }
 
-/// The per-line entries of a `batch/cmd` for `lines` lines of `variant`, or (for a
-/// [`Rejection::Malformed`]) what is wrong with its shape: every list needs one entry per line,
-/// except `modes`, which the basic line ignores and which may then be empty.
-pub fn batch_commands(cmd: &LineCommands, lines: usize, variant: Variant) -> Result<Vec<BatchEntry>, String> {
-    let advanced = variant == Variant::Advanced;
-    let modes_ok = cmd.modes.len() == lines || (!advanced && cmd.modes.is_empty());
+/// What a node's lines do with the `modes` of a `batch/cmd`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BatchModes {
+    /// The advanced line: one mode per line, always.
+    Required,
+    /// Evolving lines: one mode per line, taken by each line's rules, or none at all (the lines
+    /// then get no mode command: enough while their machines have no sort modes).
+    Optional,
+    /// The basic line: absent, or one per line and ignored.
+    Ignored,
+}
+
+impl BatchModes {
+    /// The rule for the lines a node hosts.
+    pub fn of(variant: Variant, evolving: bool) -> Self {
+        match (evolving, variant) {
+            (true, _) => BatchModes::Optional,
+            (false, Variant::Advanced) => BatchModes::Required,
+            (false, Variant::Basic) => BatchModes::Ignored,
+        }
+    }
+}
+
+/// The per-line entries of a `batch/cmd` for `lines` lines, or (for a [`Rejection::Malformed`])
+/// what is wrong with its shape: every list needs one entry per line, except `modes`, which may
+/// be empty unless [`BatchModes::Required`].
+pub fn batch_commands(cmd: &LineCommands, lines: usize, modes: BatchModes) -> Result<Vec<BatchEntry>, String> {
+    let advanced = match modes {
+        BatchModes::Required => true,
+        BatchModes::Optional => !cmd.modes.is_empty(),
+        BatchModes::Ignored => false,
+    };
+    let modes_ok = cmd.modes.len() == lines || (modes != BatchModes::Required && cmd.modes.is_empty());
     if cmd.stamp_sec.len() != lines || cmd.stamp_nanosec.len() != lines || cmd.speeds.len() != lines || !modes_ok {
         return Err(format!(
             "batch of {} stamp_sec, {} stamp_nanosec, {} speeds, {} modes for {lines} lines",
@@ -533,6 +607,55 @@ mod tests {
     }
 
     #[test]
+    fn an_evolving_line_takes_modes_only_while_its_machine_has_them() {
+        use crate::sim::evolution::{At, Event};
+        let mut upgrade = Event::at(At::Tick(2));
+        upgrade.sort_modes = Some(true);
+        let mut downgrade = Event::at(At::Episode(1));
+        downgrade.sort_modes = Some(false);
+        let schedule = Schedule::new(vec![upgrade, downgrade]);
+        let config = LineConfig::for_setup(Setup::B, Variant::Basic);
+        let mut h = HostedLine::with_evolution(config.clone(), 42, schedule.clone(), SimClock::new(0.5), TickMode::Lockstep);
+        let mut reference = Line::with_evolution(config, 42, schedule);
+        assert!(h.evolving() && !h.takes_modes());
+        for _ in 0..2 {
+            let s = h.stamp();
+            assert_eq!(h.on_sort_mode(s, 1), Err(Rejection::SortModesOff), "no modes before the machine upgrade");
+            assert_eq!(h.on_sort_mode(s, 7), Err(Rejection::UnknownMode));
+            assert_eq!(h.on_sort_mode(s, 0), Ok(Accepted::Stored), "mode 0 is always valid");
+            let Ok(Accepted::Stepped(out)) = h.on_speed(s, 0.3) else { panic!("the speed alone completes the tick") };
+            assert_eq!(out, reference.step(Action::new(2, SortMode::Positive)));
+        }
+        // The upgrade is due at the start of tick 2: its step needs, and takes, a mode.
+        assert!(h.takes_modes() && !h.line().sort_modes());
+        let s = h.stamp();
+        assert_eq!(h.on_speed(s, 0.3), Ok(Accepted::Stored));
+        let Ok(Accepted::Stepped(out)) = h.on_sort_mode(s, 2) else { panic!("mode and speed complete the tick") };
+        assert_eq!(out, reference.step(Action::new(2, SortMode::Negative)));
+        assert_eq!(out.action.mode, SortMode::Negative);
+        // Episode 1 takes the modes away again.
+        h.reset(Some(3));
+        reference.reset(Some(3));
+        assert!(!h.takes_modes());
+        assert_eq!(h.on_sort_mode(h.stamp(), 2), Err(Rejection::SortModesOff));
+        let Ok(Accepted::Stepped(out)) = h.on_speed(h.stamp(), 0.5) else { panic!() };
+        assert_eq!(out, reference.step(Action::new(4, SortMode::Basic)));
+        // Without a schedule the basic line still refuses every mode as before.
+        assert_eq!(host(Variant::Basic, TickMode::Lockstep).on_sort_mode(SimClock::new(0.5).stamp(0), 0), Err(Rejection::ModeOnBasicLine));
+    }
+
+    #[test]
+    fn evolving_lines_take_batch_modes_when_given() {
+        let t = Time { sec: 1, nanosec: 0 };
+        let with = batch_commands(&batch(&[t, t], &[0.3, 0.5], &[1, 2]), 2, BatchModes::Optional).unwrap();
+        assert_eq!(with[1].mode, Some(2));
+        let without = batch_commands(&batch(&[t, t], &[0.3, 0.5], &[]), 2, BatchModes::Optional).unwrap();
+        assert_eq!(without[0].commands().collect::<Vec<_>>(), [Command::Speed(0.3)]);
+        assert!(batch_commands(&batch(&[t, t], &[0.3, 0.5], &[1]), 2, BatchModes::Optional).is_err());
+        assert_eq!(BatchModes::of(Variant::Basic, true), BatchModes::Optional);
+    }
+
+    #[test]
     fn one_client_drives_an_episode_and_a_reset_frees_the_line() {
         let (a, b) = ([1; 12], [2; 12]);
         let mut h = host(Variant::Basic, TickMode::Lockstep);
@@ -567,12 +690,12 @@ mod tests {
     #[test]
     fn a_batch_command_needs_one_entry_per_line_in_every_list() {
         let t = Time { sec: 1, nanosec: 0 };
-        let ok = batch_commands(&batch(&[t, t], &[0.3, 0.5], &[1, 2]), 2, Variant::Advanced).unwrap();
+        let ok = batch_commands(&batch(&[t, t], &[0.3, 0.5], &[1, 2]), 2, BatchModes::Required).unwrap();
         assert_eq!(ok[1], BatchEntry { stamp: t, speed: 0.5, mode: Some(2) });
         assert_eq!(ok[0].commands().collect::<Vec<_>>(), [Command::Mode(1), Command::Speed(0.3)], "mode first");
         // The basic line ignores modes: absent or one per line.
         for modes in [&[][..], &[7, 7]] {
-            let basic = batch_commands(&batch(&[t, t], &[0.3, 0.5], modes), 2, Variant::Basic).unwrap();
+            let basic = batch_commands(&batch(&[t, t], &[0.3, 0.5], modes), 2, BatchModes::Ignored).unwrap();
             assert_eq!(basic[0].commands().collect::<Vec<_>>(), [Command::Speed(0.3)]);
         }
         let mut wrong_nanos = batch(&[t, t], &[0.3, 0.5], &[1, 2]);
@@ -585,7 +708,7 @@ mod tests {
             (batch(&[t, t, t], &[0.3, 0.5, 0.1], &[0, 0, 0]), Variant::Basic),
             (wrong_nanos, Variant::Advanced),
         ] {
-            let e = batch_commands(&cmd, 2, variant).unwrap_err();
+            let e = batch_commands(&cmd, 2, BatchModes::of(variant, false)).unwrap_err();
             assert!(e.starts_with("batch of ") && e.ends_with("for 2 lines"), "{e}");
         }
     }

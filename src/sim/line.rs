@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 
 use super::accuracy::{noiseless_accuracy, with_noise, ModeEffect, START_ACCURACY};
 use super::config::{LineConfig, Variant};
-use super::evolution::{ActiveFault, Event, Schedule, Settings, Timeline};
+use super::evolution::{ActiveFault, At, Event, Schedule, Settings, Timeline};
 use super::input::InputGenerator;
 use super::material::{Batch, Category, SortMode, SORT_MODES};
 use super::reward::reward;
@@ -448,6 +448,28 @@ impl Line {
     /// the line has no ratio sensor.
     pub fn category_reading(&self) -> Option<Category> {
         self.ratio_sensor.then_some(self.observation.category)
+    }
+    /// The events due at the start of the next step (tick [`Line::tick`]) that have not applied
+    /// yet, with their indices in the schedule, and the line's settings once they have. `None`
+    /// when no event is due there. A host announces them when the line arrives at that tick, so
+    /// a client knows before it commands the step (the line applies them inside [`Line::step`]).
+    pub fn pending_tick_events(&self) -> Option<(Vec<usize>, Settings)> {
+        if self.tick != self.due_tick {
+            return None;
+        }
+        let indices = self.timeline.schedule().events_at(At::Tick(self.tick)).map(|(i, _)| i).collect();
+        let mut after = self.clone();
+        after.apply_tick_events();
+        Some((indices, after.settings()))
+    }
+    /// Whether the next step runs with sort modes: [`Line::sort_modes`], unless an event due at
+    /// the start of that step switches them (what a host checks a mode command against).
+    pub fn sort_modes_at_next_step(&self) -> bool {
+        if self.tick != self.due_tick {
+            return self.sort_modes;
+        }
+        let due = self.timeline.schedule().events_at(At::Tick(self.tick));
+        due.filter_map(|(_, e)| e.sort_modes).last().unwrap_or(self.sort_modes)
     }
     /// Whether `mode` is a valid command now: any mode with sort modes, only mode 0 without.
     pub fn mode_allowed(&self, mode: SortMode) -> bool {

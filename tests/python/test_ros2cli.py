@@ -25,8 +25,8 @@ pytestmark = pytest.mark.usefixtures("ros2_daemon")
 
 RATE = 10.0  # ticks per second of the realtime lines here
 NODE_TYPES = {"/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
-PARAMETERS = ["action_penalty", "input", "lines", "max_steps", "mode", "obs_noise", "rate", "seed", "setup",
-              "threshold", "tick_period", "use_sim_time", "variant"]
+PARAMETERS = ["action_penalty", "evolution_file", "input", "lines", "max_steps", "mode", "obs_noise", "rate", "seed",
+              "setup", "threshold", "tick_period", "use_sim_time", "variant"]
 HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
 
 
@@ -312,7 +312,7 @@ def test_param_list_get_dump(ros2, rt_line):
     assert got == f"Double value is: {RATE}", got
     dump = yaml.safe_load(ros2.run("param", "dump", rt_line.fqn, timeout=20).stdout)
     assert dump == {rt_line.fqn: {"ros__parameters": {
-        "action_penalty": 0.0, "input": "random", "lines": 1, "max_steps": 1000000, "mode": "realtime",
+        "action_penalty": 0.0, "evolution_file": "", "input": "random", "lines": 1, "max_steps": 1000000, "mode": "realtime",
         "obs_noise": 0.0, "rate": RATE, "seed": 5, "setup": "", "threshold": 0.7, "tick_period": 1.0, "use_sim_time": False,
         "variant": "advanced"}}}, dump
 

@@ -38,6 +38,8 @@ def test_speeds_modes_and_numbers_equal_the_rust_librarys(rust):
     assert v.VARIANTS == tuple(rust["variants"])
     assert v.INPUTS == tuple(rust["inputs"])
     assert v.THRESHOLD == rust["threshold"]
+    assert (v.CATEGORY_UNKNOWN_CODE, v.CATEGORY_UNKNOWN_OBSERVATION) == (
+        rust["category_unknown_code"], rust["category_unknown_observation"])
     assert v.EPISODE_STEPS == rust["episode_steps"]
     assert v.MAX_EPISODE_STEPS == rust["max_episode_steps"]
     assert set(v.MODE_LABELS) == set(v.MODES.values())

@@ -27,11 +27,13 @@ from typing import Callable
 
 from .bagfile import META_KEY, BagError, BagWriter, LineInfo
 from .rosnode import ToolNode
-from .schema import CLOCK, GLOBAL_TYPES, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
+from .schema import CLOCK, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
 
 #: The node's parameters that describe a line (and thus a replay's node).
 NODE_PARAMETERS = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "mode",
-                   "rate", "lines", "tick_period")
+                   "rate", "lines", "tick_period", "evolution_file")
+#: Parameters a node may lack (older nodes): recorded as "" then.
+OPTIONAL_PARAMETERS = ("evolution_file",)
 
 
 @dataclass
@@ -90,6 +92,7 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
                     client.remove_pending_request(future)
                     continue
                 values = [_parameter_value(v) for v in future.result().values]
+                values = ["" if v is None and n in OPTIONAL_PARAMETERS else v for n, v in zip(NODE_PARAMETERS, values)]
                 break
         except TimeoutError:
             pass
@@ -104,8 +107,23 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
             line = int(tail[5:])
         options["seed"] = int(options["seed"]) + line
         options["line"] = line
+        _store_schedule(options)
         return options
     return None
+
+
+def _store_schedule(options: dict) -> None:
+    """An evolving line's schedule goes into the bag as text (``evolution``), so a replay needs
+    nothing but the bag; the node's file is read here, on the node's host."""
+    path = options.get("evolution_file") or ""
+    if not path:
+        options.pop("evolution_file", None)
+        return
+    try:
+        options["evolution"] = Path(path).read_text()
+    except OSError as e:
+        print(f"sorting-line-bag record: warning: cannot read the node's evolution schedule {path} ({e}); "
+              "`replay` will need it", file=sys.stderr, flush=True)
 
 
 def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, duration: float | None = None,
@@ -143,7 +161,7 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
             return on
 
         subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
-        _await_matched(tool, namespace, subs, wait)
+        _await_matched(tool, namespace, subs, wait, evolving=bool(options and options.get("evolution_file")))
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
         _write(tool, writer, subs, lambda: states[0], duration=duration, max_ticks=max_ticks, stop=stop,
@@ -167,7 +185,8 @@ def _match(tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics
               "`replay` will need its options as flags", file=sys.stderr, flush=True)
     variant = options["variant"] if options else (
         "advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
-    wanted = topics if topics else [*line_topics(variant), CLOCK] + (["/diagnostics"] if diagnostics else [])
+    evolving = bool(options and options.get("evolution_file"))
+    wanted = topics if topics else [*line_topics(variant, evolving), CLOCK] + (["/diagnostics"] if diagnostics else [])
     types = {}
     for name in {join(namespace, t): t for t in wanted}:
         rel = relative_to(namespace, name)
@@ -176,16 +195,17 @@ def _match(tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics
     return options, types
 
 
-def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float) -> None:
+def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float, evolving: bool = False) -> None:
     """Ready when the node's topics are matched and the node has shown it sends to us (a
-    /diagnostics status of the line)."""
+    /diagnostics status of the line). An evolving line's hardware topics may not exist yet."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     seen_status = []
     diag = tool.node.create_subscription(
         DiagnosticArray, "/diagnostics",
         lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None, 10)
-    node_side = [n for n in subs if relative_to(namespace, n) in PUBLISHED or n == CLOCK]
+    node_side = [n for n in subs if (relative_to(namespace, n) in PUBLISHED or n == CLOCK)
+                 and not (evolving and relative_to(namespace, n) in HARDWARE)]
     tool.until(lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status, wait,
                lambda: f"the topics of {namespace} to match and a /diagnostics status of the line "
                        f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})")

@@ -22,12 +22,23 @@ compares what the node publishes with what the bag recorded, field by field.
   be equal. The comparison (:mod:`.compare`) covers every message from the bag's first reset on,
   of ``events/reset``, ``input``, ``belt/occupancy``, ``sensors/ratio``, ``state`` and ``/clock``
   as far as the bag has them, and names the first difference by topic, tick and field.
+- Evolving lines: the bag carries the schedule (``evolution`` in its description), which the
+  replay node runs by; ``events/evolution`` is compared like the other topics. The recording must
+  start at the node's first reset (episode 1, tick 0: the schedule counts episodes and ticks from
+  the node's start), and there is no handshake reset (it would be an episode of the schedule).
+  ``cmd/sort_mode`` is sent while the recorded line had sort modes (its ``events/evolution`` say
+  when), once the replay node's subscription, which appears with the machine upgrade, is matched.
+  ``sensors/ratio`` is not compared: its publisher appears with the sensor upgrade, and which of
+  its first messages a recorder had matched in time is discovery timing, not the line (the
+  reading itself is compared, in every state's ``observation_category``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 
 from ..line.errors import BridgeTimeout
@@ -36,7 +47,7 @@ from ..ros.links import LineLink
 from .bagfile import Bag, BagError, BagMessage, open_bag
 from .compare import Comparison, Difference, compare, shifted
 from .rosnode import ToolNode
-from .schema import CLOCK, COMMANDS, GLOBAL_TYPES, LINE_TYPES, PUBLISHED, decode, join, stamp_ns, typestore
+from .schema import CLOCK, COMMANDS, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, decode, join, stamp_ns, typestore
 
 #: Node options a replay needs, as `sorting_line node` flags (underscores).
 REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
@@ -83,6 +94,23 @@ def line_namespace(bag: Bag) -> str:
     if len(states) != 1:
         raise BagError(f"{bag.path}: cannot tell which line the bag recorded (state topics: {states or 'none'})")
     return states[0][: -len("/state")] or "/"
+
+
+def evolution_text(bag: Bag) -> str | None:
+    """The evolution schedule the recorded node ran by, if it evolved."""
+    return (bag.info.node.get("evolution") if bag.info else None) or None
+
+
+def sort_modes_by_stamp(events: list[dict]) -> list[tuple[int, bool]]:
+    """(stamp, whether the line has sort modes from that tick's step on), from the recorded
+    ``events/evolution``: a reset's message gives the whole setup, a tick's the fields it changed."""
+    out = []
+    for e in sorted(events, key=lambda e: (stamp_ns(e), not e["at_reset"])):
+        if e["at_reset"]:
+            out.append((stamp_ns(e), bool(e["sort_modes"])))
+        elif "sort_modes" in e["changed"]:
+            out.append((stamp_ns(e), e["values"][e["changed"].index("sort_modes")] == "true"))
+    return out
 
 
 def node_options(bag: Bag, overrides: dict | None) -> dict:
@@ -152,7 +180,15 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
         result.notes.append(f"not sent: {plan.ineffective} commands for ticks the recorded node did not step from "
                             "(the episode was over, a reset came first, or the recording ended)")
     replay_ns = private_namespace()
-    process = NodeProcess(replay_ns, dict(plan.options, mode="lockstep", lines=1),
+    options = dict(plan.options, mode="lockstep", lines=1)
+    scratch = tempfile.TemporaryDirectory(prefix="sorting_line_replay_")
+    if plan.evolution is not None:
+        schedule = Path(scratch.name) / "evolution.yaml"
+        schedule.write_text(plan.evolution)
+        options["evolution"] = str(schedule)
+        result.notes.append("evolving line: replayed with the schedule stored in the bag; sensors/ratio not compared "
+                            "(its publisher appears with the sensor upgrade; the reading is compared in state)")
+    process = NodeProcess(replay_ns, options,
                           ros_args=("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
     tool = None
     try:
@@ -165,6 +201,7 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
         if tool is not None:
             tool.close()
         process.stop()
+        scratch.cleanup()
 
 
 @dataclass
@@ -180,6 +217,17 @@ class _Plan:
     drivers: list[tuple[str, BagMessage]]  # resets and commands, in the order to send them
     compared_topics: list[str]
     ineffective: int  # commands left out: the recorded node never stepped from their tick
+    evolution: str | None = None  # the schedule of an evolving line
+    sort_modes: list[tuple[int, bool]] = field(default_factory=list)  # (stamp, modes from then on)
+
+    def had_sort_modes(self, stamp: int) -> bool:
+        """Whether the recorded line took sort modes for the step answering ``stamp``."""
+        modes = False
+        for at, on in self.sort_modes:
+            if at > stamp:
+                break
+            modes = on
+        return modes
 
 
 def _plan(bag: Bag, overrides: dict | None) -> _Plan:
@@ -187,6 +235,15 @@ def _plan(bag: Bag, overrides: dict | None) -> _Plan:
     options = node_options(bag, overrides)
     period = round(float(options["tick_period"]) * 1e9)
     rel_msgs = bag.by_relative_topic()
+    evolution = evolution_text(bag)
+    if evolution is not None:
+        announced = [m.plain for m in rel_msgs.get("events/evolution", [])]
+        first = next((e for e in announced if e["at_reset"]), None)
+        if first is None or (first["episode"], first["tick"]) != (1, 0):
+            where = f"episode {first['episode']}, tick {first['tick']}" if first else "no events/evolution at a reset"
+            raise BagError(f"{bag.path} records an evolving line from {where}: its schedule counts episodes and ticks "
+                           "from the node's start, so a replay needs the recording to start at the node's first reset "
+                           "(episode 1, tick 0)")
     resets = rel_msgs.get("events/reset", [])
     if not resets:
         raise BagError(f"{bag.path}: no {join(namespace, 'events/reset')} in the bag: a replay starts at a reset")
@@ -203,8 +260,10 @@ def _plan(bag: Bag, overrides: dict | None) -> _Plan:
     stepped = {s - period for s, m in bag_states.items() if m["step"] > 0}
     commands = [(rel, m) for rel in COMMANDS for m in rel_msgs.get(rel, []) if stamp_ns(m.plain) >= start]
     effective = [c for c in commands if stamp_ns(c[1].plain) in stepped]
+    compared = [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t) and not (evolution and t == "sensors/ratio")]
+    modes = sort_modes_by_stamp([m.plain for m in rel_msgs.get("events/evolution", [])]) if evolution else []
     return _Plan(bag, options, period, rel_msgs, start, bag_states, _order_drivers(resets, effective),
-                 [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t)], len(commands) - len(effective))
+                 compared, len(commands) - len(effective), evolution, modes)
 
 
 class _Replay:
@@ -213,7 +272,8 @@ class _Replay:
 
     def __init__(self, plan: _Plan, result: ReplayResult, tool: ToolNode, namespace: str, step_timeout: float):
         self.plan, self.result, self.tool, self.namespace, self.step_timeout = plan, result, tool, namespace, step_timeout
-        self.link = LineLink(tool.node, namespace, plan.options["variant"] == "advanced")
+        # An evolving line's cmd/sort_mode comes with its machine upgrade: created when needed.
+        self.link = LineLink(tool.node, namespace, plan.options["variant"] == "advanced" and plan.evolution is None)
         self.capture = _Capture(tool, namespace, plan.compared_topics)
         self.publishers = {"cmd/speed": self.link.speed_pub, "cmd/sort_mode": self.link.mode_pub}
         self.store = typestore()
@@ -221,9 +281,15 @@ class _Replay:
     def drive(self, startup_timeout: float, progress: bool) -> _Capture:
         """Sends every driver; stops at the first tick the node does not reach (result.difference)."""
         link, tool, plan = self.link, self.tool, self.plan
-        tool.until(lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in self.capture.subs.values()),
+        fixed = [s for rel, s in self.capture.subs.items() if not (plan.evolution and rel in HARDWARE)]
+        tool.until(lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in fixed),
                    startup_timeout, f"the replay node serving {self.namespace} (its reset service and topics)")
-        _handshake(tool, link, int(plan.options["seed"]), self.step_timeout)
+        if plan.evolution is None:
+            _handshake(tool, link, int(plan.options["seed"]), self.step_timeout)
+        else:
+            # No handshake reset: it would be an episode of the schedule. The first reset is the
+            # bag's; a moment for the node to match our readers first (volatile topics).
+            tool.spin_for(0.5)
         bar = _progress(len(plan.drivers), progress)
         try:
             for rel, m in plan.drivers:
@@ -274,6 +340,11 @@ class _Replay:
         pub = self.publishers.get(rel)
         if pub is None:  # a sort mode sent to a basic line: the node refuses it, as it did then
             pub = self.publishers[rel] = self.tool.publisher(join(self.namespace, rel), LINE_TYPES[rel])
+        if self.plan.evolution is not None and rel == "cmd/sort_mode":
+            if not self.plan.had_sort_modes(stamp):
+                return True  # the recorded node had no cmd/sort_mode then: it never got this command
+            self.tool.until(lambda: pub.get_subscription_count() > 0, self.step_timeout,
+                            f"{self.namespace}/cmd/sort_mode, subscribed since the machine upgrade, to match")
         pub.publish(_restamped(self.store, m, stamp - self.result.tick_shift * self.plan.period))
         self.result.commands += 1
         return True

@@ -24,7 +24,10 @@ INTERFACES = "sorting_line_interfaces"
 
 #: What the node publishes for one line, in the order it publishes a tick (``events/reset`` comes
 #: first on a reset, ``state`` last). Names are relative to the line's namespace.
-PUBLISHED = ("events/reset", "input", "belt/occupancy", "sensors/ratio", "state")
+PUBLISHED = ("events/reset", "events/evolution", "input", "belt/occupancy", "sensors/ratio", "state")
+#: Topics of a line's hardware: on an evolving line they come and go with its upgrades, so a
+#: recorder or replay cannot wait for them at the start.
+HARDWARE = ("sensors/ratio", "cmd/sort_mode")
 #: What a controller sends a line, in the order a tick's answer is sent (mode first).
 COMMANDS = ("cmd/sort_mode", "cmd/speed")
 #: Node-wide topics a bag of a line records by default.
@@ -37,6 +40,7 @@ LINE_TYPES = {
     "sensors/ratio": f"{INTERFACES}/msg/MaterialRatio",
     "state": f"{INTERFACES}/msg/LineState",
     "events/reset": f"{INTERFACES}/msg/ResetEvent",
+    "events/evolution": f"{INTERFACES}/msg/EvolutionEvent",
     "cmd/speed": f"{INTERFACES}/msg/SpeedCommand",
     "cmd/sort_mode": f"{INTERFACES}/msg/SortModeCommand",
 }
@@ -59,11 +63,14 @@ NODE_QOS = Qos(
 )
 
 
-def line_topics(variant: str | None) -> list[str]:
+def line_topics(variant: str | None, evolving: bool = False) -> list[str]:
     """The relative topics of a line a bag records by default: what the node publishes and the
-    commands (the basic line has no ``sensors/ratio`` and no ``cmd/sort_mode``)."""
+    commands (the basic line has no ``sensors/ratio`` and no ``cmd/sort_mode``; only an evolving
+    line has ``events/evolution``, and every hardware topic, whatever its variant)."""
     names = list(PUBLISHED) + list(COMMANDS)
-    if variant == "basic":
+    if not evolving:
+        names.remove("events/evolution")
+    if variant == "basic" and not evolving:
         names = [t for t in names if t not in ("sensors/ratio", "cmd/sort_mode")]
     return names
 

@@ -34,6 +34,8 @@ class LineOptions:
     step_timeout: float = 2.0
     startup_timeout: float = 20.0
     threshold: float = THRESHOLD
+    #: An evolution schedule file the node runs the line by (``--evolution``), or None.
+    evolution: str | None = None
 
     def __post_init__(self) -> None:
         check_variant(self.variant)
@@ -57,4 +59,6 @@ class LineOptions:
         ``NodeProcess`` turns into flags and the line server matches leases on)."""
         options = dict(SETUPS[self.setup], variant=self.variant, threshold=self.threshold, lines=lines)
         options["max_steps"] = self.max_episode_steps if self.max_episode_steps is not None else MAX_EPISODE_STEPS
+        if self.evolution is not None:
+            options["evolution"] = self.evolution
         return options

@@ -52,6 +52,11 @@ MODE_COUNT = len(MODES)
 #: Ratio categories of a batch (``sensors/ratio``, the advanced observation): the number of the
 #: mode made for them.
 CATEGORIES: Mapping[str, int] = MappingProxyType({"basic": 0, "positive": 1, "negative": 2})
+#: The category code on the wire while an evolving line has no ratio sensor (before its sensor
+#: upgrade), and the value its observation slot then holds: inside the advanced Box(0, 2), and no
+#: category's value, so "no sensor" differs from "mixed batch" (src/sim/evolution.rs).
+CATEGORY_UNKNOWN_CODE = 3
+CATEGORY_UNKNOWN_OBSERVATION = 0.5
 #: What each mode number is for, as the dashboard and reports label it.
 MODE_LABELS: Mapping[int, str] = MappingProxyType({0: "basic", 1: "positive (A-rich)", 2: "negative (B-rich)"})
 
@@ -131,10 +136,13 @@ def encode_actions(variant: str, speed_index, mode):
 def observations(variant: str, quantity, category) -> np.ndarray:
     """The observation(s) for the input sensor's reading(s) and ratio category(ies): shape
     ``(1,)``/``(2,)`` for one line, ``(N, 1)``/``(N, 2)`` for N (basic: the reading; advanced:
-    reading, category), float32 as the observation space."""
+    reading, category), float32 as the observation space. An unknown category (no ratio sensor
+    yet) reads :data:`CATEGORY_UNKNOWN_OBSERVATION`."""
     q = np.asarray(quantity, dtype=np.float32)
     if variant == "advanced":
-        return np.stack([q, np.asarray(category, dtype=np.float32)], axis=-1)
+        c = np.asarray(category, dtype=np.float32)
+        c = np.where(c == CATEGORY_UNKNOWN_CODE, np.float32(CATEGORY_UNKNOWN_OBSERVATION), c).astype(np.float32)
+        return np.stack([q, c], axis=-1)
     return q[..., None]
 
 

@@ -41,7 +41,8 @@ class LineBank:
     ``batch=False`` through each line's own topics (:meth:`step`), with ``batch=True`` through the
     node's ``batch/cmd`` and ``batch/state`` (:meth:`step_batch`)."""
 
-    def __init__(self, options: LineOptions, *, lines: int = 1, watch_sensors: bool = False, batch: bool = False):
+    def __init__(self, options: LineOptions, *, lines: int = 1, watch_sensors: bool = False, batch: bool = False,
+                 watch: dict | None = None):
         if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
         if not 1 <= lines <= 64:
@@ -61,6 +62,9 @@ class LineBank:
         self._node_options = options.node_options(lines)
         self._watch_sensors = watch_sensors
         self._batch = batch
+        #: Extra topics of line 0 to subscribe to when the bank opens, {relative topic: (type,
+        #: callback)}; the first reset waits until each is matched with a publisher (e.g. events/evolution).
+        self._watch = dict(watch or {})
         self.links: list[LineLink] = []
         self.batch: BatchLink | None = None
         self._connected = False
@@ -103,6 +107,10 @@ class LineBank:
             self.batch = None if per_line else BatchLink(self.node, self.namespace, self.links)
             self.waiter = Waiter(self.executor, self.process)
             self.sensors: list[dict[str, dict]] = [{"input": {}, "belt": {}} for _ in spaces]
+            self._watched = [
+                self.node.create_subscription(msg_type, f"{spaces[0]}/{topic}", callback, QOS)
+                for topic, (msg_type, callback) in self._watch.items()
+            ]
             if self._watch_sensors:
                 for k, ns in enumerate(spaces):
                     self.node.create_subscription(MaterialInput, f"{ns}/input", self._keep(k, "input"), QOS)
@@ -141,7 +149,8 @@ class LineBank:
     def _connect(self, deadline: float) -> None:
         self.waiter.until_deadline(
             lambda: all(link.endpoints_matched(self.node) for link in self.links)
-            and (self.batch is None or self.batch.matched(self.node)),
+            and (self.batch is None or self.batch.matched(self.node))
+            and all(sub.get_publisher_count() > 0 for sub in self._watched),
             deadline,
             self.startup_timeout,
             lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics; {self._unmatched()})",
