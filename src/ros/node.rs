@@ -362,7 +362,15 @@ struct StepJob {
     reply: StepReply,
     done: u64,
     steps: u64,
+    /// When the action's last feedback went out (see [`FEEDBACK_PERIOD`]).
+    last_feedback: Option<std::time::Instant>,
 }
+
+/// Shortest time between two SimulateSteps feedbacks. A paused line steps thousands of times a
+/// second; one feedback per step outran the client's acknowledgements (the reliable writer then
+/// refused every feedback with WouldBlock, and a client saw none for seconds). Feedback is
+/// progress, not data: the first step, then at most one per period, and the last step always.
+const FEEDBACK_PERIOD: std::time::Duration = std::time::Duration::from_millis(10);
 
 /// Ends a SimulateSteps goal: the result goes out when the client asks for it (ros2-client's
 /// `send_result_response` waits for that request), so it runs beside the node's loop.
@@ -920,7 +928,9 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
                     tick_all(endpoints, runtimes, shared, &mut clock);
                     j.done += 1;
                     sim_counters.steps += 1;
-                    if let StepReply::Action(goal) = j.reply {
+                    let due = j.done == j.steps || j.last_feedback.is_none_or(|t| t.elapsed() >= FEEDBACK_PERIOD);
+                    if let (StepReply::Action(goal), true) = (j.reply, due) {
+                        j.last_feedback = Some(std::time::Instant::now());
                         let feedback = SimulateStepsFeedback { completed_steps: j.done, remaining_steps: j.steps - j.done };
                         if let Err(e) = action.publish_feedback(goal, feedback).await {
                             log("WARN", format!("{}: cannot publish feedback: {e:?}", ACTION.0));
@@ -959,7 +969,7 @@ fn start_job(runtimes: &mut [LineRuntime], reply: StepReply, steps: u64) -> Step
     for r in runtimes.iter_mut() {
         r.host.set_mode(TickMode::Realtime);
     }
-    StepJob { reply, done: 0, steps }
+    StepJob { reply, done: 0, steps, last_feedback: None }
 }
 
 /// Back to lock-step (PAUSED) after a step job.

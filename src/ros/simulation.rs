@@ -12,7 +12,8 @@
 //! - **STOPPED**: paused and reset to the start (time and state, as SCOPE_ALL): no tick happens,
 //!   commands are rejected (`stopped` on /diagnostics) and StepSimulation answers INCORRECT_STATE.
 //!   PLAYING or PAUSED starts it again.
-//! - The **SimulateSteps** action steps as StepSimulation does, with feedback after each step; a
+//! - The **SimulateSteps** action steps as StepSimulation does, with feedback (the first step, at most one per
+//!   10 ms, the last step: `node.rs` FEEDBACK_PERIOD); a
 //!   cancel ends it after the step in progress. A goal the rules refuse is accepted and ends at
 //!   once, aborted, with the refusal's code and reason in its result (a rejected goal could not
 //!   say why).

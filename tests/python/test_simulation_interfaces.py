@@ -278,7 +278,7 @@ def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
     done = sim.ros.wait_future(goal.get_result_async(), 10.0, "the result of 20 steps", sim.context, abort=sim.gone)
     assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.result.result == OK, done
     assert_trajectory(sim.states_after(0, 20), [START_SPEED_INDEX] * 20, "SimulateSteps 20")
-    # One feedback per step is sent; rclpy keeps the last 10 of a burst and drops a goal's feedback
+    # Feedback is throttled (at most one per 10 ms); rclpy keeps the last 10 of a burst and drops a goal's feedback
     # once its result is in, so only what arrived is checked here: each one consistent, in order
     # (the long goal below waits for its feedback).
     got = [(f.feedback.completed_steps, f.feedback.remaining_steps) for f in feedback]
