@@ -31,7 +31,7 @@ from types import SimpleNamespace
 import pytest
 
 import ros_harness as h
-from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess
+from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, wait_for_command_writers
 from ros_harness import NS_PER_S
 
 from sorting_line_gym.bag import open_bag, rewrite_bag
@@ -181,10 +181,7 @@ def test_record_a_live_line_and_replay_it(ros, start_node, client_factory, names
     c.wait_connected()
     out = tmp_path / "live"
     recorder = BagProcess(["record", "--namespace", ns, "-o", out], tmp_path / "record.log")
-    recorder.wait_for_output("recording", 20.0, ros)
-    for rel in ("cmd/speed", "cmd/sort_mode"):
-        ros.spin_until(lambda: f"matched {ns}/{rel}: 1 publisher(s)" in recorder.log(), 20.0,
-                       f"the recorder to match our {rel}", recorder.describe)
+    wait_for_command_writers(ros, recorder, ns, "advanced", recorder.describe, writers=1)
     c.reset(7)
     for action in (5, 27, 14):
         c.act(action)

@@ -304,7 +304,7 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
 
 
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
-    from bag_golden import BagProcess
+    from bag_golden import BagProcess, wait_for_command_writers
 
     from sorting_line_gym.bag import open_bag
     from sorting_line_gym.bag.replay import replay
@@ -313,10 +313,7 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     c.wait_connected()
     out = tmp_path / "evolving"
     recorder = BagProcess(["record", "--namespace", ns, "-o", out], tmp_path / "record.log")
-    recorder.wait_for_output("recording", 20.0, ros)
-    for rel in ("cmd/speed", "cmd/sort_mode"):
-        ros.spin_until(lambda: f"matched {ns}/{rel}: 1 publisher(s)" in recorder.log(), 20.0,
-                       f"the recorder to match our {rel}", recorder.describe)
+    wait_for_command_writers(ros, recorder, ns, "advanced", recorder.describe, writers=1)
 
     def step(action: int):
         speed, mode = h.decode_action("advanced", action)
