@@ -216,11 +216,6 @@ if __name__ == "__main__":
 '''
 
 
-@pytest.mark.skipif(
-    os.environ.get("SORTING_LINE_SUBPROC16") != "1",
-    reason="known defect (issue 13): 16 rclpy workers starting at once lose a node endpoint's discovery in about "
-    "1 of 2 fresh runs (BridgeTimeout at the first reset); run by launch_scripts/reliability.sh until fixed",
-)
 def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
     """SB3's SubprocVecEnv with 16 worker processes, each an rclpy participant leasing a line:
     env k == `trace --seed S+k` for 20 steps. (fork: the workers share the parent's imports, which
