@@ -9,13 +9,14 @@
 #      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
 #   4. bridge/ (Python package sorting_line_gym) installed editable into .venv/
 #   5. `cargo build --release` (cargo's own checks make it a no-op when nothing changed)
-#   6. only with --rllib: Ray RLlib (launch_scripts/requirements-rllib.txt; reliability.sh asks for it)
+#   6. only with --rllib: Ray RLlib (launch_scripts/requirements-rllib.txt; test.sh and reliability.sh ask for it)
 # Steps 2-4 and 6 already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
 #
 # Usage: launch_scripts/setup.sh [--force] [--no-cargo] [--rllib]
 #   --force      redo steps 2, 3 and 4 even if their stamps match
 #   --no-cargo   skip step 5 (same as SORTING_LINE_SKIP_CARGO=1)
-#   --rllib      also install Ray RLlib (~6 min and 655 MB: CI runs no RLlib test, so test.sh does not ask)
+#   --rllib      also install Ray RLlib (655 MB; ~1 min from a warm pip cache, ~6 min cold on a loaded machine;
+#                test.sh asks for it in the background, next to the Rust tests; run.sh does not need it)
 # Environment (all optional):
 #   SORTING_LINE_PYTHON      interpreter for a new venv (default: python3.11; must be CPython 3.11 with
 #                            its headers, e.g. Debian packages python3.11-venv python3.11-dev)
@@ -124,7 +125,7 @@ install_rllib() {
     say "rllib: up to date (requirements-rllib.txt unchanged)"
     return
   fi
-  say "rllib: installing requirements-rllib.txt (Ray, ~6 min cold)"
+  say "rllib: installing requirements-rllib.txt (Ray; ~1 min from a warm pip cache, minutes cold)"
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" -r "$REQ_RLLIB" ||
     die "pip install -r $REQ_RLLIB failed"
   write_stamp rllib "$key"

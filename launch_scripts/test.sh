@@ -26,10 +26,30 @@ if [[ $RUST_ONLY == 0 ]]; then
   ROS2CLI_PID=$!
 fi
 
+# Ray RLlib for tests/python/test_rllib.py (issue 15): ~1 min warm, more cold, mostly download, so
+# also in the background next to the Rust tests; the Python tests start once it is in (pip must not
+# write into the venv while they import from it).
+RLLIB_LOG="$(mktemp /tmp/sorting_line_rllib.XXXXXX.log)"
+RLLIB_PID=""
+if [[ $RUST_ONLY == 0 ]]; then
+  bash launch_scripts/setup.sh --rllib --no-cargo >"$RLLIB_LOG" 2>&1 &
+  RLLIB_PID=$!
+fi
+
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 
 [[ $RUST_ONLY == 1 ]] && exit 0
+
+step "Ray RLlib for the RLlib tests"
+if ! wait "$RLLIB_PID"; then
+  cat "$RLLIB_LOG" >&2
+  echo "test.sh: installing Ray RLlib (setup.sh --rllib, launch_scripts/requirements-rllib.txt) failed" >&2
+  exit 1
+fi
+cat "$RLLIB_LOG"
+rm -f "$RLLIB_LOG"
+export SORTING_LINE_RLLIB=1
 
 step "ros2 CLI for the CLI tests"
 if ! wait "$ROS2CLI_PID"; then
