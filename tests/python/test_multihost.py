@@ -9,7 +9,8 @@ the bridge); h3 under LOCALHOST with ROS_STATIC_PEERS naming the trainer, which 
 ROS_STATIC_PEERS.
 
 - line i of the env equals `sorting_line trace` for its seed, across same-step autoresets (the
-  resets of the three nodes in flight together);
+  resets of the three nodes in flight together); so does line i of the SB3 face
+  (``SortingLineSB3VecEnv``) over the same three nodes, across one autoreset;
 - h2's cable pulled out of the switch mid-episode: the next step raises within step_timeout, naming
   /h2/plant and the env's lines on it, not the others; an env over h1 and h3 works meanwhile; once
   the cable is back, a new env over all three works;
@@ -82,6 +83,28 @@ def run(env, seed, actions):
     return lines
 
 
+def run_sb3(namespaces, seed, actions):
+    """The same through the SB3 face (seeded at construction, autoreset by SB3's convention):
+    each line's record in run()'s format, final_obs from terminal_observation."""
+    from sorting_line_gym import SortingLineSB3VecEnv
+
+    vec = SortingLineSB3VecEnv(num_envs=len(namespaces) * cfg["lines"], setup=cfg["setup"], variant=cfg["variant"],
+                               namespace=namespaces, node="attach", max_episode_steps=cfg["episode"],
+                               step_timeout=cfg["step_timeout"], startup_timeout=40.0, seed=seed)
+    obs = vec.reset()
+    lines = [{"obs": obs[k].tolist(), "steps": []} for k in range(vec.num_envs)]
+    for row in actions:
+        obs, rewards, dones, infos = vec.step(np.array(row))
+        for k, line in enumerate(lines):
+            record = {"obs": obs[k].tolist(), "reward": float(rewards[k]), "truncated": bool(dones[k]),
+                      "info": {key: np.asarray(infos[k][key]).tolist() for key in KEYS}}
+            if dones[k]:
+                record["final_obs"] = np.asarray(infos[k]["terminal_observation"]).tolist()
+            line["steps"].append(record)
+    vec.close()
+    return lines
+
+
 def failing_step(env, row):
     t0 = time.monotonic()
     try:
@@ -97,6 +120,7 @@ if cfg["scenario"] == "trajectories":
     env = make(ns)
     say(phase="trajectories", lines=run(env, cfg["seed"], acts))
     env.close()
+    say(phase="sb3", lines=run_sb3(ns, cfg["seed"] + 50, acts[:cfg["episode"] + 3]))
 else:
     env = make(ns)
     run(env, cfg["seed"], acts[:3])
@@ -183,8 +207,10 @@ def with_resets(line: dict, actions: list[int]) -> list:
     return out
 
 
-def assert_line_matches_trace(line: dict, seed: int, actions: list[int], where: str) -> None:
-    """A recorded line against the library's trajectory for its seed and actions, resets included."""
+def assert_line_matches_trace(line: dict, seed: int, actions: list[int], where: str, float32_rewards=False) -> None:
+    """A recorded line against the library's trajectory for its seed and actions, resets included.
+    ``float32_rewards``: the rewards were handed over as float32 (SB3's VecEnv), so they must equal
+    the library's rounded to float32."""
     want = iter(trace(SETUP, VARIANT, seed, with_resets(line, actions)))
     assert_obs(np.array(line["obs"], dtype=np.float32), VARIANT, next(want)["reset"]["observation"], f"{where} reset")
     for t, step in enumerate(line["steps"]):
@@ -197,12 +223,17 @@ def assert_line_matches_trace(line: dict, seed: int, actions: list[int], where: 
             assert_obs(np.array(step["obs"], dtype=np.float32), VARIANT, fresh["reset"]["observation"],
                        f"{where} autoreset after step {t + 1}")
         info = dict(step["info"], containers=tuple(step["info"]["containers"]))
-        assert_step(VARIANT, np.array(obs, dtype=np.float32), step["reward"], info, entry, f"{where} step {t + 1}")
+        reward = step["reward"]
+        if float32_rewards and "step" in entry:
+            library = entry["step"]["reward"]
+            assert np.float32(reward) == np.float32(library), f"{where} step {t + 1}: reward {reward!r} != library {library!r}"
+            reward = library  # compared above, at the precision it was handed over in
+        assert_step(VARIANT, np.array(obs, dtype=np.float32), reward, info, entry, f"{where} step {t + 1}")
 
 
-def check_lines(lines: list[dict], seed: int, actions: list[list[int]], where: str) -> None:
+def check_lines(lines: list[dict], seed: int, actions: list[list[int]], where: str, float32_rewards=False) -> None:
     for k, line in enumerate(lines):
-        assert_line_matches_trace(line, seed + k, [row[k] for row in actions], f"{where}, line {k}")
+        assert_line_matches_trace(line, seed + k, [row[k] for row in actions], f"{where}, line {k}", float32_rewards)
 
 
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
@@ -233,6 +264,8 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
         t = trainer("trajectories", 500)
         report = t.expect("trajectories")
         check_lines(report["lines"], 500, actions, "3 hosts")
+        # The SB3 face over the same three nodes, through one autoreset of every line.
+        check_lines(t.expect("sb3")["lines"], 550, actions[:EPISODE + 3], "SB3 face, 3 hosts", float32_rewards=True)
         assert t.proc.wait(timeout=30) == 0, t.tail()
 
         # 2. Faults: h2's link down, then back; h3's node killed, then replaced.
