@@ -67,7 +67,8 @@ class LineBank:
         self._watch = dict(watch or {})
         self.links: list[LineLink] = []
         self.batch: BatchLink | None = None
-        self._connected = False
+        #: Whether the first reset's handshake is done (the bank joined the graph and found the node).
+        self.connected = False
 
     def open(self) -> None:
         """Starts the node process (``node="spawn"``), rclpy and this bank's endpoints: what the
@@ -155,7 +156,7 @@ class LineBank:
             self.startup_timeout,
             lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics; {self._unmatched()})",
         )
-        self._connected = True
+        self.connected = True
 
     def _unmatched(self) -> str:
         """What discovery still lacks, e.g. "not yet discovered: /ns/line_3 reset service" (when a
@@ -175,8 +176,8 @@ class LineBank:
         Joining the DDS graph (rclpy's participant, the node's, discovery of the node's endpoints)
         happens one bank at a time per host and domain (:func:`joining_graph`): participants that
         join together lose endpoint announcements for good (README, "Many envs per host")."""
-        if self._connected:
-            self._check_usable()
+        if self.connected:
+            self.check_usable()
             return self._reset_once(seeds)
         with joining_graph(self.startup_timeout):
             # Once it is this bank's turn, startup_timeout bounds the rest of the start: rclpy,
@@ -219,7 +220,7 @@ class LineBank:
 
     def step(self, actions: Sequence[tuple[int, int]]) -> list[LineState]:
         """Sends (speed index, mode) to every line and waits for each line's next state."""
-        self._check_usable()
+        self.check_usable()
         if len(actions) != len(self.links):
             raise ValueError(f"{len(actions)} actions for {len(self.links)} lines")
         for link in self.links:
@@ -253,7 +254,7 @@ class LineBank:
     def step_batch(self, speed_indices, modes):
         """Steps every line through ``batch/cmd`` and returns the ``batch/state`` message (arrays,
         entry k = line k)."""
-        self._check_usable()
+        self.check_usable()
         if self.batch is None:
             raise BridgeError("a single-line bank steps with step()")
         self.batch.check_started()
@@ -261,7 +262,9 @@ class LineBank:
         self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
         return self.batch.position
 
-    def _check_usable(self) -> None:
+    def check_usable(self) -> None:
+        """Raises unless this bank was opened (by a reset) in this very process: a bank
+        used before its first reset, or inherited by a forked child, cannot step."""
         if self._opened_in is None:
             raise BridgeError(f"{self.namespace}: step() before reset()")
         if self._opened_in != os.getpid():

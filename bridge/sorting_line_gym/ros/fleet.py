@@ -88,7 +88,7 @@ class NodeFleet:
         results = {}
         fresh, joined = {}, {}
         for b, local in self._by_bank(seeds).items():
-            (joined if self.banks[b]._connected else fresh)[b] = local
+            (joined if self.banks[b].connected else fresh)[b] = local
         for b, local in fresh.items():
             try:
                 answers = self.banks[b].reset(local)
@@ -101,7 +101,7 @@ class NodeFleet:
 
     def _reset_together(self, per_bank: dict[int, dict[int, int | None]]):
         for b, local in per_bank.items():
-            self.banks[b]._check_usable()
+            self.banks[b].check_usable()
             self.banks[b].batch.send_reset(local)
         pending = set(per_bank)
         deadline = time.monotonic() + self.step_timeout
@@ -131,7 +131,7 @@ class NodeFleet:
         speed_indices = np.asarray(speed_indices)
         modes = np.asarray(modes)
         for b, bank in enumerate(self.banks):
-            bank._check_usable()
+            bank.check_usable()
             bank.batch.check_started()
         for b, bank in enumerate(self.banks):
             bank.batch.send(speed_indices[b * n:(b + 1) * n], modes[b * n:(b + 1) * n])
