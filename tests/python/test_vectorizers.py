@@ -6,6 +6,7 @@
 - many envs per host through line servers (``node="shared"``): SyncVectorEnv of 64 envs in one
   process, SB3's SubprocVecEnv of 16 worker processes, two vector envs in two processes at once;
 - every env's episode equals `sorting_line trace` for its seed, number for number;
+- a process whose env is connected still dies of SIGTERM (Process.terminate()), with its node;
 - action_masks() on every env, and sb3-contrib's MaskablePPO training on them;
 - RL Baselines3 Zoo: rl_zoo3.train with our conf file, then rl_zoo3.enjoy on the model.
 
@@ -169,6 +170,45 @@ def test_forked_child_with_an_inherited_live_context_gets_a_clear_error(tmp_path
 
 # --------------------------------------------------------------------------------------------
 # many envs per host: line servers
+
+
+LIVE_ENV_WAITING = r'''
+import sys
+import gymnasium as gym
+import sorting_line_gym  # noqa: F401
+env = gym.make(sys.argv[1], setup="B", node=sys.argv[2])
+env.reset(seed=1)
+print("ready", flush=True)
+sys.stdin.read()  # as a vectorizer's worker waits for its next command
+'''
+
+
+@pytest.mark.parametrize("node", ["spawn", "shared"])
+def test_a_process_with_a_live_env_dies_of_sigterm(tmp_path, node):
+    """Process.terminate() (multiprocessing's exit handler, SB3's and Gymnasium's vectorizers
+    after a worker failed) must end a worker whose env is connected: the env does not install
+    rclpy's signal handlers, under which SIGTERM only shut rclpy down and the worker lived on,
+    blocked, with its parent waiting for it forever."""
+    import signal
+
+    script = tmp_path / "live_env.py"
+    script.write_text(LIVE_ENV_WAITING)
+    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([sys.executable, str(script), BASIC, node], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = p.stdout.readline().strip()
+        assert line == "ready", f"the env did not start: {line!r}\n{p.stderr.read() if p.poll() is not None else ''}"
+        p.send_signal(signal.SIGTERM)
+        try:
+            code = p.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail("a process with a connected env survived SIGTERM for 30 s")
+        assert code == -signal.SIGTERM, f"exit code {code}, expected death by SIGTERM"
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
 
 
 def test_sync_vector_env_of_64_shared_envs_matches_the_library():

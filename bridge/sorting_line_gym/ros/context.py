@@ -2,7 +2,13 @@
 
 rclpy over Fast DDS is not fork-safe (shared/platform/ros2-without-a-ros-install.md): the fork
 hooks here remember whether rclpy was live when a process forked, so that a child's first use
-fails at once with an error naming the cause and the fix instead of blocking forever."""
+fails at once with an error naming the cause and the fix instead of blocking forever.
+
+An env is a guest in its user's process, so rclpy is initialised without its signal handlers:
+with them, SIGTERM only shut rclpy down and the process lived on, so ``Process.terminate()``
+(multiprocessing's exit handler, SB3's and Gymnasium's vectorizers after a worker failed, a killed
+benchmark's pool) left workers blocked and their parents waiting on them forever. SIGINT keeps
+Python's own handler (KeyboardInterrupt), which the waits notice within one wait slice."""
 
 from __future__ import annotations
 
@@ -10,6 +16,7 @@ import os
 import threading
 
 import rclpy
+from rclpy.signals import SignalHandlerOptions
 
 from ..line.errors import BridgeError
 
@@ -75,7 +82,7 @@ def acquire_rclpy() -> None:
     check_not_forked()
     with _rclpy_lock:
         if _rclpy_users == 0 and not rclpy.ok():
-            rclpy.init()
+            rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
             _rclpy_ours = True
         _rclpy_users += 1
 
