@@ -38,24 +38,47 @@ def joining_graph(timeout: float):
     participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast
     DDS and RustDDS lose some endpoint announcements between them for good (a node's reset
     service never becomes ready for its client, even after 60 s); one participant pair joining at
-    a time discovers completely, whatever the number of participants. Waiting for the lock counts
-    against ``timeout``; a holder that dies frees it at once (flock)."""
+    a time discovers completely, whatever the number of participants.
+
+    A waiter gives up only when the queue stops moving: when one holder has kept the lock for
+    ``timeout`` (a holder's own start is bounded by its startup_timeout, so that means it hangs).
+    The whole queue may take longer: 16 workers joining one after the other at 1-2 s each on a
+    busy machine must not time out for waiting their turn. Each holder writes its pid and the
+    time of its turn into the lock file, which is how waiters see the lock change hands; a holder
+    that dies frees the lock at once (flock)."""
     digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
     path = host_state_directory() / f"join-{digest}.lock"
-    deadline = time.monotonic() + timeout
     with open(path, "a+") as f:
+        holder, since = None, time.monotonic()
         while True:
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 break
             except BlockingIOError:
-                if time.monotonic() > deadline:
+                now = time.monotonic()
+                current = _holder(path)
+                if current != holder:
+                    holder, since = current, now  # the lock changed hands: the queue moves
+                elif now - since > timeout:
+                    pid = (holder or "?").split(" ")[0] or "?"
                     raise BridgeTimeout(
                         f"timed out after {timeout:g} s waiting for other environments of this host to join "
-                        f"the DDS graph (lock {path})"
+                        f"the DDS graph: pid {pid} has held the lock (file {path}) for {now - since:.0f} s"
                     ) from None
                 time.sleep(0.01)
         try:
+            f.seek(0)
+            f.truncate()
+            f.write(f"{os.getpid()} {time.time_ns()}")
+            f.flush()
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _holder(path: Path) -> str | None:
+    """Who holds (or last held) the join lock: "pid time" as the holder wrote it."""
+    try:
+        return path.read_text()
+    except OSError:
+        return None
