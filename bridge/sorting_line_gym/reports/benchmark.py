@@ -492,7 +492,7 @@ def _interrupt(signum, frame):
 
 def _die_with_the_benchmark() -> None:
     """Worker initializer: the kernel kills this worker when the benchmark process dies, however
-    it dies (a worker in an rclpy wait ignores SIGTERM, and a killed benchmark runs no handler)."""
+    it dies (a benchmark killed with SIGKILL runs no handler, and nothing else would tell them)."""
     import ctypes
 
     PR_SET_PDEATHSIG = 1
@@ -501,8 +501,8 @@ def _die_with_the_benchmark() -> None:
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
     """Kills the pool's workers at once (their nodes get SIGTERM through their parent-death
-    signal): a worker would otherwise finish its cell, a training of several minutes, and rclpy's
-    own SIGTERM handler keeps it from dying of the signal."""
+    signal): a worker would otherwise finish its cell, a training of several minutes, before the
+    pool's shutdown reached it."""
     for child in multiprocessing.active_children():
         child.kill()
     pool.shutdown(wait=False, cancel_futures=True)
