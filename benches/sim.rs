@@ -219,8 +219,8 @@ fn print_summary(entries: &[Entry], dir: &Path, since: SystemTime) {
     if rows.is_empty() {
         return;
     }
-    let header = ["benchmark", "measured (median)", "target", "vs target", "met", "reference", "vs reference"]
-        .map(String::from);
+    let header =
+        ["benchmark", "measured (median)", "target", "vs target", "met", "reference", "vs reference"].map(String::from);
     let widths: Vec<usize> =
         (0..header.len()).map(|i| rows.iter().chain([&header]).map(|r| r[i].len()).max().unwrap()).collect();
     let line = |r: &[String; 7]| {

@@ -36,6 +36,13 @@ if [[ $RUST_ONLY == 0 ]]; then
   RLLIB_PID=$!
 fi
 
+step "Rust formatting (rustfmt.toml)"
+if cargo fmt --version >/dev/null 2>&1; then
+  cargo fmt --check || { echo "test.sh: run \`cargo fmt\` (the diff above is what it would change)" >&2; exit 1; }
+else
+  echo "test.sh: rustfmt is not installed (rustup component add rustfmt): formatting not checked"
+fi
+
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 

@@ -241,7 +241,11 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
         "agent {} | setup {:?} {} | {} episodes from seed {}",
         s.agent, setup, s.config.variant, s.episodes, s.seed
     )?;
-    writeln!(out, "reward        {:.2} +- {:.2} (std; standard error {:.2})", s.reward_mean, s.reward_std, s.reward_se)?;
+    writeln!(
+        out,
+        "reward        {:.2} +- {:.2} (std; standard error {:.2})",
+        s.reward_mean, s.reward_std, s.reward_se
+    )?;
     writeln!(out, "mean speed    {:.1} %", s.speed_mean * 100.0)?;
     writeln!(out, "mean accuracy {:.3}", s.accuracy_mean)?;
     writeln!(out, "purity        {:.1} %", s.purity_mean * 100.0)?;
@@ -353,7 +357,11 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
     emit(reset_record(&line))?;
     for token in &args.actions {
         if let Some(seed) = token.strip_prefix('r') {
-            let seed = if seed.is_empty() { None } else { Some(seed.parse::<u64>().map_err(|_| format!("bad reset '{token}'"))?) };
+            let seed = if seed.is_empty() {
+                None
+            } else {
+                Some(seed.parse::<u64>().map_err(|_| format!("bad reset '{token}'"))?)
+            };
             line.reset(seed);
             emit(reset_record(&line))?;
             continue;
@@ -391,7 +399,8 @@ fn run_vocabulary() -> Result<(), String> {
         .iter()
         .map(|&s| {
             let c = LineConfig::for_setup(s, Variant::Basic);
-            let value = serde_json::json!({"input": c.input, "obs_noise": c.obs_noise, "action_penalty": c.action_penalty});
+            let value =
+                serde_json::json!({"input": c.input, "obs_noise": c.obs_noise, "action_penalty": c.action_penalty});
             (s.to_string(), value)
         })
         .collect();

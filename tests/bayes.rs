@@ -6,10 +6,10 @@
 //!   on the real line match the model's expectations within 4 standard errors;
 //! - the clairvoyant oracle is above it on every seed.
 
-use sorting_line::sim::evolution::Schedule;
 use sorting_line::eval::{add_oracle, evaluate};
 use sorting_line::sim::agent::{Agent, AgentSpec};
 use sorting_line::sim::bayes::{expected_reward_of, BayesPolicy};
+use sorting_line::sim::evolution::Schedule;
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
 /// The model's expected episode reward of an agent that decides from (reading, speed) alone.

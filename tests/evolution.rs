@@ -14,9 +14,7 @@ use std::process::Command;
 use proptest::prelude::*;
 use proptest::sample::select;
 use serde_json::{json, Map, Value};
-use sorting_line::sim::evolution::{
-    category_code, At, Event, FaultKind, InputFault, Schedule, CATEGORY_UNKNOWN_CODE,
-};
+use sorting_line::sim::evolution::{category_code, At, Event, FaultKind, InputFault, Schedule, CATEGORY_UNKNOWN_CODE};
 use sorting_line::sim::{Action, Category, InputKind, Line, LineConfig, Setup, SortMode, Variant};
 
 /// Steps of a scripted run: three episodes (reset without a seed after 50 steps, with seed 77
@@ -189,8 +187,18 @@ fn threshold_and_penalty_change_the_reward_only() {
 #[test]
 fn input_generator_changes_the_material_from_its_tick() {
     let all: &[&str] = &[
-        SETTINGS, "obs_quantity", "obs_category", "containers", "input", "belt", "machine", "reward", "accuracy",
-        "occupancy", "cumulative_reward", "category_reading",
+        SETTINGS,
+        "obs_quantity",
+        "obs_category",
+        "containers",
+        "input",
+        "belt",
+        "machine",
+        "reward",
+        "accuracy",
+        "occupancy",
+        "cumulative_reward",
+        "category_reading",
     ];
     for (at, kind) in [(At::Tick(20), InputKind::Seasonal3), (At::Episode(1), InputKind::Seasonal)] {
         check_event(
@@ -234,13 +242,21 @@ fn sensor_upgrade_changes_the_category_reading_only() {
             "ratio_sensor on",
             LineConfig::for_setup(Setup::C, Variant::Basic),
             event(at, |e| e.ratio_sensor = Some(true)),
-            Expect { may_change: &[SETTINGS, "category_reading"], at_once: &[SETTINGS, "category_reading"], somewhere: &[] },
+            Expect {
+                may_change: &[SETTINGS, "category_reading"],
+                at_once: &[SETTINGS, "category_reading"],
+                somewhere: &[],
+            },
         );
         check_event(
             "ratio_sensor off",
             LineConfig::for_setup(Setup::C, Variant::Advanced),
             event(at, |e| e.ratio_sensor = Some(false)),
-            Expect { may_change: &[SETTINGS, "category_reading"], at_once: &[SETTINGS, "category_reading"], somewhere: &[] },
+            Expect {
+                may_change: &[SETTINGS, "category_reading"],
+                at_once: &[SETTINGS, "category_reading"],
+                somewhere: &[],
+            },
         );
     }
 }
@@ -310,7 +326,8 @@ fn a_fault_at_episode_zero_sticks_at_zero_and_a_new_fault_replaces_the_old() {
 #[test]
 fn without_the_machine_upgrade_only_mode_0_is_valid_and_other_modes_run_as_0() {
     let upgrade = event(At::Tick(3), |e| e.sort_modes = Some(true));
-    let mut line = Line::with_evolution(LineConfig::for_setup(Setup::B, Variant::Basic), 5, Schedule::new(vec![upgrade]));
+    let mut line =
+        Line::with_evolution(LineConfig::for_setup(Setup::B, Variant::Basic), 5, Schedule::new(vec![upgrade]));
     for _ in 0..3 {
         assert!(line.mode_allowed(SortMode::Basic) && !line.mode_allowed(SortMode::Negative));
         let mask = line.action_mask();
@@ -327,7 +344,8 @@ fn without_the_machine_upgrade_only_mode_0_is_valid_and_other_modes_run_as_0() {
 #[test]
 fn before_the_sensor_upgrade_the_category_is_unknown() {
     let upgrade = event(At::Episode(1), |e| e.ratio_sensor = Some(true));
-    let mut line = Line::with_evolution(LineConfig::for_setup(Setup::A, Variant::Basic), 5, Schedule::new(vec![upgrade]));
+    let mut line =
+        Line::with_evolution(LineConfig::for_setup(Setup::A, Variant::Basic), 5, Schedule::new(vec![upgrade]));
     assert_eq!((line.category_reading(), category_code(line.category_reading())), (None, CATEGORY_UNKNOWN_CODE));
     line.step(Action::new(4, SortMode::Basic));
     assert_eq!(line.category_reading(), None);
@@ -343,10 +361,12 @@ fn before_the_sensor_upgrade_the_category_is_unknown() {
 /// and an upgrade at episode 0 is an advanced line from the start.
 #[test]
 fn an_upgraded_line_is_an_advanced_line() {
-    let upgrade = |at| Schedule::new(vec![event(at, |e| {
-        e.sort_modes = Some(true);
-        e.ratio_sensor = Some(true);
-    })]);
+    let upgrade = |at| {
+        Schedule::new(vec![event(at, |e| {
+            e.sort_modes = Some(true);
+            e.ratio_sensor = Some(true);
+        })])
+    };
     let basic = LineConfig::for_setup(Setup::D, Variant::Basic);
     let advanced = LineConfig::for_setup(Setup::D, Variant::Advanced);
     let mut from_start = Line::with_evolution(basic.clone(), 9, upgrade(At::Episode(0)));
@@ -367,7 +387,8 @@ fn an_upgraded_line_is_an_advanced_line() {
     // So is a changed input at construction: a new line of that input.
     let seasonal = Schedule::new(vec![event(At::Episode(0), |e| e.input = Some(InputKind::Seasonal))]);
     let mut switched = Line::with_evolution(LineConfig::for_setup(Setup::A, Variant::Basic), 4, seasonal);
-    let mut fresh = Line::new(LineConfig { input: InputKind::Seasonal, ..LineConfig::for_setup(Setup::A, Variant::Basic) }, 4);
+    let mut fresh =
+        Line::new(LineConfig { input: InputKind::Seasonal, ..LineConfig::for_setup(Setup::A, Variant::Basic) }, 4);
     for k in 0..60 {
         assert_eq!(switched.step(script_action(k)), fresh.step(script_action(k)));
     }
@@ -411,12 +432,15 @@ fn same_schedule_seed_and_actions_same_trajectory() {
 #[test]
 fn no_event_moves_the_input_stream_but_an_input_event() {
     let config = LineConfig::for_setup(Setup::C, Variant::Basic);
-    let materials = |records: &[Map<String, Value>]| -> Vec<Value> { records.iter().map(|r| r["input"].clone()).collect() };
+    let materials =
+        |records: &[Map<String, Value>]| -> Vec<Value> { records.iter().map(|r| r["input"].clone()).collect() };
     let base = materials(&run(&config, 8, Schedule::default()));
     let mut schedule = rich_schedule();
     schedule.events.retain(|e| e.input.is_none());
     schedule.events.push(event(At::Tick(3), |e| e.obs_noise = Some(1.0)));
-    schedule.events.push(event(At::Tick(30), |e| e.input_fault = Some(InputFault { kind: FaultKind::Dropped, ticks: 9 })));
+    schedule
+        .events
+        .push(event(At::Tick(30), |e| e.input_fault = Some(InputFault { kind: FaultKind::Dropped, ticks: 9 })));
     schedule.events.push(event(At::Tick(40), |e| e.sort_modes = Some(true)));
     assert_eq!(materials(&run(&config, 8, schedule)), base);
 }
@@ -433,7 +457,8 @@ fn write_temp(text: &str) -> tempfile::NamedTempFile {
 
 #[test]
 fn cli_refuses_a_bad_schedule_at_start_naming_the_event() {
-    let bad = write_temp("events:\n  - at: {episode: 2}\n    sort_modes: true\n  - at: {tick: 500}\n    threshold: 1.2\n");
+    let bad =
+        write_temp("events:\n  - at: {episode: 2}\n    sort_modes: true\n  - at: {tick: 500}\n    threshold: 1.2\n");
     let path = bad.path().display().to_string();
     for args in [
         vec!["trace", "--setup", "B", "--actions", "1,2", "--evolution", path.as_str()],
@@ -481,7 +506,13 @@ fn trace_says_which_events_applied_where_and_agrees_with_the_library() {
         })
         .collect();
     // Ticks 7, 60, 110; resets at tick 50 (episode 1) and 100 (episode 2).
-    let expected = [("step", 7, vec![0]), ("reset", 50, vec![1]), ("step", 60, vec![2, 3]), ("reset", 100, vec![4]), ("step", 110, vec![5])];
+    let expected = [
+        ("step", 7, vec![0]),
+        ("reset", 50, vec![1]),
+        ("step", 60, vec![2, 3]),
+        ("reset", 100, vec![4]),
+        ("step", 110, vec![5]),
+    ];
     assert_eq!(applied, expected.map(|(k, t, i)| (k.to_string(), t, i)));
     // The step records agree with the library, event for event.
     let mut line = Line::with_evolution(LineConfig::for_setup(Setup::B, Variant::Basic), 11, rich_schedule());
@@ -511,13 +542,25 @@ fn eval_reports_the_events_of_each_episode() {
     let file = write_temp("events:\n  - at: {episode: 3}\n    sort_modes: true\n    ratio_sensor: true\n");
     let path = file.path().display().to_string();
     let out = bin()
-        .args(["eval", "--agent", "constant:5:cat", "--setup", "B", "--variant", "advanced", "--episodes", "4", "--json"])
+        .args([
+            "eval",
+            "--agent",
+            "constant:5:cat",
+            "--setup",
+            "B",
+            "--variant",
+            "advanced",
+            "--episodes",
+            "4",
+            "--json",
+        ])
         .args(["--evolution", &path])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
-    let events: Vec<Value> = summary["per_episode"].as_array().unwrap().iter().map(|e| e["evolution_events"].clone()).collect();
+    let events: Vec<Value> =
+        summary["per_episode"].as_array().unwrap().iter().map(|e| e["evolution_events"].clone()).collect();
     assert_eq!(events, [Value::Null, Value::Null, json!([0]), Value::Null]);
     assert_eq!(summary["evolution"]["events"][0]["at"], json!({"episode": 3}));
 }
@@ -528,7 +571,8 @@ fn evolutions_dir() -> PathBuf {
 
 #[test]
 fn the_ready_schedules_parse_and_run() {
-    let read = |name: &str| Schedule::from_yaml(&std::fs::read_to_string(evolutions_dir().join(name)).unwrap()).unwrap();
+    let read =
+        |name: &str| Schedule::from_yaml(&std::fs::read_to_string(evolutions_dir().join(name)).unwrap()).unwrap();
     let mut files: Vec<String> = std::fs::read_dir(evolutions_dir())
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -551,7 +595,10 @@ fn the_ready_schedules_parse_and_run() {
     }
     let advanced_b = line.settings();
     assert!(advanced_b.sort_modes && advanced_b.ratio_sensor);
-    assert_eq!((advanced_b.input, advanced_b.obs_noise, advanced_b.action_penalty, advanced_b.threshold), (InputKind::Seasonal, 0.0, 0.5, 0.7));
+    assert_eq!(
+        (advanced_b.input, advanced_b.obs_noise, advanced_b.action_penalty, advanced_b.threshold),
+        (InputKind::Seasonal, 0.0, 0.5, 0.7)
+    );
 
     // The drift: noise 0 -> 0.3, threshold 0.7 -> 0.8, in steps.
     let drift = read("drift.yaml");
@@ -577,7 +624,9 @@ fn at() -> impl Strategy<Value = At> {
     prop_oneof![(0u32..5).prop_map(At::Episode), (0u64..200).prop_map(At::Tick)]
 }
 
-fn maybe<T: std::fmt::Debug + Clone + 'static>(s: impl Strategy<Value = T> + 'static) -> impl Strategy<Value = Option<T>> {
+fn maybe<T: std::fmt::Debug + Clone + 'static>(
+    s: impl Strategy<Value = T> + 'static,
+) -> impl Strategy<Value = Option<T>> {
     prop_oneof![3 => Just(None), 1 => s.prop_map(Some)]
 }
 
@@ -587,7 +636,8 @@ fn wide() -> impl Strategy<Value = f64> {
 }
 
 fn any_event() -> impl Strategy<Value = Event> {
-    let fault = (select(vec![FaultKind::Stuck, FaultKind::Dropped]), 0u32..30).prop_map(|(kind, ticks)| InputFault { kind, ticks });
+    let fault = (select(vec![FaultKind::Stuck, FaultKind::Dropped]), 0u32..30)
+        .prop_map(|(kind, ticks)| InputFault { kind, ticks });
     (
         at(),
         maybe(wide()),
@@ -598,15 +648,8 @@ fn any_event() -> impl Strategy<Value = Event> {
         maybe(any::<bool>()),
         maybe(fault),
     )
-        .prop_map(|(at, obs_noise, action_penalty, threshold, input, sort_modes, ratio_sensor, input_fault)| Event {
-            at,
-            obs_noise,
-            action_penalty,
-            threshold,
-            input,
-            sort_modes,
-            ratio_sensor,
-            input_fault,
+        .prop_map(|(at, obs_noise, action_penalty, threshold, input, sort_modes, ratio_sensor, input_fault)| {
+            Event { at, obs_noise, action_penalty, threshold, input, sort_modes, ratio_sensor, input_fault }
         })
 }
 

@@ -34,7 +34,8 @@ use sorting_line::ros::names::Names;
 use sorting_line::ros::options::{NodeArgs, TickMode};
 use sorting_line::ros::params::{load_params_file, NodeParams, PARAMETERS};
 use sorting_line::ros::protocol::{
-    batch_commands, batch_resets, Accepted, BatchModes, BatchReset, Client, Command, HostedLine, Rejection, TimerTick, REJECTIONS,
+    batch_commands, batch_resets, Accepted, BatchModes, BatchReset, Client, Command, HostedLine, Rejection, TimerTick,
+    REJECTIONS,
 };
 use sorting_line::ros::ros_args::RosArgs;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
@@ -114,7 +115,11 @@ fn stamp_kind() -> impl Strategy<Value = StampKind> {
 fn junk() -> impl Strategy<Value = Junk> {
     let stranger = prop::bool::weighted(0.3);
     prop_oneof![
-        (stranger.clone(), stamp_kind(), speed_value()).prop_map(|(stranger, stamp, speed)| Junk::Speed { stranger, stamp, speed }),
+        (stranger.clone(), stamp_kind(), speed_value()).prop_map(|(stranger, stamp, speed)| Junk::Speed {
+            stranger,
+            stamp,
+            speed
+        }),
         (stranger, stamp_kind(), prop_oneof![3 => 0u8..3, 1 => any::<u8>()])
             .prop_map(|(stranger, stamp, mode)| Junk::Mode { stranger, stamp, mode }),
     ]
@@ -152,8 +157,16 @@ fn stamp_of(kind: StampKind, line: &HostedLine) -> Time {
 
 /// The oracle: what the protocol must answer to a command, from the documented rules alone.
 /// `None` = it must be accepted (such junk is not sent: it would be a good command).
-fn expected(line: &HostedLine, advanced: bool, lockstep: bool, from: Client, stamp: Time, is_speed: bool, valid: bool,
-            pending: bool) -> Option<&'static [Rejection]> {
+fn expected(
+    line: &HostedLine,
+    advanced: bool,
+    lockstep: bool,
+    from: Client,
+    stamp: Time,
+    is_speed: bool,
+    valid: bool,
+    pending: bool,
+) -> Option<&'static [Rejection]> {
     if line.owner().is_some_and(|o| o != from) {
         return Some(&[Rejection::NotOwner]);
     }
@@ -194,8 +207,14 @@ struct Tally {
 }
 
 /// Sends one junk command to `noisy` (unless the oracle says it would be accepted) and checks the answer.
-fn send_junk(noisy: &mut HostedLine, counters: &mut LineCounters, tally: &mut Tally, j: Junk, lockstep: bool,
-             pending: (bool, bool)) -> Result<(), TestCaseError> {
+fn send_junk(
+    noisy: &mut HostedLine,
+    counters: &mut LineCounters,
+    tally: &mut Tally,
+    j: Junk,
+    lockstep: bool,
+    pending: (bool, bool),
+) -> Result<(), TestCaseError> {
     let advanced = noisy.line().config().variant == Variant::Advanced;
     let (from, stamp, is_speed, valid, value) = match j {
         Junk::Speed { stranger, stamp, speed } => {
@@ -211,14 +230,22 @@ fn send_junk(noisy: &mut HostedLine, counters: &mut LineCounters, tally: &mut Ta
         return Ok(());
     };
     let before = (noisy.tick(), noisy.line().last_step().copied(), noisy.owner());
-    let got = if is_speed { noisy.speed_from(from, stamp, value) } else { noisy.sort_mode_from(from, stamp, value as u8) };
+    let got =
+        if is_speed { noisy.speed_from(from, stamp, value) } else { noisy.sort_mode_from(from, stamp, value as u8) };
     tally.commands += 1;
     let reason = match got {
         Err(reason) => reason,
         Ok(ok) => return Err(TestCaseError::fail(format!("{j:?} (stamp {stamp:?}) was accepted: {ok:?}"))),
     };
-    prop_assert!(allowed.contains(&reason), "{j:?} (stamp {stamp:?}): rejected as {reason:?}, expected one of {allowed:?}");
-    prop_assert_eq!(before, (noisy.tick(), noisy.line().last_step().copied(), noisy.owner()), "a rejected command changed the line");
+    prop_assert!(
+        allowed.contains(&reason),
+        "{j:?} (stamp {stamp:?}): rejected as {reason:?}, expected one of {allowed:?}"
+    );
+    prop_assert_eq!(
+        before,
+        (noisy.tick(), noisy.line().last_step().copied(), noisy.owner()),
+        "a rejected command changed the line"
+    );
     *tally.rejected.entry(reason).or_default() += 1;
     counters.reject(reason, if is_speed { "cmd/speed" } else { "cmd/sort_mode" }, "fuzz");
     Ok(())
@@ -251,7 +278,8 @@ fn clean_replay(line: &mut HostedLine, config: &LineConfig, seed: u64, lockstep:
     let advanced = config.variant == Variant::Advanced;
     for k in 0..config.max_steps.min(30) as usize {
         let (speed_index, mode) = (k * 7 % 10, (k % 3) as u8);
-        let action = sorting_line::sim::Action::new(speed_index, SortMode::from_index(if advanced { mode } else { 0 }).unwrap());
+        let action =
+            sorting_line::sim::Action::new(speed_index, SortMode::from_index(if advanced { mode } else { 0 }).unwrap());
         let want = reference.step(action);
         let r = Round { speed_index, mode, junk: Default::default() };
         let got = if lockstep {
@@ -273,7 +301,8 @@ fn clean_replay(line: &mut HostedLine, config: &LineConfig, seed: u64, lockstep:
 
 fn fuzz_commands(lockstep: bool) -> (u32, u64, u64, BTreeMap<Rejection, u64>) {
     let mode = if lockstep { TickMode::Lockstep } else { TickMode::Realtime };
-    let strategy = (select(SETUPS.to_vec()), select(VARIANTS.to_vec()), 1u32..=25, any::<u64>(), any::<u64>(), rounds());
+    let strategy =
+        (select(SETUPS.to_vec()), select(VARIANTS.to_vec()), 1u32..=25, any::<u64>(), any::<u64>(), rounds());
     let mut totals = (0u32, 0u64, 0u64, BTreeMap::new());
     let totals_cell = std::cell::RefCell::new(&mut totals);
     runner()
@@ -354,10 +383,9 @@ fn report_commands(name: &str, (cases, commands, skipped, by_reason): (u32, u64,
         // Malformed comes from decoding, Stopped from the simulation state (STOPPED) and SortModesOff
         // from an evolving line without modes, not from a command's content: the protocol's unit
         // tests, test_simulation_interfaces.py and test_evolving.py cover them.
-        let reachable = !matches!(reason, Rejection::Malformed | Rejection::SortModesOff | Rejection::Stopped) && (name == "lockstep" || !matches!(
-            reason,
-            Rejection::Stale | Rejection::Duplicate | Rejection::EpisodeOver
-        ));
+        let reachable = !matches!(reason, Rejection::Malformed | Rejection::SortModesOff | Rejection::Stopped)
+            && (name == "lockstep"
+                || !matches!(reason, Rejection::Stale | Rejection::Duplicate | Rejection::EpisodeOver));
         if reachable && cases >= 64 {
             assert!(by_reason.contains_key(&reason), "the fuzz never produced a {} rejection", reason.key());
         }
@@ -408,7 +436,8 @@ fn entry() -> impl Strategy<Value = Entry> {
 
 fn batches() -> impl Strategy<Value = Vec<Batch>> {
     let misshapen = prop_oneof![4 => Just(None), 1 => (0usize..4, any::<bool>()).prop_map(Some)];
-    let batch = (prop::collection::vec(entry(), 4), misshapen).prop_map(|(entries, misshapen)| Batch { entries, misshapen });
+    let batch =
+        (prop::collection::vec(entry(), 4), misshapen).prop_map(|(entries, misshapen)| Batch { entries, misshapen });
     prop::collection::vec(batch, 1..40)
 }
 
@@ -450,10 +479,13 @@ fn fuzz_batch_commands() {
             let advanced = variant == Variant::Advanced;
             let clock = SimClock::new(PERIOD);
             let new_lines = || -> Vec<HostedLine> {
-                (0..lines).map(|k| HostedLine::new(config.clone(), seed + k as u64, clock, TickMode::Lockstep)).collect()
+                (0..lines)
+                    .map(|k| HostedLine::new(config.clone(), seed + k as u64, clock, TickMode::Lockstep))
+                    .collect()
             };
             let (mut clean, mut noisy) = (new_lines(), new_lines());
-            let mut counters: Vec<LineCounters> = (0..lines).map(|k| LineCounters::new(format!("/fuzz/line_{k}"))).collect();
+            let mut counters: Vec<LineCounters> =
+                (0..lines).map(|k| LineCounters::new(format!("/fuzz/line_{k}"))).collect();
             let mut tallies: Vec<Tally> =
                 (0..lines).map(|_| Tally { commands: 0, rejected: BTreeMap::new(), skipped: 0 }).collect();
             // Per line: whether a speed and a mode already wait for the current tick.
@@ -493,7 +525,11 @@ fn fuzz_batch_commands() {
                                 }
                             }
                             (Some(allowed), Err(reason)) => {
-                                prop_assert!(allowed.contains(&reason), "line {k}, {command} at {:?}: {reason:?}, expected one of {allowed:?}", entry.stamp);
+                                prop_assert!(
+                                    allowed.contains(&reason),
+                                    "line {k}, {command} at {:?}: {reason:?}, expected one of {allowed:?}",
+                                    entry.stamp
+                                );
                                 *tallies[k].rejected.entry(reason).or_default() += 1;
                                 counters[k].reject(reason, "batch/cmd", "fuzz");
                             }
@@ -525,10 +561,20 @@ fn fuzz_batch_commands() {
         .unwrap();
     let (cases, commands, by_reason) = totals.into_inner();
     let reasons: Vec<String> = by_reason.iter().map(|(r, n)| format!("{} {n}", r.key())).collect();
-    eprintln!("fuzz batch commands: {cases} cases, {commands} entries' commands judged as expected ({})", reasons.join(", "));
+    eprintln!(
+        "fuzz batch commands: {cases} cases, {commands} entries' commands judged as expected ({})",
+        reasons.join(", ")
+    );
     if cases >= 64 {
-        for reason in [Rejection::Malformed, Rejection::InvalidSpeed, Rejection::UnknownMode, Rejection::Stale,
-                       Rejection::UnknownTick, Rejection::NotOwner, Rejection::Duplicate] {
+        for reason in [
+            Rejection::Malformed,
+            Rejection::InvalidSpeed,
+            Rejection::UnknownMode,
+            Rejection::Stale,
+            Rejection::UnknownTick,
+            Rejection::NotOwner,
+            Rejection::Duplicate,
+        ] {
             assert!(by_reason.contains_key(&reason), "the batch fuzz never produced a {} rejection", reason.key());
         }
     }
@@ -537,7 +583,8 @@ fn fuzz_batch_commands() {
 #[test]
 fn fuzz_batch_resets() {
     let list = |max: u32| prop::collection::vec(prop_oneof![4 => 0..max, 1 => any::<u32>()], 0..6);
-    let strategy = (1usize..=5, list(6), prop::collection::vec(any::<bool>(), 0..6), prop::collection::vec(any::<u64>(), 0..6));
+    let strategy =
+        (1usize..=5, list(6), prop::collection::vec(any::<bool>(), 0..6), prop::collection::vec(any::<u64>(), 0..6));
     let refused = std::cell::Cell::new(0u32);
     runner()
         .run(&strategy, |(lines, mut ids, mut has_seed, mut seeds)| {
@@ -564,7 +611,8 @@ fn fuzz_batch_resets() {
                 }
                 Err(e) => {
                     prop_assert!(!valid, "{request:?} on {lines} lines was refused: {e}");
-                    let named = if same_length { e.contains("out of range or repeated") } else { e.contains("same length") };
+                    let named =
+                        if same_length { e.contains("out of range or repeated") } else { e.contains("same length") };
                     prop_assert!(named, "{e}");
                     refused.set(refused.get() + 1);
                 }
@@ -586,9 +634,35 @@ fn yaml_scalar() -> impl Strategy<Value = String> {
         (-2.0..2.0f64).prop_map(|v| format!("{v}")),
         (0u32..100).prop_map(|v| v.to_string()),
         select(vec![
-            "true", "false", "null", "~", ".nan", ".inf", "-.inf", "basic", "advanced", "random", "seasonal",
-            "seasonal3", "lockstep", "realtime", "''", "\"x\"", "[1, 2]", "{a: 1}", "[", "{", "'unclosed", "0x1F",
-            "1e400", "-1", "18446744073709551616", "&anchor 1", "*alias", "!!binary aGk=", "- 1",
+            "true",
+            "false",
+            "null",
+            "~",
+            ".nan",
+            ".inf",
+            "-.inf",
+            "basic",
+            "advanced",
+            "random",
+            "seasonal",
+            "seasonal3",
+            "lockstep",
+            "realtime",
+            "''",
+            "\"x\"",
+            "[1, 2]",
+            "{a: 1}",
+            "[",
+            "{",
+            "'unclosed",
+            "0x1F",
+            "1e400",
+            "-1",
+            "18446744073709551616",
+            "&anchor 1",
+            "*alias",
+            "!!binary aGk=",
+            "- 1",
         ])
         .prop_map(String::from),
     ]
@@ -643,12 +717,15 @@ fn fuzz_parameter_files() {
                 Err(e) => {
                     prop_assert!(e.contains(&shown), "the error does not name the file: {e}\n--- file ---\n{text}");
                     // It names the offending key, or says what is wrong with the file as a whole.
-                    let keys = load_params_file(&path, &names).map(|kv| kv.into_iter().map(|(k, _)| k).collect::<Vec<_>>());
+                    let keys =
+                        load_params_file(&path, &names).map(|kv| kv.into_iter().map(|(k, _)| k).collect::<Vec<_>>());
                     let names_problem = match &keys {
                         Ok(keys) => keys.iter().any(|k| e.contains(k.as_str())),
-                        Err(_) => ["not valid YAML", "must be a mapping", "ros__parameters", "is not a string", "cannot read"]
-                            .iter()
-                            .any(|w| e.contains(w)),
+                        Err(_) => {
+                            ["not valid YAML", "must be a mapping", "ros__parameters", "is not a string", "cannot read"]
+                                .iter()
+                                .any(|w| e.contains(w))
+                        }
                     };
                     prop_assert!(names_problem, "the error does not name the problem: {e}\n--- file ---\n{text}");
                     counts.borrow_mut().1 += 1;
@@ -658,7 +735,10 @@ fn fuzz_parameter_files() {
         })
         .unwrap();
     let (ok, refused) = counts.into_inner();
-    eprintln!("fuzz parameter files: {} cases: {ok} accepted (valid), {refused} refused naming the problem", ok + refused);
+    eprintln!(
+        "fuzz parameter files: {} cases: {ok} accepted (valid), {refused} refused naming the problem",
+        ok + refused
+    );
 }
 
 // ------------------------------------------------------------------------------------------
@@ -709,7 +789,10 @@ fn fuzz_ros_args() {
                 }
                 Err(e) => {
                     prop_assert!(e.starts_with("--ros-args:"), "{e}");
-                    prop_assert!(names_an_argument(&e, &tokens), "the error names none of the arguments {tokens:?}: {e}");
+                    prop_assert!(
+                        names_an_argument(&e, &tokens),
+                        "the error names none of the arguments {tokens:?}: {e}"
+                    );
                     counts.borrow_mut().1 += 1;
                 }
             }

@@ -8,18 +8,16 @@
 use std::process::Command;
 
 use serde_json::Value;
-use sorting_line::sim::evolution::Schedule;
 use sorting_line::eval::{add_oracle, evaluate};
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
+use sorting_line::sim::evolution::Schedule;
 use sorting_line::sim::oracle::{replay, solve};
 use sorting_line::sim::{Action, Line, LineConfig, Setup, Variant};
 
 /// Every action of a line: 10 speeds, times the 3 modes of the advanced line.
 fn all_actions(variant: Variant) -> Vec<Action> {
-    (0..if variant == Variant::Basic { 10 } else { 30 })
-        .map(|a| Action::from_discrete(variant, a).unwrap())
-        .collect()
+    (0..if variant == Variant::Basic { 10 } else { 30 }).map(|a| Action::from_discrete(variant, a).unwrap()).collect()
 }
 
 /// The best episode reward over every action sequence from this point on.
@@ -41,9 +39,11 @@ fn brute_force(line: &Line, actions: &[Action]) -> f64 {
 fn brute_force_over_every_action_sequence_agrees_on_short_episodes() {
     // Basic: 10^5 sequences of 5 steps; advanced: 30^3 of 3 steps and, for one seed, 30^4 of 4.
     for setup in SETUPS {
-        for (variant, steps, seeds) in
-            [(Variant::Basic, 5, &[42u64, 7, 1234][..]), (Variant::Advanced, 3, &[42, 7, 1234]), (Variant::Advanced, 4, &[43])]
-        {
+        for (variant, steps, seeds) in [
+            (Variant::Basic, 5, &[42u64, 7, 1234][..]),
+            (Variant::Advanced, 3, &[42, 7, 1234]),
+            (Variant::Advanced, 4, &[43]),
+        ] {
             let config = LineConfig { max_steps: steps, ..LineConfig::for_setup(setup, variant) };
             for &seed in seeds {
                 let exhaustive = brute_force(&Line::new(config.clone(), seed), &all_actions(variant));
@@ -66,7 +66,11 @@ fn no_single_changed_action_beats_the_optimum_of_a_full_episode() {
                     let mut actions = best.actions.clone();
                     actions[t] = alternative;
                     let reward = replay(&config, 42, &actions);
-                    assert!(reward <= best.reward, "{setup:?} {variant}: step {t} -> {alternative:?} gives {reward} > {}", best.reward);
+                    assert!(
+                        reward <= best.reward,
+                        "{setup:?} {variant}: step {t} -> {alternative:?} gives {reward} > {}",
+                        best.reward
+                    );
                 }
             }
         }
@@ -95,7 +99,12 @@ fn oracle_is_at_least_every_builtin_agent_on_every_seed() {
                 add_oracle(&mut summary).unwrap();
                 for e in &summary.per_episode {
                     let (oracle, gap) = (e.oracle.unwrap(), e.gap.unwrap());
-                    assert!(oracle >= e.reward, "{setup:?} {variant} {spec} seed {}: {} > oracle {oracle}", e.seed, e.reward);
+                    assert!(
+                        oracle >= e.reward,
+                        "{setup:?} {variant} {spec} seed {}: {} > oracle {oracle}",
+                        e.seed,
+                        e.reward
+                    );
                     assert_eq!(gap, oracle - e.reward);
                 }
                 if !matches!(spec, AgentSpec::Rba | AgentSpec::RbaHold) {
@@ -105,7 +114,11 @@ fn oracle_is_at_least_every_builtin_agent_on_every_seed() {
                     // The oracle is tight: on A basic the accuracy noise is subtracted alike at every
                     // speed and the best speed clears the threshold whatever the draw, so knowing the
                     // draws is worth nothing and the expected-reward agent is exactly optimal.
-                    assert!(summary.per_episode.iter().all(|e| e.gap == Some(0.0)), "{spec}: {:?}", summary.per_episode);
+                    assert!(
+                        summary.per_episode.iter().all(|e| e.gap == Some(0.0)),
+                        "{spec}: {:?}",
+                        summary.per_episode
+                    );
                 } else if setup != Setup::A {
                     // Noisy readings (C, D) or unknown pattern changes (B, D) leave a real gap.
                     assert!(summary.gap_mean.unwrap() > 1.0, "{setup:?} {variant} {spec}: gap {:?}", summary.gap_mean);
@@ -128,7 +141,11 @@ fn replayed_optimal_actions_give_the_oracles_reward_bit_for_bit() {
                     sum += line.step(action).reward;
                 }
                 assert!(line.truncated());
-                assert_eq!((sum, line.cumulative_reward()), (best.reward, best.reward), "{setup:?} {variant} seed {seed}");
+                assert_eq!(
+                    (sum, line.cumulative_reward()),
+                    (best.reward, best.reward),
+                    "{setup:?} {variant} seed {seed}"
+                );
             }
         }
     }
@@ -142,11 +159,13 @@ fn sorting_line(args: &[&str]) -> (bool, String, String) {
 #[test]
 fn cli_oracle_actions_replay_through_trace_and_eval_reports_the_gap() {
     for (setup, variant) in [("B", "advanced"), ("D", "basic")] {
-        let (ok, stdout, stderr) = sorting_line(&["oracle", "--setup", setup, "--variant", variant, "--episodes", "3", "--json"]);
+        let (ok, stdout, stderr) =
+            sorting_line(&["oracle", "--setup", setup, "--variant", variant, "--episodes", "3", "--json"]);
         assert!(ok, "{stderr}");
         let oracle: Value = serde_json::from_str(&stdout).unwrap();
         assert_eq!((oracle["episodes"].as_u64(), oracle["seed"].as_u64()), (Some(3), Some(42)));
-        let rewards: Vec<f64> = oracle["per_episode"].as_array().unwrap().iter().map(|e| e["reward"].as_f64().unwrap()).collect();
+        let rewards: Vec<f64> =
+            oracle["per_episode"].as_array().unwrap().iter().map(|e| e["reward"].as_f64().unwrap()).collect();
         let mean = rewards.iter().sum::<f64>() / 3.0;
         assert_eq!(oracle["reward_mean"].as_f64().unwrap(), mean);
         assert!(oracle["reward_std"].as_f64().unwrap() > 0.0);
@@ -163,7 +182,19 @@ fn cli_oracle_actions_replay_through_trace_and_eval_reports_the_gap() {
             assert_eq!(last["cumulative_reward"].as_f64().unwrap(), rewards[i], "{setup} {variant} seed {seed}");
             assert_eq!(last["step"]["truncated"], Value::Bool(true));
         }
-        let (ok, stdout, stderr) = sorting_line(&["eval", "--agent", "rba-hold", "--setup", setup, "--variant", variant, "--episodes", "3", "--json", "--gap"]);
+        let (ok, stdout, stderr) = sorting_line(&[
+            "eval",
+            "--agent",
+            "rba-hold",
+            "--setup",
+            setup,
+            "--variant",
+            variant,
+            "--episodes",
+            "3",
+            "--json",
+            "--gap",
+        ]);
         assert!(ok, "{stderr}");
         let eval: Value = serde_json::from_str(&stdout).unwrap();
         assert_eq!(eval["oracle_mean"].as_f64().unwrap(), mean);
@@ -171,7 +202,18 @@ fn cli_oracle_actions_replay_through_trace_and_eval_reports_the_gap() {
         assert!((gap - (mean - eval["reward_mean"].as_f64().unwrap())).abs() < 1e-9, "{gap}");
         assert!(eval["per_episode"][0]["gap"].as_f64().unwrap() >= 0.0);
         // Without --gap the JSON keeps exactly the fields the ROS-side evaluation reports.
-        let (ok, stdout, _) = sorting_line(&["eval", "--agent", "rba", "--setup", setup, "--variant", variant, "--episodes", "1", "--json"]);
+        let (ok, stdout, _) = sorting_line(&[
+            "eval",
+            "--agent",
+            "rba",
+            "--setup",
+            setup,
+            "--variant",
+            variant,
+            "--episodes",
+            "1",
+            "--json",
+        ]);
         assert!(ok && !stdout.contains("oracle") && !stdout.contains("gap"), "{stdout}");
     }
 }
@@ -180,9 +222,22 @@ fn cli_oracle_actions_replay_through_trace_and_eval_reports_the_gap() {
 fn cli_oracle_refuses_what_it_cannot_solve_naming_the_range() {
     let (ok, _, stderr) = sorting_line(&["oracle", "--setup", "A", "--variant", "advanced", "--max-steps", "5000"]);
     assert!(!ok);
-    assert!(stderr.contains("max_steps = 5000 is out of range for the advanced oracle: allowed 1 ..= 2000"), "{stderr}");
-    let (ok, _, stderr) =
-        sorting_line(&["eval", "--agent", "rba", "--setup", "A", "--variant", "advanced", "--max-steps", "5000", "--gap"]);
+    assert!(
+        stderr.contains("max_steps = 5000 is out of range for the advanced oracle: allowed 1 ..= 2000"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = sorting_line(&[
+        "eval",
+        "--agent",
+        "rba",
+        "--setup",
+        "A",
+        "--variant",
+        "advanced",
+        "--max-steps",
+        "5000",
+        "--gap",
+    ]);
     assert!(!ok && stderr.contains("--gap: max_steps = 5000 is out of range"), "{stderr}");
     let (ok, _, stderr) = sorting_line(&["oracle", "--setup", "A", "--episodes", "0"]);
     assert!(!ok && stderr.contains("episodes = 0 is out of range"), "{stderr}");

@@ -206,7 +206,10 @@ fn check_reset(config: &LineConfig, line: &Line, episode_before: u32) -> Result<
     prop_assert_eq!(line.episode(), episode_before + 1);
     prop_assert_eq!(line.step_count(), 0);
     prop_assert!(!line.truncated());
-    prop_assert_eq!((line.input(), line.belt(), line.machine()), (Batch::new(30, 50), Batch::new(40, 20), Batch::new(75, 25)));
+    prop_assert_eq!(
+        (line.input(), line.belt(), line.machine()),
+        (Batch::new(30, 50), Batch::new(40, 20), Batch::new(75, 25))
+    );
     prop_assert_eq!(line.containers(), Containers::default());
     prop_assert_eq!((line.speed_index(), line.mode()), (START_SPEED, SortMode::Basic));
     prop_assert_eq!((line.sorter_accuracy(), line.belt_accuracy()), (0.75, 0.75));

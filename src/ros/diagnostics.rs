@@ -49,7 +49,11 @@ impl<K: Ord + Copy> LogThrottle<K> {
             entry => {
                 let suppressed = entry.map(|(_, s)| *s).unwrap_or(0);
                 self.state.insert(kind, (now, 0));
-                Some(if suppressed > 0 { format!(" ({suppressed} more like it since the last report)") } else { String::new() })
+                Some(if suppressed > 0 {
+                    format!(" ({suppressed} more like it since the last report)")
+                } else {
+                    String::new()
+                })
             }
         }
     }
@@ -114,7 +118,10 @@ impl LineCounters {
             kv("messages_unread_skipped", self.unread.to_string()),
         ];
         for reason in REJECTIONS {
-            values.push(kv(&format!("rejected_{}", reason.key()), self.rejected.get(&reason).copied().unwrap_or(0).to_string()));
+            values.push(kv(
+                &format!("rejected_{}", reason.key()),
+                self.rejected.get(&reason).copied().unwrap_or(0).to_string(),
+            ));
         }
         values.extend(extra);
         let (level, message) = if recent_rejections > 0 {
@@ -185,7 +192,10 @@ impl SimulationCounters {
             kv("requests_refused", self.total_refused().to_string()),
         ];
         for c in code::REFUSALS {
-            values.push(kv(&format!("refused_{}", code::name(c)), self.refused.get(&c).copied().unwrap_or(0).to_string()));
+            values.push(kv(
+                &format!("refused_{}", code::name(c)),
+                self.refused.get(&c).copied().unwrap_or(0).to_string(),
+            ));
         }
         let recent = self.total_refused() - self.refused_at_last_report;
         self.refused_at_last_report = self.total_refused();
@@ -194,7 +204,13 @@ impl SimulationCounters {
         } else {
             (DIAGNOSTIC_OK, state.name().to_string())
         };
-        DiagnosticStatus { level, name: "sorting_line: simulation".to_string(), message, hardware_id: self.node.clone(), values }
+        DiagnosticStatus {
+            level,
+            name: "sorting_line: simulation".to_string(),
+            message,
+            hardware_id: self.node.clone(),
+            values,
+        }
     }
 }
 
@@ -225,11 +241,17 @@ mod tests {
         let mut c = SimulationCounters::new("/plant/sorting_line".into());
         let refusal = Refusal { code: code::INCORRECT_STATE, message: "the simulation is PLAYING".into() };
         let line = c.refuse("step_simulation", "steps 50", &refusal).unwrap();
-        assert_eq!(line, "/plant/sorting_line/step_simulation: refused steps 50: the simulation is PLAYING [incorrect_state]");
+        assert_eq!(
+            line,
+            "/plant/sorting_line/step_simulation: refused steps 50: the simulation is PLAYING [incorrect_state]"
+        );
         assert!(c.refuse("step_simulation", "steps 50", &refusal).is_none(), "once per interval");
         let status = c.status(SimState::Playing, None);
         let get = |k: &str| status.values.iter().find(|v| v.key == k).unwrap().value.clone();
-        assert_eq!((get("refused_incorrect_state"), get("requests_refused"), get("simulation_state")), ("2".into(), "2".into(), "PLAYING".into()));
+        assert_eq!(
+            (get("refused_incorrect_state"), get("requests_refused"), get("simulation_state")),
+            ("2".into(), "2".into(), "PLAYING".into())
+        );
         assert_eq!(status.level, DIAGNOSTIC_WARN);
         assert_eq!(c.status(SimState::Playing, None).level, DIAGNOSTIC_OK);
     }

@@ -74,15 +74,21 @@ impl Discovery {
         let var = |name: &str| var(name).filter(|v| !v.is_empty());
         let domain = match var("ROS_DOMAIN_ID") {
             None => 0,
-            Some(v) => v.trim().parse::<u16>().ok().filter(|d| *d <= MAX_DOMAIN_ID).ok_or_else(|| {
-                format!("ROS_DOMAIN_ID = {v} is out of range: allowed 0 ..= {MAX_DOMAIN_ID}")
-            })?,
+            Some(v) => v
+                .trim()
+                .parse::<u16>()
+                .ok()
+                .filter(|d| *d <= MAX_DOMAIN_ID)
+                .ok_or_else(|| format!("ROS_DOMAIN_ID = {v} is out of range: allowed 0 ..= {MAX_DOMAIN_ID}"))?,
         };
         let mut range = match var("ROS_AUTOMATIC_DISCOVERY_RANGE") {
             None => Range::Subnet,
             Some(v) => Range::NAMES.iter().find(|(n, _)| *n == v).map(|(_, r)| *r).ok_or_else(|| {
                 let allowed: Vec<&str> = Range::NAMES.iter().map(|(n, _)| *n).collect();
-                format!("ROS_AUTOMATIC_DISCOVERY_RANGE = {v} is not valid: allowed {} (or unset: SUBNET)", allowed.join(", "))
+                format!(
+                    "ROS_AUTOMATIC_DISCOVERY_RANGE = {v} is not valid: allowed {} (or unset: SUBNET)",
+                    allowed.join(", ")
+                )
             })?,
         };
         let peers = var("ROS_STATIC_PEERS").unwrap_or_default();
@@ -94,7 +100,10 @@ impl Discovery {
                  and ROS_STATIC_PEERS instead."
                     .to_string(),
             );
-            warnings.push("'localhost_only' is enabled, 'automatic_discovery_range' and 'static_peers' will be ignored.".to_string());
+            warnings.push(
+                "'localhost_only' is enabled, 'automatic_discovery_range' and 'static_peers' will be ignored."
+                    .to_string(),
+            );
             range = Range::Localhost;
             peers.clear();
         }
@@ -117,7 +126,11 @@ impl Discovery {
             Range::Localhost => {
                 let builder =
                     builder.multicast(false).localhost_only(true).with_static_peers(self.static_peers.clone());
-                if self.static_peers.is_empty() { builder.with_only_networks([Ipv4Addr::LOCALHOST]) } else { builder }
+                if self.static_peers.is_empty() {
+                    builder.with_only_networks([Ipv4Addr::LOCALHOST])
+                } else {
+                    builder
+                }
             }
             Range::Off => builder
                 .multicast(false)
@@ -145,7 +158,9 @@ impl Discovery {
 
 /// The first IPv4 address of a peer (rmw_fastrtps takes the first IPv4 one too).
 fn resolve(peer: &str) -> Result<IpAddr, String> {
-    let bad = |why: String| format!("ROS_STATIC_PEERS: peer '{peer}' {why}: allowed IPv4 addresses or host names, separated by ';'");
+    let bad = |why: String| {
+        format!("ROS_STATIC_PEERS: peer '{peer}' {why}: allowed IPv4 addresses or host names, separated by ';'")
+    };
     if let Ok(ip) = peer.parse::<IpAddr>() {
         return if ip.is_ipv4() { Ok(ip) } else { Err(bad("is IPv6".into())) };
     }
@@ -184,8 +199,12 @@ mod tests {
 
     #[test]
     fn localhost_only_is_localhost_without_peers() {
-        let d = from(&[("ROS_LOCALHOST_ONLY", "1"), ("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET"), ("ROS_STATIC_PEERS", "10.0.0.2")])
-            .unwrap();
+        let d = from(&[
+            ("ROS_LOCALHOST_ONLY", "1"),
+            ("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET"),
+            ("ROS_STATIC_PEERS", "10.0.0.2"),
+        ])
+        .unwrap();
         assert_eq!((d.range, d.static_peers.len()), (Range::Localhost, 0));
         assert!(d.warnings[0].contains("ROS_LOCALHOST_ONLY is deprecated"), "{d:?}");
         assert_eq!(from(&[("ROS_LOCALHOST_ONLY", "0")]).unwrap().range, Range::Subnet);

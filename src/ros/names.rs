@@ -37,7 +37,9 @@ impl Names {
         }
         let node_name = ros.node_name.clone().unwrap_or_else(|| NODE_NAME.into());
         if !valid_token(&node_name) {
-            return Err(format!("node name '{node_name}' is not valid: allowed letters, digits and single _, not starting with a digit"));
+            return Err(format!(
+                "node name '{node_name}' is not valid: allowed letters, digits and single _, not starting with a digit"
+            ));
         }
         Ok(Names { namespace, node_name, remaps: ros.remaps.clone() })
     }

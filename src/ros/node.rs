@@ -20,7 +20,9 @@ use async_signal::{Signal, Signals};
 use futures::channel::oneshot;
 use futures::future::{FutureExt, LocalBoxFuture};
 use futures::stream::{self, FuturesUnordered, LocalBoxStream, StreamExt};
-use ros2_client::action::{ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle};
+use ros2_client::action::{
+    ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle,
+};
 use ros2_client::{
     Context, Gid, Message, MessageInfo, Name, Node, NodeName, NodeOptions, ParameterValue, Publisher, RmwRequestId,
     Server, ServiceMapping, Subscription,
@@ -35,7 +37,9 @@ use super::names::{Names, NODE_NAME};
 use super::options::{NodeArgs, TickMode};
 use super::param_descriptors::{descriptors, EVOLVING_PARAMETERS};
 use super::params::NodeParams;
-use super::protocol::{batch_commands, batch_resets, Accepted, BatchModes, Client, Command, HostedLine, Rejection, TimerTick};
+use super::protocol::{
+    batch_commands, batch_resets, Accepted, BatchModes, Client, Command, HostedLine, Rejection, TimerTick,
+};
 use super::qos::{action_status_profile, default_profile};
 use super::ros_args::RosArgs;
 use super::simulation::{self, code, reset_scope, step_request, transition, ResetScope, SimState, Transition};
@@ -65,7 +69,8 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     // Whatever the environment asks, as any rcl node would: keeping a test on this machine is
     // the test's business (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, network namespaces).
     let participant = discovery.participant()?;
-    let context = Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
+    let context =
+        Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
     let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
     let (options, parameter_values) = node_options(&params);
     let mut node = context.new_node(node_name, options).map_err(|e| format!("cannot create the node: {e:?}"))?;
@@ -206,7 +211,11 @@ where
     node.create_subscription(&topic, Some(qos)).map_err(|e| format!("cannot subscribe {absolute}: {e:?}"))
 }
 
-fn server<Req, Resp>(node: &mut Node, absolute: &str, service: ros2_client::ServiceTypeName) -> Result<Server<Req, Resp>, String>
+fn server<Req, Resp>(
+    node: &mut Node,
+    absolute: &str,
+    service: ros2_client::ServiceTypeName,
+) -> Result<Server<Req, Resp>, String>
 where
     Req: Message + Clone + for<'de> serde::Deserialize<'de> + 'static,
     Resp: Message + Serialize + 'static,
@@ -279,17 +288,24 @@ impl SimulationServers {
     }
 
     fn events(&self) -> Vec<LocalBoxStream<'_, Event>> {
-        fn tag<R>(
-            request: fn(R) -> SimRequest,
-        ) -> impl Fn(ros2_client::ReadResult<(RmwRequestId, R)>) -> Event {
+        fn tag<R>(request: fn(R) -> SimRequest) -> impl Fn(ros2_client::ReadResult<(RmwRequestId, R)>) -> Event {
             move |r| Event::Sim(r.map(|(id, req)| (id, request(req))).map_err(|e| format!("{e:?}")))
         }
         vec![
             self.features.receive_request_stream().map(tag(|_| SimRequest::Features)).boxed_local(),
             self.get_state.receive_request_stream().map(tag(|_| SimRequest::GetState)).boxed_local(),
-            self.set_state.receive_request_stream().map(tag(|r: SetSimulationStateRequest| SimRequest::SetState(r.state.state))).boxed_local(),
-            self.step.receive_request_stream().map(tag(|r: StepSimulationRequest| SimRequest::Step(r.steps))).boxed_local(),
-            self.reset.receive_request_stream().map(tag(|r: ResetSimulationRequest| SimRequest::Reset(r.scope))).boxed_local(),
+            self.set_state
+                .receive_request_stream()
+                .map(tag(|r: SetSimulationStateRequest| SimRequest::SetState(r.state.state)))
+                .boxed_local(),
+            self.step
+                .receive_request_stream()
+                .map(tag(|r: StepSimulationRequest| SimRequest::Step(r.steps)))
+                .boxed_local(),
+            self.reset
+                .receive_request_stream()
+                .map(tag(|r: ResetSimulationRequest| SimRequest::Reset(r.scope)))
+                .boxed_local(),
         ]
     }
 
@@ -304,21 +320,28 @@ impl SimulationServers {
                                   PLAYING is realtime at the rate parameter; one step is one tick of every line"
                         .to_string(),
                 };
-                self.features.async_send_response(id, GetSimulatorFeaturesResponse { features }).await.map_err(|e| format!("{e:?}"))
+                self.features
+                    .async_send_response(id, GetSimulatorFeaturesResponse { features })
+                    .await
+                    .map_err(|e| format!("{e:?}"))
             }
             SimRequest::GetState => {
                 let response = GetSimulationStateResponse { state: SimulationState { state: state.code() }, result };
                 self.get_state.async_send_response(id, response).await.map_err(|e| format!("{e:?}"))
             }
-            SimRequest::SetState(_) => {
-                self.set_state.async_send_response(id, SetSimulationStateResponse { result }).await.map_err(|e| format!("{e:?}"))
-            }
+            SimRequest::SetState(_) => self
+                .set_state
+                .async_send_response(id, SetSimulationStateResponse { result })
+                .await
+                .map_err(|e| format!("{e:?}")),
             SimRequest::Step(_) => {
                 self.step.async_send_response(id, StepSimulationResponse { result }).await.map_err(|e| format!("{e:?}"))
             }
-            SimRequest::Reset(_) => {
-                self.reset.async_send_response(id, ResetSimulationResponse { result }).await.map_err(|e| format!("{e:?}"))
-            }
+            SimRequest::Reset(_) => self
+                .reset
+                .async_send_response(id, ResetSimulationResponse { result })
+                .await
+                .map_err(|e| format!("{e:?}")),
         };
         if let Err(error) = sent {
             log("WARN", format!("{}: cannot send the response: {error}", request.service()));
@@ -638,7 +661,15 @@ impl LineEndpoints {
         }
     }
 
-    fn announce(&self, shared: &Shared, k: usize, r: &mut LineRuntime, at_reset: bool, indices: &[usize], settings: &Settings) {
+    fn announce(
+        &self,
+        shared: &Shared,
+        k: usize,
+        r: &mut LineRuntime,
+        at_reset: bool,
+        indices: &[usize],
+        settings: &Settings,
+    ) {
         let Some(publisher) = &self.evolution else { return };
         let message = EvolutionEvent::of(&r.host, at_reset, indices, settings);
         if !indices.is_empty() {
@@ -649,7 +680,13 @@ impl LineEndpoints {
                     self.namespace.trim_end_matches('/'),
                     message.episode,
                     message.tick,
-                    message.changed.iter().zip(&message.values).map(|(c, v)| format!("{c} = {v}")).collect::<Vec<_>>().join(", ")
+                    message
+                        .changed
+                        .iter()
+                        .zip(&message.values)
+                        .map(|(c, v)| format!("{c} = {v}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
             );
         }
@@ -669,9 +706,13 @@ impl LineEndpoints {
     /// The tagged input streams of this line's fixed endpoints.
     fn events(&self, k: usize) -> Vec<LocalBoxStream<'_, Event>> {
         let err = |e| format!("{e:?}");
-        let speed = |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
+        let speed =
+            |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
         vec![
-            self.speed_cmd.async_stream().map(move |r| Event::Command(k, "cmd/speed", r.map(speed).map_err(err))).boxed_local(),
+            self.speed_cmd
+                .async_stream()
+                .map(move |r| Event::Command(k, "cmd/speed", r.map(speed).map_err(err)))
+                .boxed_local(),
             self.reset.receive_request_stream().map(move |r| Event::Reset(k, r.map_err(err))).boxed_local(),
         ]
     }
@@ -679,8 +720,13 @@ impl LineEndpoints {
 
 /// Line k's `cmd/sort_mode` commands, from a stream that owns the subscription and ends (dropping
 /// it, so the subscription leaves the graph) when `stop` fires or its sender is dropped.
-fn mode_commands(k: usize, sub: Subscription<SortModeCommand>, stop: oneshot::Receiver<()>) -> LocalBoxStream<'static, Event> {
-    let mode = |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
+fn mode_commands(
+    k: usize,
+    sub: Subscription<SortModeCommand>,
+    stop: oneshot::Receiver<()>,
+) -> LocalBoxStream<'static, Event> {
+    let mode =
+        |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
     stream::unfold(sub, |sub| async move {
         let received = sub.async_take().await;
         Some((received, sub))
@@ -726,8 +772,11 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     clock.publish(shared, runtimes);
 
     let batch = shared.batch_cmd.async_stream().map(|r| Event::Batch(r.map_err(|e| format!("{e:?}")))).boxed_local();
-    let resets =
-        shared.batch_reset.receive_request_stream().map(|r| Event::BatchReset(r.map_err(|e| format!("{e:?}")))).boxed_local();
+    let resets = shared
+        .batch_reset
+        .receive_request_stream()
+        .map(|r| Event::BatchReset(r.map_err(|e| format!("{e:?}"))))
+        .boxed_local();
     let action = &shared.simulate_steps;
     let goals = stream::unfold((), move |()| async move {
         Some((Event::Goal(action.receive_new_goal().await.map_err(|e| format!("{e:?}"))), ()))
@@ -749,7 +798,8 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
     let mut signals = signals.fuse();
     let period = Duration::from_secs_f64(1.0 / shared.params.rate);
     let mut sim = SimState::initial(shared.params.mode);
-    let mut timer = StreamExt::fuse(if sim == SimState::Playing { smol::Timer::interval(period) } else { smol::Timer::never() });
+    let mut timer =
+        StreamExt::fuse(if sim == SimState::Playing { smol::Timer::interval(period) } else { smol::Timer::never() });
     let mut job: Option<StepJob> = None;
     let mut sim_counters = SimulationCounters::new(shared.fully_qualified_name.clone());
     let mut diagnostics = StreamExt::fuse(smol::Timer::interval(DIAGNOSTICS_PERIOD));
@@ -762,8 +812,11 @@ async fn serve(endpoints: &[LineEndpoints], runtimes: &mut [LineRuntime], shared
         }
         // A StepSimulation in progress runs one step per turn of the loop, so other requests,
         // commands and signals are served between its steps.
-        let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> =
-            if job.is_some() { futures::future::ready(()).boxed_local().fuse() } else { futures::future::pending().boxed_local().fuse() };
+        let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> = if job.is_some() {
+            futures::future::ready(()).boxed_local().fuse()
+        } else {
+            futures::future::pending().boxed_local().fuse()
+        };
         // Fair (random among ready inputs): a biased order would let a flood of commands starve
         // the realtime timer and /diagnostics.
         futures::select! {
@@ -1110,7 +1163,11 @@ fn show_client(client: Option<Client>) -> String {
 fn command_detail(host: &HostedLine, client: Client, what: String) -> String {
     match host.owner() {
         Some(owner) if owner != client => {
-            format!("{what} from client {} (the episode's owner is {})", show_client(Some(client)), show_client(Some(owner)))
+            format!(
+                "{what} from client {} (the episode's owner is {})",
+                show_client(Some(client)),
+                show_client(Some(owner))
+            )
         }
         _ => what,
     }
@@ -1118,7 +1175,9 @@ fn command_detail(host: &HostedLine, client: Client, what: String) -> String {
 
 fn apply(r: &mut LineRuntime, client: Client, stamp: Time, command: Command) -> Result<Accepted, Refusal> {
     let result = r.host.command_from(client, stamp, command);
-    result.map_err(|reason| (reason, command_detail(&r.host, client, format!("{command} for stamp {}", show_stamp(stamp)))))
+    result.map_err(|reason| {
+        (reason, command_detail(&r.host, client, format!("{command} for stamp {}", show_stamp(stamp))))
+    })
 }
 
 fn malformed(error: &str) -> Refusal {
@@ -1127,7 +1186,14 @@ fn malformed(error: &str) -> Refusal {
 
 /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
 /// whether the line stepped.
-fn settle(e: &LineEndpoints, k: usize, r: &mut LineRuntime, shared: &Shared, topic: &str, result: Result<Accepted, Refusal>) -> bool {
+fn settle(
+    e: &LineEndpoints,
+    k: usize,
+    r: &mut LineRuntime,
+    shared: &Shared,
+    topic: &str,
+    result: Result<Accepted, Refusal>,
+) -> bool {
     match result {
         Ok(Accepted::Stored) => {
             r.counters.accepted += 1;
@@ -1169,7 +1235,10 @@ fn publish_diagnostics(runtimes: &mut [LineRuntime], shared: &Shared, started: I
             if r.host.evolving() {
                 // The evolution state: the setup now and how far the schedule has come.
                 let s = line.settings();
-                let fault = s.input_fault.map_or_else(|| "none".to_string(), |f| format!("{:?} {} ticks left", f.kind, f.remaining).to_lowercase());
+                let fault = s.input_fault.map_or_else(
+                    || "none".to_string(),
+                    |f| format!("{:?} {} ticks left", f.kind, f.remaining).to_lowercase(),
+                );
                 extra.extend([
                     kv("evolution_file", p.evolution_file.clone()),
                     kv("evolution_events_applied", r.evolution_events.to_string()),

@@ -31,7 +31,8 @@ pub const EVOLVING_PARAMETERS: [&str; 4] = ["obs_noise", "action_penalty", "thre
 
 /// The numeric range of a parameter, if it has one.
 fn range(name: &str) -> NumericRange {
-    let float = |(from_value, to_value): (f64, f64)| NumericRange::FloatingPointRange { from_value, to_value, step: 0.0 };
+    let float =
+        |(from_value, to_value): (f64, f64)| NumericRange::FloatingPointRange { from_value, to_value, step: 0.0 };
     let int = |from_value: i64, to_value: i64| NumericRange::IntegerRange { from_value, to_value, step: 1 };
     match name {
         "obs_noise" => float(OBS_NOISE_RANGE),

@@ -89,7 +89,12 @@ fn allowed(name: &str) -> &'static str {
 
 impl NodeParams {
     /// Resolves the parameters from every source, in precedence order.
-    pub fn resolve(args: &NodeArgs, ros_params: &[(String, Value)], ros_files: &[impl AsRef<Path>], names: &Names) -> Result<Self, String> {
+    pub fn resolve(
+        args: &NodeArgs,
+        ros_params: &[(String, Value)],
+        ros_files: &[impl AsRef<Path>],
+        names: &Names,
+    ) -> Result<Self, String> {
         // (name, value, source), lowest precedence first.
         let mut given: Vec<(String, Value, String)> = Vec::new();
         for file in args.params_file.iter().map(|f| f.as_path()).chain(ros_files.iter().map(|f| f.as_ref())) {
@@ -110,13 +115,8 @@ impl NodeParams {
 
     /// Sets one parameter from a YAML value.
     pub fn set(&mut self, name: &str, value: &Value, source: &str) -> Result<(), String> {
-        let bad = || {
-            format!(
-                "parameter {name} = {} (from {source}) is not valid: allowed {}",
-                show(value),
-                allowed(name)
-            )
-        };
+        let bad =
+            || format!("parameter {name} = {} (from {source}) is not valid: allowed {}", show(value), allowed(name));
         let float = || value.as_f64().filter(|v| v.is_finite()).ok_or_else(bad);
         let text = || value.as_str().ok_or_else(bad);
         match name {
@@ -150,7 +150,8 @@ impl NodeParams {
             "tick_period" => self.tick_period = float()?,
             "evolution_file" => {
                 let file = text()?;
-                self.evolution = load_schedule(file).map_err(|e| format!("parameter {name} = {file} (from {source}): {e}"))?;
+                self.evolution =
+                    load_schedule(file).map_err(|e| format!("parameter {name} = {file} (from {source}): {e}"))?;
                 self.evolution_file = file.to_string();
             }
             "use_sim_time" => {
@@ -183,7 +184,12 @@ impl NodeParams {
         // The seed is declared as a ROS parameter, an int64: a larger one would read back negative.
         match self.seed.checked_add(u64::from(self.lines - 1)) {
             Some(last) if last <= MAX_SEED => {}
-            _ if self.lines > 1 => return out_of_range("seed", format!("{} (with {} lines, up to seed + {})", self.seed, self.lines, self.lines - 1)),
+            _ if self.lines > 1 => {
+                return out_of_range(
+                    "seed",
+                    format!("{} (with {} lines, up to seed + {})", self.seed, self.lines, self.lines - 1),
+                )
+            }
             _ => return out_of_range("seed", self.seed.to_string()),
         }
         Ok(())
@@ -291,9 +297,10 @@ pub fn load_params_file(path: &Path, names: &Names) -> Result<Vec<(String, Value
         if !ours.contains(&key) {
             continue;
         }
-        let params = section.get("ros__parameters").and_then(Value::as_mapping).ok_or_else(|| {
-            format!("params file {}: section '{key}' has no ros__parameters mapping", path.display())
-        })?;
+        let params = section
+            .get("ros__parameters")
+            .and_then(Value::as_mapping)
+            .ok_or_else(|| format!("params file {}: section '{key}' has no ros__parameters mapping", path.display()))?;
         flatten(&mut out, params)?;
     }
     Ok(out)
@@ -339,8 +346,9 @@ mod tests {
         let e = NodeParams::resolve(&NodeArgs::default(), &[], &[&f], &names("/")).unwrap_err();
         assert!(e.contains("threshold = 1.5 is out of range: allowed 0.0 ..< 1.0"), "{e}");
         assert!(e.contains("params file"), "{e}");
-        let e = NodeParams::resolve(&NodeArgs { lines: Some(0), ..NodeArgs::default() }, &[], &[] as &[&Path], &names("/"))
-            .unwrap_err();
+        let e =
+            NodeParams::resolve(&NodeArgs { lines: Some(0), ..NodeArgs::default() }, &[], &[] as &[&Path], &names("/"))
+                .unwrap_err();
         assert!(e.contains("lines = 0 is out of range: allowed 1 ..= 64"), "{e}");
         let bad_type = vec![("max_steps".to_string(), Value::from("many"))];
         let e = NodeParams::resolve(&NodeArgs::default(), &bad_type, &[] as &[&Path], &names("/")).unwrap_err();
@@ -351,7 +359,8 @@ mod tests {
         let f = write("a: [unclosed\n");
         let e = NodeParams::resolve(&NodeArgs::default(), &[], &[&f], &names("/")).unwrap_err();
         assert!(e.contains("is not valid YAML"), "{e}");
-        let e = NodeParams::resolve(&NodeArgs::default(), &[], &[Path::new("/nonexistent.yaml")], &names("/")).unwrap_err();
+        let e =
+            NodeParams::resolve(&NodeArgs::default(), &[], &[Path::new("/nonexistent.yaml")], &names("/")).unwrap_err();
         assert!(e.contains("cannot read params file /nonexistent.yaml"), "{e}");
     }
 
@@ -374,7 +383,10 @@ mod tests {
         let f = write("setup: C\n");
         let ros = vec![("setup".to_string(), Value::from("B")), ("input".to_string(), Value::from("random"))];
         let p = NodeParams::resolve(&NodeArgs::default(), &ros, &[&f], &names("/")).unwrap();
-        assert_eq!((p.setup, p.line.input, p.line.obs_noise, p.line.action_penalty), (Some(Setup::B), InputKind::Random, 0.0, 0.5));
+        assert_eq!(
+            (p.setup, p.line.input, p.line.obs_noise, p.line.action_penalty),
+            (Some(Setup::B), InputKind::Random, 0.0, 0.5)
+        );
         // None named: the defaults, declared as an empty setup.
         let p = NodeParams::resolve(&NodeArgs::default(), &[], none, &names("/")).unwrap();
         assert_eq!((p.setup, &p.line), (None, &LineConfig::default()));

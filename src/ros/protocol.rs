@@ -40,8 +40,8 @@ use std::fmt;
 use super::clock::SimClock;
 use super::messages::{LineCommands, ResetLinesRequest, Time};
 use super::options::TickMode;
-use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
 use crate::sim::evolution::{category_code, Schedule};
+use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
 use crate::sim::{Action, Line, LineConfig, Observation, SortMode, StepOutcome, Variant};
 
 /// Why a command was dropped.
@@ -529,7 +529,10 @@ pub fn batch_resets(request: &ResetLinesRequest, lines: usize) -> Result<Vec<Bat
     for (i, &k) in request.lines.iter().enumerate() {
         let line = k as usize;
         if line >= lines || seen[line] {
-            return Err(format!("line {k} is out of range or repeated: allowed each of 0 ..= {} once", lines.saturating_sub(1)));
+            return Err(format!(
+                "line {k} is out of range or repeated: allowed each of 0 ..= {} once",
+                lines.saturating_sub(1)
+            ));
         }
         seen[line] = true;
         resets.push(BatchReset { line, seed: request.has_seed[i].then_some(request.seeds[i]) });
@@ -615,7 +618,8 @@ mod tests {
         downgrade.sort_modes = Some(false);
         let schedule = Schedule::new(vec![upgrade, downgrade]);
         let config = LineConfig::for_setup(Setup::B, Variant::Basic);
-        let mut h = HostedLine::with_evolution(config.clone(), 42, schedule.clone(), SimClock::new(0.5), TickMode::Lockstep);
+        let mut h =
+            HostedLine::with_evolution(config.clone(), 42, schedule.clone(), SimClock::new(0.5), TickMode::Lockstep);
         let mut reference = Line::with_evolution(config, 42, schedule);
         assert!(h.evolving() && !h.takes_modes());
         for _ in 0..2 {
@@ -641,7 +645,10 @@ mod tests {
         let Ok(Accepted::Stepped(out)) = h.on_speed(h.stamp(), 0.5) else { panic!() };
         assert_eq!(out, reference.step(Action::new(4, SortMode::Basic)));
         // Without a schedule the basic line still refuses every mode as before.
-        assert_eq!(host(Variant::Basic, TickMode::Lockstep).on_sort_mode(SimClock::new(0.5).stamp(0), 0), Err(Rejection::ModeOnBasicLine));
+        assert_eq!(
+            host(Variant::Basic, TickMode::Lockstep).on_sort_mode(SimClock::new(0.5).stamp(0), 0),
+            Err(Rejection::ModeOnBasicLine)
+        );
     }
 
     #[test]
@@ -659,7 +666,11 @@ mod tests {
     fn one_client_drives_an_episode_and_a_reset_frees_the_line() {
         let (a, b) = ([1; 12], [2; 12]);
         let mut h = host(Variant::Basic, TickMode::Lockstep);
-        assert_eq!(h.speed_from(b, h.stamp(), f64::NAN), Err(Rejection::InvalidSpeed), "a rejected command claims nothing");
+        assert_eq!(
+            h.speed_from(b, h.stamp(), f64::NAN),
+            Err(Rejection::InvalidSpeed),
+            "a rejected command claims nothing"
+        );
         assert!(matches!(h.speed_from(a, h.stamp(), 0.3), Ok(Accepted::Stepped(_))));
         assert_eq!(h.owner(), Some(a));
         let before = h.line().last_step().copied();
@@ -780,7 +791,11 @@ mod tests {
         assert_eq!(first, again, "the seed's streams from the start");
         h.rewind_time();
         assert_eq!(h.stamp(), Time::default());
-        assert_eq!(h.on_speed(SimClock::new(0.5).stamp(1), 0.3), Err(Rejection::UnknownTick), "old stamps name no tick");
+        assert_eq!(
+            h.on_speed(SimClock::new(0.5).stamp(1), 0.3),
+            Err(Rejection::UnknownTick),
+            "old stamps name no tick"
+        );
     }
 
     #[test]

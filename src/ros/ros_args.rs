@@ -39,9 +39,8 @@ impl RosArgs {
         let mut rules: Vec<(Option<String>, String, String, bool)> = Vec::new(); // (node, from, to, is_param)
         let mut it = args.iter();
         while let Some(flag) = it.next() {
-            let mut value = |what: &str| {
-                it.next().cloned().ok_or_else(|| format!("--ros-args: {flag} needs {what} after it"))
-            };
+            let mut value =
+                |what: &str| it.next().cloned().ok_or_else(|| format!("--ros-args: {flag} needs {what} after it"));
             match flag.as_str() {
                 "-r" | "--remap" => {
                     let (node, from, to) = split_rule(&value("a rule from:=to")?, flag)?;
@@ -118,8 +117,10 @@ mod tests {
     #[test]
     fn launch_ros_style_arguments() {
         let a = RosArgs::parse(
-            &args("-r __ns:=/plant -r __node:=sorter -p seed:=7 -p threshold:=0.8 --params-file f.yaml \
-                   -r state:=status --log-level debug -r other:cmd/speed:=x -p sorter:lines:=2"),
+            &args(
+                "-r __ns:=/plant -r __node:=sorter -p seed:=7 -p threshold:=0.8 --params-file f.yaml \
+                   -r state:=status --log-level debug -r other:cmd/speed:=x -p sorter:lines:=2",
+            ),
             "sorting_line",
         )
         .unwrap();

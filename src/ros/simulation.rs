@@ -253,7 +253,10 @@ pub fn step_request(current: SimState, steps: u64, stepping: Stepping) -> Result
     if current != SimState::Paused {
         return refuse(
             code::INCORRECT_STATE,
-            format!("the simulation is {}: StepSimulation needs it PAUSED (SetSimulationState to 2 first)", current.name()),
+            format!(
+                "the simulation is {}: StepSimulation needs it PAUSED (SetSimulationState to 2 first)",
+                current.name()
+            ),
         );
     }
     Ok(steps)

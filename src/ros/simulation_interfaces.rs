@@ -179,7 +179,11 @@ mod tests {
         assert_eq!(yaml(v(SimulationState::default())), fields("msg/SimulationState.msg"));
         assert_eq!(yaml(v(SimulatorFeatures::default())), fields("msg/SimulatorFeatures.msg"));
         let cases = [
-            ("GetSimulatorFeatures", v(GetSimulatorFeaturesRequest::default()), v(GetSimulatorFeaturesResponse::default())),
+            (
+                "GetSimulatorFeatures",
+                v(GetSimulatorFeaturesRequest::default()),
+                v(GetSimulatorFeaturesResponse::default()),
+            ),
             ("GetSimulationState", v(GetSimulationStateRequest::default()), v(GetSimulationStateResponse::default())),
             ("SetSimulationState", v(SetSimulationStateRequest::default()), v(SetSimulationStateResponse::default())),
             ("StepSimulation", v(StepSimulationRequest::default()), v(StepSimulationResponse::default())),

@@ -21,7 +21,9 @@ pub fn ros_type_name(dds_type_name: &str) -> Option<String> {
         "msg" => name,
         "srv" if name.ends_with("_Request") || name.ends_with("_Response") => name,
         // An action's goal and result services and its feedback topic.
-        "action" if name.ends_with("_Request") || name.ends_with("_Response") || name.ends_with("_FeedbackMessage") => name,
+        "action" if name.ends_with("_Request") || name.ends_with("_Response") || name.ends_with("_FeedbackMessage") => {
+            name
+        }
         _ => return None,
     };
     Some(format!("{pkg}/{kind}/{name}"))
@@ -44,7 +46,9 @@ pub fn endpoint_user_data(dds_type_name: &str) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros::messages::{batch_reset_service_type, reset_service_type, Clock, DiagnosticArray, LineState, Typed};
+    use crate::ros::messages::{
+        batch_reset_service_type, reset_service_type, Clock, DiagnosticArray, LineState, Typed,
+    };
 
     #[test]
     fn dds_names_map_to_ros_types() {

@@ -93,11 +93,7 @@ pub fn accuracy_law(c: f64, effect: ModeEffect, threshold: f64) -> AccuracyLaw {
     };
     // accuracy >= threshold  <=>  N <= c - threshold (threshold > 0, so the clamp at 0 never passes).
     let cut = (c - threshold).min(high);
-    let (p_above, mean_above) = if cut < low {
-        (0.0, 0.0)
-    } else {
-        ((cut - low) / width, c - (low + cut) / 2.0)
-    };
+    let (p_above, mean_above) = if cut < low { (0.0, 0.0) } else { ((cut - low) / width, c - (low + cut) / 2.0) };
     AccuracyLaw { mean, p_above, mean_above }
 }
 
@@ -111,7 +107,7 @@ mod tests {
         let over = noiseless_accuracy(0.8, 3, ModeEffect::NoMode);
         assert!((over - 0.7).abs() < 1e-12);
         assert_eq!(noiseless_accuracy(1.0, 9, ModeEffect::NoMode), 0.0); // 1 - 2.7 clamps to 0
-        // The clamp comes before the noise: a matched mode cannot exceed 1.
+                                                                         // The clamp comes before the noise: a matched mode cannot exceed 1.
         assert_eq!(noiseless_accuracy(0.3, 5, ModeEffect::Matched), 1.0);
         assert!((noiseless_accuracy(0.52, 5, ModeEffect::Matched) - 1.0).abs() < 1e-12);
         assert!((noiseless_accuracy(0.3, 5, ModeEffect::Mismatched) - 0.9).abs() < 1e-12);

@@ -35,7 +35,8 @@ impl FromStr for AgentSpec {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        let usage = "allowed: rba, rba-hold, bayes, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
+        let usage =
+            "allowed: rba, rba-hold, bayes, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
         match s {
             "rba" => return Ok(AgentSpec::Rba),
             "rba-hold" => return Ok(AgentSpec::RbaHold),

@@ -77,7 +77,8 @@ fn run_model(classes: usize, ages: usize) -> RunModel {
     let p_length = 1.0 / (high - low) as f64;
     let p_class = 1.0 / classes as f64;
     // belief[length - low][age - 1]
-    let mut belief: Vec<Vec<f64>> = (low..high).map(|l| (0..l).map(|a| if a == 0 { p_length } else { 0.0 }).collect()).collect();
+    let mut belief: Vec<Vec<f64>> =
+        (low..high).map(|l| (0..l).map(|a| if a == 0 { p_length } else { 0.0 }).collect()).collect();
     let (mut stay, mut to_other) = (vec![0.0; ages + 1], vec![0.0; ages + 1]);
     for d in 1..=ages {
         let ends: f64 = belief.iter().map(|b| b[b.len() - 1]).sum();
@@ -129,7 +130,10 @@ fn check(config: &LineConfig) -> Result<(), String> {
         ));
     }
     if config.max_steps > MAX_STEPS {
-        return Err(format!("max_steps = {} is out of range for the Bayes-optimal policy: allowed 1 ..= {MAX_STEPS}", config.max_steps));
+        return Err(format!(
+            "max_steps = {} is out of range for the Bayes-optimal policy: allowed 1 ..= {MAX_STEPS}",
+            config.max_steps
+        ));
     }
     Ok(())
 }
@@ -160,7 +164,10 @@ fn argmax(values: &[f64; SPEED_COUNT]) -> usize {
 /// Backward induction over (step, speed, reading, run age) with `pick(t, speed, total, age,
 /// values)` choosing the speed from the action values: the argmax plans the optimal policy;
 /// a fixed choice evaluates another policy exactly under the same model.
-fn plan(config: &LineConfig, mut pick: impl FnMut(usize, usize, usize, usize, &[f64; SPEED_COUNT]) -> usize) -> BayesPolicy {
+fn plan(
+    config: &LineConfig,
+    mut pick: impl FnMut(usize, usize, usize, usize, &[f64; SPEED_COUNT]) -> usize,
+) -> BayesPolicy {
     let steps = config.max_steps as usize;
     let bands = amount_bands(config.input);
     let seasonal = config.input != InputKind::Random;
@@ -232,7 +239,10 @@ fn plan(config: &LineConfig, mut pick: impl FnMut(usize, usize, usize, usize, &[
 /// The exact expected episode reward of a policy that decides from (reading, current speed)
 /// alone, such as `rba` and `rba-hold`, under the same model: what [`BayesPolicy`] is held
 /// against.
-pub fn expected_reward_of(config: &LineConfig, mut policy: impl FnMut(Observation, usize) -> Action) -> Result<f64, String> {
+pub fn expected_reward_of(
+    config: &LineConfig,
+    mut policy: impl FnMut(Observation, usize) -> Action,
+) -> Result<f64, String> {
     check(config)?;
     Ok(plan(config, |_, speed, total, _, _| {
         let observation = Observation { quantity: total as f64 / 100.0, category: Category::Basic };

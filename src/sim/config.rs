@@ -141,7 +141,14 @@ impl LineConfig {
 
     /// The allowed range of `action_penalty` (see [`LineConfig::check_obs_noise`]).
     pub fn check_action_penalty(value: f64) -> Result<(), ConfigError> {
-        check_range("action_penalty", value, ACTION_PENALTY_RANGE.0, ACTION_PENALTY_RANGE.1, false, ACTION_PENALTY_ALLOWED)
+        check_range(
+            "action_penalty",
+            value,
+            ACTION_PENALTY_RANGE.0,
+            ACTION_PENALTY_RANGE.1,
+            false,
+            ACTION_PENALTY_ALLOWED,
+        )
     }
 
     /// The allowed range of `threshold` (see [`LineConfig::check_obs_noise`]).

@@ -221,11 +221,19 @@ impl Event {
     /// Checks every value against its range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         if !self.changes_something() {
-            return Err(ConfigError { field: "(event)", value: "nothing".into(), allowed: "at least one of the fields" });
+            return Err(ConfigError {
+                field: "(event)",
+                value: "nothing".into(),
+                allowed: "at least one of the fields",
+            });
         }
         if let At::Tick(t) = self.at {
             if t > MAX_TICK {
-                return Err(ConfigError { field: "at.tick", value: t.to_string(), allowed: "0 ..= 9223372036854775807" });
+                return Err(ConfigError {
+                    field: "at.tick",
+                    value: t.to_string(),
+                    allowed: "0 ..= 9223372036854775807",
+                });
             }
         }
         self.obs_noise.map_or(Ok(()), LineConfig::check_obs_noise)?;
@@ -292,8 +300,7 @@ impl Schedule {
 
     /// Parses and validates a schedule file's text.
     pub fn from_yaml(text: &str) -> Result<Self, String> {
-        let schedule: Schedule =
-            serde_yaml::from_str(text).map_err(|e| format!("not an evolution schedule: {e}"))?;
+        let schedule: Schedule = serde_yaml::from_str(text).map_err(|e| format!("not an evolution schedule: {e}"))?;
         schedule.validate().map_err(|e| e.to_string())?;
         Ok(schedule)
     }
@@ -438,14 +445,19 @@ events:
 
     #[test]
     fn bad_values_name_event_field_value_and_range() {
-        let e = Schedule::from_yaml("events:\n  - at: {tick: 5}\n    obs_noise: 0.1\n  - at: {tick: 500}\n    threshold: 1.2\n")
-            .unwrap_err();
+        let e = Schedule::from_yaml(
+            "events:\n  - at: {tick: 5}\n    obs_noise: 0.1\n  - at: {tick: 500}\n    threshold: 1.2\n",
+        )
+        .unwrap_err();
         assert_eq!(e, "evolution event 1 (at tick 500): threshold = 1.2 is out of range: allowed 0.0 ..< 1.0");
         let e = Schedule::from_yaml("events:\n  - at: {episode: 3}\n    input_fault: {kind: dropped, ticks: 0}\n")
             .unwrap_err();
         assert_eq!(e, "evolution event 0 (at episode 3): input_fault.ticks = 0 is out of range: allowed 1 ..= 1000000");
         let e = Schedule::from_yaml("events:\n  - at: {episode: 3}\n").unwrap_err();
-        assert!(e.starts_with("evolution event 0 (at episode 3): changes nothing: set at least one of obs_noise"), "{e}");
+        assert!(
+            e.starts_with("evolution event 0 (at episode 3): changes nothing: set at least one of obs_noise"),
+            "{e}"
+        );
         let e = Schedule::from_yaml("events:\n  - at: {tick: 9223372036854775808}\n    threshold: 0.5\n").unwrap_err();
         assert!(e.contains("at.tick = 9223372036854775808 is out of range: allowed 0 ..= 9223372036854775807"), "{e}");
     }
@@ -458,7 +470,8 @@ events:
         assert!(e.contains("events[0]") && e.contains("exactly one of `episode` or `tick`"), "{e}");
         let e = Schedule::from_yaml("events:\n  - at: {tick: 5}\n    input: sine\n").unwrap_err();
         assert!(e.contains("events[0].input") && e.contains("unknown variant `sine`"), "{e}");
-        let e = Schedule::from_yaml("events:\n  - at: {tick: 5}\n    input_fault: {kind: frozen, ticks: 3}\n").unwrap_err();
+        let e =
+            Schedule::from_yaml("events:\n  - at: {tick: 5}\n    input_fault: {kind: frozen, ticks: 3}\n").unwrap_err();
         assert!(e.contains("unknown variant `frozen`"), "{e}");
         assert!(Schedule::from_yaml("").is_err());
         assert_eq!(Schedule::from_yaml("events: []\n").unwrap(), Schedule::default());

@@ -622,7 +622,10 @@ mod tests {
         let mut fresh = Line::new(config, 5);
         assert_eq!(line.reset(Some(5)), fresh.observation());
         for k in 0..20 {
-            assert_eq!(line.step(Action::new(k % 10, SortMode::Basic)), fresh.step(Action::new(k % 10, SortMode::Basic)));
+            assert_eq!(
+                line.step(Action::new(k % 10, SortMode::Basic)),
+                fresh.step(Action::new(k % 10, SortMode::Basic))
+            );
         }
     }
 

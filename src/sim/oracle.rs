@@ -146,10 +146,8 @@ pub fn solve(config: &LineConfig, seed: u64) -> Result<OracleEpisode, String> {
         best = next;
         backs.push(back);
     }
-    let (mut state, &total) = best
-        .iter()
-        .enumerate()
-        .fold((0, &f64::NEG_INFINITY), |acc, (i, v)| if *v > *acc.1 { (i, v) } else { acc });
+    let (mut state, &total) =
+        best.iter().enumerate().fold((0, &f64::NEG_INFINITY), |acc, (i, v)| if *v > *acc.1 { (i, v) } else { acc });
     let mut actions = Vec::with_capacity(steps);
     for (t, back) in backs.iter().enumerate().rev() {
         let (speed, m) = (state / width, state % width);
@@ -204,7 +202,8 @@ mod tests {
 
     #[test]
     fn long_advanced_episodes_are_refused_with_the_range() {
-        let config = LineConfig { max_steps: MAX_ADVANCED_STEPS + 1, ..LineConfig::for_setup(Setup::A, Variant::Advanced) };
+        let config =
+            LineConfig { max_steps: MAX_ADVANCED_STEPS + 1, ..LineConfig::for_setup(Setup::A, Variant::Advanced) };
         let err = solve(&config, 1).unwrap_err();
         assert_eq!(err, "max_steps = 2001 is out of range for the advanced oracle: allowed 1 ..= 2000");
         let basic = LineConfig { max_steps: 5_000, ..LineConfig::for_setup(Setup::B, Variant::Basic) };

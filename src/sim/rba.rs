@@ -100,7 +100,10 @@ impl RbaTable {
                     .map(|&action| {
                         weights.iter().fold(Value::default(), |acc, &(total, c, w)| {
                             let v = value_at(config, total, c, action);
-                            Value { reward: acc.reward + w / mass * v.reward, p_above: acc.p_above + w / mass * v.p_above }
+                            Value {
+                                reward: acc.reward + w / mass * v.reward,
+                                p_above: acc.p_above + w / mass * v.p_above,
+                            }
                         })
                     })
                     .collect();
