@@ -1,8 +1,10 @@
 //! The RIHS01 hash of every interface the node's endpoints use, as rosidl computed them.
 //! Generated: `.venv/bin/python tests/python/type_hashes.py --write`. Do not edit;
-//! tests/python/test_type_hash.py fails when this differs from rosidl's.
+//! tests/python/test_graph_citizen.py::test_type_hash_table_is_rosidls fails when this differs from rosidl's.
 
-/// (ROS type name, RIHS01 hash), sorted by name.
+/// (ROS type name, RIHS01 hash), sorted by name; one row a line, as generated (and as
+/// type_hashes.checked_in reads it back), so rustfmt leaves it alone.
+#[rustfmt::skip]
 pub const TYPE_HASHES: &[(&str, &str)] = &[
     ("action_msgs/msg/GoalStatusArray", "RIHS01_6c1684b00f177d37438febe6e709fc4e2b0d4248dca4854946f9ed8b30cda83e"),
     ("action_msgs/srv/CancelGoal_Request", "RIHS01_3d3c84653c1f96918086887e1dcb236faec88b81a5b14fd4cf4840065bcdf8af"),
@@ -10,182 +12,50 @@ pub const TYPE_HASHES: &[(&str, &str)] = &[
     ("diagnostic_msgs/msg/DiagnosticArray", "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"),
     ("rcl_interfaces/msg/Log", "RIHS01_e28ce254ca8abc06abf92773b74602cdbf116ed34fbaf294fb9f81da9f318eac"),
     ("rcl_interfaces/msg/ParameterEvent", "RIHS01_043e627780fcad87a22d225bc2a037361dba713fca6a6b9f4b869a5aa0393204"),
-    (
-        "rcl_interfaces/srv/DescribeParameters_Request",
-        "RIHS01_05dd1c2bc87dec2627105c8070d6f9725c781a4f2ab852975bf105462b82b644",
-    ),
-    (
-        "rcl_interfaces/srv/DescribeParameters_Response",
-        "RIHS01_ad6747319613c6131589e062e095b469a46cc764f7d0f12a001a49e6cd893995",
-    ),
-    (
-        "rcl_interfaces/srv/GetParameterTypes_Request",
-        "RIHS01_87d7ec5ef545d4daa289d500025d31fb2437bc8b8365ca367161c4dac4be33fd",
-    ),
-    (
-        "rcl_interfaces/srv/GetParameterTypes_Response",
-        "RIHS01_ac1335dce67c478e669434f6ac2fbff34fcd529580f272d3006785ba8b54e47f",
-    ),
-    (
-        "rcl_interfaces/srv/GetParameters_Request",
-        "RIHS01_135a9e1c3d7cebef792f6687d7ddf99949b21a0bd9a320d863a9110a3f5cf4d6",
-    ),
-    (
-        "rcl_interfaces/srv/GetParameters_Response",
-        "RIHS01_9fa773b46e39cc5d02db6224d8fd520bb9caeeffc2b27c96c1e59431baba9f2a",
-    ),
-    (
-        "rcl_interfaces/srv/ListParameters_Request",
-        "RIHS01_a1b0b5d6b967a5b8ac5bc8563c3ea678f349e312a6a4967227c5a96bc5ce38df",
-    ),
-    (
-        "rcl_interfaces/srv/ListParameters_Response",
-        "RIHS01_31b937b82de3612426be79f231e386259f97e8dc843e3f2845288b4bfa296bdd",
-    ),
-    (
-        "rcl_interfaces/srv/SetParameters_Request",
-        "RIHS01_130d46386b7e84ea9ecf60608a4d83cbe5e5cb7c6cc5b712b7a4e3a6c254e932",
-    ),
-    (
-        "rcl_interfaces/srv/SetParameters_Response",
-        "RIHS01_7a0e8140a0b8d98308fa81a5403a766e610af29a239caf54b7553227906fc266",
-    ),
-    (
-        "rcl_interfaces/srv/SetParametersAtomically_Request",
-        "RIHS01_db0bd950ed5ed867a0e90b225e44dea382d762c0762ff3e0ee842190042a59e5",
-    ),
-    (
-        "rcl_interfaces/srv/SetParametersAtomically_Response",
-        "RIHS01_31b1a38c5b0b9d893ee24da45f69638f4561c78461d82d52750f429b534502b8",
-    ),
-    (
-        "rmw_dds_common/msg/ParticipantEntitiesInfo",
-        "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e",
-    ),
+    ("rcl_interfaces/srv/DescribeParameters_Request", "RIHS01_05dd1c2bc87dec2627105c8070d6f9725c781a4f2ab852975bf105462b82b644"),
+    ("rcl_interfaces/srv/DescribeParameters_Response", "RIHS01_ad6747319613c6131589e062e095b469a46cc764f7d0f12a001a49e6cd893995"),
+    ("rcl_interfaces/srv/GetParameterTypes_Request", "RIHS01_87d7ec5ef545d4daa289d500025d31fb2437bc8b8365ca367161c4dac4be33fd"),
+    ("rcl_interfaces/srv/GetParameterTypes_Response", "RIHS01_ac1335dce67c478e669434f6ac2fbff34fcd529580f272d3006785ba8b54e47f"),
+    ("rcl_interfaces/srv/GetParameters_Request", "RIHS01_135a9e1c3d7cebef792f6687d7ddf99949b21a0bd9a320d863a9110a3f5cf4d6"),
+    ("rcl_interfaces/srv/GetParameters_Response", "RIHS01_9fa773b46e39cc5d02db6224d8fd520bb9caeeffc2b27c96c1e59431baba9f2a"),
+    ("rcl_interfaces/srv/ListParameters_Request", "RIHS01_a1b0b5d6b967a5b8ac5bc8563c3ea678f349e312a6a4967227c5a96bc5ce38df"),
+    ("rcl_interfaces/srv/ListParameters_Response", "RIHS01_31b937b82de3612426be79f231e386259f97e8dc843e3f2845288b4bfa296bdd"),
+    ("rcl_interfaces/srv/SetParameters_Request", "RIHS01_130d46386b7e84ea9ecf60608a4d83cbe5e5cb7c6cc5b712b7a4e3a6c254e932"),
+    ("rcl_interfaces/srv/SetParameters_Response", "RIHS01_7a0e8140a0b8d98308fa81a5403a766e610af29a239caf54b7553227906fc266"),
+    ("rcl_interfaces/srv/SetParametersAtomically_Request", "RIHS01_db0bd950ed5ed867a0e90b225e44dea382d762c0762ff3e0ee842190042a59e5"),
+    ("rcl_interfaces/srv/SetParametersAtomically_Response", "RIHS01_31b1a38c5b0b9d893ee24da45f69638f4561c78461d82d52750f429b534502b8"),
+    ("rmw_dds_common/msg/ParticipantEntitiesInfo", "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e"),
     ("rosgraph_msgs/msg/Clock", "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"),
-    (
-        "simulation_interfaces/action/SimulateSteps_SendGoal_Request",
-        "RIHS01_275e6fd2fafc5d33dcdc83bdea6de5cf29f30b9df74a3b9514a8c5d501fd0fe3",
-    ),
-    (
-        "simulation_interfaces/action/SimulateSteps_SendGoal_Response",
-        "RIHS01_755f44a68d1e8d116f50dfed7ab30a140137fb71ad59eca4851d55abe2b3d4c2",
-    ),
-    (
-        "simulation_interfaces/action/SimulateSteps_GetResult_Request",
-        "RIHS01_4591b0bfbcb881003bbd46a2acebcaddceb977e5352905218688ce5ed051fdeb",
-    ),
-    (
-        "simulation_interfaces/action/SimulateSteps_GetResult_Response",
-        "RIHS01_5658172e771cb145a986a8ef4c2b80b5407b741038453b8539e35bed5ff23207",
-    ),
-    (
-        "simulation_interfaces/action/SimulateSteps_FeedbackMessage",
-        "RIHS01_a30dee7ee7380769e616406ec5067b238aa2b27e1dbd7a5957fba1d908d7754d",
-    ),
+    ("simulation_interfaces/action/SimulateSteps_SendGoal_Request", "RIHS01_275e6fd2fafc5d33dcdc83bdea6de5cf29f30b9df74a3b9514a8c5d501fd0fe3"),
+    ("simulation_interfaces/action/SimulateSteps_SendGoal_Response", "RIHS01_755f44a68d1e8d116f50dfed7ab30a140137fb71ad59eca4851d55abe2b3d4c2"),
+    ("simulation_interfaces/action/SimulateSteps_GetResult_Request", "RIHS01_4591b0bfbcb881003bbd46a2acebcaddceb977e5352905218688ce5ed051fdeb"),
+    ("simulation_interfaces/action/SimulateSteps_GetResult_Response", "RIHS01_5658172e771cb145a986a8ef4c2b80b5407b741038453b8539e35bed5ff23207"),
+    ("simulation_interfaces/action/SimulateSteps_FeedbackMessage", "RIHS01_a30dee7ee7380769e616406ec5067b238aa2b27e1dbd7a5957fba1d908d7754d"),
     ("simulation_interfaces/msg/Result", "RIHS01_cf43a306adff3337a0a47143d8f5689933bc70a30478f13b077dc1fe3bc5ad17"),
-    (
-        "simulation_interfaces/msg/SimulationState",
-        "RIHS01_bb9f87ccdd98fba113052a512d9801e84ce732d0a2b3c2b0cb281828de36e415",
-    ),
-    (
-        "simulation_interfaces/msg/SimulatorFeatures",
-        "RIHS01_8b101c8529bc0ea3dcf056078254768f39832b9ef0adaf93bd5cea96c0de3305",
-    ),
-    (
-        "simulation_interfaces/srv/GetSimulationState_Request",
-        "RIHS01_c6d65bc5c0a95ca2886bc57f146f803e01722c84ddb5acd5f32a4417f55eecfb",
-    ),
-    (
-        "simulation_interfaces/srv/GetSimulationState_Response",
-        "RIHS01_dc80ce852a5ab04c2b23cdd47910cee1bcc46e0f1931cac85825e6916b15517f",
-    ),
-    (
-        "simulation_interfaces/srv/GetSimulatorFeatures_Request",
-        "RIHS01_982b8c1adef1d556f6ecdc019d1269fc39413626a9222d73b4fc874bd798b7db",
-    ),
-    (
-        "simulation_interfaces/srv/GetSimulatorFeatures_Response",
-        "RIHS01_ede4dc8227cbb2f86a24612c999dcaa67d17dab21dab566cefdc233e7a2a65d1",
-    ),
-    (
-        "simulation_interfaces/srv/ResetSimulation_Request",
-        "RIHS01_2c766d09c3aa30f01fadc55a42fd760b63db358c7d1d3b6a64ea9978225ffbc7",
-    ),
-    (
-        "simulation_interfaces/srv/ResetSimulation_Response",
-        "RIHS01_718428121e0f1755720878d3c28f1688da7581ee5a5d56d26d10d941a28a50a0",
-    ),
-    (
-        "simulation_interfaces/srv/SetSimulationState_Request",
-        "RIHS01_73283477d36ba619db2ac37a3e599077ca244502c9d8ca2a7183afcb2224f476",
-    ),
-    (
-        "simulation_interfaces/srv/SetSimulationState_Response",
-        "RIHS01_6351aebf2bbf06e2993977918b944240f7403b532a9e4a344c53e71a56afd174",
-    ),
-    (
-        "simulation_interfaces/srv/StepSimulation_Request",
-        "RIHS01_cda33f6887815f3dce0f90e61fd8efd39bda13ae264ddede15c33fbad890630e",
-    ),
-    (
-        "simulation_interfaces/srv/StepSimulation_Response",
-        "RIHS01_5b4acf2d0ce7c3fc125d0bef2acb9b5a81377e80db6b696b81beeffb9824fb5c",
-    ),
-    (
-        "sorting_line_interfaces/msg/BeltOccupancy",
-        "RIHS01_f3f783fc5c6cda0a7813a3a34ff5a512d77a4dc0262a183fcb7365ff7a254f82",
-    ),
-    (
-        "sorting_line_interfaces/msg/EvolutionEvent",
-        "RIHS01_566a8bf49b00dae860d4990d4501392ff2c153e901f167b548d6883f040a1611",
-    ),
-    (
-        "sorting_line_interfaces/msg/LineCommands",
-        "RIHS01_16844149071f7ef1eded2e1115510c13fa3f9975bde1cac3c61f54d86f8f9801",
-    ),
-    (
-        "sorting_line_interfaces/msg/LineState",
-        "RIHS01_f960d663f175fb957d5d0f04d630e30dcba23913e91dca00dcf85cfbf1da2a6c",
-    ),
-    (
-        "sorting_line_interfaces/msg/LineStates",
-        "RIHS01_817712176a3d3dbe9e6f90339519fc99bfd93071405c0d7152c588a012849066",
-    ),
-    (
-        "sorting_line_interfaces/msg/MaterialInput",
-        "RIHS01_9ba651f841870e9bd2cfd0424d944e685c2fcae059393373f5b08056333719ce",
-    ),
-    (
-        "sorting_line_interfaces/msg/MaterialRatio",
-        "RIHS01_9f4d135853fe649f249ffa27690e3572f1463590178368e991bde14381c83155",
-    ),
-    (
-        "sorting_line_interfaces/msg/ResetEvent",
-        "RIHS01_323fd029d5dcf5020a1184f43ac63b05f84326050bffc5d8de84361c74de537c",
-    ),
-    (
-        "sorting_line_interfaces/msg/SortModeCommand",
-        "RIHS01_72318357a08ec6e9de74050f45e36f75f8404f177d4c16a628032f232caa705f",
-    ),
-    (
-        "sorting_line_interfaces/msg/SpeedCommand",
-        "RIHS01_768c9f5fae3892afd877e829d5a602398b35a9274f0379211962fae37196ddab",
-    ),
-    (
-        "sorting_line_interfaces/srv/ResetLine_Request",
-        "RIHS01_6f8910f0b93de51d20d7d028ab5ad02646c4a555f265b5683fe75ecd1d756521",
-    ),
-    (
-        "sorting_line_interfaces/srv/ResetLine_Response",
-        "RIHS01_5fa2eb4f928509bef99b6c195f11776fcf65d647ddb76b35d724c1be741d9fbd",
-    ),
-    (
-        "sorting_line_interfaces/srv/ResetLines_Request",
-        "RIHS01_fb0ee281e27596cb6b06af20f2ea631fb9eefa5a468013afe0ac0c4451703589",
-    ),
-    (
-        "sorting_line_interfaces/srv/ResetLines_Response",
-        "RIHS01_25363ec87a91d82789d2aba08f22f38e01ca24887d4c8fe91579ff9ae52519c7",
-    ),
+    ("simulation_interfaces/msg/SimulationState", "RIHS01_bb9f87ccdd98fba113052a512d9801e84ce732d0a2b3c2b0cb281828de36e415"),
+    ("simulation_interfaces/msg/SimulatorFeatures", "RIHS01_8b101c8529bc0ea3dcf056078254768f39832b9ef0adaf93bd5cea96c0de3305"),
+    ("simulation_interfaces/srv/GetSimulationState_Request", "RIHS01_c6d65bc5c0a95ca2886bc57f146f803e01722c84ddb5acd5f32a4417f55eecfb"),
+    ("simulation_interfaces/srv/GetSimulationState_Response", "RIHS01_dc80ce852a5ab04c2b23cdd47910cee1bcc46e0f1931cac85825e6916b15517f"),
+    ("simulation_interfaces/srv/GetSimulatorFeatures_Request", "RIHS01_982b8c1adef1d556f6ecdc019d1269fc39413626a9222d73b4fc874bd798b7db"),
+    ("simulation_interfaces/srv/GetSimulatorFeatures_Response", "RIHS01_ede4dc8227cbb2f86a24612c999dcaa67d17dab21dab566cefdc233e7a2a65d1"),
+    ("simulation_interfaces/srv/ResetSimulation_Request", "RIHS01_2c766d09c3aa30f01fadc55a42fd760b63db358c7d1d3b6a64ea9978225ffbc7"),
+    ("simulation_interfaces/srv/ResetSimulation_Response", "RIHS01_718428121e0f1755720878d3c28f1688da7581ee5a5d56d26d10d941a28a50a0"),
+    ("simulation_interfaces/srv/SetSimulationState_Request", "RIHS01_73283477d36ba619db2ac37a3e599077ca244502c9d8ca2a7183afcb2224f476"),
+    ("simulation_interfaces/srv/SetSimulationState_Response", "RIHS01_6351aebf2bbf06e2993977918b944240f7403b532a9e4a344c53e71a56afd174"),
+    ("simulation_interfaces/srv/StepSimulation_Request", "RIHS01_cda33f6887815f3dce0f90e61fd8efd39bda13ae264ddede15c33fbad890630e"),
+    ("simulation_interfaces/srv/StepSimulation_Response", "RIHS01_5b4acf2d0ce7c3fc125d0bef2acb9b5a81377e80db6b696b81beeffb9824fb5c"),
+    ("sorting_line_interfaces/msg/BeltOccupancy", "RIHS01_f3f783fc5c6cda0a7813a3a34ff5a512d77a4dc0262a183fcb7365ff7a254f82"),
+    ("sorting_line_interfaces/msg/EvolutionEvent", "RIHS01_566a8bf49b00dae860d4990d4501392ff2c153e901f167b548d6883f040a1611"),
+    ("sorting_line_interfaces/msg/LineCommands", "RIHS01_16844149071f7ef1eded2e1115510c13fa3f9975bde1cac3c61f54d86f8f9801"),
+    ("sorting_line_interfaces/msg/LineState", "RIHS01_f960d663f175fb957d5d0f04d630e30dcba23913e91dca00dcf85cfbf1da2a6c"),
+    ("sorting_line_interfaces/msg/LineStates", "RIHS01_817712176a3d3dbe9e6f90339519fc99bfd93071405c0d7152c588a012849066"),
+    ("sorting_line_interfaces/msg/MaterialInput", "RIHS01_9ba651f841870e9bd2cfd0424d944e685c2fcae059393373f5b08056333719ce"),
+    ("sorting_line_interfaces/msg/MaterialRatio", "RIHS01_9f4d135853fe649f249ffa27690e3572f1463590178368e991bde14381c83155"),
+    ("sorting_line_interfaces/msg/ResetEvent", "RIHS01_323fd029d5dcf5020a1184f43ac63b05f84326050bffc5d8de84361c74de537c"),
+    ("sorting_line_interfaces/msg/SortModeCommand", "RIHS01_72318357a08ec6e9de74050f45e36f75f8404f177d4c16a628032f232caa705f"),
+    ("sorting_line_interfaces/msg/SpeedCommand", "RIHS01_768c9f5fae3892afd877e829d5a602398b35a9274f0379211962fae37196ddab"),
+    ("sorting_line_interfaces/srv/ResetLine_Request", "RIHS01_6f8910f0b93de51d20d7d028ab5ad02646c4a555f265b5683fe75ecd1d756521"),
+    ("sorting_line_interfaces/srv/ResetLine_Response", "RIHS01_5fa2eb4f928509bef99b6c195f11776fcf65d647ddb76b35d724c1be741d9fbd"),
+    ("sorting_line_interfaces/srv/ResetLines_Request", "RIHS01_fb0ee281e27596cb6b06af20f2ea631fb9eefa5a468013afe0ac0c4451703589"),
+    ("sorting_line_interfaces/srv/ResetLines_Response", "RIHS01_25363ec87a91d82789d2aba08f22f38e01ca24887d4c8fe91579ff9ae52519c7"),
 ];
