@@ -113,7 +113,7 @@ install_wheels() {
     return
   fi
   say "wheels: installing requirements-ros.txt and requirements-bridge.txt (torch brings ~4 GB of CUDA libraries)"
-  rm -f "$STATE/pip.stamp" "$STATE/sorting_line_interfaces.stamp" "$STATE/simulation_interfaces.stamp"
+  rm -f "$STATE/pip.stamp"
   "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
     die "pip install -r $REQ -r $REQ_BRIDGE failed"
   write_stamp pip "$key"
@@ -163,7 +163,12 @@ fix_wheel_cmake_paths() {
 iface_key() { # NAME DIR
   {
     echo "recipe=$RECIPE"
-    cat "$STATE/pip.stamp"
+    # What the build uses of the venv: the Python, the ROS wheels (rosidl, rclpy), numpy's
+    # headers. Not requirements-bridge.txt as a whole: a change there (a new tool for the
+    # bridge) must not cost a rebuild of the interfaces.
+    echo "python=$PY_ID"
+    cat "$REQ"
+    "$VENV/bin/python" -c 'import numpy; print("numpy", numpy.__version__)'
     # every file of the package (not of a package nested in it), names and contents
     (cd "$2" && find . -mindepth 1 -type d -exec test -f '{}/package.xml' \; -prune -o \
       -type f ! -name '.*' ! -name '*~' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum)
