@@ -75,12 +75,18 @@ def run(env, seed, actions):
     for row in actions:
         obs, rewards, _, truncated, info = env.step(np.array(row))
         for k, line in enumerate(lines):
-            record = {"obs": obs[k].tolist(), "reward": float(rewards[k]), "truncated": bool(truncated[k]),
-                      "info": {key: np.asarray(info[key][k]).tolist() for key in KEYS}}
-            if truncated[k]:
-                record["final_obs"] = np.asarray(info["final_obs"][k]).tolist()
-            line["steps"].append(record)
+            line["steps"].append(record(obs[k], rewards[k], truncated[k], {key: info[key][k] for key in KEYS},
+                                        info["final_obs"][k] if truncated[k] else None))
     return lines
+
+
+def record(obs, reward, truncated, info, final_obs):
+    """One line's step as the test reads it (the same for both faces)."""
+    step = {"obs": obs.tolist(), "reward": float(reward), "truncated": bool(truncated),
+            "info": {key: np.asarray(value).tolist() for key, value in info.items()}}
+    if truncated:
+        step["final_obs"] = np.asarray(final_obs).tolist()
+    return step
 
 
 def run_sb3(namespaces, seed, actions):
@@ -96,11 +102,8 @@ def run_sb3(namespaces, seed, actions):
     for row in actions:
         obs, rewards, dones, infos = vec.step(np.array(row))
         for k, line in enumerate(lines):
-            record = {"obs": obs[k].tolist(), "reward": float(rewards[k]), "truncated": bool(dones[k]),
-                      "info": {key: np.asarray(infos[k][key]).tolist() for key in KEYS}}
-            if dones[k]:
-                record["final_obs"] = np.asarray(infos[k]["terminal_observation"]).tolist()
-            line["steps"].append(record)
+            line["steps"].append(record(obs[k], rewards[k], dones[k], {key: infos[k][key] for key in KEYS},
+                                        infos[k].get("terminal_observation")))
     vec.close()
     return lines
 
