@@ -207,7 +207,7 @@ fn get_local_unicast_locators_inner(
   port: u16,
   only_networks: Option<&[IpAddr]>,
 ) -> Vec<Locator> {
-  ifaces
+  let mut locators = ifaces
     .iter()
     // Our unicast transport (both `UDPListener` and the `UDPSender` unicast
     // socket) is IPv4-only, so an announced IPv6 locator is unreachable: peers
@@ -217,7 +217,18 @@ fn get_local_unicast_locators_inner(
     .filter(|ifa| ifa.ip.is_ipv4())
     .filter(|ifa| only_networks.is_none_or(|nets| nets.contains(&ifa.ip)))
     .map(|ifa| Locator::from(SocketAddr::new(ifa.ip, port)))
-    .collect()
+    .collect::<Vec<_>>();
+  // [sorting_line patch] Without an explicit `only_networks`, loopback is announced only when it
+  // is all there is, as Fast DDS (ROS 2's default RMW) announces. Fast DDS sends every sample to
+  // every unicast locator a remote reader announces, so a 127.0.0.1 locator made it send each
+  // sample twice, the second copy to whatever listens on that port of *its own* host (measured:
+  // rclpy sent each batch/cmd and each ACKNACK of a round trip over veth also to its own
+  // 127.0.0.1 and read it back). A same-host peer reaches the other addresses just as well: the
+  // kernel delivers a datagram to one of its own addresses over loopback.
+  if only_networks.is_none() && locators.iter().any(|l| !l.is_loopback()) {
+    locators.retain(|l| !l.is_loopback());
+  }
+  locators
 }
 
 /// Enumerates local interfaces that we may use for multicasting.
@@ -408,6 +419,27 @@ mod tests {
     assert_eq!(
       filtered,
       vec![Locator::from(SocketAddr::new(v4(10, 0, 0, 10), 7412))]
+    );
+  }
+
+  // [sorting_line patch] Loopback is announced only when it is the only address (or asked for by
+  // `only_networks`): Fast DDS sends to every announced locator, 127.0.0.1 included.
+  #[test]
+  fn unicast_locators_announce_loopback_only_when_alone() {
+    let lo = iface(IpAddr::V4(Ipv4Addr::LOCALHOST), 1, true, false);
+    let lan = iface(v4(192, 168, 77, 2), 2, false, true);
+    let at = |ip| Locator::from(SocketAddr::new(ip, 7412));
+
+    let both = vec![lo.clone(), lan.clone()];
+    assert_eq!(get_local_unicast_locators_inner(&both, 7412, None), vec![at(lan.ip)]);
+    assert_eq!(
+      get_local_unicast_locators_inner(&[lo.clone()], 7412, None),
+      vec![at(lo.ip)]
+    );
+    let asked = [lo.ip, lan.ip];
+    assert_eq!(
+      get_local_unicast_locators_inner(&both, 7412, Some(&asked)),
+      vec![at(lo.ip), at(lan.ip)]
     );
   }
 

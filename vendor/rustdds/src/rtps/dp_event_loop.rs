@@ -1365,6 +1365,7 @@ mod tests {
         None,
         0,
         true,
+        false, // [sorting_line patch] localhost_only
         Vec::new(),
         reader_ready,
         writer_ready,
