@@ -2242,6 +2242,13 @@ impl HasQoSPolicy for Writer {
 // path MTU (see FragmentationIter::new_resume): well inside a UDP datagram with its headers.
 const UNFRAGMENTED_SERVICE_SAMPLE_MAX: usize = 60_000;
 
+// [sorting_line patch] Largest other sample sent as one DATA whatever the path MTU, leaving the
+// splitting to IP as ROS 2's DDS stacks do (Fast DDS sends datagrams up to 64 KB, Cyclone DDS up
+// to 14,720 bytes): one datagram to receive instead of one per fragment plus the HEARTBEAT.
+// Bounded so that a big sample (a /diagnostics of many lines, 12.8 KB at 16 lines) stays a
+// dozen IP fragments at most on a 1500-byte MTU.
+const UNFRAGMENTED_SAMPLE_MAX: usize = 16_000;
+
 // Serialized overhead of one DATA submessage excluding its serialized payload
 // and inline QoS. Conservative fixed fields only; underestimating inline QoS
 // causes earlier fragmentation (safe), never datagram overflow.
@@ -2339,10 +2346,17 @@ impl<'a> FragmentationIter<'a> {
     // when it arrives as DATA_FRAG with the identity in its inline QoS, so a reply larger than
     // one datagram never reached a client on another host (a 16-line batch/reset reply, 2.5 KB,
     // over a 1500-byte MTU; on loopback the budget is 64 KB and nothing was fragmented).
-    let service_sample = cache_change.write_options.related_sample_identity().is_some()
-      && data_size <= UNFRAGMENTED_SERVICE_SAMPLE_MAX;
+    // Any other sample goes out as one DATA up to UNFRAGMENTED_SAMPLE_MAX bytes (item 8 of
+    // vendor/README.md): as DATA_FRAG, a 16-line batch/state (2.2 KB) cost its reader two
+    // datagrams and a third for the trailing HEARTBEAT, which an unfragmented DATA carries in
+    // its own datagram.
+    let unfragmented_max = if cache_change.write_options.related_sample_identity().is_some() {
+      UNFRAGMENTED_SERVICE_SAMPLE_MAX
+    } else {
+      UNFRAGMENTED_SAMPLE_MAX
+    };
     let fragmentation_needed =
-      data_size > writer.max_unfragmented_serialized_payload(target_reader_opt) && !service_sample;
+      data_size > writer.max_unfragmented_serialized_payload(target_reader_opt).max(unfragmented_max);
 
     let state = if fragmentation_needed {
       let fragmented = match cursor {
