@@ -140,6 +140,11 @@ struct TableArgs {
 }
 
 fn main() -> ExitCode {
+    // The DDS stack's own log (RUST_LOG=rustdds=debug, to stderr) only when asked for: without it
+    // env_logger would still print rustdds' error lines, some of them routine.
+    if std::env::var_os("RUST_LOG").is_some() {
+        env_logger::Builder::from_default_env().format_timestamp_micros().init();
+    }
     // `--ros-args ... [--]` belongs to ROS, not to clap: split it off first.
     let (args, ros_args) = sorting_line::ros::options::split_ros_args(std::env::args().collect());
     let cli = Cli::parse_from(args);
