@@ -20,6 +20,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import gymnasium
@@ -86,6 +87,7 @@ def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, act
 
 ASYNC_DEFAULT_CONTEXT = r'''
 import sys
+import time
 import gymnasium as gym
 from gymnasium.vector import AsyncVectorEnv
 import sorting_line_gym
@@ -174,6 +176,7 @@ def test_forked_child_with_an_inherited_live_context_gets_a_clear_error(tmp_path
 
 LIVE_ENV_WAITING = r'''
 import sys
+import time
 import gymnasium as gym
 import sorting_line_gym  # noqa: F401
 env = gym.make(sys.argv[1], setup="B", node=sys.argv[2])
@@ -211,6 +214,67 @@ def test_a_process_with_a_live_env_dies_of_sigterm(tmp_path, node):
             p.wait()
 
 
+ORPHANED_WORKER = r'''
+import multiprocessing, sys
+import gymnasium as gym
+import sorting_line_gym  # noqa: F401
+
+def worker(env_id, pipe):
+    env = gym.make(env_id, setup="B", node="shared")
+    env.reset(seed=1)
+    pipe.send("ready")
+    pipe.recv()  # as SB3's and Gymnasium's workers wait for their next command
+
+if __name__ == "__main__":
+    ours, theirs = multiprocessing.get_context("fork").Pipe()
+    child = multiprocessing.get_context("fork").Process(target=worker, args=(sys.argv[1], theirs))
+    child.start()
+    assert ours.poll(120), "the worker's env did not connect within 120 s"
+    ours.recv()
+    print(child.pid, flush=True)
+    sys.stdin.read()  # the test kills this process here
+'''
+
+
+def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path):
+    """A multiprocessing worker with a connected env, whose parent is killed with SIGKILL (a
+    training script timed out, or killed by its user), must not live on: it held the parent's
+    pipe, so nothing would ever wake it, and its leased line stayed leased."""
+    import signal
+
+    script = tmp_path / "orphan.py"
+    script.write_text(ORPHANED_WORKER)
+    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([sys.executable, str(script), BASIC], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env)
+    worker = None
+    try:
+        line = p.stdout.readline().strip()
+        assert line.isdigit(), f"the worker did not start: {line!r}\n{p.stderr.read() if p.poll() is not None else ''}"
+        worker = int(line)
+        p.kill()
+        p.wait()
+        deadline = time.monotonic() + 30
+        while os.path.exists(f"/proc/{worker}") and _state(worker) != "Z":
+            if time.monotonic() > deadline:
+                pytest.fail(f"the worker (pid {worker}) outlived its killed parent by 30 s")
+            time.sleep(0.1)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        if worker is not None and os.path.exists(f"/proc/{worker}"):
+            os.kill(worker, signal.SIGKILL)
+
+
+def _state(pid: int) -> str:
+    """A process's state letter from /proc (Z: a zombie, dead but not yet reaped by init)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return "gone"
+
+
 def test_sync_vector_env_of_64_shared_envs_matches_the_library():
     """gymnasium.make_vec(sync) of 64 envs on line servers (4 node processes of 16 lines): env k ==
     `trace --seed S+k` for 10 steps."""
@@ -235,6 +299,7 @@ def test_sync_vector_env_of_64_shared_envs_matches_the_library():
 
 SUBPROC_16 = r'''
 import sys
+import time
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import SubprocVecEnv
 import sorting_line_gym
@@ -280,6 +345,7 @@ def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
 
 SYNC_IN_A_PROCESS = r'''
 import sys
+import time
 import gymnasium as gym
 import sorting_line_gym
 

@@ -8,11 +8,19 @@ An env is a guest in its user's process, so rclpy is initialised without its sig
 with them, SIGTERM only shut rclpy down and the process lived on, so ``Process.terminate()``
 (multiprocessing's exit handler, SB3's and Gymnasium's vectorizers after a worker failed, a killed
 benchmark's pool) left workers blocked and their parents waiting on them forever. SIGINT keeps
-Python's own handler (KeyboardInterrupt), which the waits notice within one wait slice."""
+Python's own handler (KeyboardInterrupt), which the waits notice within one wait slice.
+
+An env in a multiprocessing worker (SB3's SubprocVecEnv, Gymnasium's AsyncVectorEnv, a pool)
+asks the kernel for SIGTERM when the worker's parent dies: a vectorizer's workers wait on their
+command pipe, and with fork every sibling holds the parent's ends open, so no EOF ever came; a
+training script killed (or timed out) left its 15 other workers, and their leased lines, behind
+for good."""
 
 from __future__ import annotations
 
 import os
+import signal
+import sys
 import threading
 
 import rclpy
@@ -75,6 +83,23 @@ def check_not_forked() -> None:
         raise error
 
 
+def _die_with_multiprocessing_parent() -> None:
+    """In a multiprocessing child on Linux: SIGTERM when the parent dies (``PR_SET_PDEATHSIG``; the
+    kernel ties it to the thread that started the child, which is the main thread in SB3's,
+    Gymnasium's and the benchmark's pools). A parent gone already gets the same at once."""
+    import multiprocessing
+
+    parent = multiprocessing.parent_process()
+    if parent is None or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent.pid:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def acquire_rclpy() -> None:
     """Initialises rclpy if nobody has; paired with :func:`release_rclpy`. Raises instead of
     blocking when this process was forked from one where rclpy was live (:func:`fork_error`)."""
@@ -82,6 +107,7 @@ def acquire_rclpy() -> None:
     check_not_forked()
     with _rclpy_lock:
         if _rclpy_users == 0 and not rclpy.ok():
+            _die_with_multiprocessing_parent()
             rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
             _rclpy_ours = True
         _rclpy_users += 1
