@@ -94,8 +94,12 @@ def _die_with_multiprocessing_parent() -> None:
         return
     import ctypes
 
-    PR_SET_PDEATHSIG = 1
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
+    libc = ctypes.CDLL(None, use_errno=True)
+    current = ctypes.c_int(0)
+    libc.prctl(PR_GET_PDEATHSIG, ctypes.byref(current))
+    if current.value == 0:  # one the process chose itself (the benchmark's pool: SIGKILL) stays
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() != parent.pid:
         os.kill(os.getpid(), signal.SIGTERM)
 
