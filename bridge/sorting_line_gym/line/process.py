@@ -8,6 +8,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -39,6 +40,25 @@ _spawn_counter = itertools.count()
 def private_namespace() -> str:
     """A namespace no other bridge in any process uses: /sorting_line_gym/p<pid>_<n>."""
     return f"/sorting_line_gym/p{os.getpid()}_{next(_spawn_counter)}"
+
+
+def die_with_parent(sig: int, parent_pid: int | None = None, keep_existing: bool = False) -> None:
+    """Asks the kernel to send ``sig`` to this process when its parent dies (Linux
+    ``PR_SET_PDEATHSIG``; the signal follows the thread that started this process). With
+    ``parent_pid``, sends it at once if that parent is gone already; ``keep_existing`` leaves a
+    signal the process chose before in place. Does nothing elsewhere than on Linux."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
+    libc = ctypes.CDLL(None, use_errno=True)
+    current = ctypes.c_int(0)
+    libc.prctl(PR_GET_PDEATHSIG, ctypes.byref(current))
+    if not (keep_existing and current.value):
+        libc.prctl(PR_SET_PDEATHSIG, sig)
+    if parent_pid is not None and os.getppid() != parent_pid:
+        os.kill(os.getpid(), sig)
 
 
 class NodeProcess:

@@ -50,6 +50,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..line.process import die_with_parent
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
 from . import stats
@@ -493,10 +494,7 @@ def _interrupt(signum, frame):
 def _die_with_the_benchmark() -> None:
     """Worker initializer: the kernel kills this worker when the benchmark process dies, however
     it dies (a benchmark killed with SIGKILL runs no handler, and nothing else would tell them)."""
-    import ctypes
-
-    PR_SET_PDEATHSIG = 1
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    die_with_parent(signal.SIGKILL)
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:

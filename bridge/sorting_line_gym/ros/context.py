@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 import threading
 
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 from ..line.errors import BridgeError
+from ..line.process import die_with_parent
 
 
 _rclpy_lock = threading.Lock()
@@ -84,24 +84,14 @@ def check_not_forked() -> None:
 
 
 def _die_with_multiprocessing_parent() -> None:
-    """In a multiprocessing child on Linux: SIGTERM when the parent dies (``PR_SET_PDEATHSIG``; the
-    kernel ties it to the thread that started the child, which is the main thread in SB3's,
-    Gymnasium's and the benchmark's pools). A parent gone already gets the same at once."""
+    """In a multiprocessing child: SIGTERM when the parent dies (the kernel ties it to the thread
+    that started the child, which is the main thread in SB3's, Gymnasium's and the benchmark's
+    pools), unless the process chose a parent-death signal itself (the benchmark's pool: SIGKILL)."""
     import multiprocessing
 
     parent = multiprocessing.parent_process()
-    if parent is None or not sys.platform.startswith("linux"):
-        return
-    import ctypes
-
-    PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
-    libc = ctypes.CDLL(None, use_errno=True)
-    current = ctypes.c_int(0)
-    libc.prctl(PR_GET_PDEATHSIG, ctypes.byref(current))
-    if current.value == 0:  # one the process chose itself (the benchmark's pool: SIGKILL) stays
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    if os.getppid() != parent.pid:
-        os.kill(os.getpid(), signal.SIGTERM)
+    if parent is not None:
+        die_with_parent(signal.SIGTERM, parent_pid=parent.pid, keep_existing=True)
 
 
 def acquire_rclpy() -> None:
