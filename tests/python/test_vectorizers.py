@@ -16,8 +16,12 @@ timeout. Episodes are short (10-30 steps; 200 for the fork test) to keep CI cost
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
+import re
+import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -37,8 +41,14 @@ ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
 
 # Records every env's episode as JSON lines: what the comparison with the trace needs.
 RECORDER = r'''
+import faulthandler
 import json
+import signal
 import numpy as np
+
+# On SIGUSR1 every process of the script (forked workers inherit the handler) prints the stacks of
+# all its threads: run_script sends it before killing a hung script, so a hang names its place.
+faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 KEYS = ("accuracy", "purity", "containers", "speed_changes", "occupancy", "cumulative_reward", "speed_index", "mode", "step")
 
@@ -56,19 +66,82 @@ def record_step(episodes, obs, rewards, info_of):
 '''
 
 
+_script_domains = itertools.count()
+
+
+def script_environment() -> dict[str, str]:
+    """The environment of a workload script: the node binary, unbuffered output, and a
+    ROS_DOMAIN_ID of its own (not the suite's, nor an earlier script's). What a script starts (its
+    workers' participants, their nodes, line servers) then neither discovers nor is disturbed by
+    what earlier tests left in the suite's domain: lingering participants, and Fast DDS's
+    shared-memory ports derived from the domain id, which live in /dev/shm, where no network
+    namespace separates them (rmw_fastrtps adds the shared-memory transport in LOCALHOST mode;
+    its port 7000, which every participant opens whatever its domain, stays shared)."""
+    suite = int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    domain = suite
+    while domain == suite:
+        domain = 1 + (suite + next(_script_domains)) % 99
+    return dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1", ROS_DOMAIN_ID=str(domain))
+
+
 def run_script(tmp_path: Path, name: str, code: str, args=(), timeout: float = 240.0) -> dict:
     """Runs ``code`` (after RECORDER) as a script in a fresh interpreter, bounded by ``timeout``;
-    returns the JSON object its last stdout line holds."""
+    returns the JSON object its last stdout line holds. A script still running at the timeout
+    (a hang) is killed with all its session (workers and nodes too), after its processes' stacks
+    were taken, so that the failure names where it hung (``_stacks_then_kill``)."""
     script = tmp_path / f"{name}.py"
     script.write_text(RECORDER + code)
-    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    env = script_environment()
+    p = subprocess.Popen([sys.executable, str(script), *map(str, args)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path, start_new_session=True)
     try:
-        r = subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True,
-                           timeout=timeout, env=env, cwd=tmp_path)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"{name} did not finish within {timeout:g} s (a hang):\n{(e.stderr or '')[-3000:]}")
-    assert r.returncode == 0, f"{name} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-4000:]}"
-    return json.loads(r.stdout.strip().splitlines()[-1])
+        stdout, stderr = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        stdout, stderr, native = _stacks_then_kill(p)
+        pytest.fail(f"{name} did not finish within {timeout:g} s (a hang); its last output:\n{stdout[-1000:]}\n"
+                    f"its stderr, ending with every process's Python stacks:\n{stderr[-8000:]}\n{native[-16000:]}")
+    assert p.returncode == 0, f"{name} failed ({p.returncode}):\n{stdout[-2000:]}\n{stderr[-4000:]}"
+    return json.loads(stdout.strip().splitlines()[-1])
+
+
+def _stacks_then_kill(p: subprocess.Popen) -> tuple[str, str, str]:
+    """For a hung script: the native stacks of its Python processes (gdb, where installed: a hang
+    inside rclpy or Fast DDS shows only as a C call in Python's stack), then SIGUSR1 to its
+    session (faulthandler prints the Python stacks; a node, which has no handler, just ends), then
+    SIGKILL to all of it; returns what the script wrote to stdout and stderr, and the native stacks."""
+    native = []
+    if shutil.which("gdb"):
+        for pid in _session_members(p.pid):
+            try:
+                bt = subprocess.run(["gdb", "-p", str(pid), "-batch", "-ex", "thread apply all bt 25"],
+                                    capture_output=True, text=True, timeout=60).stdout
+            except subprocess.TimeoutExpired:
+                bt = "(gdb timed out)"
+            # "#3 0x7f.. in func (args...) at file.c:12" -> "#3 func at file.c:12"
+            frames = [re.sub(r"^(#\d+)\s+(?:0x[0-9a-f]+ in )?(\S+) \(.*\) (at|from) ", r"\1 \2 \3 ", line)
+                      for line in bt.splitlines() if line.startswith(("#", "Thread "))]
+            native.append(f"--- native stacks of pid {pid}:\n" + "\n".join(frames)[-6000:])
+    for sig, pause in ((signal.SIGUSR1, 3.0), (signal.SIGKILL, 0.0)):
+        try:
+            os.killpg(p.pid, sig)
+        except ProcessLookupError:
+            pass
+        time.sleep(pause)
+    stdout, stderr = p.communicate(timeout=30)
+    return stdout, stderr, "\n".join(native)
+
+
+def _session_members(session: int) -> list[int]:
+    """The Python processes of a session (a script started with start_new_session=True)."""
+    members = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            comm_end = (text := stat.read_text()).rindex(")")
+            if int(text[comm_end + 2:].split()[3]) == session and "python" in text[:comm_end]:
+                members.append(int(stat.parent.name))
+        except (OSError, ValueError, IndexError):
+            continue
+    return sorted(members)
 
 
 def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, actions: list[int], max_steps: int,
@@ -192,11 +265,9 @@ def test_a_process_with_a_live_env_dies_of_sigterm(tmp_path, node):
     after a worker failed) must end a worker whose env is connected: the env does not install
     rclpy's signal handlers, under which SIGTERM only shut rclpy down and the worker lived on,
     blocked, with its parent waiting for it forever."""
-    import signal
-
     script = tmp_path / "live_env.py"
     script.write_text(LIVE_ENV_WAITING)
-    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    env = script_environment()
     p = subprocess.Popen([sys.executable, str(script), BASIC, node], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=env)
     try:
@@ -240,11 +311,9 @@ def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path):
     """A multiprocessing worker with a connected env, whose parent is killed with SIGKILL (a
     training script timed out, or killed by its user), must not live on: it held the parent's
     pipe, so nothing would ever wake it, and its leased line stayed leased."""
-    import signal
-
     script = tmp_path / "orphan.py"
     script.write_text(ORPHANED_WORKER)
-    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    env = script_environment()
     p = subprocess.Popen([sys.executable, str(script), BASIC], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=env)
     worker = None
@@ -376,7 +445,7 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
     n, steps, variant = 8, 30, "basic"
     seeds = (2000, 3000)
     per_env = {s: [fixed_actions(10, steps, s + k) for k in range(n)] for s in seeds}
-    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    env = script_environment()
     procs = []
     for s in seeds:
         script = tmp_path / f"sync_{s}.py"
@@ -440,7 +509,7 @@ def test_maskable_ppo_trains_2048_steps_on_4_envs():
 
 
 def test_rl_zoo_trains_with_our_conf_file_and_enjoy_replays_the_model(tmp_path):
-    env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
+    env = script_environment()
     common = ["--algo", "ppo", "--env", "SortingLine-v0", "--gym-packages", "sorting_line_gym", "-f", str(tmp_path / "logs")]
     train = [sys.executable, "-m", "rl_zoo3.train", *common, "--conf-file", "sorting_line_gym.zoo.ppo", "-n", "512",
              "--seed", "3", "--eval-freq", "-1", "-params", "n_steps:256", "batch_size:64", "n_epochs:1"]
