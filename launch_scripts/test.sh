@@ -2,7 +2,9 @@
 # Every test of sorting_line, from a fresh clone: installs what it needs (launch_scripts/setup.sh),
 # then runs the Rust tests and the Python/ROS integration tests. The ROS tests run inside a
 # loopback-only network namespace on a test-specific ROS_DOMAIN_ID, so no DDS traffic leaves
-# this machine and parallel runs cannot cross-talk.
+# this machine and parallel runs cannot cross-talk over the network. (Not over shared memory,
+# which namespaces do not separate: every rclpy participant in LOCALHOST mode opens Fast DDS's
+# /dev/shm port 7000, whatever its domain, besides ports derived from its domain id.)
 #
 # Usage: launch_scripts/test.sh [--rust-only] [PYTEST_ARGS...]
 set -euo pipefail
@@ -80,9 +82,19 @@ if ! unshare -n true 2>/dev/null; then
   echo "test.sh: cannot create a network namespace (unshare -n needs root); refusing to run DDS tests on the host network" >&2
   exit 1
 fi
+# rmw_fastrtps adds Fast DDS's shared-memory transport in LOCALHOST mode, and a process that dies
+# without closing its participant (the tests kill nodes, workers and scripts on purpose) leaves its
+# segments and ports in /dev/shm, which no network namespace separates: a run left ~230 MB there.
+# `fastdds shm clean` removes the ones no live process holds (it checks their locks), before and
+# after the tests, so runs neither pile them up nor start among a dead run's ports.
+shm_clean() { .venv/bin/fastdds shm clean | tr '\n' ' ' | sed 's/^/Fast DDS /; s/ $/\n/' || true; }
+shm_clean
+status=0
 unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
   python -m pytest tests/python -q -rs -p no:cacheprovider "$@"
-' test.sh "$@"
+' test.sh "$@" || status=$?
+shm_clean
+exit "$status"
