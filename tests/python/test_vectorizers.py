@@ -472,6 +472,51 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
             assert_matches_trace(episode, "A", variant, s + k, per_env[s][k], 1_000_000, f"process seed {s} env {k}")
 
 
+KEEPS_ITS_PARTICIPANT = r'''
+import multiprocessing, sys
+import gymnasium as gym
+import rclpy
+import sorting_line_gym  # noqa: F401
+from sorting_line_gym.ros import context
+
+
+def state():
+    return {"rclpy_ok": rclpy.ok(), "anchor": context._participant_anchor is not None}
+
+
+def worker(env_id, queue):
+    env = gym.make(env_id, setup="B")
+    env.reset(seed=1)
+    env.step(0)
+    env.close()
+    queue.put(state())
+
+
+if __name__ == "__main__":
+    fork = multiprocessing.get_context("fork")
+    queue = fork.Queue()
+    child = fork.Process(target=worker, args=(sys.argv[1], queue))
+    child.start()
+    in_child = queue.get(timeout=120)
+    child.join(60)
+    env = gym.make(sys.argv[1], setup="B")
+    env.reset(seed=1)
+    env.close()
+    print(json.dumps({"forked_child_after_close": in_child, "parent_after_close": state(),
+                      "child_exit": child.exitcode}))
+'''
+
+
+def test_a_forked_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp_path):
+    """In a forked worker, closing the last env neither deletes the DDS participant nor shuts
+    rclpy down (ros.context._keep_participant: deleting it while the other workers close can hang
+    for minutes in Fast DDS 2.14); elsewhere rclpy is shut down when the last env closes, so that
+    the process may fork afterwards."""
+    out = run_script(tmp_path, "keeps_participant", KEEPS_ITS_PARTICIPANT, [BASIC], timeout=180)
+    assert out == {"forked_child_after_close": {"rclpy_ok": True, "anchor": True},
+                   "parent_after_close": {"rclpy_ok": False, "anchor": False}, "child_exit": 0}
+
+
 # --------------------------------------------------------------------------------------------
 # action masks
 

@@ -14,7 +14,10 @@ An env in a multiprocessing worker (SB3's SubprocVecEnv, Gymnasium's AsyncVector
 asks the kernel for SIGTERM when the worker's parent dies: a vectorizer's workers wait on their
 command pipe, and with fork every sibling holds the parent's ends open, so no EOF ever came; a
 training script killed (or timed out) left its 15 other workers, and their leased lines, behind
-for good."""
+for good.
+
+In a forked child, the DDS participant lives as long as the process (``_keep_participant``):
+deleting it while the other workers close can hang for minutes in Fast DDS 2.14."""
 
 from __future__ import annotations
 
@@ -35,6 +38,11 @@ _rclpy_ours = False
 #: In a forked child: the pid of the parent, when rclpy (so DDS: Fast DDS's threads, sockets and
 #: locks) was live there at the fork. Set by the fork hooks below, inherited by the child.
 _forked_from_live: int | None = None
+#: Whether this process was forked (a multiprocessing worker with the fork context: SB3's
+#: SubprocVecEnv, Gymnasium's AsyncVectorEnv, the benchmark's pool); see _keep_participant.
+_in_forked_child = False
+#: In a forked child, once rclpy is up: a node never destroyed, see _keep_participant.
+_participant_anchor = None
 
 
 def _default_context_live() -> bool:
@@ -58,7 +66,12 @@ def _after_fork_in_parent() -> None:
         _forked_from_live = None
 
 
-os.register_at_fork(before=_before_fork, after_in_parent=_after_fork_in_parent)
+def _after_fork_in_child() -> None:
+    global _in_forked_child
+    _in_forked_child = True
+
+
+os.register_at_fork(before=_before_fork, after_in_parent=_after_fork_in_parent, after_in_child=_after_fork_in_child)
 
 
 def fork_error() -> BridgeError | None:
@@ -94,6 +107,29 @@ def _die_with_multiprocessing_parent() -> None:
         die_with_parent(signal.SIGTERM, parent_pid=parent.pid, keep_existing=True)
 
 
+def _keep_participant() -> None:
+    """In a forked child: a node of the bridge's own that is never destroyed, so that closing an
+    env never deletes the process's DDS participant, and rclpy is never shut down.
+
+    Why: destroying a context's last node deletes its Fast DDS participant, and that can hang for
+    minutes when other participants of the domain close at the same moment, as a vectorizer's
+    workers all do on ``close()``: rmw_fastrtps first calls ``DomainParticipant::set_listener
+    (nullptr)``, which waits for the discovery callbacks in flight, and Fast DDS 2.14 (the only
+    one rclpy's wheels have) waited so at 78 % CPU while its discovery thread, in
+    ``onReaderDiscovery``, waited for the participant's mutex (gdb stacks of a SubprocVecEnv-16
+    worker stuck 4 min in ``env.close()``; in CI an AsyncVectorEnv (fork) hung 240 s in its
+    ``close()``, with no stacks taken). Running the deletion at ``SCHED_IDLE`` priority did not
+    help (one hang in 5 runs under load, as before). A forked worker ends with ``os._exit``, so its participant is never deleted at all:
+    the others drop it when its lease expires, as for a killed process. Only forked children keep
+    their participant: elsewhere the process may fork after its envs are closed, which needs
+    rclpy shut down (``fork_error``)."""
+    global _participant_anchor
+    if _in_forked_child and _participant_anchor is None:
+        _participant_anchor = rclpy.create_node(
+            f"sorting_line_gym_keepalive_{os.getpid()}", start_parameter_services=False, enable_rosout=False
+        )
+
+
 def acquire_rclpy() -> None:
     """Initialises rclpy if nobody has; paired with :func:`release_rclpy`. Raises instead of
     blocking when this process was forked from one where rclpy was live (:func:`fork_error`)."""
@@ -104,6 +140,7 @@ def acquire_rclpy() -> None:
             _die_with_multiprocessing_parent()
             rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
             _rclpy_ours = True
+            _keep_participant()
         _rclpy_users += 1
 
 
@@ -114,6 +151,6 @@ def release_rclpy() -> None:
         return  # the inherited context is not ours to shut down here
     with _rclpy_lock:
         _rclpy_users = max(0, _rclpy_users - 1)
-        if _rclpy_users == 0 and _rclpy_ours and rclpy.ok():
+        if _rclpy_users == 0 and _rclpy_ours and rclpy.ok() and _participant_anchor is None:
             rclpy.shutdown()
             _rclpy_ours = False
