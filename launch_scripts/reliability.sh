@@ -45,7 +45,7 @@ unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
-  SORTING_LINE_SUBPROC16=1 python -m pytest tests/python/test_reliability.py tests/python/test_vectorizers.py::test_sb3_subproc_vec_env_of_16_workers_matches_the_library -q -p no:cacheprovider -rA
+  python -m pytest tests/python/test_reliability.py -q -p no:cacheprovider -rA
 ' 2>&1 | tee "$OUT/tests.log"
 
 step "Ray RLlib: PPO on 2 EnvRunners x 4 envs; a Ray cluster of two network-namespace hosts"

@@ -390,15 +390,6 @@ if __name__ == "__main__":
 '''
 
 
-@pytest.mark.skipif(
-    os.environ.get("SORTING_LINE_SUBPROC16") != "1",
-    reason="known defect (issue 13): in 2 of 5 fresh-clone runs beside a niced benchmark this test failed: once a "
-    "join-lock timeout (fixed), once a worker whose client never discovered its leased line's reset service "
-    "(BridgeTimeout: not yet discovered: .../line_12 reset service), after which SB3's forked workers keep that "
-    "worker's pipe open and the script hangs. Lost announcements that Fast DDS repairs but never matches are one "
-    "cause (launch_scripts/fastdds_profile.xml's buffers, README 'Discovery'), yet the test failed once more in a "
-    "full suite beside the benchmark after that fix; run by launch_scripts/reliability.sh until fixed",
-)
 def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
     """SB3's SubprocVecEnv with 16 worker processes, each an rclpy participant leasing a line:
     env k == `trace --seed S+k` for 20 steps. (fork: the workers share the parent's imports, which
