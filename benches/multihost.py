@@ -9,7 +9,8 @@ a "trainer" host runs a ``SortingLineVectorEnv`` over all of them (``namespace=[
 ``node="attach"``): one round trip per node per step, all in flight at once.
 
 - scaling: for 1, 2 and 4 hosts (``--hosts``), ``--round-trips`` timed steps after a warm-up:
-  round trips/s, p50/p99 latency and the trainer's CPU time per round trip, ``--rounds``
+  round trips/s, p50/p99 latency, and the CPU time per round trip of the trainer and of each
+  node (the hosts share this machine's cores, so their CPU adds to the trainer's), ``--rounds``
   interleaved rounds (the median of each figure over the rounds is reported); the target is a
   4-host round trip at most 1.5x a 1-host one (p50);
 - soak: ``--soak-ticks`` line-ticks (default 100,000) over ``--soak-hosts`` hosts (default 3) through
@@ -54,6 +55,7 @@ def measure(cfg: dict) -> dict:
         env.step(rng.integers(0, 10, size=n))
     times = []
     cpu0 = time.process_time()  # all the trainer's threads: rclpy's, Fast DDS's and the env's
+    nodes0 = [process_cpu(pid) for pid in cfg["node_pids"]]
     t0 = time.perf_counter()
     for _ in range(cfg["round_trips"]):
         actions = rng.integers(0, 10, size=n)
@@ -62,11 +64,19 @@ def measure(cfg: dict) -> dict:
         times.append(time.perf_counter() - t)
     total = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
+    nodes = [process_cpu(pid) - c for pid, c in zip(cfg["node_pids"], nodes0)]
     env.close()
     times.sort()
     return {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
             "line_ticks_per_s": round(n * len(times) / total, 1),
-            "trainer_cpu_ms": round(1e3 * cpu / len(times), 3), "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+            "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
+            "node_cpu_ms": round(1e3 * sum(nodes) / len(nodes) / len(times), 3), "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+
+
+def process_cpu(pid: int) -> float:
+    """CPU seconds (user and system, all threads) process ``pid`` has used so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def soak(cfg: dict) -> dict:
@@ -101,11 +111,12 @@ def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
     env = ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", SORTING_LINE_BIN=str(h.node_binary()))
     with netns_hosts.Hosts([*names, "trainer"]) as hosts:
         namespaces = [f"/{name}/plant" for name in names]
+        pids = []
         for name, ns in zip(names, namespaces):
             log = open(log_dir / f"node_{role}_{count}_{name}.log", "wb")
-            hosts.popen(name, [str(h.node_binary()), "node", "--setup", "A", "--lines", str(LINES), "--max-steps", "50",
-                               "--ros-args", "-r", f"__ns:={ns}"], env=env, stdout=log, stderr=subprocess.STDOUT)
-        cfg = dict(cfg, namespaces=namespaces)
+            pids += [hosts.popen(name, [str(h.node_binary()), "node", "--setup", "A", "--lines", str(LINES), "--max-steps", "50",
+                               "--ros-args", "-r", f"__ns:={ns}"], env=env, stdout=log, stderr=subprocess.STDOUT).pid]
+        cfg = dict(cfg, namespaces=namespaces, node_pids=pids)
         r = subprocess.run(hosts.argv("trainer", [sys.executable, os.path.abspath(__file__), "--role", role,
                                                   json.dumps(cfg)]),
                            env=env, capture_output=True, text=True, timeout=3600)
@@ -175,11 +186,11 @@ def main() -> int:
     for k in args.hosts:
         row = {key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0] if key not in ("hosts", "lines")}
         rows.append(dict(row, hosts=k, lines=runs[k][0]["lines"], rounds=[r["p50_ms"] for r in runs[k]]))
-    print(f"\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip | p50 of each round (ms) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(f"\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip | each node's CPU ms per round trip | p50 of each round (ms) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['hosts']} | {r['lines']} | {r['round_trips_per_s']:,.0f} | {r['line_ticks_per_s']:,.0f} | "
-              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
+              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | {r['node_cpu_ms']:.2f} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
     by = {r["hosts"]: r for r in rows}
     if 1 in by and max(by) > 1:
         ratio = by[max(by)]["p50_ms"] / by[1]["p50_ms"]
