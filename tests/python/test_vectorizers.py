@@ -167,6 +167,7 @@ import sorting_line_gym
 
 env_id, setup, seed, steps, n = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
 actions = json.loads(sys.argv[6])
+context = sys.argv[7] if len(sys.argv) > 7 else None
 
 
 def make():
@@ -174,7 +175,7 @@ def make():
 
 
 if __name__ == "__main__":
-    envs = AsyncVectorEnv([make] * n)  # the default context: fork on Linux; the dummy env starts nothing
+    envs = AsyncVectorEnv([make] * n, context=context)  # None: fork on Linux; the dummy env starts nothing
     obs, _ = envs.reset(seed=[seed + k for k in range(n)])
     episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
     for t in range(steps):
@@ -195,6 +196,20 @@ def test_async_vector_env_with_the_default_fork_context_matches_the_library(tmp_
     assert out["truncated"] == [True] * n
     for k, episode in enumerate(out["episodes"]):
         assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"worker {k}")
+
+
+@pytest.mark.parametrize("context", ["forkserver", "spawn"])
+def test_async_vector_env_with_the_forkserver_and_spawn_contexts_matches_the_library(tmp_path, context):
+    """AsyncVectorEnv with the other two start methods (2 envs, 30 steps, env k == `trace --seed
+    S+k`). With forkserver a worker's parent, for the kernel, is the fork server: the parent-death
+    set-up once took that for a dead parent and killed every such worker at its first reset."""
+    n, steps, seed, variant = 2, 30, 4200, "basic"
+    per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
+    by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
+    out = run_script(tmp_path, f"async_{context}", ASYNC_DEFAULT_CONTEXT,
+                     [BASIC, "B", seed, steps, n, json.dumps(by_step), context], timeout=120)
+    for k, episode in enumerate(out["episodes"]):
+        assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"{context} worker {k}")
 
 
 FORK_WITH_LIVE_CONTEXT = r'''
@@ -297,8 +312,9 @@ def worker(env_id, pipe):
     pipe.recv()  # as SB3's and Gymnasium's workers wait for their next command
 
 if __name__ == "__main__":
-    ours, theirs = multiprocessing.get_context("fork").Pipe()
-    child = multiprocessing.get_context("fork").Process(target=worker, args=(sys.argv[1], theirs))
+    context = multiprocessing.get_context(sys.argv[2])
+    ours, theirs = context.Pipe()
+    child = context.Process(target=worker, args=(sys.argv[1], theirs))
     child.start()
     assert ours.poll(120), "the worker's env did not connect within 120 s"
     ours.recv()
@@ -307,14 +323,16 @@ if __name__ == "__main__":
 '''
 
 
-def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path):
+@pytest.mark.parametrize("start", ["fork", "forkserver", "spawn"])
+def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path, start):
     """A multiprocessing worker with a connected env, whose parent is killed with SIGKILL (a
     training script timed out, or killed by its user), must not live on: it held the parent's
-    pipe, so nothing would ever wake it, and its leased line stayed leased."""
+    pipe, so nothing would ever wake it, and its leased line stayed leased. With forkserver the
+    signal comes through the fork server, which exits when the parent is gone."""
     script = tmp_path / "orphan.py"
     script.write_text(ORPHANED_WORKER)
     env = script_environment()
-    p = subprocess.Popen([sys.executable, str(script), BASIC], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, str(script), BASIC, start], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=env)
     worker = None
     try:

@@ -42,11 +42,12 @@ def private_namespace() -> str:
     return f"/sorting_line_gym/p{os.getpid()}_{next(_spawn_counter)}"
 
 
-def die_with_parent(sig: int, parent_pid: int | None = None, keep_existing: bool = False) -> None:
+def die_with_parent(sig: int, keep_existing: bool = False) -> None:
     """Asks the kernel to send ``sig`` to this process when its parent dies (Linux
-    ``PR_SET_PDEATHSIG``; the signal follows the thread that started this process). With
-    ``parent_pid``, sends it at once if that parent is gone already; ``keep_existing`` leaves a
-    signal the process chose before in place. Does nothing elsewhere than on Linux."""
+    ``PR_SET_PDEATHSIG``; the parent is the thread that started this process, so a process that
+    outlives a parent that already died before this call gets nothing: callers check that
+    themselves). ``keep_existing`` leaves a signal the process chose before in place. Does nothing
+    elsewhere than on Linux."""
     if not sys.platform.startswith("linux"):
         return
     import ctypes
@@ -57,8 +58,6 @@ def die_with_parent(sig: int, parent_pid: int | None = None, keep_existing: bool
     libc.prctl(PR_GET_PDEATHSIG, ctypes.byref(current))
     if not (keep_existing and current.value):
         libc.prctl(PR_SET_PDEATHSIG, sig)
-    if parent_pid is not None and os.getppid() != parent_pid:
-        os.kill(os.getpid(), sig)
 
 
 class NodeProcess:

@@ -99,12 +99,37 @@ def check_not_forked() -> None:
 def _die_with_multiprocessing_parent() -> None:
     """In a multiprocessing child: SIGTERM when the parent dies (the kernel ties it to the thread
     that started the child, which is the main thread in SB3's, Gymnasium's and the benchmark's
-    pools), unless the process chose a parent-death signal itself (the benchmark's pool: SIGKILL)."""
+    pools), unless the process chose a parent-death signal itself (the benchmark's pool: SIGKILL).
+
+    With the forkserver start method the child's parent in the kernel's eyes is the fork server,
+    not the process that asked for the child; the fork server exits when that process is gone, so
+    the signal still comes. The check below must tell that case from a parent that died before
+    the signal was asked for (the child then belongs to init or a subreaper, and no signal will
+    ever come): it once took the fork server for a dead parent and killed every forkserver worker
+    at its first reset."""
     import multiprocessing
 
     parent = multiprocessing.parent_process()
-    if parent is not None:
-        die_with_parent(signal.SIGTERM, parent_pid=parent.pid, keep_existing=True)
+    if parent is None:
+        return
+    die_with_parent(signal.SIGTERM, keep_existing=True)
+    ppid = os.getppid()
+    if ppid == parent.pid:
+        return
+    if _is_fork_server(ppid):
+        if parent.is_alive():  # with forkserver the sentinel is the server's: closed once the parent is gone
+            return
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
+def _is_fork_server(pid: int) -> bool:
+    """Whether ``pid`` is a multiprocessing fork server (its command line runs
+    ``multiprocessing.forkserver``'s main)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return b"multiprocessing.forkserver" in f.read()
+    except OSError:
+        return False
 
 
 def _keep_participant() -> None:
