@@ -94,7 +94,8 @@ unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
-  python -m pytest tests/python -q -rs -p no:cacheprovider "$@"
+  # --durations: where the minutes of the suite go, in every CI log (a run must stay well under 20 min).
+  python -m pytest tests/python -q -rs -p no:cacheprovider --durations=12 "$@"
 ' test.sh "$@" || status=$?
 shm_clean
 exit "$status"
