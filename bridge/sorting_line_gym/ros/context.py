@@ -116,9 +116,10 @@ def _die_with_multiprocessing_parent() -> None:
     ppid = os.getppid()
     if ppid == parent.pid:
         return
-    if _is_fork_server(ppid):
-        if parent.is_alive():  # with forkserver the sentinel is the server's: closed once the parent is gone
-            return
+    # is_alive() reads the parent's sentinel, a pipe whose write end only the real parent keeps
+    # with forkserver (with fork, siblings inherit it too, hence not asked there).
+    if _is_fork_server(ppid) and parent.is_alive():
+        return
     os.kill(os.getpid(), signal.SIGTERM)
 
 
