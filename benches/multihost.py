@@ -44,6 +44,7 @@ LINES = 16
 def measure(cfg: dict) -> dict:
     """In the trainer host: round trips over the nodes of ``cfg["namespaces"]``."""
     import numpy as np
+    from node_lockstep import cpu_seconds
     from sorting_line_gym import SortingLineVectorEnv
 
     n = LINES * len(cfg["namespaces"])
@@ -55,7 +56,7 @@ def measure(cfg: dict) -> dict:
         env.step(rng.integers(0, 10, size=n))
     times = []
     cpu0 = time.process_time()  # all the trainer's threads: rclpy's, Fast DDS's and the env's
-    nodes0 = [process_cpu(pid) for pid in cfg["node_pids"]]
+    nodes0 = [cpu_seconds(pid) for pid in cfg["node_pids"]]
     t0 = time.perf_counter()
     for _ in range(cfg["round_trips"]):
         actions = rng.integers(0, 10, size=n)
@@ -64,19 +65,13 @@ def measure(cfg: dict) -> dict:
         times.append(time.perf_counter() - t)
     total = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
-    nodes = [process_cpu(pid) - c for pid, c in zip(cfg["node_pids"], nodes0)]
+    nodes = [cpu_seconds(pid) - c for pid, c in zip(cfg["node_pids"], nodes0)]
     env.close()
     times.sort()
     return {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
             "line_ticks_per_s": round(n * len(times) / total, 1),
             "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
             "node_cpu_ms": round(1e3 * sum(nodes) / len(nodes) / len(times), 3), "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
-
-
-def process_cpu(pid: int) -> float:
-    """CPU seconds (user and system, all threads) process ``pid`` has used so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def soak(cfg: dict) -> dict:
