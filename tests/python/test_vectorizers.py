@@ -158,7 +158,7 @@ def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, act
 # fork
 
 
-ASYNC_DEFAULT_CONTEXT = r'''
+ASYNC_VECTOR_ENV = r'''
 import sys
 import time
 import gymnasium as gym
@@ -192,7 +192,7 @@ def test_async_vector_env_with_the_default_fork_context_matches_the_library(tmp_
     n, steps, seed, variant = 4, 200, 4100, "basic"
     per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
     by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
-    out = run_script(tmp_path, "async_fork", ASYNC_DEFAULT_CONTEXT, [BASIC, "B", seed, steps, n, json.dumps(by_step)])
+    out = run_script(tmp_path, "async_fork", ASYNC_VECTOR_ENV, [BASIC, "B", seed, steps, n, json.dumps(by_step)])
     assert out["truncated"] == [True] * n
     for k, episode in enumerate(out["episodes"]):
         assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"worker {k}")
@@ -206,7 +206,7 @@ def test_async_vector_env_with_the_forkserver_and_spawn_contexts_matches_the_lib
     n, steps, seed, variant = 2, 30, 4200, "basic"
     per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
     by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
-    out = run_script(tmp_path, f"async_{context}", ASYNC_DEFAULT_CONTEXT,
+    out = run_script(tmp_path, f"async_{context}", ASYNC_VECTOR_ENV,
                      [BASIC, "B", seed, steps, n, json.dumps(by_step), context], timeout=120)
     for k, episode in enumerate(out["episodes"]):
         assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"{context} worker {k}")
