@@ -130,3 +130,37 @@ def test_decoded_arrays_own_their_memory():
         assert not np.shares_memory(value, received) and not np.shares_memory(value, second.reward), key
     first.reward[:] = -1.0
     assert (second.reward != -1.0).all()
+
+
+def test_rows_of_several_nodes_read_as_one_batch():
+    """The fleet's path: each node's message loaded into a row of one array, the rows read as one
+    batch, equal to the messages read one by one and concatenated in row order."""
+    rng = np.random.default_rng(11)
+    n, nodes = 3, 4
+    codec = BatchCodec(LineStates, n)
+    messages = [random_states(rng, n) for _ in range(nodes)]
+    rows = codec.records(nodes)
+    for k in reversed(range(nodes)):  # the order of arrival does not matter
+        assert codec.load(rows, k, serialize_message(messages[k]))
+    batch = codec.fields(rows)
+    assert batch.stamp_ns == from_message(messages[0]).stamp_ns
+    for name, _ in codec.sequences:
+        want = np.concatenate([getattr(from_message(m), name) for m in messages])
+        got = getattr(batch, name)
+        assert got.dtype == want.dtype, name
+        np.testing.assert_array_equal(got, want, err_msg=name)
+        assert got.flags.writeable and not np.shares_memory(got, rows), name
+
+
+def test_a_row_takes_what_fits_its_lengths_and_nothing_else():
+    rng = np.random.default_rng(12)
+    codec = BatchCodec(LineStates, 4)
+    rows = codec.records(2)
+    framed = random_states(rng, 4, frame_id="belt")  # other layout, same lengths: through rclpy
+    assert codec.load(rows, 1, serialize_message(framed))
+    assert_same(codec.fields(rows[1:]), framed)
+    before = rows.tobytes()
+    for message in (random_states(rng, 5), random_states(rng, 4, lengths={"reward": 3})):
+        assert not codec.load(rows, 0, serialize_message(message))
+        assert not codec.assign(rows, 0, from_message(message))
+    assert rows.tobytes() == before

@@ -6,8 +6,9 @@ Why not rclpy's own conversion: turning a 16-line ``LineStates`` into a Python m
 in a round trip whose whole budget at 16 lines is a few hundred microseconds
 (benches/bridge_throughput.py). Both batch messages are a ``std_msgs/Header`` followed by sequences
 of primitives of one length N, so for a given N (and an empty ``frame_id``, which is what the node
-and this bridge send) their CDR encoding has fixed offsets: one numpy structured dtype reads the
-whole message in a microsecond, as views on the received bytes, or writes it.
+and this bridge send) their CDR encoding has fixed offsets: one numpy structured dtype lays out the
+whole message, so reading one is a copy of its bytes into a row of records (a vector env over
+several nodes keeps one row a node and reads the rows as one batch), and writing one the reverse.
 
 The codec changes speed, never results: a message that does not fit the layout (another length, a
 ``frame_id``, another encoding) is handed to rclpy's deserialisation instead, and the tests compare
@@ -102,7 +103,7 @@ class BatchCodec:
         # and NUL, and every sequence's count.
         fixed = [range(8, 13)] + [range(offsets[i], offsets[i] + 4) for i, name in enumerate(names) if name.endswith("__count")]
         self._fixed_at = np.array([len(CDR_LE) + i for r in fixed for i in r])
-        self._fixed = np.frombuffer(CDR_LE + template.tobytes(), dtype=np.uint8)[self._fixed_at]
+        self._fixed = np.frombuffer(CDR_LE + template.tobytes(), dtype=np.uint8)[self._fixed_at].tobytes()
         self._sizes = (self.size, _align(self.size, 4))
         self._names = [name for name, _ in self.sequences]
 
@@ -111,18 +112,55 @@ class BatchCodec:
         """Whether ``raw`` is this layout: little-endian CDR, the size, an empty frame_id, the counts."""
         if len(raw) not in self._sizes or raw[:2] != CDR_LE[:2]:
             return False
-        return bool((np.frombuffer(raw, dtype=np.uint8)[self._fixed_at] == self._fixed).all())
+        return np.frombuffer(raw, dtype=np.uint8)[self._fixed_at].tobytes() == self._fixed
 
     def decode(self, raw: bytes) -> SimpleNamespace:
         """The message as a namespace of numpy arrays (one per sequence) plus ``stamp_ns`` of its
-        header; through rclpy when ``raw`` does not fit. The arrays are writable views on a copy
-        of ``raw`` owned by this message alone, so they can be handed out without copying."""
-        if not self.fits(raw):
+        header; through rclpy when ``raw`` does not fit. The arrays are copies owned by this
+        message alone, so they can be handed out."""
+        rows = self.records(1)
+        if not self.load(rows, 0, raw):
             return from_message(deserialize_message(raw, self.msg_type))
-        records = np.frombuffer(bytearray(raw), dtype=self.dtype, count=1, offset=len(CDR_LE))
-        fields = {name: records[name][0] for name in self._names}
-        stamp_ns = int(records["header_sec"][0]) * 1_000_000_000 + int(records["header_nanosec"][0])
-        return SimpleNamespace(stamp_ns=stamp_ns, **fields)
+        return self.fields(rows)
+
+    # -- records: messages kept as rows of one array -------------------------------------------
+    # The step loop keeps each node's newest state batch as a row of this layout and copies rows
+    # as bytes: a few microseconds a node, where building a namespace of arrays per message and
+    # concatenating them for several nodes cost tens (benches/multihost.py).
+
+    def records(self, count: int) -> np.ndarray:
+        """``count`` rows of this layout, each an empty message of the codec's lengths."""
+        return np.frombuffer(bytearray(self._template.tobytes() * count), dtype=self.dtype)
+
+    def load(self, rows: np.ndarray, k: int, raw: bytes) -> bool:
+        """Copies the message ``raw`` into row k of ``rows``; through rclpy when it does not fit the
+        layout. False, and the row untouched, when its sequences are not the codec's lengths."""
+        if self.fits(raw):
+            rows.view(np.uint8).reshape(len(rows), -1)[k] = np.frombuffer(raw, np.uint8, self.dtype.itemsize, len(CDR_LE))
+            return True
+        return self.assign(rows, k, from_message(deserialize_message(raw, self.msg_type)))
+
+    def assign(self, rows: np.ndarray, k: int, batch: SimpleNamespace) -> bool:
+        """Writes a batch as :func:`from_message` gives it into row k of ``rows``; False, and the
+        row untouched, when its sequences are not the codec's lengths."""
+        if any(len(getattr(batch, name)) != self.lengths[name] for name in self._names):
+            return False
+        row = rows[k : k + 1]
+        row[...] = self._template
+        row["header_sec"], row["header_nanosec"] = divmod(batch.stamp_ns, 1_000_000_000)
+        for name in self._names:
+            row[name] = getattr(batch, name)
+        return True
+
+    def fields(self, rows: np.ndarray) -> SimpleNamespace:
+        """Rows as one batch, as :meth:`decode` gives one message: per sequence, the entries of
+        row 0, then of row 1, ... (copies owned by the batch), and ``stamp_ns`` of row 0's header."""
+        stamp_ns = int(rows["header_sec"][0]) * 1_000_000_000 + int(rows["header_nanosec"][0])
+        # One row: one copy of it (as bytes: numpy copies a structured array field by field, ten
+        # times slower), every field a view on that copy, as reshape does not copy a contiguous
+        # field. Several rows: reshape copies each field, whose entries interleave across rows.
+        own = rows.view(np.uint8).copy().view(self.dtype) if len(rows) == 1 else rows
+        return SimpleNamespace(stamp_ns=stamp_ns, **{name: own[name].reshape(-1) for name in self._names})
 
     # -- writing -------------------------------------------------------------------------------
     def encode(self, **values: Any) -> bytes:

@@ -21,9 +21,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from sorting_line_interfaces.msg import LineStates
+
 from ..line.errors import BridgeError, BridgeTimeout
 from ..line.options import LineOptions
 from .bank import LineBank
+from .batch_codec import BatchCodec
 from .waits import Waiter
 
 #: How long each pending node's executor is spun per turn while resets of several nodes are in
@@ -66,6 +69,10 @@ class NodeFleet:
         self.banks = [LineBank(replace(options, namespace=ns), lines=lines_per_node, batch=True) for ns in namespaces]
         self._waiter: Waiter | None = None
         self.step_timeout = options.step_timeout
+        #: Each node's newest state batch, gathered as one row a node for the step's result.
+        self._states = BatchCodec(LineStates, lines_per_node)
+        self._rows = self._states.records(len(namespaces))
+        self._row_bytes = self._rows.view(np.uint8).reshape(len(namespaces), -1)
 
     def __len__(self) -> int:
         return self.lines_per_node * len(self.banks)
@@ -152,17 +159,11 @@ class NodeFleet:
             self.step_timeout,
             lambda: "; ".join(f"{self.where(b)}: {self.banks[b].batch.describe_wait()}" for b in sorted(pending)),
         )
-        return merge([bank.batch.position for bank in self.banks])
+        for b, bank in enumerate(self.banks):
+            self._row_bytes[b] = bank.batch.position_bytes
+        return self._states.fields(self._rows)
 
     def close(self) -> None:
         for bank in self.banks:
             bank.close()
 
-
-def merge(batches: list[SimpleNamespace]) -> SimpleNamespace:
-    """State batches of several nodes as one: per-line arrays concatenated in node order."""
-    first = vars(batches[0])
-    return SimpleNamespace(**{
-        key: np.concatenate([vars(b)[key] for b in batches]) if isinstance(value, np.ndarray) else value
-        for key, value in first.items()
-    })

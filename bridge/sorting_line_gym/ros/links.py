@@ -199,12 +199,12 @@ class BatchLink:
     """``batch/cmd`` and ``batch/state`` of a node: every line's command in one message and every
     line's state in one message of arrays, so a round trip over N lines costs two messages, not 2N.
 
-    Both messages cross as bytes, read and written by :mod:`.batch_codec` as numpy records:
-    a state batch is a namespace of arrays (entry k = line k). Where the lines stand is the newest
-    batch that showed them (``position``): its stamps are what the next command answers, and its
-    episodes and steps are compared whole with the next batch's. Nothing is unpacked per line in
-    the step loop; that keeps a 16-line round trip close to a one-line one
-    (benches/bridge_throughput.py).
+    Both messages cross as bytes, read and written by :mod:`.batch_codec` as numpy records.
+    Where the lines stand is the newest batch that showed them, kept as one record
+    (``position_bytes``; as a namespace of arrays, entry k = line k, ``position``): its stamps are
+    what the next command answers, and its episodes and steps are compared whole with the next
+    batch's. Nothing is unpacked per line in the step loop; that keeps a 16-line round trip close
+    to a one-line one (benches/bridge_throughput.py).
     """
 
     def __init__(self, node: Node, namespace: str, links: list[LineLink]):
@@ -224,8 +224,10 @@ class BatchLink:
         self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda raw: self.inbox.append(raw), QOS, raw=True)
         #: Lines no reset has started yet: they cannot be stepped.
         self.unstarted = set(range(n))
-        #: The newest batch showing every line's current tick (after a reset: the reply's states).
-        self.position: SimpleNamespace | None = None
+        #: The newest batch showing every line's current tick (after a reset: the reply's states),
+        #: and where each received batch is read: two records that swap when one is taken.
+        self._position = self._states.records(1)
+        self._incoming = self._states.records(1)
         self._next_step = None
         self._speeds = np.array(SPEEDS)
 
@@ -256,7 +258,9 @@ class BatchLink:
         if response is None or not response.success:
             raise BridgeError(f"{self.reset_name} refused: {getattr(response, 'message', 'no response')}")
         # The reply carries every line's state after the reset; lines not reset are where they were.
-        b = self.position = from_message(response.states)
+        b = from_message(response.states)
+        if not self._states.assign(self._position, 0, b):
+            raise BridgeError(f"{self.reset_name} replied with the states of {len(b.step)} lines; this bridge drives {len(self.links)}")
         self.unstarted.difference_update(seeds)
         results = {}
         for k in seeds:
@@ -271,38 +275,48 @@ class BatchLink:
             k = min(self.unstarted)
             raise BridgeError(f"{self.links[k].namespace}: step() before reset()")
 
+    @property
+    def position(self) -> SimpleNamespace:
+        """Where the lines stand, as a namespace of arrays (entry k = line k) the caller owns."""
+        return self._states.fields(self._position)
+
+    @property
+    def position_bytes(self) -> np.ndarray:
+        """Where the lines stand, as the record's bytes (valid until the next batch is taken)."""
+        return self._position.view(np.uint8)
+
     def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
-        """Answers every line's current tick (the stamps of ``position``)."""
-        p = self.position
-        fields = {"stamp_sec": p.stamp_sec, "stamp_nanosec": p.stamp_nanosec, "speeds": self._speeds[speed_indices]}
+        """Answers every line's current tick (the stamps of the position)."""
+        p = self._position
+        fields = {"stamp_sec": p["stamp_sec"][0], "stamp_nanosec": p["stamp_nanosec"][0], "speeds": self._speeds[speed_indices]}
         if self.advanced:
             fields["modes"] = modes
-        self._next_step = p.step + 1
+        self._next_step = p["step"][0] + 1
         self.cmd_pub.publish(self._commands.encode(**fields))
 
-    def _find(self, step: np.ndarray) -> SimpleNamespace | None:
-        """The first batch in the inbox showing every line in its current episode at ``step``;
-        older batches are dropped."""
+    def _advance(self, step: np.ndarray) -> bool:
+        """Makes the first batch in the inbox showing every line in its current episode at
+        ``step`` the position; older batches are dropped. False when none is there yet."""
         _drain(self.state_sub, self.inbox)
-        episode = self.position.episode
+        episode = self._position["episode"][0]
+        incoming = self._incoming
         while self.inbox:
-            batch = self._states.decode(self.inbox.popleft())
-            if len(batch.step) == len(self.links) and (batch.episode == episode).all() and (batch.step == step).all():
-                return batch
-            for link, ours, seen in zip(self.links, episode.tolist(), batch.episode.tolist()):
-                check_not_taken_over(link.namespace, ours, seen)
-        return None
+            if not self._states.load(incoming, 0, self.inbox.popleft()):
+                continue  # not a batch of this many lines: not what this bridge drives
+            seen = incoming["episode"][0]
+            if (seen == episode).all() and (incoming["step"][0] == step).all():
+                self._position, self._incoming = incoming, self._position
+                return True
+            for link, ours, theirs in zip(self.links, episode.tolist(), seen.tolist()):
+                check_not_taken_over(link.namespace, ours, theirs)
+        return False
 
     def saw_current_ticks(self) -> bool:
         """Whether a batch showed every line at its current tick (the handshake after a reset)."""
-        return self._find(self.position.step) is not None
+        return self._advance(self._position["step"][0].copy())
 
     def take_next_states(self) -> bool:
-        batch = self._find(self._next_step)
-        if batch is None:
-            return False
-        self.position = batch
-        return True
+        return self._advance(self._next_step)
 
     def describe_wait(self) -> str:
         p, n = self.position, len(self.links)
