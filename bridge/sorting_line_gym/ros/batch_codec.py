@@ -98,7 +98,8 @@ class BatchCodec:
         template["header_frame_id_len"] = 1
         for name, count in self.lengths.items():
             template[f"{name}__count"] = count
-        self._template = template
+        #: An empty message of the codec's lengths, as bytes: every record starts as a copy of it.
+        self._template = template.tobytes()
         # The bytes that must be as in the template for a message to fit: the frame_id's length
         # and NUL, and every sequence's count.
         fixed = [range(8, 13)] + [range(offsets[i], offsets[i] + 4) for i, name in enumerate(names) if name.endswith("__count")]
@@ -130,13 +131,13 @@ class BatchCodec:
 
     def records(self, count: int) -> np.ndarray:
         """``count`` rows of this layout, each an empty message of the codec's lengths."""
-        return np.frombuffer(bytearray(self._template.tobytes() * count), dtype=self.dtype)
+        return np.frombuffer(bytearray(self._template * count), dtype=self.dtype)
 
     def load(self, rows: np.ndarray, k: int, raw: bytes) -> bool:
         """Copies the message ``raw`` into row k of ``rows``; through rclpy when it does not fit the
         layout. False, and the row untouched, when its sequences are not the codec's lengths."""
         if self.fits(raw):
-            rows.view(np.uint8).reshape(len(rows), -1)[k] = np.frombuffer(raw, np.uint8, self.dtype.itemsize, len(CDR_LE))
+            row_bytes(rows)[k] = np.frombuffer(raw, np.uint8, self.dtype.itemsize, len(CDR_LE))
             return True
         return self.assign(rows, k, from_message(deserialize_message(raw, self.msg_type)))
 
@@ -145,8 +146,8 @@ class BatchCodec:
         row untouched, when its sequences are not the codec's lengths."""
         if any(len(getattr(batch, name)) != self.lengths[name] for name in self._names):
             return False
+        row_bytes(rows)[k] = np.frombuffer(self._template, np.uint8)
         row = rows[k : k + 1]
-        row[...] = self._template
         row["header_sec"], row["header_nanosec"] = divmod(batch.stamp_ns, 1_000_000_000)
         for name in self._names:
             row[name] = getattr(batch, name)
@@ -156,19 +157,25 @@ class BatchCodec:
         """Rows as one batch, as :meth:`decode` gives one message: per sequence, the entries of
         row 0, then of row 1, ... (copies owned by the batch), and ``stamp_ns`` of row 0's header."""
         stamp_ns = int(rows["header_sec"][0]) * 1_000_000_000 + int(rows["header_nanosec"][0])
-        # One row: one copy of it (as bytes: numpy copies a structured array field by field, ten
-        # times slower), every field a view on that copy, as reshape does not copy a contiguous
-        # field. Several rows: reshape copies each field, whose entries interleave across rows.
-        own = rows.view(np.uint8).copy().view(self.dtype) if len(rows) == 1 else rows
+        # One row: one copy of it (as bytes), every field a view on that copy, as reshape does
+        # not copy a contiguous field. Several rows: reshape copies each field, whose entries
+        # interleave across rows.
+        own = row_bytes(rows).copy().view(self.dtype).reshape(1) if len(rows) == 1 else rows
         return SimpleNamespace(stamp_ns=stamp_ns, **{name: own[name].reshape(-1) for name in self._names})
 
     # -- writing -------------------------------------------------------------------------------
     def encode(self, **values: Any) -> bytes:
         """The serialised message with the given sequences (header stamp zero, empty frame_id)."""
-        record = self._template.copy()
+        record = self.records(1)  # from the template's bytes: a structured copy leaves the padding undefined
         for name, value in values.items():
             record[name] = value
         return CDR_LE + record.tobytes()
+
+
+def row_bytes(rows: np.ndarray) -> np.ndarray:
+    """Records as a (rows, bytes) uint8 array on the same memory: rows are copied as bytes, which
+    numpy does ten times faster than a structured copy (field by field, padding left undefined)."""
+    return rows.view(np.uint8).reshape(len(rows), -1)
 
 
 def from_message(message) -> SimpleNamespace:

@@ -26,7 +26,7 @@ from sorting_line_interfaces.msg import LineStates
 from ..line.errors import BridgeError, BridgeTimeout
 from ..line.options import LineOptions
 from .bank import LineBank
-from .batch_codec import BatchCodec
+from .batch_codec import BatchCodec, row_bytes
 from .waits import Waiter
 
 #: How long each pending node's executor is spun per turn while resets of several nodes are in
@@ -72,7 +72,7 @@ class NodeFleet:
         #: Each node's newest state batch, gathered as one row a node for the step's result.
         self._states = BatchCodec(LineStates, lines_per_node)
         self._rows = self._states.records(len(namespaces))
-        self._row_bytes = self._rows.view(np.uint8).reshape(len(namespaces), -1)
+        self._row_bytes = row_bytes(self._rows)
 
     def __len__(self) -> int:
         return self.lines_per_node * len(self.banks)

@@ -24,7 +24,7 @@ from sorting_line_interfaces.srv import ResetLine, ResetLines
 
 from ..line.errors import BridgeError
 from ..line.vocabulary import SPEEDS  # a speed index i commands SPEEDS[i]
-from .batch_codec import BatchCodec, from_message
+from .batch_codec import BatchCodec, from_message, row_bytes
 
 #: The node's QoS for commands and state.
 QOS = QoSProfile(
@@ -283,7 +283,7 @@ class BatchLink:
     @property
     def position_bytes(self) -> np.ndarray:
         """Where the lines stand, as the record's bytes (valid until the next batch is taken)."""
-        return self._position.view(np.uint8)
+        return row_bytes(self._position)[0]
 
     def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
         """Answers every line's current tick (the stamps of the position)."""
