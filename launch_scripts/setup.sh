@@ -27,6 +27,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+source "$ROOT/launch_scripts/jobs.sh"
 
 VENV="$ROOT/.venv"
 STATE="$VENV/.sorting_line"
@@ -276,16 +277,11 @@ install_bridge() {
 # The release build needs nothing of steps 1-4, and they mostly wait on downloads and CMake while
 # it mostly computes: it starts first, in the background (its output kept until step 5), which
 # takes minutes off a fresh set-up. An exit before step 5 takes it down.
-CARGO_PID=""
-CARGO_LOG=""
 start_rust() {
   [[ $CARGO == 1 ]] || return 0
   command -v cargo >/dev/null 2>&1 || die "cargo not found: install the Rust toolchain (rustup) first"
-  CARGO_LOG="$(mktemp /tmp/sorting_line_cargo.XXXXXX.log)"
   say "cargo: cargo build --release (in the background, beside the steps below)"
-  cargo build --release --manifest-path "$ROOT/Cargo.toml" >"$CARGO_LOG" 2>&1 &
-  CARGO_PID=$!
-  trap '[[ -n "$CARGO_PID" ]] && kill "$CARGO_PID" 2>/dev/null; rm -f "$CARGO_LOG"' EXIT
+  job_start cargo cargo build --release --manifest-path "$ROOT/Cargo.toml"
 }
 
 build_rust() {
@@ -293,11 +289,7 @@ build_rust() {
     say "cargo: skipped (--no-cargo)"
     return
   fi
-  local ok=0
-  wait "$CARGO_PID" || ok=$?
-  CARGO_PID=""
-  cat "$CARGO_LOG"
-  [[ $ok == 0 ]] || die "cargo build --release failed (its output is above)"
+  job_join cargo "[setup] cargo build --release"
   say "cargo: release build done"
 }
 

@@ -10,6 +10,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+source launch_scripts/jobs.sh
 
 RUST_ONLY=0
 if [[ "${1:-}" == "--rust-only" ]]; then RUST_ONLY=1; shift; fi
@@ -21,21 +22,12 @@ bash launch_scripts/setup.sh
 
 # The real ros2 CLI for tests/python/test_ros2cli.py: built (or found in its cache) here, outside the
 # test network namespace, because it needs PyPI; in the background, next to the Rust tests.
-ROS2CLI_LOG="$(mktemp /tmp/sorting_line_ros2cli.XXXXXX.log)"
-ROS2CLI_PID=""
-if [[ $RUST_ONLY == 0 ]]; then
-  .venv/bin/python tests/python/ros2_cli.py --build >"$ROS2CLI_LOG" 2>&1 &
-  ROS2CLI_PID=$!
-fi
-
 # Ray RLlib for tests/python/test_rllib.py (issue 15): ~1 min warm, more cold, mostly download, so
 # also in the background next to the Rust tests; the Python tests start once it is in (pip must not
 # write into the venv while they import from it).
-RLLIB_LOG="$(mktemp /tmp/sorting_line_rllib.XXXXXX.log)"
-RLLIB_PID=""
 if [[ $RUST_ONLY == 0 ]]; then
-  bash launch_scripts/setup.sh --rllib --no-cargo >"$RLLIB_LOG" 2>&1 &
-  RLLIB_PID=$!
+  job_start ros2cli .venv/bin/python tests/python/ros2_cli.py --build
+  job_start rllib bash launch_scripts/setup.sh --rllib --no-cargo
 fi
 
 step "Rust formatting (rustfmt.toml)"
@@ -51,23 +43,11 @@ cargo test --release --locked
 [[ $RUST_ONLY == 1 ]] && exit 0
 
 step "Ray RLlib for the RLlib tests"
-if ! wait "$RLLIB_PID"; then
-  cat "$RLLIB_LOG" >&2
-  echo "test.sh: installing Ray RLlib (setup.sh --rllib, launch_scripts/requirements-rllib.txt) failed" >&2
-  exit 1
-fi
-cat "$RLLIB_LOG"
-rm -f "$RLLIB_LOG"
+job_join rllib "test.sh: installing Ray RLlib (setup.sh --rllib, launch_scripts/requirements-rllib.txt)"
 export SORTING_LINE_RLLIB=1
 
 step "ros2 CLI for the CLI tests"
-if ! wait "$ROS2CLI_PID"; then
-  cat "$ROS2CLI_LOG" >&2
-  echo "test.sh: building the ros2 CLI venv from shared/tools/ros2cli failed" >&2
-  exit 1
-fi
-cat "$ROS2CLI_LOG"
-rm -f "$ROS2CLI_LOG"
+job_join ros2cli "test.sh: building the ros2 CLI venv from shared/tools/ros2cli"
 
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
