@@ -56,11 +56,11 @@ def joining_graph(timeout: float):
                 break
             except BlockingIOError:
                 now = time.monotonic()
-                current = _holder(path)
+                current = os.pread(f.fileno(), 64, 0)  # "pid time", as the holder wrote it
                 if current != holder:
                     holder, since = current, now  # the lock changed hands: the queue moves
                 elif now - since > timeout:
-                    pid = (holder or "?").split(" ")[0] or "?"
+                    pid = holder.decode(errors="replace").split(" ")[0] or "?"
                     raise BridgeTimeout(
                         f"timed out after {timeout:g} s waiting for other environments of this host to join "
                         f"the DDS graph: pid {pid} has held the lock (file {path}) for {now - since:.0f} s"
@@ -75,10 +75,3 @@ def joining_graph(timeout: float):
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
 
-
-def _holder(path: Path) -> str | None:
-    """Who holds (or last held) the join lock: "pid time" as the holder wrote it."""
-    try:
-        return path.read_text()
-    except OSError:
-        return None
