@@ -68,9 +68,11 @@ class Waiter:
             self._wait_set = _rclpy.WaitSet(len(handles), 0, 0, 0, 0, 0, self.executor.context.handle)
             self._wait_handles = handles
         wait_set = self._wait_set
-        while not done():
+        while True:  # done() was just checked: wait first (each check takes from every subscription)
             remaining = self._check(deadline, timeout, what)
             wait_set.clear_entities()
             for handle in handles:
                 wait_set.add_subscription(handle)
             wait_set.wait(int(min(remaining, WAIT_SLICE) * 1e9))
+            if done():
+                return
