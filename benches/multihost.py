@@ -20,7 +20,21 @@ a "trainer" host runs a ``SortingLineVectorEnv`` over all of them (``namespace=[
     .venv/bin/python benches/multihost.py --soak-ticks 0     # scaling only
     .venv/bin/python benches/multihost.py --json r.json --plot docs/scaling.png
 
-Needs root (network namespaces). Exit code 1 when the soak lost, misaligned or mismatched anything.
+Needs root (network namespaces), except with --attach. Exit code 1 when the soak lost, misaligned or
+mismatched anything.
+
+On real machines (where the 1.5x target can be measured fairly: here the "hosts" share the
+trainer's 2 cores), start on each machine K a node of 16 lines,
+
+    sorting_line node --setup A --lines 16 --max-steps 50 --ros-args -r __ns:=/hK/plant
+
+in one ROS domain the trainer's machine reaches (ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET
+or ROS_STATIC_PEERS), then on the trainer's machine, in that ROS environment:
+
+    .venv/bin/python benches/multihost.py --attach /h1/plant /h2/plant /h3/plant /h4/plant
+
+``--hosts`` then counts how many of the attached nodes each measurement uses, in the order given
+(the soak uses the first ``--soak-hosts``). The nodes' CPU is not measured there (they run elsewhere).
 """
 
 from __future__ import annotations
@@ -68,10 +82,13 @@ def measure(cfg: dict) -> dict:
     nodes = [cpu_seconds(pid) - c for pid, c in zip(cfg["node_pids"], nodes0)]
     env.close()
     times.sort()
-    return {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
-            "line_ticks_per_s": round(n * len(times) / total, 1),
-            "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
-            "node_cpu_ms": round(1e3 * sum(nodes) / len(nodes) / len(times), 3), "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+    row = {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
+           "line_ticks_per_s": round(n * len(times) / total, 1),
+           "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
+           "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+    if nodes:  # nodes on this machine (not --attach)
+        row["node_cpu_ms"] = round(1e3 * sum(nodes) / len(nodes) / len(times), 3)
+    return row
 
 
 def soak(cfg: dict) -> dict:
@@ -122,6 +139,19 @@ def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
         return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def on_attached(count: int, role: str, cfg: dict, namespaces: list[str]) -> dict:
+    """Runs ``role`` in a process of its own over the first ``count`` of the running nodes
+    ``namespaces`` (--attach), in this process's ROS environment."""
+    cfg = dict(cfg, namespaces=namespaces[:count], node_pids=[])
+    r = subprocess.run([sys.executable, os.path.abspath(__file__), "--role", role, json.dumps(cfg)],
+                       env=dict(os.environ, PYTHONUNBUFFERED="1"), capture_output=True, text=True, timeout=3600)
+    if r.returncode != 0:
+        raise SystemExit(f"{role} over {namespaces[:count]} failed ({r.returncode}):\n{r.stderr[-4000:]}")
+    if r.stderr.strip():
+        print(r.stderr.strip(), file=sys.stderr, flush=True)
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
 def plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
@@ -148,7 +178,8 @@ def plot(rows: list[dict], path: Path) -> None:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--role", help=argparse.SUPPRESS)
     p.add_argument("cfg", nargs="?", help=argparse.SUPPRESS)
     p.add_argument("--hosts", type=int, nargs="+", default=[1, 2, 4])
@@ -159,6 +190,9 @@ def main() -> int:
     p.add_argument("--json", type=Path)
     p.add_argument("--plot", type=Path)
     p.add_argument("--logs", type=Path, default=Path("/tmp/sorting_line_multihost"))
+    p.add_argument("--attach", nargs="+", metavar="NS",
+                   help="measure over running nodes of these namespaces, 16 lines each, in this ROS environment, "
+                        "instead of making network namespaces (see below)")
     args = p.parse_args()
     if args.role:
         print(json.dumps({"measure": measure, "soak": soak}[args.role](json.loads(args.cfg))))
@@ -167,25 +201,34 @@ def main() -> int:
     import netns_hosts
     from node_lockstep import loadavg
 
-    if netns_hosts.problem():
-        sys.exit(f"multihost.py: {netns_hosts.problem()}")
-    args.logs.mkdir(parents=True, exist_ok=True)
+    if args.attach:
+        most = max(args.hosts + ([args.soak_hosts] if args.soak_ticks > 0 else []))
+        if most > len(args.attach):
+            sys.exit(f"multihost.py: --hosts/--soak-hosts ask for {most} nodes, --attach names {len(args.attach)}")
+        run = lambda count, role, cfg: on_attached(count, role, cfg, args.attach)
+    else:
+        if netns_hosts.problem():
+            sys.exit(f"multihost.py: {netns_hosts.problem()}")
+        args.logs.mkdir(parents=True, exist_ok=True)
+        run = lambda count, role, cfg: on_hosts(count, role, cfg, args.logs)
     print(f"load before: {loadavg()}", flush=True)
     runs: dict[int, list[dict]] = {k: [] for k in args.hosts}
     for round_ in range(args.rounds):
         for k in args.hosts:
-            row = on_hosts(k, "measure", {"round_trips": args.round_trips}, args.logs)
+            row = run(k, "measure", {"round_trips": args.round_trips})
             runs[k].append(row)
             print(f"round {round_ + 1}, {k} host(s): {row}", file=sys.stderr, flush=True)
     rows = []  # each figure the median of its rounds (the rounds swing with the machine's load)
     for k in args.hosts:
         row = {key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0] if key not in ("hosts", "lines")}
+        row.setdefault("node_cpu_ms", None)  # not measured for --attach
         rows.append(dict(row, hosts=k, lines=runs[k][0]["lines"], rounds=[r["p50_ms"] for r in runs[k]]))
     print(f"\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip | each node's CPU ms per round trip | p50 of each round (ms) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
+        node = "n/a" if r["node_cpu_ms"] is None else f"{r['node_cpu_ms']:.2f}"
         print(f"| {r['hosts']} | {r['lines']} | {r['round_trips_per_s']:,.0f} | {r['line_ticks_per_s']:,.0f} | "
-              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | {r['node_cpu_ms']:.2f} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
+              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | {node} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
     by = {r["hosts"]: r for r in rows}
     if 1 in by and max(by) > 1:
         ratio = by[max(by)]["p50_ms"] / by[1]["p50_ms"]
@@ -193,7 +236,7 @@ def main() -> int:
     result = {"scaling": rows, "load_after_scaling": loadavg()}
     ok = True
     if args.soak_ticks > 0:
-        s = on_hosts(args.soak_hosts, "soak", {"ticks": args.soak_ticks}, args.logs)
+        s = run(args.soak_hosts, "soak", {"ticks": args.soak_ticks})
         print(f"\nsoak: {s['ticks']:,} line-ticks over {s['hosts']} hosts ({s['lines']} lines): lost {s['lost']}, "
               f"misaligned {s['misaligned']}, values compared with the library {s['values_compared']:,}, "
               f"mismatched {s['mismatched']}; {s['line_ticks_per_s']:,.0f} line-ticks/s")

@@ -331,3 +331,47 @@ def test_a_list_of_nodes_is_checked_when_the_env_is_made():
         SortingLineVectorEnv(num_envs=4, namespace=["/a/plant", "/b/plant"], node="shared")
     with pytest.raises(ValueError, match="name at least one node"):
         SortingLineVectorEnv(num_envs=4, namespace=[], node="attach")
+
+
+BENCH = Path(__file__).resolve().parents[2] / "benches" / "multihost.py"
+# Small: 1 and 2 hosts, 100 timed round trips each, and a soak of 3,000 line-ticks over 2 hosts.
+SMALL_BENCH = ["--hosts", "1", "2", "--rounds", "1", "--round-trips", "100", "--soak-ticks", "3000", "--soak-hosts", "2"]
+
+
+def assert_bench_output(out: str, node_cpu: str) -> None:
+    import re
+
+    assert re.search(rf"^\| 1 \| 16 \| [\d,]+ \| [\d,]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| {node_cpu} \|", out, re.M), out
+    assert re.search(rf"^\| 2 \| 32 \| [\d,]+ \| [\d,]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| {node_cpu} \|", out, re.M), out
+    assert re.search(r"^2 hosts / 1 host, p50 round trip: [\d.]+x \(target <= 1.5x\)$", out, re.M), out
+    assert re.search(r"^soak: [\d,]+ line-ticks over 2 hosts \(32 lines\): lost 0, misaligned 0, values compared with "
+                     r"the library [1-9][\d,]+, mismatched 0;", out, re.M), out
+
+
+@pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
+def test_the_multihost_benchmark_on_hosts_it_makes(tmp_path):
+    """benches/multihost.py, which gives docs/scaling.md its figures, at a small size over the
+    network-namespace hosts it makes itself."""
+    r = subprocess.run([sys.executable, str(BENCH), *SMALL_BENCH, "--logs", str(tmp_path)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
+    assert_bench_output(r.stdout, r"[\d.]+")
+
+
+def test_the_multihost_benchmark_attaches_to_running_nodes(tmp_path):
+    """``--attach``: what a user with real machines runs, here over two nodes started in this
+    test's namespace (the ROS environment decides where they are; the nodes' CPU is not the
+    benchmark's to measure then)."""
+    nodes = [h.NodeProcess(["--setup", "A", "--lines", "16", "--max-steps", "50", "--ros-args", "-r", f"__ns:=/{n}/plant"],
+                           tmp_path / f"{n}.log") for n in ("m1", "m2")]
+    try:
+        r = subprocess.run([sys.executable, str(BENCH), "--attach", "/m1/plant", "/m2/plant", *SMALL_BENCH],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:] + "".join(n.describe() for n in nodes)
+        assert_bench_output(r.stdout, "n/a")
+        too_many = subprocess.run([sys.executable, str(BENCH), "--attach", "/m1/plant", "--hosts", "1", "2"],
+                                  capture_output=True, text=True, timeout=60)
+        assert too_many.returncode != 0 and "ask for 3 nodes, --attach names 1" in too_many.stderr, too_many.stderr
+    finally:
+        for n in nodes:
+            n.stop()
