@@ -129,24 +129,25 @@ def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
             pids += [hosts.popen(name, [str(h.node_binary()), "node", "--setup", "A", "--lines", str(LINES), "--max-steps", "50",
                                "--ros-args", "-r", f"__ns:={ns}"], env=env, stdout=log, stderr=subprocess.STDOUT).pid]
         cfg = dict(cfg, namespaces=namespaces, node_pids=pids)
-        r = subprocess.run(hosts.argv("trainer", [sys.executable, os.path.abspath(__file__), "--role", role,
-                                                  json.dumps(cfg)]),
-                           env=env, capture_output=True, text=True, timeout=3600)
-        if r.returncode != 0:
-            raise SystemExit(f"{role} on {count} hosts failed ({r.returncode}):\n{r.stderr[-4000:]}")
-        if r.stderr.strip():
-            print(r.stderr.strip(), file=sys.stderr, flush=True)
-        return json.loads(r.stdout.strip().splitlines()[-1])
+        return run_role(hosts.argv("trainer", role_argv(role, cfg)), env, f"{role} on {count} hosts")
 
 
 def on_attached(count: int, role: str, cfg: dict, namespaces: list[str]) -> dict:
     """Runs ``role`` in a process of its own over the first ``count`` of the running nodes
     ``namespaces`` (--attach), in this process's ROS environment."""
     cfg = dict(cfg, namespaces=namespaces[:count], node_pids=[])
-    r = subprocess.run([sys.executable, os.path.abspath(__file__), "--role", role, json.dumps(cfg)],
-                       env=dict(os.environ, PYTHONUNBUFFERED="1"), capture_output=True, text=True, timeout=3600)
+    return run_role(role_argv(role, cfg), dict(os.environ, PYTHONUNBUFFERED="1"), f"{role} over {namespaces[:count]}")
+
+
+def role_argv(role: str, cfg: dict) -> list[str]:
+    return [sys.executable, os.path.abspath(__file__), "--role", role, json.dumps(cfg)]
+
+
+def run_role(argv: list[str], env: dict[str, str], what: str) -> dict:
+    """Runs a role's process and returns the row it prints last; its stderr is passed on."""
+    r = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=3600)
     if r.returncode != 0:
-        raise SystemExit(f"{role} over {namespaces[:count]} failed ({r.returncode}):\n{r.stderr[-4000:]}")
+        raise SystemExit(f"{what} failed ({r.returncode}):\n{r.stderr[-4000:]}")
     if r.stderr.strip():
         print(r.stderr.strip(), file=sys.stderr, flush=True)
     return json.loads(r.stdout.strip().splitlines()[-1])
