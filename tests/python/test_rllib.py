@@ -75,6 +75,9 @@ def test_ppo_with_two_env_runners_each_on_a_node_of_its_own(start_node, namespac
     for p, ns in zip(placement, nodes):
         assert sorted(p["lines"]) == [f"{ns}/line_{k}" for k in range(4)], f"EnvRunner {p['worker_index']}: {p}"
     assert len({p["pid"] for p in placement}) == 2, placement
+    # RLlib closes a remote EnvRunner's envs, then ray.kill()s it: its DDS participant is never
+    # deleted (deleting it while the other EnvRunner closes its envs hung a CI run in Fast DDS).
+    assert all(p["keeps_participant"] for p in placement), placement
 
 
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")

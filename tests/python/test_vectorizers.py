@@ -490,7 +490,7 @@ from sorting_line_gym.ros import context
 
 
 def state():
-    return {"rclpy_ok": rclpy.ok(), "anchor": context._participant_anchor is not None}
+    return {"rclpy_ok": rclpy.ok(), "anchor": context.keeps_participant()}
 
 
 def worker(env_id, queue):

@@ -16,8 +16,10 @@ command pipe, and with fork every sibling holds the parent's ends open, so no EO
 training script killed (or timed out) left its 15 other workers, and their leased lines, behind
 for good.
 
-In a forked child, the DDS participant lives as long as the process (``_keep_participant``):
-deleting it while the other workers close can hang for minutes in Fast DDS 2.14."""
+In a forked child, and in a process its host ends by killing it (Ray's EnvRunners,
+:func:`keep_participant_until_killed`), the DDS participant lives as long as the process
+(``_keep_participant``): deleting it while the other workers close can hang for minutes in Fast
+DDS 2.14."""
 
 from __future__ import annotations
 
@@ -41,6 +43,8 @@ _forked_from_live: int | None = None
 #: Whether this process was forked (a multiprocessing worker with the fork context: SB3's
 #: SubprocVecEnv, Gymnasium's AsyncVectorEnv, the benchmark's pool); see _keep_participant.
 _in_forked_child = False
+#: Whether this process's host ends it by killing it (keep_participant_until_killed).
+_killed_at_end = False
 #: In a forked child, once rclpy is up: a node never destroyed, see _keep_participant.
 _participant_anchor = None
 
@@ -146,14 +150,35 @@ def _keep_participant() -> None:
     worker stuck 4 min in ``env.close()``; in CI an AsyncVectorEnv (fork) hung 240 s in its
     ``close()``, with no stacks taken). Running the deletion at ``SCHED_IDLE`` priority did not
     help (one hang in 5 runs under load, as before). A forked worker ends with ``os._exit``, so its participant is never deleted at all:
-    the others drop it when its lease expires, as for a killed process. Only forked children keep
-    their participant: elsewhere the process may fork after its envs are closed, which needs
-    rclpy shut down (``fork_error``)."""
+    the others drop it when its lease expires, as for a killed process. The same holds for a
+    process its host kills at the end (:func:`keep_participant_until_killed`). Other processes
+    delete their participant: they may fork after their envs are closed, which needs rclpy shut
+    down (``fork_error``), and they end through interpreter finalisation."""
     global _participant_anchor
-    if _in_forked_child and _participant_anchor is None:
+    if (_in_forked_child or _killed_at_end) and _participant_anchor is None:
         _participant_anchor = rclpy.create_node(
             f"sorting_line_gym_keepalive_{os.getpid()}", start_parameter_services=False, enable_rosout=False
         )
+
+
+def keep_participant_until_killed() -> None:
+    """Declares that this process is ended by being killed, never by closing its envs and
+    returning: closing an env then leaves the DDS participant alone (see ``_keep_participant``).
+
+    For Ray's EnvRunners (``training.rllib`` calls it in each): RLlib stops one by closing its
+    envs, then ends it with ``ray.kill``. A run in CI hung there: an EnvRunner spun in
+    ``destroy_node`` (Fast DDS ``DomainParticipant::set_listener(nullptr)``, gdb) for the whole
+    400 s of the test while the other EnvRunner closed its envs."""
+    global _killed_at_end
+    with _rclpy_lock:
+        _killed_at_end = True
+        if _rclpy_users > 0 and _rclpy_ours:
+            _keep_participant()
+
+
+def keeps_participant() -> bool:
+    """Whether this process's DDS participant outlives its envs (``_keep_participant``)."""
+    return _participant_anchor is not None
 
 
 def acquire_rclpy() -> None:

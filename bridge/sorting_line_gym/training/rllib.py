@@ -62,8 +62,14 @@ def make_env(config) -> gymnasium.Env:
     """Ray Tune's env creator: ``config`` is RLlib's ``EnvContext`` (a dict of ``env_config``
     with ``worker_index``)."""
     import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids in this (EnvRunner) process
+    from sorting_line_gym.ros.context import keep_participant_until_killed
 
-    env_id, kwargs = env_kwargs(config, int(getattr(config, "worker_index", 0)))
+    worker_index = int(getattr(config, "worker_index", 0))
+    if worker_index > 0:
+        # A remote EnvRunner: RLlib closes its envs, then ray.kill()s it. Deleting the DDS
+        # participant while the other EnvRunners close theirs can hang in Fast DDS 2.14.
+        keep_participant_until_killed()
+    env_id, kwargs = env_kwargs(config, worker_index)
     return gymnasium.make(env_id, **kwargs)
 
 
@@ -85,15 +91,19 @@ def quiet_ray_environment() -> dict[str, str]:
 
 
 def where_envs_live(algo) -> list[dict[str, Any]]:
-    """For each remote EnvRunner: its Ray node's address, its pid and the namespaces of its envs'
-    lines (known once they have reset)."""
+    """For each remote EnvRunner: its Ray node's address, its pid, the namespaces of its envs'
+    lines (known once they have reset), and whether its DDS participant outlives its envs
+    (:func:`~sorting_line_gym.ros.context.keep_participant_until_killed`)."""
 
     def report(runner):
         import ray.util
 
+        from sorting_line_gym.ros import context
+
         envs = getattr(runner.env.unwrapped, "envs", [])  # RLlib wraps Gymnasium's SyncVectorEnv
         return {"node_ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
-                "worker_index": runner.worker_index, "lines": [e.unwrapped.namespace for e in envs]}
+                "worker_index": runner.worker_index, "lines": [e.unwrapped.namespace for e in envs],
+                "keeps_participant": context.keeps_participant()}
 
     return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
 
