@@ -45,7 +45,8 @@ _forked_from_live: int | None = None
 _in_forked_child = False
 #: Whether this process's host ends it by killing it (keep_participant_until_killed).
 _killed_at_end = False
-#: In a forked child, once rclpy is up: a node never destroyed, see _keep_participant.
+#: In a forked child or one killed at its end, once rclpy is up: a node never destroyed, see
+#: _keep_participant.
 _participant_anchor = None
 
 
