@@ -27,7 +27,8 @@ namespace and, as root, re-executes itself under `unshare -n` with `lo` up. It s
 launch_scripts/env.sh sets and a ROS_DOMAIN_ID of its own (--domain, default 89).
 
     .venv/bin/python benches/bridge_throughput.py                 # 5 rounds, N = 4000 single, 2000 vector
-    .venv/bin/python benches/bridge_throughput.py --rounds 3 --single 2000 --vector 500 --plot docs/benchmark/bridge_throughput.png
+    .venv/bin/python benches/bridge_throughput.py --rounds 3 --single 2000 --vector 500 \
+        --plot docs/benchmark/bridge_throughput.png
 Progress goes to stderr, the table to stdout; load average and CPU steal are printed with it.
 """
 
@@ -42,9 +43,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
@@ -214,7 +215,9 @@ def raw_subject(n: int, log_dir: Path) -> Subject:
     except BaseException:
         line.close()
         raise
-    return Subject("(a) raw rclpy lock-step loop, 1 line (per-line topics)", n, 1, lambda i: line.round_trip(), line.close)
+    return Subject(
+        "(a) raw rclpy lock-step loop, 1 line (per-line topics)", n, 1, lambda i: line.round_trip(), line.close
+    )
 
 
 def direct_subject(n: int) -> Subject:
@@ -247,12 +250,15 @@ def make_subject(n: int) -> Subject:
 
 def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
     import numpy as np
+
     from sorting_line_gym import SortingLineVectorEnv
 
     env = SortingLineVectorEnv(num_envs=lines, setup="A", variant="basic", max_episode_steps=max_episode_steps)
     env.reset(seed=1)
     actions = [np.full(lines, k % 10, dtype=np.int64) for k in range(10)]
-    label = f"(c) SortingLineVectorEnv({lines:>2} lines), " + ("50-step episodes" if max_episode_steps == 50 else "no episode ends")
+    label = f"(c) SortingLineVectorEnv({lines:>2} lines), " + (
+        "50-step episodes" if max_episode_steps == 50 else "no episode ends"
+    )
     return Subject(label, n, lines, lambda i: env.step(actions[i % 10]), env.close)
 
 
@@ -262,7 +268,7 @@ def vector_subject(lines: int, n: int, max_episode_steps: int) -> Subject:
 
 def paired_ratio(numerator: Row, denominator: Row) -> tuple[float, list[float]]:
     """Median of the per-round ratios, and the ratios."""
-    ratios = [a / b for a, b in zip(numerator.rates, denominator.rates)]
+    ratios = [a / b for a, b in zip(numerator.rates, denominator.rates, strict=False)]
     return statistics.median(ratios), ratios
 
 
@@ -274,11 +280,14 @@ def plot(rows: list[Row], by_key: dict[str, Row], path: Path, title: str) -> Non
     from matplotlib.ticker import StrMethodFormatter
 
     fig, ax = plt.subplots(figsize=(9, 4.8), layout="constrained")
-    labels = [r.label.split(") ", 1)[1].replace("(max_episode_steps=1e6)", "").replace("SortingLineVectorEnv", "VectorEnv") for r in rows]
+    labels = [
+        r.label.split(") ", 1)[1].replace("(max_episode_steps=1e6)", "").replace("SortingLineVectorEnv", "VectorEnv")
+        for r in rows
+    ]
     colors = ["0.6" if r.key == "raw" else ("tab:blue" if r.key in ("direct", "make") else "tab:orange") for r in rows]
     y = list(range(len(rows)))
     ax.barh(y, [r.median for r in rows], color=colors)
-    for yi, r in zip(y, rows):
+    for yi, r in zip(y, rows, strict=False):
         ax.plot(r.rates, [yi] * len(r.rates), "k|", markersize=9)
         ax.text(max(r.rates), yi, f"   {r.median:,.0f}", va="center", fontsize=8)
     ax.set_yticks(y, labels, fontsize=8)
@@ -336,7 +345,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--single", type=int, default=4000, help="steps per timed run for (a) and (b) (default 4000)")
     parser.add_argument("--vector", type=int, default=2000, help="round trips per timed run for (c) (default 2000)")
-    parser.add_argument("--rounds", "--runs", type=int, default=5, help="interleaved rounds; medians reported (default 5)")
+    parser.add_argument(
+        "--rounds", "--runs", type=int, default=5, help="interleaved rounds; medians reported (default 5)"
+    )
     parser.add_argument("--lines", type=int, nargs="+", default=[1, 4, 16], help="vector line counts (default 1 4 16)")
     parser.add_argument("--domain", type=int, default=89, help="ROS_DOMAIN_ID of the benchmark (default 89)")
     parser.add_argument("--plot", type=Path, help="also draw the medians to this PNG (and the same name .svg)")
@@ -385,13 +396,19 @@ def main() -> int:
     print("\ntargets (ratios: median of the per-round ratios)")
     for key, name in (("direct", "SortingLineEnv, no resets"), ("make", "gymnasium.make, 50-step episodes")):
         ok = by_key[key].median >= TARGET_ONE_LINE
-        print(f"  one line, {name}: {by_key[key].median:,.0f} env-steps/s (target >= {TARGET_ONE_LINE:,.0f}) {'OK' if ok else 'MISSED'}")
+        print(
+            f"  one line, {name}: {by_key[key].median:,.0f} env-steps/s "
+            f"(target >= {TARGET_ONE_LINE:,.0f}) {'OK' if ok else 'MISSED'}"
+        )
     for tag, single, name in (("noend", "direct", "no episode ends"), ("ep50", "make", "50-step episodes")):
         if f"{tag}_16" in by_key:
             ratio, ratios = paired_ratio(by_key[f"{tag}_16"], by_key[single])
-            print(f"  16 lines (VectorEnv) / single-line env ({by_key[single].label[4:].split(',')[0]}), {name}: {ratio:.1f}x "
-                  f"(target >= {TARGET_SCALING:.0f}x) {'OK' if ratio >= TARGET_SCALING else 'MISSED'}; "
-                  f"rounds {' / '.join(f'{x:.1f}' for x in ratios)}")
+            print(
+                f"  16 lines (VectorEnv) / single-line env ({by_key[single].label[4:].split(',')[0]}), "
+                f"{name}: {ratio:.1f}x "
+                f"(target >= {TARGET_SCALING:.0f}x) {'OK' if ratio >= TARGET_SCALING else 'MISSED'}; "
+                f"rounds {' / '.join(f'{x:.1f}' for x in ratios)}"
+            )
     print("\nother ratios")
     for tag, name in (("noend", "no episode ends"), ("ep50", "50-step episodes")):
         if f"{tag}_16" in by_key and f"{tag}_1" in by_key:
@@ -402,7 +419,12 @@ def main() -> int:
         print(f"  {by_key[key].label[4:]} / raw lock-step loop (a): {ratio:.2f}")
     if args.plot:
         args.plot.parent.mkdir(parents=True, exist_ok=True)
-        plot(ordered, by_key, args.plot, f"sorting_line_gym env-steps/s, median of {args.rounds} rounds, {os.cpu_count()} CPUs ({after})")
+        plot(
+            ordered,
+            by_key,
+            args.plot,
+            f"sorting_line_gym env-steps/s, median of {args.rounds} rounds, {os.cpu_count()} CPUs ({after})",
+        )
         print(f"\nplot: {args.plot} and {args.plot.with_suffix('.svg')}")
     return 0
 

@@ -43,7 +43,11 @@ spaces = sys.argv[2].split(",")
 pubs = {ns: node.create_publisher(SpeedCommand, f"{ns}/cmd/speed", 10) for ns in spaces}
 resets = {ns: node.create_client(ResetLine, f"{ns}/reset") for ns in spaces}
 def seen(ns):
-    return [node.count_publishers(f"{ns}/state") > 0, pubs[ns].get_subscription_count() > 0, resets[ns].service_is_ready()]
+    return [
+        node.count_publishers(f"{ns}/state") > 0,
+        pubs[ns].get_subscription_count() > 0,
+        resets[ns].service_is_ready(),
+    ]
 start = time.monotonic()
 first = {}
 while time.monotonic() - start < float(sys.argv[1]):
@@ -120,7 +124,7 @@ def main() -> None:
     print("node participant ids:  ", [ids.get(n.pid, ["?"])[0] for n in nodes])
     print("client participant ids:", [ids.get(c.pid, ["?"])[0] for c in clients])
     total = 0
-    for c, seen in zip(clients, results):
+    for c, seen in zip(clients, results, strict=False):
         missing = [i for i, ns in enumerate(names) if not all(seen[ns]["seen"])]
         total += len(names) - len(missing)
         cid = ids.get(c.pid, ["?"])[0]

@@ -58,6 +58,7 @@ LINES = 16
 def measure(cfg: dict) -> dict:
     """In the trainer host: round trips over the nodes of ``cfg["namespaces"]``."""
     import numpy as np
+
     from node_lockstep import cpu_seconds
     from sorting_line_gym import SortingLineVectorEnv
 
@@ -79,7 +80,7 @@ def measure(cfg: dict) -> dict:
         times.append(time.perf_counter() - t)
     total = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
-    nodes = [cpu_seconds(pid) - c for pid, c in zip(cfg["node_pids"], nodes0)]
+    nodes = [cpu_seconds(pid) - c for pid, c in zip(cfg["node_pids"], nodes0, strict=False)]
     env.close()
     times.sort()
     row = {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
@@ -124,10 +125,29 @@ def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
     with netns_hosts.Hosts([*names, "trainer"]) as hosts:
         namespaces = [f"/{name}/plant" for name in names]
         pids = []
-        for name, ns in zip(names, namespaces):
+        for name, ns in zip(names, namespaces, strict=False):
             log = open(log_dir / f"node_{role}_{count}_{name}.log", "wb")
-            pids += [hosts.popen(name, [str(h.node_binary()), "node", "--setup", "A", "--lines", str(LINES), "--max-steps", "50",
-                               "--ros-args", "-r", f"__ns:={ns}"], env=env, stdout=log, stderr=subprocess.STDOUT).pid]
+            pids += [
+                hosts.popen(
+                    name,
+                    [
+                        str(h.node_binary()),
+                        "node",
+                        "--setup",
+                        "A",
+                        "--lines",
+                        str(LINES),
+                        "--max-steps",
+                        "50",
+                        "--ros-args",
+                        "-r",
+                        f"__ns:={ns}",
+                    ],
+                    env=env,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                ).pid
+            ]
         cfg = dict(cfg, namespaces=namespaces, node_pids=pids)
         return run_role(hosts.argv("trainer", role_argv(role, cfg)), env, f"{role} on {count} hosts")
 
@@ -206,12 +226,14 @@ def main() -> int:
         most = max(args.hosts + ([args.soak_hosts] if args.soak_ticks > 0 else []))
         if most > len(args.attach):
             sys.exit(f"multihost.py: --hosts/--soak-hosts ask for {most} nodes, --attach names {len(args.attach)}")
-        run = lambda count, role, cfg: on_attached(count, role, cfg, args.attach)
+        def run(count, role, cfg):
+            return on_attached(count, role, cfg, args.attach)
     else:
         if netns_hosts.problem():
             sys.exit(f"multihost.py: {netns_hosts.problem()}")
         args.logs.mkdir(parents=True, exist_ok=True)
-        run = lambda count, role, cfg: on_hosts(count, role, cfg, args.logs)
+        def run(count, role, cfg):
+            return on_hosts(count, role, cfg, args.logs)
     print(f"load before: {loadavg()}", flush=True)
     runs: dict[int, list[dict]] = {k: [] for k in args.hosts}
     for round_ in range(args.rounds):
@@ -224,12 +246,18 @@ def main() -> int:
         row = {key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0] if key not in ("hosts", "lines")}
         row.setdefault("node_cpu_ms", None)  # not measured for --attach
         rows.append(dict(row, hosts=k, lines=runs[k][0]["lines"], rounds=[r["p50_ms"] for r in runs[k]]))
-    print(f"\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip | each node's CPU ms per round trip | p50 of each round (ms) |")
+    print(
+        "\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip |"
+        " each node's CPU ms per round trip | p50 of each round (ms) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         node = "n/a" if r["node_cpu_ms"] is None else f"{r['node_cpu_ms']:.2f}"
-        print(f"| {r['hosts']} | {r['lines']} | {r['round_trips_per_s']:,.0f} | {r['line_ticks_per_s']:,.0f} | "
-              f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | {node} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |")
+        print(
+            f"| {r['hosts']} | {r['lines']} | {r['round_trips_per_s']:,.0f} | {r['line_ticks_per_s']:,.0f} | "
+            f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['trainer_cpu_ms']:.2f} | "
+            f"{node} | {', '.join(f'{x:.2f}' for x in r['rounds'])} |"
+        )
     by = {r["hosts"]: r for r in rows}
     if 1 in by and max(by) > 1:
         ratio = by[max(by)]["p50_ms"] / by[1]["p50_ms"]

@@ -140,11 +140,16 @@ class LockstepClient:
         self.lean = lean
         pub_events = PublisherEventCallbacks(use_default_callbacks=False) if lean else None
         sub_events = SubscriptionEventCallbacks(use_default_callbacks=False) if lean else None
-        self.pubs = [self.node.create_publisher(SpeedCommand, h.join_ns(ns, "cmd/speed"), 10, event_callbacks=pub_events)
-                     for ns in namespaces]
-        self.subs = [self.node.create_subscription(LineState, h.join_ns(ns, "state"), self._callback(k), 10,
-                                                   event_callbacks=sub_events)
-                     for k, ns in enumerate(namespaces)]
+        self.pubs = [
+            self.node.create_publisher(SpeedCommand, h.join_ns(ns, "cmd/speed"), 10, event_callbacks=pub_events)
+            for ns in namespaces
+        ]
+        self.subs = [
+            self.node.create_subscription(
+                LineState, h.join_ns(ns, "state"), self._callback(k), 10, event_callbacks=sub_events
+            )
+            for k, ns in enumerate(namespaces)
+        ]
         self.resets = [self.node.create_client(ResetLine, h.join_ns(ns, "reset")) for ns in namespaces]
         self.cmds = [SpeedCommand(speed=0.5) for _ in namespaces]
         self._ResetLine = ResetLine
@@ -305,9 +310,18 @@ def measure(session: h.RosSession, lines: int, ticks: int, runs: int, pattern: s
             progress(f"  {tag}: idle CPU over {idle_s:.0f} s ...")
             idle = idle_cpu_percent(node.pid, idle_s)
         return {
-            "lines": lines, "pattern": pattern + ("" if lean else " (default entities)"), "runs": rates, "rt_s": statistics.median(rates),
-            "line_ticks_s": statistics.median(rates) * lines, "p50_ms": percentile(latencies, 50) * 1e3,
-            "p99_ms": percentile(latencies, 99) * 1e3, "rss_mb": rss, "hwm_mb": hwm, "rss_start_mb": rss_start, "steal": steal, "idle_cpu": idle,
+            "lines": lines,
+            "pattern": pattern + ("" if lean else " (default entities)"),
+            "runs": rates,
+            "rt_s": statistics.median(rates),
+            "line_ticks_s": statistics.median(rates) * lines,
+            "p50_ms": percentile(latencies, 50) * 1e3,
+            "p99_ms": percentile(latencies, 99) * 1e3,
+            "rss_mb": rss,
+            "hwm_mb": hwm,
+            "rss_start_mb": rss_start,
+            "steal": steal,
+            "idle_cpu": idle,
         }
     finally:
         client.destroy()
@@ -324,7 +338,7 @@ def cpu_times() -> list[int]:
 
 def steal_percent(before: list[int], after: list[int]) -> float:
     """Share of CPU time the hypervisor took from this VM between two cpu_times() samples."""
-    delta = [a - b for a, b in zip(after, before)]
+    delta = [a - b for a, b in zip(after, before, strict=False)]
     total = sum(delta[:8])
     return 100.0 * delta[7] / total if total else 0.0
 

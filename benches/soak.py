@@ -106,7 +106,7 @@ class LineLedger:
         # The ledger may end mid-episode; trace from the first episode's seed over every token.
         trace = h.run_trace(self.setup, self.variant, self.seed, self.tokens, max_steps=EPISODE_STEPS)[1:]
         mismatches = 0 if len(trace) == len(self.seen) else abs(len(trace) - len(self.seen))
-        for entry, seen in zip(trace, self.seen):
+        for entry, seen in zip(trace, self.seen, strict=False):
             if seen[0] == "reset":
                 want = ("reset", observation_of(self.variant, entry["reset"]["observation"]))
             else:
@@ -175,14 +175,24 @@ def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basi
     soaks lines on several hosts: benches/multihost.py); the node's RSS is reported only for a node
     the env spawned."""
     import numpy as np
-    from node_lockstep import cpu_times, loadavg, steal_percent
-    from sorting_line_gym.envs.env import SEED_BOUND
-    from sorting_line_gym import BridgeTimeout
-    from sorting_line_gym import SortingLineVectorEnv
 
-    result = SoakResult(load_before=loadavg(), config=dict(ticks=ticks, lines=lines, setup=setup, variant=variant,
-                                                           seed=seed, window=window, verify_episodes=verify_episodes,
-                                                           nodes=1 if isinstance(namespace, (str, type(None))) else len(namespace)))
+    from node_lockstep import cpu_times, loadavg, steal_percent
+    from sorting_line_gym import BridgeTimeout, SortingLineVectorEnv
+    from sorting_line_gym.envs.env import SEED_BOUND
+
+    result = SoakResult(
+        load_before=loadavg(),
+        config=dict(
+            ticks=ticks,
+            lines=lines,
+            setup=setup,
+            variant=variant,
+            seed=seed,
+            window=window,
+            verify_episodes=verify_episodes,
+            nodes=1 if isinstance(namespace, (str, type(None))) else len(namespace),
+        ),
+    )
     cpu_before = cpu_times()
     env = SortingLineVectorEnv(num_envs=lines, setup=setup, variant=variant, max_episode_steps=EPISODE_STEPS,
                                step_timeout=step_timeout, namespace=namespace, node=node)
@@ -271,7 +281,8 @@ def report(r: SoakResult) -> str:
     first, last = (rates[0], rates[-1]) if rates else (0, 0)
     c = r.config
     lines = [
-        f"soak: {r.ticks:,} lock-step line-ticks through SortingLineVectorEnv ({c['lines']} lines of {c.get('nodes', 1)} node(s), "
+        f"soak: {r.ticks:,} lock-step line-ticks through SortingLineVectorEnv ({c['lines']} "
+        f"lines of {c.get('nodes', 1)} node(s), "
         f"setup {c['setup']} {c['variant']}, 50-step episodes, seed {c['seed']}), {r.round_trips:,} round trips, "
         f"{r.resets:,} autoresets, in {r.seconds:.1f} s",
         f"  lost {r.lost}, misaligned {r.misaligned}, values compared with `sorting_line trace` {r.verified:,}, "
@@ -280,12 +291,15 @@ def report(r: SoakResult) -> str:
         f"{r.rss_bridge_end:.1f} MB (start = after the first reset, end = after the last step)",
         f"  throughput {r.ticks / max(r.seconds, 1e-9):,.0f} line-ticks/s overall; per window of {c['window']:,}: "
         f"first {first:,.0f}, last {last:,.0f}, min {min(rates, default=0):,.0f}, max {max(rates, default=0):,.0f}",
-        f"  {os.cpu_count()} CPUs; load average {r.load_before} before, {r.load_after} after; CPU steal {r.steal:.0f} %",
+        f"  {os.cpu_count()} CPUs; load average {r.load_before} before, {r.load_after} after; "
+        f"CPU steal {r.steal:.0f} %",
         "  windows (line-ticks, line-ticks/s, RSS node MB, RSS bridge MB, load average, CPU steal %):",
     ]
     for w in r.windows:
-        lines.append(f"    {w['ticks']:>10,} {w['ticks_per_s']:>10,.0f} {w['rss_node_mb']:>8.1f} {w['rss_bridge_mb']:>8.1f}"
-                     f"  {w['load']}  {w['steal']:>4.1f}")
+        lines.append(
+            f"    {w['ticks']:>10,} {w['ticks_per_s']:>10,.0f} {w['rss_node_mb']:>8.1f} {w['rss_bridge_mb']:>8.1f}"
+            f"  {w['load']}  {w['steal']:>4.1f}"
+        )
     return "\n".join(lines)
 
 

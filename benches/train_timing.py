@@ -85,12 +85,16 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
     return time.perf_counter() - start
 
 
-def time_ours(algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path, n_envs: int = 1) -> float:
+def time_ours(
+    algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path, n_envs: int = 1
+) -> float:
     from sorting_line_gym.training import hyperparams
     from sorting_line_gym.training.train import train
 
     params = hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={n_envs}"])
-    run = train(algo, setup, variant, seed=42, out=out, params=params, tensorboard=tb, progress=True, torch_threads=threads)
+    run = train(
+        algo, setup, variant, seed=42, out=out, params=params, tensorboard=tb, progress=True, torch_threads=threads
+    )
     return run.wall_s
 
 
@@ -101,17 +105,31 @@ FULL_STUDY = {"cells_per_algo": 8 * 5, "one_line_cells": {"ppo": 5, "dqn": 5}, "
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--reference", type=Path, help="checkout of the reference implementation (Storm-131/2024_Sorting_Env); without it only ours is timed")
+    p.add_argument(
+        "--reference",
+        type=Path,
+        help="checkout of the reference implementation (Storm-131/2024_Sorting_Env); without it only ours is timed",
+    )
     p.add_argument("--algo", nargs="+", default=["ppo"], choices=("ppo", "dqn", "a2c"))
-    p.add_argument("--n-envs", nargs="+", type=int, default=[1], help="lines of one node for our side (default 1); several values: each timed")
+    p.add_argument(
+        "--n-envs",
+        nargs="+",
+        type=int,
+        default=[1],
+        help="lines of one node for our side (default 1); several values: each timed",
+    )
     p.add_argument("--setup", default="B", choices=tuple(REFERENCE_SETUPS))
     p.add_argument("--variant", default="advanced", choices=VARIANTS)
     p.add_argument("--timesteps", type=int, default=100_000)
     p.add_argument("--torch-threads", type=int, default=1)
-    p.add_argument("--rounds", type=int, default=1, help="alternate reference and ours this many times; medians reported")
+    p.add_argument(
+        "--rounds", type=int, default=1, help="alternate reference and ours this many times; medians reported"
+    )
     args = p.parse_args()
     if args.reference is not None and not (args.reference / "src" / "env_1_simple.py").is_file():
-        sys.exit(f"train_timing.py: {args.reference} does not look like the reference checkout (no src/env_1_simple.py)")
+        sys.exit(
+            f"train_timing.py: {args.reference} does not look like the reference checkout (no src/env_1_simple.py)"
+        )
     h.run_isolated(__file__, "SORTING_LINE_TRAIN_TIMING_IN_NETNS")
     h.ros_environment("97")
 
@@ -121,13 +139,29 @@ def main() -> int:
         for r in range(args.rounds):
             for algo in args.algo:
                 if args.reference is not None:
-                    progress(f"round {r + 1}/{args.rounds}: {algo} on the reference env, {args.timesteps} steps ({h.machine_conditions()})")
-                    wall = time_reference(args.reference, algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb")
+                    progress(
+                        f"round {r + 1}/{args.rounds}: {algo} on the reference env, "
+                        f"{args.timesteps} steps ({h.machine_conditions()})"
+                    )
+                    wall = time_reference(
+                        args.reference, algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb"
+                    )
                     times.setdefault((algo, "reference"), []).append(wall)
                     progress(f"  reference: {wall:.1f} s")
                 for n in args.n_envs:
-                    progress(f"round {r + 1}/{args.rounds}: {algo} through ROS on {n} line(s) ({h.machine_conditions()})")
-                    wall = time_ours(algo, args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb", tmp / f"models_n{n}", n)
+                    progress(
+                        f"round {r + 1}/{args.rounds}: {algo} through ROS on {n} line(s) ({h.machine_conditions()})"
+                    )
+                    wall = time_ours(
+                        algo,
+                        args.setup,
+                        args.variant,
+                        args.timesteps,
+                        args.torch_threads,
+                        tmp / "tb",
+                        tmp / f"models_n{n}",
+                        n,
+                    )
                     times.setdefault((algo, f"ros x{n}"), []).append(wall)
                     progress(f"  through ROS, {n} line(s): {wall:.1f} s")
     print(f"\n{args.timesteps} training steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
@@ -143,17 +177,28 @@ def main() -> int:
             print(f"| {algo} | {label} | {wall:.1f} | {args.timesteps / wall:.0f} | {ratio} |")
     if args.reference is not None and "ppo" in args.algo and 1 in args.n_envs:
         ratio = statistics.median(times[("ppo", "ros x1")]) / statistics.median(times[("ppo", "reference")])
-        print(f"PPO on one line, ours/reference: {ratio:.2f}x (target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})")
+        print(
+            f"PPO on one line, ours/reference: {ratio:.2f}x "
+            f"(target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})"
+        )
     n = max(args.n_envs)
-    if all((a, f"ros x{n}") in times for a in ("ppo", "dqn", "a2c")) and 1 in args.n_envs and all((a, "ros x1") in times for a in ("ppo", "dqn")):
+    if (
+        all((a, f"ros x{n}") in times for a in ("ppo", "dqn", "a2c"))
+        and 1 in args.n_envs
+        and all((a, "ros x1") in times for a in ("ppo", "dqn"))
+    ):
         rate = {a: args.timesteps / statistics.median(times[(a, f"ros x{n}")]) for a in ("ppo", "dqn", "a2c")}
         one = {a: args.timesteps / statistics.median(times[(a, "ros x1")]) for a in ("ppo", "dqn")}
         total = sum(FULL_STUDY["cells_per_algo"] * FULL_STUDY["timesteps"] / rate[a] for a in rate)
         total += sum(k * FULL_STUDY["timesteps"] / one[a] for a, k in FULL_STUDY["one_line_cells"].items())
         hours = total / FULL_STUDY["jobs"] / 3600
-        print(f"projected training time of run.sh --full (--n-envs {n}, {FULL_STUDY['jobs']} cells at once, at these rates): "
-              f"{hours:.1f} h (target < 2 h: {'met' if hours < 2 else 'NOT met'}; measured one training at a time, so two at once on "
-              f"2 cores may be slower; evaluations add about 20 s per cell)")
+        print(
+            f"projected training time of run.sh --full (--n-envs {n}, {FULL_STUDY['jobs']} cells at once, "
+            f"at these rates): "
+            f"{hours:.1f} h (target < 2 h: {'met' if hours < 2 else 'NOT met'}; "
+            f"measured one training at a time, so two at once on "
+            f"2 cores may be slower; evaluations add about 20 s per cell)"
+        )
     return 0
 
 

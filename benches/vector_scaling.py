@@ -181,9 +181,13 @@ def main() -> int:
     after = h.machine_conditions()
     raw = statistics.median(raws)
     results["raw"]["rate"] = raw
-    print(f"\nsorting_line_gym, many envs on one host ({args.steps} vector steps per subject, 50-step episodes; "
-          f"raw loop {args.raw_steps} round trips); {os.cpu_count()} CPUs; {before} before, {after} after")
-    header = f"{'subject':<48} | {'env-steps/s':>11} | {'/ raw':>6} | {'start-up s':>10} | {'RSS MB':>7} | {'MB/env':>6}"
+    print(
+        f"\nsorting_line_gym, many envs on one host ({args.steps} vector steps per subject, 50-step episodes; "
+        f"raw loop {args.raw_steps} round trips); {os.cpu_count()} CPUs; {before} before, {after} after"
+    )
+    header = (
+        f"{'subject':<48} | {'env-steps/s':>11} | {'/ raw':>6} | {'start-up s':>10} | {'RSS MB':>7} | {'MB/env':>6}"
+    )
     print(header)
     print("-" * len(header))
     names = {"sync": "SyncVectorEnv, node='shared'", "async": "AsyncVectorEnv (fork), node='shared'",
@@ -191,8 +195,11 @@ def main() -> int:
     base = results["sync_1"]["rss_mb"]
     for key, r in results.items():
         if key == "raw":
-            print(f"{'raw one-line rclpy lock-step loop (round trips)':<48} | {raw:>11,.0f} | {1:>6.2f} | {'':>10} | {'':>7} | {'':>6}"
-                  f"  (median of {' / '.join(f'{x:,.0f}' for x in raws)})")
+            print(
+                f"{'raw one-line rclpy lock-step loop (round trips)':<48} | {raw:>11,.0f} "
+                f"| {1:>6.2f} | {'':>10} | {'':>7} | {'':>6}"
+                f"  (median of {' / '.join(f'{x:,.0f}' for x in raws)})"
+            )
             continue
         kind, n = key.split("_")
         per_env = f"{(r['rss_mb'] - base) / (int(n) - 1):>6.1f}" if kind == "sync" and int(n) > 1 else f"{'':>6}"
@@ -201,8 +208,14 @@ def main() -> int:
     s64 = results["sync_64"]
     mb = (s64["rss_mb"] - base) / 63
     print("\ntargets (SyncVectorEnv of 64, node='shared')")
-    print(f"  start-up {s64['start_s']:.1f} s (target < {TARGET_START_S:g} s) {'OK' if s64['start_s'] < TARGET_START_S else 'MISSED'}")
-    print(f"  memory {mb:.1f} MB per env beyond the first (target < {TARGET_MB_PER_ENV:g}) {'OK' if mb < TARGET_MB_PER_ENV else 'MISSED'}")
+    print(
+        f"  start-up {s64['start_s']:.1f} s (target < {TARGET_START_S:g} s) "
+        f"{'OK' if s64['start_s'] < TARGET_START_S else 'MISSED'}"
+    )
+    print(
+        f"  memory {mb:.1f} MB per env beyond the first (target < {TARGET_MB_PER_ENV:g}) "
+        f"{'OK' if mb < TARGET_MB_PER_ENV else 'MISSED'}"
+    )
     share = s64["rate"] / raw
     print(f"  {s64['rate']:,.0f} env-steps/s = {share:.0%} of the raw loop's round trips/s (target >= "
           f"{TARGET_RAW_SHARE:.0%}) {'OK' if share >= TARGET_RAW_SHARE else 'MISSED'}")

@@ -46,7 +46,8 @@ def _typed(text):
 
 
 def _node(context):
-    value = lambda name: context.launch_configurations.get(name, "")
+    def value(name):
+        return context.launch_configurations.get(name, "")
     parameters = []
     if value("params_file"):
         parameters.append(value("params_file"))

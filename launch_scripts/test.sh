@@ -37,6 +37,9 @@ else
   echo "test.sh: rustfmt is not installed (rustup component add rustfmt): formatting not checked"
 fi
 
+step "Python lint (ruff.toml)"
+.venv/bin/ruff check --no-cache . || { echo "test.sh: fix what \`.venv/bin/ruff check\` reports above (\`--fix\` fixes the ones marked [*])" >&2; exit 1; }
+
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 

@@ -17,7 +17,6 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import ros_harness as h
 
@@ -26,7 +25,13 @@ MAX_STEPS = 50
 #: name -> the line, the controller's agent and the reset plan (None: a reset without a seed).
 GOLDEN = {
     "basic_d": {"variant": "basic", "setup": "D", "seed": 5, "agent": "rba", "plan": [None, 12, None, 12, 7]},
-    "advanced_b": {"variant": "advanced", "setup": "B", "seed": 9, "agent": "rba-hold", "plan": [11, None, 11, 5, None]},
+    "advanced_b": {
+        "variant": "advanced",
+        "setup": "B",
+        "seed": 9,
+        "agent": "rba-hold",
+        "plan": [11, None, 11, 5, None],
+    },
 }
 
 
@@ -36,7 +41,7 @@ class BagProcess(h.ScriptProcess):
     def __init__(self, args: list, log_path: Path):
         super().__init__("sorting-line-bag", args, log_path)
 
-    def wait_for_output(self, text: str, timeout: float, session: Optional[h.RosSession] = None) -> None:
+    def wait_for_output(self, text: str, timeout: float, session: h.RosSession | None = None) -> None:
         """Waits until the log shows `text` (spinning `session` meanwhile, if given)."""
         deadline = time.monotonic() + timeout
         while text not in self.log():

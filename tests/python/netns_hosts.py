@@ -19,14 +19,14 @@ import itertools
 import os
 import shutil
 import subprocess
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 SUBNET = "192.168.77"  # exists only inside the namespaces made here
 MULTICAST = "224.0.0.0/4"
 _COUNT = itertools.count()
 
 
-def problem() -> Optional[str]:
+def problem() -> str | None:
     """None when hosts can be made here; otherwise why not."""
     if os.geteuid() != 0:
         return "network namespaces need root"
@@ -58,7 +58,7 @@ class Hosts:
         self.created: list[str] = []
         self.procs: list[subprocess.Popen] = []
 
-    def __enter__(self) -> "Hosts":
+    def __enter__(self) -> Hosts:
         try:
             _ip("netns", "add", self.switch)
             self.created.append(self.switch)

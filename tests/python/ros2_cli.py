@@ -32,7 +32,6 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
 
 ROOT = Path(__file__).resolve().parents[2]
 PROJECT_VENV = ROOT / ".venv"
@@ -42,7 +41,7 @@ INTERFACES_MANIFESTS = [PROJECT_VENV / ".sorting_line" / f"{package}_install_man
 BUILD_TIMEOUT = 900.0  # s; the README says ~45 s on a quiet machine
 
 
-def shared_dir() -> Optional[Path]:
+def shared_dir() -> Path | None:
     """The shared/ folder next to the repository (or named by SORTING_LINE_SHARED)."""
     candidates = []
     if os.environ.get("SORTING_LINE_SHARED"):
@@ -61,7 +60,7 @@ def shared_dir() -> Optional[Path]:
     return None
 
 
-def tool_dir() -> Optional[Path]:
+def tool_dir() -> Path | None:
     shared = shared_dir()
     return shared / "tools" / "ros2cli" if shared else None
 
@@ -142,7 +141,7 @@ class Ros2Cli:
     def argv(self, *args: str) -> list[str]:
         return [self.executable, *[str(a) for a in args]]
 
-    def run(self, *args: str, timeout: float = 30.0, check: bool = True, input: Optional[str] = None
+    def run(self, *args: str, timeout: float = 30.0, check: bool = True, input: str | None = None
             ) -> subprocess.CompletedProcess:
         """Runs `ros2 ARGS` (bounded); with `check`, a non-zero exit fails naming the command and output."""
         argv = self.argv(*args)
@@ -169,14 +168,16 @@ def _venv_env(venv: Path) -> dict[str, str]:
     env["PATH"] = os.pathsep.join([str(venv / "bin"), *path])
     env["VIRTUAL_ENV"] = str(venv)
     env["AMENT_PREFIX_PATH"] = str(venv)
-    libs = [str(venv / "lib")] + sorted(str(d) for d in venv.glob("lib/python3*/site-packages/ros_*.libs") if d.is_dir())
+    libs = [str(venv / "lib")] + sorted(
+        str(d) for d in venv.glob("lib/python3*/site-packages/ros_*.libs") if d.is_dir()
+    )
     env["LD_LIBRARY_PATH"] = os.pathsep.join(libs)
     env["_ROS_WHEELS_BOOTSTRAP_COMPLETE"] = "1"
     env.update(ROS_DISTRO="jazzy", ROS_VERSION="2", ROS_PYTHON_VERSION="3", PYTHONUNBUFFERED="1")
     return env
 
 
-def locate(overlay_dir: Path, log_dir: Path) -> tuple[Optional[Ros2Cli], str]:
+def locate(overlay_dir: Path, log_dir: Path) -> tuple[Ros2Cli | None, str]:
     """(the CLI, where it came from) or (None, why there is none). Never builds: see build()."""
     on_path = _ros2_on_path()
     if on_path:
@@ -202,7 +203,7 @@ def locate(overlay_dir: Path, log_dir: Path) -> tuple[Optional[Ros2Cli], str]:
     return cli, origin
 
 
-def _ros2_on_path() -> Optional[str]:
+def _ros2_on_path() -> str | None:
     return shutil.which("ros2", path=os.pathsep.join(p for p in os.environ.get("PATH", "").split(os.pathsep)
                                                     if p and not p.startswith(str(PROJECT_VENV))))
 

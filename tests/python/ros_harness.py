@@ -42,8 +42,9 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable, Optional
+from typing import Any
 
 from sorting_line_gym.line import vocabulary
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
@@ -81,7 +82,7 @@ def network_interfaces() -> dict[str, set[str]]:
     return interfaces
 
 
-def isolation_problem() -> Optional[str]:
+def isolation_problem() -> str | None:
     """None when DDS traffic cannot leave this machine; otherwise why we refuse to run."""
     if os.environ.get("SORTING_LINE_ALLOW_HOST_NETWORK") == "1":
         return None
@@ -117,7 +118,9 @@ def run_isolated(script: str, mark: str = "SORTING_LINE_IN_NETNS") -> None:
     if problem is None:
         return
     if os.environ.get(mark) != "1" and os.geteuid() == 0 and shutil.which("unshare") and shutil.which("ip"):
-        print("not in an isolated network namespace: re-executing under `unshare -n` (lo up)", file=sys.stderr, flush=True)
+        print(
+            "not in an isolated network namespace: re-executing under `unshare -n` (lo up)", file=sys.stderr, flush=True
+        )
         env = dict(os.environ, **{mark: "1"})
         os.execvpe("unshare", ["unshare", "-n", "--", sys.executable, os.path.abspath(script), *sys.argv[1:]], env)
     sys.exit(f"{os.path.basename(script)}: refusing to run: {problem}")
@@ -174,7 +177,7 @@ def show_ns(ns: int) -> str:
 class NodeProcess:
     """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
 
-    def __init__(self, args: Iterable[str], log_path: Path, env: Optional[dict[str, str]] = None):
+    def __init__(self, args: Iterable[str], log_path: Path, env: dict[str, str] | None = None):
         self.args = [str(a) for a in args]
         self.log_path = Path(log_path)
         self.argv = [str(node_binary()), "node", *self.args]
@@ -218,7 +221,9 @@ class NodeProcess:
             self.proc.kill()
             self.proc.wait(timeout=5)
             self._log.close()
-            raise AssertionError(f"node did not exit within {timeout} s of {signal.Signals(sig).name}\n{self.describe()}")
+            raise AssertionError(
+                f"node did not exit within {timeout} s of {signal.Signals(sig).name}\n{self.describe()}"
+            ) from None
         self._log.close()
         return code
 
@@ -234,7 +239,7 @@ class ScriptProcess:
     subprocess, run as a user runs it: stdout and stderr into `log_path`, SORTING_LINE_BIN set to
     the node binary of the tests, a parent-death signal as for NodeProcess."""
 
-    def __init__(self, name: str, args: Iterable[Any], log_path: Path, label: Optional[str] = None):
+    def __init__(self, name: str, args: Iterable[Any], log_path: Path, label: str | None = None):
         script = Path(sys.executable).parent / name
         if not script.is_file():
             script = Path(shutil.which(name) or script)
@@ -262,7 +267,7 @@ class ScriptProcess:
         state = "running" if self.running() else f"exited with {self.proc.returncode}"
         return f"{self.label} ({state}): {' '.join(self.argv)}\n--- {self.label} log ---\n{self.log()}"
 
-    def wait(self, timeout: float, sig: Optional[int] = None) -> int:
+    def wait(self, timeout: float, sig: int | None = None) -> int:
         """Sends `sig` (if any and still running), waits up to `timeout` s for the exit code
         (kills and raises on timeout); a second call returns the same code."""
         if self.returncode is not None:
@@ -285,7 +290,7 @@ class ScriptProcess:
         return self.wait(timeout, signal.SIGINT)
 
 
-def run_node_expecting_failure(args: Iterable[str], env: Optional[dict[str, str]] = None, timeout: float = 10.0):
+def run_node_expecting_failure(args: Iterable[str], env: dict[str, str] | None = None, timeout: float = 10.0):
     """Runs `sorting_line node ARGS` that must fail at start; returns (exit code, stderr)."""
     full_env = dict(os.environ)
     if env:
@@ -302,7 +307,9 @@ def run_node_expecting_failure(args: Iterable[str], env: Optional[dict[str, str]
 # The reference trajectory
 
 
-def run_trace(setup: str, variant: str, seed: int, actions: Iterable[Any], max_steps: int = EPISODE_STEPS) -> list[dict]:
+def run_trace(
+    setup: str, variant: str, seed: int, actions: Iterable[Any], max_steps: int = EPISODE_STEPS
+) -> list[dict]:
     """`sorting_line trace`: the pure-library trajectory, one dict per line (first = initial reset)."""
     tokens = [str(a) for a in actions]
     argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),
@@ -323,7 +330,7 @@ SETUP_FLAGS = {
 }
 
 
-def decode_action(variant: str, action: int) -> tuple[float, Optional[int]]:
+def decode_action(variant: str, action: int) -> tuple[float, int | None]:
     """Gymnasium action -> (speed, mode): basic = speed index, advanced = speed index * 3 + mode."""
     speed_index, mode = vocabulary.decode_action(variant, action)
     return SPEEDS[speed_index], (mode if variant == "advanced" else None)
@@ -406,7 +413,7 @@ class RosSession:
 
     def spin_until(self, condition: Callable[[], Any], timeout: float, what: str,
                    context: Callable[[], str] = lambda: "", step: float = 0.02,
-                   abort: Callable[[], Optional[str]] = lambda: None):
+                   abort: Callable[[], str | None] = lambda: None):
         """Spins until `condition()` is truthy (and returns it); raises WaitTimeout naming `what`
         after `timeout` s, or at once when `abort()` says why waiting is pointless."""
         deadline = time.monotonic() + timeout
@@ -420,7 +427,9 @@ class RosSession:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 extra = context()
-                raise WaitTimeout(f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else ""))
+                raise WaitTimeout(
+                    f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else "")
+                )
             self.executor.spin_once(timeout_sec=min(step, remaining))
 
     def spin_for(self, seconds: float) -> None:
@@ -430,13 +439,13 @@ class RosSession:
             self.executor.spin_once(timeout_sec=min(0.02, remaining))
 
     def wait_future(self, future, timeout: float, what: str, context: Callable[[], str] = lambda: "",
-                    abort: Callable[[], Optional[str]] = lambda: None):
+                    abort: Callable[[], str | None] = lambda: None):
         self.spin_until(future.done, timeout, what, context, abort=abort)
         return future.result()
 
     def call_service(self, client, request, what: str, wait: float = 10.0, attempt_timeout: float = 3.0,
                      attempts: int = 3, context: Callable[[], str] = lambda: "",
-                     abort: Callable[[], Optional[str]] = lambda: None):
+                     abort: Callable[[], str | None] = lambda: None):
         """Waits (bounded) for the service, then calls it, retrying a call that got no reply."""
         self.spin_until(client.service_is_ready, wait, f"service {what} to be available", context, abort=abort)
         for attempt in range(1, attempts + 1):
@@ -477,7 +486,7 @@ class TopicRecorder:
         return self.session.spin_until(found, timeout, f"{self.topic}: {what}", context)
 
 
-def diagnostic_values(array, hardware_id: str) -> Optional[dict[str, str]]:
+def diagnostic_values(array, hardware_id: str) -> dict[str, str] | None:
     """The key/values of the status for `hardware_id` (the line's namespace) in a DiagnosticArray."""
     for status in array.status:
         if status.hardware_id == hardware_id:
@@ -495,11 +504,18 @@ class LineClient:
     TOPICS = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
 
     def __init__(self, session: RosSession, namespace: str, variant: str = "basic", tick_period: float = 1.0,
-                 node=None, node_proc: Optional[NodeProcess] = None, topics: Optional[list[str]] = None,
+                 node=None, node_proc: NodeProcess | None = None, topics: list[str] | None = None,
                  mode_topic: bool = False, depth: int = 10):
-        from sorting_line_interfaces.msg import (BeltOccupancy, LineState, MaterialInput, MaterialRatio, ResetEvent,
-                                                 SortModeCommand, SpeedCommand)
         from diagnostic_msgs.msg import DiagnosticArray
+        from sorting_line_interfaces.msg import (
+            BeltOccupancy,
+            LineState,
+            MaterialInput,
+            MaterialRatio,
+            ResetEvent,
+            SortModeCommand,
+            SpeedCommand,
+        )
         from sorting_line_interfaces.srv import ResetLine
 
         self.session, self.ns, self.variant = session, namespace, variant
@@ -510,8 +526,8 @@ class LineClient:
         self.msgs: dict[str, list] = defaultdict(list)
         self.source_times: dict[str, list[int]] = defaultdict(list)  # parallel to msgs
         self.by_stamp: dict[str, dict[int, list]] = defaultdict(lambda: defaultdict(list))
-        self.stamp: Optional[int] = None  # the tick the line waits at (ns), known after reset()
-        self.first_reset: Optional[int] = None  # stamp of the first reset() of this client
+        self.stamp: int | None = None  # the tick the line waits at (ns), known after reset()
+        self.first_reset: int | None = None  # stamp of the first reset() of this client
         # /diagnostics first: a status of our line arriving on it proves that the node sends to
         # this participant's readers (see wait_connected); (receive time, values) per status.
         self.diagnostics: list[tuple[float, dict[str, str]]] = []
@@ -575,7 +591,7 @@ class LineClient:
             lines.append(self.node_proc.describe())
         return "\n".join(lines)
 
-    def node_gone(self) -> Optional[str]:
+    def node_gone(self) -> str | None:
         if self.node_proc is not None and not self.node_proc.running():
             return f"the node process exited with {self.node_proc.proc.returncode}"
         return None
@@ -613,7 +629,7 @@ class LineClient:
 
     # ---- the service
 
-    def reset(self, seed: Optional[int] = None, timeout: float = 10.0, wait_tick: bool = True):
+    def reset(self, seed: int | None = None, timeout: float = 10.0, wait_tick: bool = True):
         """Calls `reset` and returns its response; waits for the new tick's state.
 
         Waits (bounded) for the service, then calls it. A call without a reply within 3 s is retried
@@ -683,17 +699,17 @@ class LineClient:
 
         return Time(sec=stamp // NS_PER_S, nanosec=stamp % NS_PER_S)
 
-    def send_speed(self, speed: float, stamp: Optional[int] = None) -> None:
+    def send_speed(self, speed: float, stamp: int | None = None) -> None:
         msg = self._SpeedCommand(speed=float(speed))
         msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
         self.speed_pub.publish(msg)
 
-    def send_mode(self, mode: int, stamp: Optional[int] = None) -> None:
+    def send_mode(self, mode: int, stamp: int | None = None) -> None:
         msg = self._SortModeCommand(mode=int(mode))
         msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
         self.mode_pub.publish(msg)
 
-    def step(self, speed: float, mode: Optional[int] = None, timeout: float = 5.0):
+    def step(self, speed: float, mode: int | None = None, timeout: float = 5.0):
         """Answers the current tick (speed, and mode on the advanced line); returns the next tick's state."""
         assert self.stamp is not None, "reset() first: the client does not know the current tick"
         if self.variant == "advanced":

@@ -33,7 +33,6 @@ import pytest
 import ros_harness as h
 from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, wait_for_command_writers
 from ros_harness import NS_PER_S
-
 from sorting_line_gym.bag import open_bag, rewrite_bag
 from sorting_line_gym.bag.replay import replay
 from sorting_line_gym.bag.schema import stamp_ns as plain_stamp
@@ -114,7 +113,7 @@ def test_golden_states_are_the_library_trajectory(name):
     assert [bool(e["seeded"]) for e in events.values()] == [seed is not None for seed in spec["plan"]]
     trace = h.run_trace(spec["setup"], spec["variant"], spec["seed"], tokens, max_steps=MAX_STEPS)[1:]
     assert len(trace) == len(states) == 255
-    for k, (s, entry) in enumerate(zip(states, trace)):
+    for k, (s, entry) in enumerate(zip(states, trace, strict=False)):
         view = SimpleNamespace(**s)
         if "reset" in entry:
             assert h.state_reset_view(view) == h.trace_reset_view(entry), f"{name}: tick {k + 1}"
@@ -160,7 +159,9 @@ def test_golden_bag_opens_with_rosbags_and_mcap(name):
     import yaml
 
     share = Path(sys.prefix) / "share" / "sorting_line_interfaces" / "msg"  # setup.sh installs it into .venv
-    topics = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["topics_with_message_count"]
+    topics = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"][
+        "topics_with_message_count"
+    ]
     for t in topics:
         meta = t["topic_metadata"]
         if meta["type"].startswith("sorting_line_interfaces/"):
@@ -262,7 +263,9 @@ def test_play_keeps_the_recorded_timing(ros, probe, namespace, tmp_path):
     ros.spin_for(0.2)
     recorded = [m["header"]["stamp"]["sec"] for m in relative(bag, "input")]
     assert [m.header.stamp.sec for m in inputs.msgs] == recorded
-    span = (bag.on(f"{bag.info.namespace}/input")[-1].log_time - bag.on(f"{bag.info.namespace}/input")[0].log_time) / 1e9
+    span = (
+        bag.on(f"{bag.info.namespace}/input")[-1].log_time - bag.on(f"{bag.info.namespace}/input")[0].log_time
+    ) / 1e9
     played = float(player.log().split(" s (recorded over")[0].rsplit(" ", 1)[1])
     assert played >= 0.9 * span / 4, player.log()
 

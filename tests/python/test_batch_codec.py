@@ -13,15 +13,17 @@ import array
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-
-from sorting_line_gym.ros.batch_codec import PRIMITIVES, BatchCodec, from_message
-from sorting_line_gym.line.vocabulary import sim_seconds, state_info
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates
+
+from sorting_line_gym.line.vocabulary import sim_seconds, state_info
+from sorting_line_gym.ros.batch_codec import PRIMITIVES, BatchCodec, from_message
 
 TYPECODES = {"<i4": "i", "<u4": "I", "<u8": "Q", "<f8": "d", "u1": "B"}
 
 
-def random_states(rng: np.random.Generator, n: int, lengths: dict[str, int] | None = None, frame_id: str = "") -> LineStates:
+def random_states(
+    rng: np.random.Generator, n: int, lengths: dict[str, int] | None = None, frame_id: str = ""
+) -> LineStates:
     """A LineStates with values over each field's whole range (extremes included)."""
     m = LineStates()
     m.header.stamp.sec = int(rng.integers(-(2**31), 2**31))

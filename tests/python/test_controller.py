@@ -33,11 +33,18 @@ import pytest
 
 import ros_harness as h
 from ros_harness import NS_PER_S, show_ns, stamp_ns
-
 from sorting_line_gym import SortingLineEnv
-from sorting_line_gym.agents import (START_SPEED_INDEX, ConstantAgent, RandomAgent, RuleBasedAgent, level,
-                                     load_policy, make_agent)
+from sorting_line_gym.agents import (
+    START_SPEED_INDEX,
+    ConstantAgent,
+    RandomAgent,
+    RuleBasedAgent,
+    level,
+    load_policy,
+    make_agent,
+)
 from sorting_line_gym.line.vocabulary import SPEEDS
+
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),
 # but once, while other jobs loaded this shared 2-core machine, 38 of 60 ticks were late
@@ -149,7 +156,9 @@ def watch(client, controller):
         return f"{client.context()}\n{controller.describe()}"
 
     def abort():
-        return client.node_gone() or (None if controller.running() else f"the controller exited with {controller.proc.returncode}")
+        return client.node_gone() or (
+            None if controller.running() else f"the controller exited with {controller.proc.returncode}"
+        )
 
     return context, abort
 
@@ -218,7 +227,7 @@ def check_realtime_run(agent: RuleBasedAgent, states: dict[int, tuple[float, obj
         applied = (s1.speed_index, s1.mode)
         explained = True
         held = (s0.speed_index, s0.mode)
-        for i, (x, field) in enumerate(zip(applied, ("speed_index", "mode"))):
+        for i, (x, field) in enumerate(zip(applied, ("speed_index", "mode"), strict=False)):
             if x == held[i]:
                 continue  # nothing new arrived (or the same value did)
             lo = newest_applied[i] if newest_applied[i] is not None else -1
@@ -314,7 +323,7 @@ def test_late_detection_accepts_held_and_late_commands_only():
     period = NS_PER_S
     states = {k * period: (float(k), SimpleNamespace(episode=0, step=k, observation_quantity=q, observation_category=0,
                                                      speed_index=a, mode=0))
-              for k, (q, a) in enumerate(zip(quantities, applied))}
+              for k, (q, a) in enumerate(zip(quantities, applied, strict=False))}
     decisions = {k * period: {"quantity": q, "category": 0, "current_speed_index": None,
                               "speed_index": agent.act(q, 0, 0)[0], "mode": 0, "latency_ms": 1.0,
                               "published_monotonic": float(k)}
@@ -376,7 +385,7 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
     agent = RuleBasedAgent("B", "advanced", hold=agent_name == "rba-hold")
     assert states[0].speed_index == START_SPEED_INDEX and states[0].mode == 0
     actions = []
-    for s0, s1 in zip(states, states[1:]):
+    for s0, s1 in zip(states, states[1:], strict=False):
         want = agent.act(s0.observation_quantity, s0.observation_category, s0.speed_index)
         t = stamp_ns(s0.header.stamp)
         where = (f"step {s0.step} -> {s1.step} (q={s0.observation_quantity}, cat {s0.observation_category}, "
@@ -398,7 +407,7 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
     start, first = h.state_reset_view(states[0]), h.trace_reset_view(trace[0])
     start["episode"] = first["episode"]  # the node's episode counter counts its earlier resets
     assert start == first
-    for k, (state, entry) in enumerate(zip(states[1:], trace[1:]), start=1):
+    for k, (state, entry) in enumerate(zip(states[1:], trace[1:], strict=False), start=1):
         view = h.state_step_view(state)
         view["episode"] = entry["episode"]  # the node's episode counter counts its earlier resets
         assert view == h.trace_step_view(entry), f"step {k}: node {view} != trace {h.trace_step_view(entry)}"

@@ -146,9 +146,12 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     tokens = [f"r{SEED}", *EPISODE_1, "r", *EPISODE_2]
     expected = trace(schedule, tokens)[1:]  # [0] is the line as built (episode 0)
     assert len(expected) == len(states)
-    for k, (entry, state) in enumerate(zip(expected, states)):
+    for k, (entry, state) in enumerate(zip(expected, states, strict=False)):
         if "reset" in entry:
-            assert h.state_reset_view(state) == {**h.trace_reset_view(entry), "observation_category": entry["category_reading"]}, k
+            assert h.state_reset_view(state) == {
+                **h.trace_reset_view(entry),
+                "observation_category": entry["category_reading"],
+            }, k
         else:
             assert h.state_step_view(state) == step_view(entry), f"record {k}, tick {entry['tick']}"
 
@@ -161,7 +164,12 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     resets = [m for m in events if m.at_reset]
     assert [m.episode for m in resets] == [1, 2] and [m.ratio_sensor for m in resets] == [False, True]
     upgrade = next(m for m in events if list(m.event_indices) == [4])
-    assert (upgrade.tick, upgrade.sort_modes, upgrade.ratio_sensor, list(upgrade.changed)) == (14, True, True, ["sort_modes"])
+    assert (upgrade.tick, upgrade.sort_modes, upgrade.ratio_sensor, list(upgrade.changed)) == (
+        14,
+        True,
+        True,
+        ["sort_modes"],
+    )
     # Announced with the state of the tick the line then waits at (after the step of tick 13).
     arrival = 1 + len(EPISODE_1) + 1 + (UPGRADE_TICK - 1 - len(EPISODE_1))
     assert stamp_ns(upgrade.header.stamp) == stamp_ns(states[arrival].header.stamp)
@@ -233,7 +241,7 @@ def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
     env = make_env(schedule)
     got, tokens = [], []
     try:
-        for episode, (seed, acts) in enumerate(zip(seeds, actions), start=1):
+        for episode, (seed, acts) in enumerate(zip(seeds, actions, strict=False), start=1):
             obs, info = env.reset(seed=seed)
             tokens.append(f"r{seed}")
             masks = env.unwrapped.action_masks()
@@ -269,7 +277,8 @@ def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
             expected.append(("step", [s["observation"]["quantity"], category], s["reward"],
                              h.MODES[s["action"]["mode"]]))
     # float32 observations: compare the readings (two decimals) at float32 precision.
-    as32 = lambda rows: [tuple(np.float32(v).item() if isinstance(v, float) else v for v in r[1]) for r in rows]
+    def as32(rows):
+        return [tuple(np.float32(v).item() if isinstance(v, float) else v for v in r[1]) for r in rows]
     assert as32(got) == as32(expected)
     assert [r[2:] for r in got] == [r[2:] for r in expected]
 
@@ -308,7 +317,6 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
 
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
     from bag_golden import BagProcess, wait_for_command_writers
-
     from sorting_line_gym.bag import open_bag
     from sorting_line_gym.bag.replay import replay
 
@@ -345,7 +353,9 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     assert result.identical, result.report()
     assert result.comparison.compared["events/evolution"] == 5
     assert result.comparison.compared["state"] == len(c.since_reset("state")) == 2 + len(EPISODE_1) + len(EPISODE_2)
-    assert "sensors/ratio" not in result.comparison.compared and any("schedule stored in the bag" in n for n in result.notes)
+    assert "sensors/ratio" not in result.comparison.compared and any(
+        "schedule stored in the bag" in n for n in result.notes
+    )
 
     # The events are compared: a recorded announcement with another threshold is named.
     import dataclasses
@@ -376,7 +386,9 @@ def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, star
     schedule.write_text("events:\n  - at: {episode: 0}\n    sort_modes: false\n    ratio_sensor: false\n"
                         "  - at: {episode: 1}\n    sort_modes: true\n    ratio_sensor: true\n")
     ns = namespace("cli")
-    node = start_node("--setup", "B", "--variant", "advanced", "--evolution", schedule, "--ros-args", "-r", f"__ns:={ns}")
+    node = start_node(
+        "--setup", "B", "--variant", "advanced", "--evolution", schedule, "--ros-args", "-r", f"__ns:={ns}"
+    )
     c = client_factory(ns, "basic", node_proc=node)
     c.wait_connected()
     hardware = {f"{ns}/sensors/ratio", f"{ns}/cmd/sort_mode"}

@@ -107,12 +107,17 @@ def test_parameters_are_described_read_only_with_ranges(ros, start_node, namespa
         for name in names:
             assert d[name].read_only and d[name].description, d[name]
             assert "missing" not in d[name].description
-        fp = lambda n: (d[n].floating_point_range[0].from_value, d[n].floating_point_range[0].to_value)
-        ir = lambda n: (d[n].integer_range[0].from_value, d[n].integer_range[0].to_value)
+        def fp(n):
+            return (d[n].floating_point_range[0].from_value, d[n].floating_point_range[0].to_value)
+        def ir(n):
+            return (d[n].integer_range[0].from_value, d[n].integer_range[0].to_value)
         assert fp("rate") == (0.0, 100000.0) and "0.0 <.." in d["rate"].additional_constraints
         assert fp("threshold") == (0.0, 1.0) and "..< 1.0" in d["threshold"].additional_constraints
         assert ir("max_steps") == (1, 1_000_000) and ir("lines") == (1, 64) and ir("seed") == (0, 2**63 - 1)
-        assert d["variant"].type == ParameterType.PARAMETER_STRING and "basic or advanced" in d["variant"].additional_constraints
+        assert (
+            d["variant"].type == ParameterType.PARAMETER_STRING
+            and "basic or advanced" in d["variant"].additional_constraints
+        )
         print("\n" + str(d["threshold"]))
 
         setter = probe.create_client(SetParameters, f"{ns}/sorting_line/set_parameters")
@@ -131,7 +136,8 @@ def leave_after(ros, start_node, namespace, sig, listed_in) -> float:
     node = start_node("--ros-args", "-r", f"__ns:={ns}")
     probe = ros.make_node("leave_probe")
     try:
-        listed = lambda: listed_in(probe, ns)
+        def listed():
+            return listed_in(probe, ns)
         ros.spin_until(listed, 15.0, f"{ns} in the peer's graph", node.describe)
         ros.spin_for(0.5)
         t0 = time.monotonic()
@@ -173,7 +179,8 @@ def test_the_node_follows_the_discovery_range(ros, start_node, namespace, range_
     node = start_node("--ros-args", "-r", f"__ns:={ns}", env={"ROS_AUTOMATIC_DISCOVERY_RANGE": range_})
     probe = ros.make_node("range_probe")
     try:
-        seen = lambda: probe.get_publishers_info_by_topic(f"{ns}/state")
+        def seen():
+            return probe.get_publishers_info_by_topic(f"{ns}/state")
         if visible:
             ros.spin_until(seen, 10.0, f"{ns}/state under {range_}", node.describe)
         else:

@@ -229,7 +229,9 @@ def assert_line_matches_trace(line: dict, seed: int, actions: list[int], where: 
         reward = step["reward"]
         if float32_rewards and "step" in entry:
             library = entry["step"]["reward"]
-            assert np.float32(reward) == np.float32(library), f"{where} step {t + 1}: reward {reward!r} != library {library!r}"
+            assert np.float32(reward) == np.float32(library), (
+                f"{where} step {t + 1}: reward {reward!r} != library {library!r}"
+            )
             reward = library  # compared above, at the precision it was handed over in
         assert_step(VARIANT, np.array(obs, dtype=np.float32), reward, info, entry, f"{where} step {t + 1}")
 
@@ -248,9 +250,15 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
     with netns_hosts.Hosts([*NODES, "trainer"]) as hosts:
         trainer_addr, h3_addr = hosts.address("trainer"), hosts.address("h3")
         subnet = discovery_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET")
-        node_envs = {"h1": subnet, "h2": subnet,
-                     "h3": discovery_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_STATIC_PEERS=trainer_addr)}
-        nodes = {host: start_node(hosts, tmp_path, host, ns, node_envs[host]) for host, ns in zip(NODES, namespaces)}
+        node_envs = {
+            "h1": subnet,
+            "h2": subnet,
+            "h3": discovery_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_STATIC_PEERS=trainer_addr),
+        }
+        nodes = {
+            host: start_node(hosts, tmp_path, host, ns, node_envs[host])
+            for host, ns in zip(NODES, namespaces, strict=False)
+        }
         trainer_env = discovery_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=h3_addr)
         script = tmp_path / "trainer.py"
         script.write_text(TRAINER)
@@ -315,9 +323,7 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
 
 def test_a_list_of_nodes_is_checked_when_the_env_is_made():
     """Nothing starts before the first reset, but a bad list fails at once, saying why."""
-    from sorting_line_gym import SortingLineVectorEnv
-
-    from sorting_line_gym import SortingLineSB3VecEnv
+    from sorting_line_gym import SortingLineSB3VecEnv, SortingLineVectorEnv
 
     env = SortingLineVectorEnv(num_envs=8, namespace=["/a/plant", "/b/plant"], node="attach")
     assert len(env._lines.bank) == 8 and env._lines.bank.lines_per_node == 4
@@ -335,7 +341,19 @@ def test_a_list_of_nodes_is_checked_when_the_env_is_made():
 
 BENCH = Path(__file__).resolve().parents[2] / "benches" / "multihost.py"
 # Small: 1 and 2 hosts, 100 timed round trips each, and a soak of 3,000 line-ticks over 2 hosts.
-SMALL_BENCH = ["--hosts", "1", "2", "--rounds", "1", "--round-trips", "100", "--soak-ticks", "3000", "--soak-hosts", "2"]
+SMALL_BENCH = [
+    "--hosts",
+    "1",
+    "2",
+    "--rounds",
+    "1",
+    "--round-trips",
+    "100",
+    "--soak-ticks",
+    "3000",
+    "--soak-hosts",
+    "2",
+]
 
 
 def assert_bench_output(out: str, node_cpu: str) -> None:
@@ -362,8 +380,13 @@ def test_the_multihost_benchmark_attaches_to_running_nodes(tmp_path):
     """``--attach``: what a user with real machines runs, here over two nodes started in this
     test's namespace (the ROS environment decides where they are; the nodes' CPU is not the
     benchmark's to measure then)."""
-    nodes = [h.NodeProcess(["--setup", "A", "--lines", "16", "--max-steps", "50", "--ros-args", "-r", f"__ns:=/{n}/plant"],
-                           tmp_path / f"{n}.log") for n in ("m1", "m2")]
+    nodes = [
+        h.NodeProcess(
+            ["--setup", "A", "--lines", "16", "--max-steps", "50", "--ros-args", "-r", f"__ns:=/{n}/plant"],
+            tmp_path / f"{n}.log",
+        )
+        for n in ("m1", "m2")
+    ]
     try:
         r = subprocess.run([sys.executable, str(BENCH), "--attach", "/m1/plant", "/m2/plant", *SMALL_BENCH],
                            capture_output=True, text=True, timeout=300)

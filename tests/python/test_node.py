@@ -117,7 +117,7 @@ def check_tick_consistency(c: h.LineClient, stamps: list[int], reset_stamps: set
 def compare_with_trace(states_by_token: list, trace: list[dict], where: str) -> None:
     """`states_by_token[i]` is the node's state after trace line i + 1 (trace line 0 = initial reset)."""
     assert len(states_by_token) == len(trace) - 1
-    for i, (state, entry) in enumerate(zip(states_by_token, trace[1:])):
+    for i, (state, entry) in enumerate(zip(states_by_token, trace[1:], strict=False)):
         if "reset" in entry:
             assert h.state_reset_view(state) == h.trace_reset_view(entry), f"{where}: reset #{i}"
             assert state.step == 0 and not state.truncated, f"{where}: reset #{i}"
@@ -157,7 +157,11 @@ BAD_START = [
     (["--max-steps", "0"], {}, ["max_steps = 0", "allowed 1 ..= 1000000"]),
     (["--mode", "realtime", "--rate", "0"], {}, ["rate = 0", "allowed 0.0 <.. 100000.0"]),
     (["--tick-period", "0"], {}, ["tick_period = 0", "allowed 0.000001 ..= 3600.0"]),
-    (["--lines", "2", "--seed", "9223372036854775807"], {}, ["seed = 9223372036854775807 (with 2 lines, up to seed + 1)", "allowed 0 ..= 9223372036854775807"]),
+    (
+        ["--lines", "2", "--seed", "9223372036854775807"],
+        {},
+        ["seed = 9223372036854775807 (with 2 lines, up to seed + 1)", "allowed 0 ..= 9223372036854775807"],
+    ),
     # A ROS integer parameter is an int64: a larger seed would read back negative.
     (["--seed", "9223372036854775808"], {}, ["seed = 9223372036854775808", "allowed 0 ..= 9223372036854775807"]),
     (["--variant", "fancy"], {}, ["'fancy'", "basic", "advanced"]),
@@ -222,7 +226,7 @@ def test_every_topic_and_the_reset_service(variant, setup, ros, start_node, clie
 
     actions = [5, 27, 3, 14, 29, 0, 8, 22] if variant == "advanced" else [5, 9, 3, 0, 7, 7, 2, 9]
     states = [c.act(a) for a in actions]
-    for state, action in zip(states, actions):
+    for state, action in zip(states, actions, strict=False):
         speed, mode = h.decode_action(variant, action)
         assert state.speed == speed and state.seed == 11
         assert state.mode == (mode or 0)
@@ -339,7 +343,7 @@ def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_pat
                 ParameterType.PARAMETER_DOUBLE: v.double_value, ParameterType.PARAMETER_STRING: v.string_value,
                 }.get(v.type, f"<type {v.type}>")
 
-    got = dict(zip(names, map(value, reply.values)))
+    got = dict(zip(names, map(value, reply.values), strict=False))
     assert got == {"variant": "advanced", "max_steps": 30, "seed": 3, "threshold": 0.75, "mode": "lockstep",
                    "lines": 1, "input": "random", "obs_noise": 0.0, "action_penalty": 0.0, "tick_period": 1.0}
     # Fixed for the run: a set request is refused with a reason.
@@ -534,7 +538,7 @@ def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, s
     from sorting_line_interfaces.srv import ResetLines
 
     ns, setup, variant, seed = namespace(), "A", "advanced", 5
-    node = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--lines", "2", "--seed", str(seed), *ns_args(ns))
+    start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--lines", "2", "--seed", str(seed), *ns_args(ns))
     diag = diagnostics_recorder(ros, probe)
     states = h.TopicRecorder(ros, probe, f"{ns}/batch/state", LineStates)
     commands = probe.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
@@ -547,12 +551,14 @@ def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, s
 
     first = reset([0, 1], [True, True], [1, 2])
     assert first.success and list(first.states.seed) == [1, 2], first
-    stamps = [s * NS_PER_S + n for s, n in zip(first.states.stamp_sec, first.states.stamp_nanosec)]
+    stamps = [s * NS_PER_S + n for s, n in zip(first.states.stamp_sec, first.states.stamp_nanosec, strict=False)]
     for request, reason in [(([0, 1], [True], [1, 2]), "same length"), (([2], [False], [0]), "out of range"),
                             (([1, 1], [False, False], [0, 0]), "repeated")]:
         refused = reset(*request)
         assert not refused.success and reason in refused.message, refused
-        assert [s * NS_PER_S + n for s, n in zip(refused.states.stamp_sec, refused.states.stamp_nanosec)] == stamps
+        assert [
+            s * NS_PER_S + n for s, n in zip(refused.states.stamp_sec, refused.states.stamp_nanosec, strict=False)
+        ] == stamps
 
     ros.spin_until(lambda: commands.get_subscription_count() > 0, 10.0, f"{ns}/batch/cmd to match")
 
@@ -562,11 +568,14 @@ def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, s
 
     def step(actions):
         """Sends the valid batch for `actions` and returns the batch state of the next tick."""
-        speeds, modes = zip(*(h.decode_action(variant, a) for a in actions))
+        speeds, modes = zip(*(h.decode_action(variant, a) for a in actions), strict=False)
         want = [t + NS_PER_S for t in stamps]
         send(stamps, list(speeds), list(modes))
-        got = states.wait_for(lambda m: [s * NS_PER_S + n for s, n in zip(m.stamp_sec, m.stamp_nanosec)] == want,
-                              10.0, f"batch/state at {want}")
+        got = states.wait_for(
+            lambda m: [s * NS_PER_S + n for s, n in zip(m.stamp_sec, m.stamp_nanosec, strict=False)] == want,
+            10.0,
+            f"batch/state at {want}",
+        )
         stamps[:] = want
         return got
 
@@ -635,7 +644,7 @@ def test_truncation_then_episode_over_then_reset(ros, start_node, client_factory
     trace = h.run_trace(setup, variant, 1, ["r4", *actions, "r6", 7], max_steps=5)
     compare_with_trace(states, trace, f"{ns} vs trace")
     stamps = [stamp_ns(s.header.stamp) for s in c.since_reset("state")]
-    assert all(b - a == 250_000_000 for a, b in zip(stamps, stamps[1:])), stamps
+    assert all(b - a == 250_000_000 for a, b in zip(stamps, stamps[1:], strict=False)), stamps
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
@@ -676,7 +685,7 @@ def test_realtime_holds_the_speed_and_rejects_nan(ros, start_node, client_factor
     seconds = (sent[-1] - sent[mark]) / NS_PER_S
     assert ticks >= 20 and 40 <= ticks / seconds <= 60, f"{ticks:.0f} ticks in {seconds:.2f} s: want about 50/s"
     stamps = [stamp_ns(s.header.stamp) for s in states[first:]]
-    assert all(b - a == NS_PER_S for a, b in zip(stamps, stamps[1:])), "realtime ticks are consecutive"
+    assert all(b - a == NS_PER_S for a, b in zip(stamps, stamps[1:], strict=False)), "realtime ticks are consecutive"
     assert all(s.speed == 0.9 for s in states[first:]), "speed 0.9 is held"
     # NaN is rejected, the line keeps 0.9.
     c.send_speed(math.nan, latest())
@@ -713,8 +722,10 @@ def test_realtime_restarts_episodes_and_keeps_streaming(ros, start_node, client_
     ros.spin_until(lambda: len({s.episode for s in states[first:]}) >= 4, 5.0, f"{ns}/state: 3 episode restarts",
                    c.context)
     stamps = [stamp_ns(s.header.stamp) for s in states]
-    assert all(b - a == NS_PER_S for a, b in zip(stamps, stamps[1:])), "the stream goes on across restarts"
-    for prev, cur in zip(states, states[1:]):
+    assert all(b - a == NS_PER_S for a, b in zip(stamps, stamps[1:], strict=False)), (
+        "the stream goes on across restarts"
+    )
+    for prev, cur in zip(states, states[1:], strict=False):
         if cur.episode != prev.episode:
             assert prev.truncated and prev.step == 10 and cur.step == 0 and cur.episode == prev.episode + 1
             assert cur.seed == 2, "restarts carry the streams of the node's seed"
@@ -736,8 +747,9 @@ def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reade
     reads and counts them on /diagnostics; a reader that subscribes later gets every tick from
     then on, the same values the batch carries."""
     import numpy as np
-    from sorting_line_gym import SortingLineVectorEnv
     from sorting_line_interfaces.msg import LineState, MaterialInput
+
+    from sorting_line_gym import SortingLineVectorEnv
 
     ns = namespace("unread")
     start_node("--lines", "2", *h.SETUP_FLAGS["D"], "--max-steps", "200", *ns_args(ns))

@@ -32,9 +32,8 @@ import numpy as np
 import pytest
 
 import ros_harness as h
-from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv
-from sorting_line_gym import SortingLineVectorEnv
 from bag_golden import BagProcess, wait_for_command_writers
+from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv, SortingLineVectorEnv
 from sorting_line_gym.bag.bagfile import open_bag
 from sorting_line_gym.bag.replay import replay
 from sorting_line_gym.bag.schema import stamp_ns
@@ -83,7 +82,7 @@ def test_soak_checker_catches_lost_misaligned_and_wrong_observations():
     def ledger_from(entries, actions_seen):
         ledger = soak.LineLedger(setup, variant, seed)
         ok = []
-        for step, (action, entry) in enumerate(zip(actions_seen, entries), start=1):
+        for action, entry in zip(actions_seen, entries, strict=False):
             s = entry["step"]
             ok.append(ledger.expect_step(action, seed, s["step"], s["reward"], entry["cumulative_reward"],
                                          soak.observation_of(variant, s["observation"])))
@@ -265,7 +264,7 @@ def test_a_second_client_is_refused_and_a_reset_takes_the_line_over(ros, start_n
         assert "[not_owner]" in node.log() and "the episode's owner is" in node.log()
 
         # A reset by the second client frees the line; it drives it, and the first bridge says so.
-        response = second.reset(23)
+        second.reset(23)
         state = second.step(0.5)
         assert state.step == 1
         with pytest.raises(BridgeError, match="another client reset this line"):
@@ -339,7 +338,9 @@ def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(ros,
         for _ in range(int(rng.integers(2, 8))):
             kind = rng.integers(0, 5)
             if kind == 0:
-                line.send_speed(float(rng.choice([math.nan, math.inf, -math.inf, 0.0, 1.1, 0.55, -0.2, 0.3 + 1e-3])), now)
+                line.send_speed(
+                    float(rng.choice([math.nan, math.inf, -math.inf, 0.0, 1.1, 0.55, -0.2, 0.3 + 1e-3])), now
+                )
                 expected["invalid_speed"] += 1
             elif kind == 1:
                 line.send_mode(int(rng.integers(3, 256)), now)
@@ -364,7 +365,8 @@ def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(ros,
         assert h.state_step_view(state) | {"episode": 0} == h.trace_step_view(want[t]) | {"episode": 0}, f"step {t}"
     total = sum(expected.values())
     got = wait_diagnostics_where(
-        diag, ns, lambda v: v["commands_rejected"] == str(total) and v["ticks"] == str(len(actions)), 10.0, line.context)
+        diag, ns, lambda v: v["commands_rejected"] == str(total) and v["ticks"] == str(len(actions)), 10.0, line.context
+    )
     assert {k: got[f"rejected_{k}"] for k in expected} == {k: str(n) for k, n in expected.items()}
     assert got["commands_accepted"] == str(2 * len(actions)) and got["ticks"] == str(len(actions))
     print(f"topic-level flood: {sent} bad commands, {total} rejections counted: {expected}")
@@ -428,7 +430,9 @@ def run_node_line(client, variant, episodes):
     out = []
     for seed, actions in episodes:
         r = client.reset(seed)
-        out.append(("reset", soak.observation_of(variant, [r.quantity, r.category][: 2 if variant == "advanced" else 1])))
+        out.append(
+            ("reset", soak.observation_of(variant, [r.quantity, r.category][: 2 if variant == "advanced" else 1]))
+        )
         for a in actions:
             s = client.act(a)
             obs = [s.observation_quantity, s.observation_category][: 2 if variant == "advanced" else 1]
@@ -445,7 +449,9 @@ def run_bag_replay(path, variant):
     out = []
     for message in sorted(open_bag(path).by_relative_topic()["state"], key=lambda m: stamp_ns(m.plain)):
         s = message.plain
-        obs = soak.observation_of(variant, [s["observation_quantity"], s["observation_category"]][: 2 if variant == "advanced" else 1])
+        obs = soak.observation_of(
+            variant, [s["observation_quantity"], s["observation_category"]][: 2 if variant == "advanced" else 1]
+        )
         out.append(("reset", obs) if s["step"] == 0 else (obs, s["reward"], s["cumulative_reward"], s["step"]))
     return out
 
@@ -477,7 +483,9 @@ def run_vector_env(variant, setup, episodes, lines, k):
             for a in actions:
                 obs, rewards, _, truncated, infos = env.step(np.full(lines, a))
                 o = infos["final_obs"][k] if truncated[k] else obs[k]
-                out.append((soak.observation_of(variant, o), rewards[k], infos["cumulative_reward"][k], infos["step"][k]))
+                out.append(
+                    (soak.observation_of(variant, o), rewards[k], infos["cumulative_reward"][k], infos["step"][k])
+                )
     finally:
         env.close()
     return out
@@ -519,5 +527,5 @@ def test_library_node_bridge_and_vector_paths_give_identical_trajectories(varian
     assert len(reference) == sum(len(a) + 1 for _, a in episodes)
     for label, trajectory in paths.items():
         assert len(trajectory) == len(reference), f"{label}: {len(trajectory)} entries, library {len(reference)}"
-        for i, (got, want) in enumerate(zip(trajectory, reference)):
+        for i, (got, want) in enumerate(zip(trajectory, reference, strict=False)):
             assert tuple(got) == tuple(want), f"{label} differs from the library at entry {i}: {got} != {want}"

@@ -34,7 +34,8 @@ def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> Dashboar
     accuracy = [float(a) for a in rng.uniform(0.4, 0.98, steps)]
     occupancy = [float(o) for o in rng.uniform(0.05, 0.95, steps)]
     reward = [
-        -0.1 if a < 0.7 else round(0.5 * (a - 0.7) / 0.3 + 0.5 * (s - 0.1) / 0.9, 2) for a, s in zip(accuracy, speed)
+        -0.1 if a < 0.7 else round(0.5 * (a - 0.7) / 0.3 + 0.5 * (s - 0.1) / 0.9, 2)
+        for a, s in zip(accuracy, speed, strict=False)
     ]
     advanced = variant == "advanced"
     modes = [int(m) for m in rng.integers(0, 3, steps)] if advanced else None

@@ -37,10 +37,13 @@ import ros_harness as h
 REQUIRED = os.environ.get("SORTING_LINE_RLLIB") == "1"
 INSTALLED = importlib.util.find_spec("ray") is not None
 if REQUIRED and not INSTALLED:
-    raise ImportError("SORTING_LINE_RLLIB=1 but Ray is not installed in this venv: bash launch_scripts/setup.sh --rllib "
-                      "(launch_scripts/requirements-rllib.txt)")
-pytestmark = pytest.mark.skipif(not INSTALLED, reason="Ray RLlib is not installed: bash launch_scripts/setup.sh --rllib "
-                                "(test.sh does this itself)")
+    raise ImportError(
+        "SORTING_LINE_RLLIB=1 but Ray is not installed in this venv: bash launch_scripts/setup.sh --rllib "
+        "(launch_scripts/requirements-rllib.txt)"
+    )
+pytestmark = pytest.mark.skipif(
+    not INSTALLED, reason="Ray RLlib is not installed: bash launch_scripts/setup.sh --rllib (test.sh does this itself)"
+)
 TRAIN = [sys.executable, "-m", "sorting_line_gym.training.rllib"]
 
 
@@ -66,13 +69,32 @@ def test_ppo_with_two_env_runners_each_on_a_node_of_its_own(start_node, namespac
     nodes = [namespace("runner1"), namespace("runner2")]
     for ns in nodes:
         start_node("--setup", "B", "--lines", "4", "--ros-args", "-r", f"__ns:={ns}")
-    r = subprocess.run([*TRAIN, "--setup", "B", "--env-runners", "2", "--envs-per-runner", "4", "--timesteps", "4000",
-                        "--batch", "1000", "--nodes", *nodes], capture_output=True, text=True, timeout=400, env=ray_env())
+    r = subprocess.run(
+        [
+            *TRAIN,
+            "--setup",
+            "B",
+            "--env-runners",
+            "2",
+            "--envs-per-runner",
+            "4",
+            "--timesteps",
+            "4000",
+            "--batch",
+            "1000",
+            "--nodes",
+            *nodes,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=400,
+        env=ray_env(),
+    )
     result = summary(r, "RLlib PPO")
     check_training(result, 4000, "2 EnvRunners x 4 envs")
     placement = sorted(result["env_runners"], key=lambda p: p["worker_index"])
     assert [p["worker_index"] for p in placement] == [1, 2], placement
-    for p, ns in zip(placement, nodes):
+    for p, ns in zip(placement, nodes, strict=False):
         assert sorted(p["lines"]) == [f"{ns}/line_{k}" for k in range(4)], f"EnvRunner {p['worker_index']}: {p}"
     assert len({p["pid"] for p in placement}) == 2, placement
     # RLlib closes a remote EnvRunner's envs, then ray.kill()s it: its DDS participant is never

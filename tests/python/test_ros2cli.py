@@ -214,7 +214,7 @@ def test_topic_hz_in_realtime_mode(ros2, rt_line):
     except subprocess.TimeoutExpired:
         os.killpg(p.pid, signal.SIGKILL)
         out, _ = p.communicate()
-        raise AssertionError(f"`ros2 topic hz` did not stop on SIGINT\n{out}")
+        raise AssertionError(f"`ros2 topic hz` did not stop on SIGINT\n{out}") from None
     rates = [float(x) for x in re.findall(r"average rate: ([0-9.]+)", out)]
     assert rates, f"no rate reported in 6 s:\n{out}"
     assert 0.5 * RATE <= rates[-1] <= 1.5 * RATE, f"rate {rates[-1]} Hz, node ticks at {RATE} Hz:\n{out}"
@@ -311,10 +311,26 @@ def test_param_list_get_dump(ros2, rt_line):
     got = ros2.run("param", "get", rt_line.fqn, "rate", timeout=20).stdout.strip()
     assert got == f"Double value is: {RATE}", got
     dump = yaml.safe_load(ros2.run("param", "dump", rt_line.fqn, timeout=20).stdout)
-    assert dump == {rt_line.fqn: {"ros__parameters": {
-        "action_penalty": 0.0, "evolution_file": "", "input": "random", "lines": 1, "max_steps": 1000000, "mode": "realtime",
-        "obs_noise": 0.0, "rate": RATE, "seed": 5, "setup": "", "threshold": 0.7, "tick_period": 1.0, "use_sim_time": False,
-        "variant": "advanced"}}}, dump
+    assert dump == {
+        rt_line.fqn: {
+            "ros__parameters": {
+                "action_penalty": 0.0,
+                "evolution_file": "",
+                "input": "random",
+                "lines": 1,
+                "max_steps": 1000000,
+                "mode": "realtime",
+                "obs_noise": 0.0,
+                "rate": RATE,
+                "seed": 5,
+                "setup": "",
+                "threshold": 0.7,
+                "tick_period": 1.0,
+                "use_sim_time": False,
+                "variant": "advanced",
+            }
+        }
+    }, dump
 
 
 def describe(ros2, node: str, names: list[str]) -> dict[str, dict[str, str]]:
@@ -411,7 +427,9 @@ def test_topic_pub_speed_command_on_a_realtime_line(ros2, ros, start_node, clien
     """`ros2 topic pub --once` of a SpeedCommand (zero stamp: a realtime line takes lagging stamps)."""
     ns = namespace("pub")
     # One long episode: a realtime line's own restart shows the start speed again at step 0.
-    node = start_node("--mode", "realtime", "--rate", str(RATE), "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}")
+    node = start_node(
+        "--mode", "realtime", "--rate", str(RATE), "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}"
+    )
     c = client_factory(ns, "basic", node_proc=node, topics=["state"])
     first = ros.spin_until(lambda: c.msgs["state"], 10.0, f"{ns}/state", c.context)[0]
     assert first.speed == 0.6, first  # the start speed, before anyone commands

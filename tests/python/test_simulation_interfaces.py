@@ -1,7 +1,8 @@
 """The node as a standard simulator: ROS 2's simulation_interfaces services in its private namespace
 (`<ns>/sorting_line/get_simulator_features`, `get_simulation_state`, `set_simulation_state`,
-`step_simulation`, `reset_simulation`) and the SimulateSteps action (`simulate_steps`), driven by real rclpy clients built against the interface
-package (msg/simulation_interfaces, compiled by setup.sh) and by the real `ros2` CLI.
+`step_simulation`, `reset_simulation`) and the SimulateSteps action (`simulate_steps`), driven by
+real rclpy clients built against the interface package (msg/simulation_interfaces, compiled by
+setup.sh) and by the real `ros2` CLI.
 
 The line is driven through the standard services only, and every state it publishes is compared
 with `sorting_line trace` for its seed: StepSimulation runs ticks on the held command (the start
@@ -19,7 +20,7 @@ import time
 import pytest
 
 import ros_harness as h
-from ros_harness import stamp_ns, show_ns
+from ros_harness import show_ns, stamp_ns
 
 SETUP, VARIANT, SEED, RATE = "B", "basic", 13, 40.0
 START_SPEED_INDEX = 5  # the speed a line starts each episode with (0.6), held until commanded
@@ -120,7 +121,7 @@ def state_views(states: list) -> list:
 
 def assert_trajectory(states: list, tokens: list, what: str) -> None:
     got, want = state_views(states), expected_views(tokens)
-    for i, (g, w) in enumerate(zip(got, want)):
+    for i, (g, w) in enumerate(zip(got, want, strict=False)):
         assert g == w, f"{what}: tick {i + 1} differs from `sorting_line trace --seed {SEED}`:\nnode  {g}\ntrace {w}"
     assert len(got) == len(want), (len(got), len(want))
 
@@ -268,8 +269,13 @@ def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
     sim.ros.spin_until(lambda: sim.node.count_publishers(feedback_topic) >= 1, 10.0, feedback_topic, sim.context)
 
     def run(steps: int, feedback: list, timeout: float = 10.0):
-        goal = sim.ros.wait_future(client.send_goal_async(SimulateSteps.Goal(steps=steps), feedback_callback=feedback.append),
-                                   timeout, f"the goal of {steps} steps accepted", sim.context, abort=sim.gone)
+        goal = sim.ros.wait_future(
+            client.send_goal_async(SimulateSteps.Goal(steps=steps), feedback_callback=feedback.append),
+            timeout,
+            f"the goal of {steps} steps accepted",
+            sim.context,
+            abort=sim.gone,
+        )
         assert goal.accepted, "a goal is accepted, and ends with the reason if refused"
         return goal
 
@@ -326,8 +332,12 @@ def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node,
     def call(name: str, request: str = "{}") -> str:
         return ros2.run("service", "call", f"{fqn}/{name}", SERVICES[name], request, timeout=40).stdout
 
-    assert re.search(r"SimulationState\(state=2\), result=simulation_interfaces\.msg\.Result\(result=1,",
-                     call("get_simulation_state")), "PAUSED"
-    assert "result=simulation_interfaces.msg.Result(result=1, error_message='')" in call("step_simulation", "{steps: 5}")
+    assert re.search(
+        r"SimulationState\(state=2\), result=simulation_interfaces\.msg\.Result\(result=1,",
+        call("get_simulation_state"),
+    ), "PAUSED"
+    assert "result=simulation_interfaces.msg.Result(result=1, error_message='')" in call(
+        "step_simulation", "{steps: 5}"
+    )
     out = call("reset_simulation", "{scope: 4}")
     assert "result=0, error_message='scope 4 is not supported" in out, out

@@ -30,7 +30,9 @@ TIMEOUT = 300
 def run(argv: list[str], cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
     """A console script of the bridge, in this test's ROS environment."""
     env = dict(os.environ, **h.ros_environment())
-    result = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT, stdin=subprocess.DEVNULL)
+    result = subprocess.run(
+        argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT, stdin=subprocess.DEVNULL
+    )
     if check and result.returncode != 0:
         raise AssertionError(f"{' '.join(argv)} exited {result.returncode}:\n{result.stderr[-3000:]}")
     return result
@@ -42,9 +44,26 @@ def script(name: str) -> str:
 
 def library_eval(agent: str, setup: str, variant: str, episodes: int, seed: int = 42, gap: bool = False) -> dict:
     out = subprocess.run(
-        [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes),
-         "--seed", str(seed), "--json", *(["--gap"] if gap else [])],
-        capture_output=True, text=True, check=True, timeout=60,
+        [
+            str(h.node_binary()),
+            "eval",
+            "--agent",
+            agent,
+            "--setup",
+            setup,
+            "--variant",
+            variant,
+            "--episodes",
+            str(episodes),
+            "--seed",
+            str(seed),
+            "--json",
+            *(["--gap"] if gap else []),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
     ).stdout
     return json.loads(out)
 
@@ -63,7 +82,19 @@ def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
 def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, capsys):
     from sorting_line_gym.reports import evaluate
 
-    argv = ["--agent", agent, "--setup", setup, "--variant", variant, "--episodes", "3", "--json", "--out", str(tmp_path)]
+    argv = [
+        "--agent",
+        agent,
+        "--setup",
+        setup,
+        "--variant",
+        variant,
+        "--episodes",
+        "3",
+        "--json",
+        "--out",
+        str(tmp_path),
+    ]
     assert evaluate.main(argv) == 0
     ours = json.loads(capsys.readouterr().out)
     theirs = library_eval(agent, setup, variant, 3)
@@ -98,11 +129,27 @@ def tiny_training(algo: str, out: Path) -> dict:
     """sorting-line-train's main, in this process (it spawns its node like the console script)."""
     from sorting_line_gym.training import train
 
-    hp = {"ppo": ["--hp", "n_steps=128", "--hp", "batch_size=64", "--hp", "n_epochs=2"],
-          "dqn": ["--hp", "learning_starts=64"],
-          "a2c": []}[algo]
-    argv = ["--algo", algo, "--setup", "B", "--variant", "advanced", "--timesteps", "256", "--hp", "episode_steps=100", *hp,
-            "--out", str(out), "--no-progress"]
+    hp = {
+        "ppo": ["--hp", "n_steps=128", "--hp", "batch_size=64", "--hp", "n_epochs=2"],
+        "dqn": ["--hp", "learning_starts=64"],
+        "a2c": [],
+    }[algo]
+    argv = [
+        "--algo",
+        algo,
+        "--setup",
+        "B",
+        "--variant",
+        "advanced",
+        "--timesteps",
+        "256",
+        "--hp",
+        "episode_steps=100",
+        *hp,
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert train.main(argv) == 0
     return json.loads((out / f"{algo}_B_advanced_seed42.json").read_text())
 
@@ -191,7 +238,9 @@ def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
     from sorting_line_gym.training import hyperparams
 
     path = tmp_path / "mine.yml"
-    path.write_text("SortingLine-v0: {n_timesteps: 5000, policy: MlpPolicy, n_envs: 2, episode_steps: 250, gamma: 0.5}\n")
+    path.write_text(
+        "SortingLine-v0: {n_timesteps: 5000, policy: MlpPolicy, n_envs: 2, episode_steps: 250, gamma: 0.5}\n"
+    )
     assert hyperparams.load("dqn", "basic", path)["gamma"] == 0.5
     with pytest.raises(ValueError, match="no entry for SortingLineAdvanced-v0"):
         hyperparams.load("dqn", "advanced", path)
@@ -211,8 +260,22 @@ def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     from sorting_line_gym.reports import benchmark
 
     out = tmp_path / "bench"
-    argv = ["--setups", "B", "--variants", "advanced", "--agents", "random", "rba", "rba-hold", "--heldout-seed", "10000",
-            "--heldout-episodes", "5", "--out", str(out)]
+    argv = [
+        "--setups",
+        "B",
+        "--variants",
+        "advanced",
+        "--agents",
+        "random",
+        "rba",
+        "rba-hold",
+        "--heldout-seed",
+        "10000",
+        "--heldout-episodes",
+        "5",
+        "--out",
+        str(out),
+    ]
     assert benchmark.main(argv) == 0
     assert "3 to run" in capsys.readouterr().err
     table = (out / "table.md").read_text()
@@ -220,8 +283,11 @@ def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     heldout = library_eval("rba", "B", "advanced", 5, seed=10000, gap=True)
     # One deterministic run: the IQM of 5 episodes is the mean of the middle 3, its interval the point.
     iqm = float(np.mean(sorted(e["reward"] for e in heldout["per_episode"])[1:4]))
-    row = (f"| B5 | B | Adv | rba | 1 | {paper['reward_mean']:.2f} +- {paper['reward_std']:.2f} | {heldout['reward_mean']:.2f} | "
-           f"{iqm:.2f} [{iqm:.2f}, {iqm:.2f}] | ")
+    row = (
+        f"| B5 | B | Adv | rba | 1 | {paper['reward_mean']:.2f} +- {paper['reward_std']:.2f} | "
+        f"{heldout['reward_mean']:.2f} | "
+        f"{iqm:.2f} [{iqm:.2f}, {iqm:.2f}] | "
+    )
     assert row in table, table
     assert table.split(row)[1].startswith(f"{heldout['gap_mean']:.2f} |")  # the gap to the oracle
     oracle_row = f"| B | Adv | oracle |  | {paper['oracle_mean']:.2f} +- "
@@ -262,9 +328,19 @@ def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
     (poi,) = report["probability_of_improvement_over_rba_hold"]
     assert poi["agent"] == "dqn" and 0.0 <= poi["low"] <= poi["point"] <= poi["high"] <= 1.0
     (check,) = report["n_envs_agreement"]
-    assert (check["setup"], check["variant"], check["agent"], check["n_envs"], check["runs"]) == ("D", "basic", "dqn", 2, [2, 2])
+    assert (check["setup"], check["variant"], check["agent"], check["n_envs"], check["runs"]) == (
+        "D",
+        "basic",
+        "dqn",
+        2,
+        [2, 2],
+    )
     table = (out / "table.md").read_text()
-    assert "| D2 | D | Basic | dqn | 2 |" in table and "P(dqn > rba-hold)" in table and "| D | Basic | dqn | 2 | 2 / 2 |" in table
+    assert (
+        "| D2 | D | Basic | dqn | 2 |" in table
+        and "P(dqn > rba-hold)" in table
+        and "| D | Basic | dqn | 2 | 2 / 2 |" in table
+    )
     for seed in (42, 43):
         two = json.loads((out / "cells" / f"D_basic_dqn_n2_seed{seed}.json").read_text())["training"]
         one = json.loads((out / "cells" / f"D_basic_dqn_seed{seed}.json").read_text())["training"]
@@ -312,7 +388,12 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
         nodes: list[int] = []
         while time.monotonic() < deadline and len(nodes) < 2:
             workers = children(bench.pid)
-            nodes = [n for w in workers for n in children(w) if "sorting_line" in Path(f"/proc/{n}/cmdline").read_bytes().decode(errors="replace")]
+            nodes = [
+                n
+                for w in workers
+                for n in children(w)
+                if "sorting_line" in Path(f"/proc/{n}/cmdline").read_bytes().decode(errors="replace")
+            ]
             time.sleep(0.5)
         assert len(nodes) == 2, f"no two training nodes under the benchmark within 90 s: workers {children(bench.pid)}"
         time.sleep(2)  # the trainings are under way

@@ -40,7 +40,7 @@ BASIC = "sorting_line_gym:SortingLine-v0"
 ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
 
 # Records every env's episode as JSON lines: what the comparison with the trace needs.
-RECORDER = r'''
+RECORDER = r"""
 import faulthandler
 import json
 import signal
@@ -50,7 +50,17 @@ import numpy as np
 # all its threads: run_script sends it before killing a hung script, so a hang names its place.
 faulthandler.register(signal.SIGUSR1, all_threads=True)
 
-KEYS = ("accuracy", "purity", "containers", "speed_changes", "occupancy", "cumulative_reward", "speed_index", "mode", "step")
+KEYS = (
+    "accuracy",
+    "purity",
+    "containers",
+    "speed_changes",
+    "occupancy",
+    "cumulative_reward",
+    "speed_index",
+    "mode",
+    "step",
+)
 
 
 def plain(value):
@@ -63,7 +73,7 @@ def record_step(episodes, obs, rewards, info_of):
     for k, episode in enumerate(episodes):
         episode["steps"].append({"obs": plain(obs[k]), "reward": float(rewards[k]),
                                  "info": {key: plain(info_of(k)[key]) for key in KEYS}})
-'''
+"""
 
 
 _script_domains = itertools.count()
@@ -384,19 +394,26 @@ def test_sync_vector_env_of_64_shared_envs_matches_the_library():
         assert_matches_trace(episode, "C", variant, seed + k, per_env[k], 1_000_000, f"env {k} ({namespaces[k]})")
 
 
-SUBPROC_16 = r'''
+SUBPROC_16 = r"""
 import sys
 import time
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import SubprocVecEnv
 import sorting_line_gym
 
-env_id, setup, seed, steps, n, start = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5]), sys.argv[6]
+env_id, setup, start = sys.argv[1], sys.argv[2], sys.argv[6]
+seed, steps, n = int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
 actions = json.loads(sys.argv[7])
 
 if __name__ == "__main__":
-    vec = make_vec_env(env_id, n_envs=n, seed=seed, vec_env_cls=SubprocVecEnv, env_kwargs={"setup": setup, "node": "shared"},
-                       vec_env_kwargs={"start_method": start})
+    vec = make_vec_env(
+        env_id,
+        n_envs=n,
+        seed=seed,
+        vec_env_cls=SubprocVecEnv,
+        env_kwargs={"setup": setup, "node": "shared"},
+        vec_env_kwargs={"start_method": start},
+    )
     obs = vec.reset()  # env k reset with seed + k
     namespaces = vec.get_attr("namespace")
     episodes = [{"obs": plain(obs[k]), "steps": []} for k in range(n)]
@@ -405,7 +422,7 @@ if __name__ == "__main__":
         record_step(episodes, obs, rewards, lambda k: infos[k])
     print(json.dumps({"episodes": episodes, "namespaces": namespaces}))
     vec.close()
-'''
+"""
 
 
 def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
@@ -462,9 +479,26 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
         by_step = [[per_env[s][k][t] for k in range(n)] for t in range(steps)]
         # The barrier makes "at once" certain: on a loaded machine one script could otherwise finish
         # (and free its lines) before the other leases any, and reusing freed lines is correct.
-        procs.append(subprocess.Popen([sys.executable, str(script), BASIC, "A", str(s), str(steps), str(n), json.dumps(by_step),
-                                       str(tmp_path), str(len(seeds))],
-                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    str(script),
+                    BASIC,
+                    "A",
+                    str(s),
+                    str(steps),
+                    str(n),
+                    json.dumps(by_step),
+                    str(tmp_path),
+                    str(len(seeds)),
+                ],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                env=env,
+            )
+        )
     outs = []
     for p in procs:
         try:
@@ -476,7 +510,7 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
         assert p.returncode == 0, f"vector env process failed ({p.returncode}):\n{stderr[-4000:]}"
         outs.append(json.loads(stdout.strip().splitlines()[-1]))
     assert not set(outs[0]["namespaces"]) & set(outs[1]["namespaces"]), "both processes drove the same line"
-    for s, out in zip(seeds, outs):
+    for s, out in zip(seeds, outs, strict=False):
         for k, episode in enumerate(out["episodes"]):
             assert_matches_trace(episode, "A", variant, s + k, per_env[s][k], 1_000_000, f"process seed {s} env {k}")
 
@@ -564,9 +598,34 @@ def test_maskable_ppo_trains_2048_steps_on_4_envs():
 
 def test_rl_zoo_trains_with_our_conf_file_and_enjoy_replays_the_model(tmp_path):
     env = script_environment()
-    common = ["--algo", "ppo", "--env", "SortingLine-v0", "--gym-packages", "sorting_line_gym", "-f", str(tmp_path / "logs")]
-    train = [sys.executable, "-m", "rl_zoo3.train", *common, "--conf-file", "sorting_line_gym.zoo.ppo", "-n", "512",
-             "--seed", "3", "--eval-freq", "-1", "-params", "n_steps:256", "batch_size:64", "n_epochs:1"]
+    common = [
+        "--algo",
+        "ppo",
+        "--env",
+        "SortingLine-v0",
+        "--gym-packages",
+        "sorting_line_gym",
+        "-f",
+        str(tmp_path / "logs"),
+    ]
+    train = [
+        sys.executable,
+        "-m",
+        "rl_zoo3.train",
+        *common,
+        "--conf-file",
+        "sorting_line_gym.zoo.ppo",
+        "-n",
+        "512",
+        "--seed",
+        "3",
+        "--eval-freq",
+        "-1",
+        "-params",
+        "n_steps:256",
+        "batch_size:64",
+        "n_epochs:1",
+    ]
     r = subprocess.run(train, capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
     assert r.returncode == 0, f"rl_zoo3.train failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     assert "'gamma', 0.85" in r.stdout and "'max_episode_steps': 250" in r.stdout, r.stdout[-3000:]

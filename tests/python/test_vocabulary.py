@@ -48,7 +48,7 @@ def test_speeds_modes_and_numbers_equal_the_rust_librarys(rust):
 def test_the_harness_setup_flags_are_the_vocabularys():
     for name, setup in v.SETUPS.items():
         flags = h.SETUP_FLAGS[name]
-        values = dict(zip(flags[::2], flags[1::2]))
+        values = dict(zip(flags[::2], flags[1::2], strict=False))
         assert values == {"--input": setup["input"], "--obs-noise": str(setup["obs_noise"]),
                           "--action-penalty": str(setup["action_penalty"])}
 

@@ -96,7 +96,8 @@ def render(table: dict[str, str]) -> str:
     return (
         "//! The RIHS01 hash of every interface the node's endpoints use, as rosidl computed them.\n"
         "//! Generated: `.venv/bin/python tests/python/type_hashes.py --write`. Do not edit;\n"
-        "//! tests/python/test_graph_citizen.py::test_type_hash_table_is_rosidls fails when this differs from rosidl's.\n\n"
+        "//! tests/python/test_graph_citizen.py::test_type_hash_table_is_rosidls "
+        "fails when this differs from rosidl's.\n\n"
         "/// (ROS type name, RIHS01 hash), sorted by name; one row a line, as generated (and as\n"
         "/// type_hashes.checked_in reads it back), so rustfmt leaves it alone.\n"
         "#[rustfmt::skip]\n"

@@ -42,7 +42,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
-
 from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
 
 from ..line.vocabulary import SETUPS, SPEEDS, VARIANTS, speed_index_of

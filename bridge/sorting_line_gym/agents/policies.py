@@ -33,7 +33,7 @@ import functools
 import json
 import math
 import subprocess
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -68,7 +68,7 @@ def level(quantity: float) -> int:
     return int(whole) + (1 if x - whole >= 0.5 else 0)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_policy(setup: str, variant: str) -> dict:
     """The decision tables of ``sorting_line policy --setup SETUP --variant VARIANT``, read once per
     (setup, variant) and process. Keys: setup, variant, levels, rba (``[speed_index, mode]`` per
@@ -201,7 +201,9 @@ class TrainedAgent(Agent):
             raise ValueError(f"cannot load the {algo.upper()} model {path!r}: {e}") from None
         expected = action_space(variant)
         if self.model.action_space != expected:
-            raise ValueError(f"the model {path!r} acts in {self.model.action_space}, the {variant} line needs {expected}")
+            raise ValueError(
+                f"the model {path!r} acts in {self.model.action_space}, the {variant} line needs {expected}"
+            )
 
     def predict(self, obs: Sequence[float], current_speed_index: int) -> int:
         action, _ = self.model.predict(np.asarray(obs, dtype=np.float32), deterministic=True)

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import json
 from collections import defaultdict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
 
 import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -44,7 +44,7 @@ class LineInfo:
         return json.dumps({"namespace": self.namespace, "node": self.node}, sort_keys=True)
 
     @classmethod
-    def from_json(cls, text: str) -> "LineInfo":
+    def from_json(cls, text: str) -> LineInfo:
         data = json.loads(text)
         return cls(namespace=data["namespace"], node=dict(data.get("node") or {}))
 

@@ -32,7 +32,7 @@ class _Stop:
         self.signal: str | None = None
         self._previous = {sig: signal.signal(sig, self._on) for sig in (signal.SIGINT, signal.SIGTERM)}
 
-    def __enter__(self) -> "_Stop":
+    def __enter__(self) -> _Stop:
         return self
 
     def __exit__(self, *_exc) -> None:

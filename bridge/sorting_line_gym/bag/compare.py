@@ -54,7 +54,7 @@ def first_field_difference(a: Any, b: Any, path: str = "") -> tuple[str, Any, An
                 return (f"{path}.{key}".lstrip("."), "<missing>", b[key])
         return None
     if isinstance(a, list) and isinstance(b, list):
-        for i, (x, y) in enumerate(zip(a, b)):
+        for i, (x, y) in enumerate(zip(a, b, strict=False)):
             found = first_field_difference(x, y, f"{path}[{i}]")
             if found:
                 return found
@@ -132,7 +132,7 @@ def compare(recorded: dict[str, list[dict]], replayed: dict[str, list[dict]], pe
         if not ours:
             return Comparison(Difference(topic, tick, stamp, "<message>", "has none", f"published {theirs[0]}", **ctx),
                               dict(compared), ignored)
-        for a, b in zip(ours, theirs):
+        for a, b in zip(ours, theirs, strict=False):
             found = first_field_difference(a, b)
             if found:
                 return Comparison(Difference(topic, tick, stamp, *found, **ctx), dict(compared), ignored)

@@ -20,8 +20,8 @@ until every subscriber has acknowledged every sample (reliable QoS), so nothing 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from rclpy.duration import Duration
 
@@ -100,7 +100,7 @@ class _Selection:
 
     @classmethod
     def of(cls, bag: Bag, topics: list[str] | None, namespace: str | None, wait_for: list[str] | None,
-           lockstep: bool) -> "_Selection":
+           lockstep: bool) -> _Selection:
         line_ns = bag.info.namespace if bag.info else ""
         if topics:
             chosen = topics_of(bag, topics)

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from .bagfile import META_KEY, BagError, BagWriter, LineInfo
 from .rosnode import ToolNode
@@ -92,7 +92,10 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
                     client.remove_pending_request(future)
                     continue
                 values = [_parameter_value(v) for v in future.result().values]
-                values = ["" if v is None and n in OPTIONAL_PARAMETERS else v for n, v in zip(NODE_PARAMETERS, values)]
+                values = [
+                    "" if v is None and n in OPTIONAL_PARAMETERS else v
+                    for n, v in zip(NODE_PARAMETERS, values, strict=False)
+                ]
                 break
         except TimeoutError:
             pass
@@ -100,7 +103,7 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
             tool.node.destroy_client(client)
         if values is None or None in values:
             continue
-        options = dict(zip(NODE_PARAMETERS, values))
+        options = dict(zip(NODE_PARAMETERS, values, strict=False))
         line = 0
         tail = namespace.rstrip("/").rsplit("/", 1)[-1]
         if options["lines"] > 1 and tail.startswith("line_") and tail[5:].isdigit():

@@ -38,8 +38,8 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from ..line.errors import BridgeTimeout
 from ..line.process import NodeProcess, private_namespace
@@ -271,7 +271,13 @@ class _Replay:
     the node has reached the tick the bag sent it at."""
 
     def __init__(self, plan: _Plan, result: ReplayResult, tool: ToolNode, namespace: str, step_timeout: float):
-        self.plan, self.result, self.tool, self.namespace, self.step_timeout = plan, result, tool, namespace, step_timeout
+        self.plan, self.result, self.tool, self.namespace, self.step_timeout = (
+            plan,
+            result,
+            tool,
+            namespace,
+            step_timeout,
+        )
         # An evolving line's cmd/sort_mode comes with its machine upgrade: created when needed.
         self.link = LineLink(tool.node, namespace, plan.options["variant"] == "advanced" and plan.evolution is None)
         self.capture = _Capture(tool, namespace, plan.compared_topics)

@@ -42,7 +42,8 @@ of 50 steps (`max_episode_steps=250` for training); constructing the class direc
 ## Arguments
 `setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "spawn" (default: start,
 own and stop a node process in a namespace of its own), "shared" (lease a line of this host's line
-server, `line_server`: for many envs per host) or "attach" (use the node serving `namespace`); `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
+server, `line_server`: for many envs per host) or "attach" (use the node serving `namespace`);
+`step_timeout` seconds per round trip (an error names the namespace, topic and tick);
 `startup_timeout`; `render_mode` "rgb_array" or "human".
 
 ## Info
@@ -58,7 +59,16 @@ import numpy as np
 from gymnasium import spaces
 
 from ..line.options import LineOptions
-from ..line.vocabulary import ACTION_COUNTS, CATEGORIES, ENV_IDS, check_variant, decode_action, observations, sim_seconds, state_info
+from ..line.vocabulary import (
+    ACTION_COUNTS,
+    CATEGORIES,
+    ENV_IDS,
+    check_variant,
+    decode_action,
+    observations,
+    sim_seconds,
+    state_info,
+)
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
@@ -220,7 +230,9 @@ class _History:
             belt_ab=belt_ab,
             machine_ab=machine_ab,
             containers=(
-                (last.container_a, last.container_a_false, last.container_b, last.container_b_false) if last else (0, 0, 0, 0)
+                (last.container_a, last.container_a_false, last.container_b, last.container_b_false)
+                if last
+                else (0, 0, 0, 0)
             ),
             belt_accuracy=last.accuracy if last else 0.75,
             sorter_accuracy=s[-2].accuracy if len(s) > 1 else 0.75,

@@ -50,7 +50,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import yaml
-
 from sorting_line_interfaces.msg import EvolutionEvent
 
 from ..line.options import LineOptions
@@ -97,7 +96,7 @@ def settings_of(message) -> dict:
 
 def event_info(message) -> dict:
     return {"at_reset": bool(message.at_reset), "episode": int(message.episode), "tick": int(message.tick),
-            "changed": dict(zip(message.changed, message.values))}
+            "changed": dict(zip(message.changed, message.values, strict=False))}
 
 
 class SortingLineEvolvingEnv(gym.Env):
@@ -128,7 +127,9 @@ class SortingLineEvolvingEnv(gym.Env):
         self._inbox: list = []
         # One line through the batch topics, which are there whatever the hardware (cmd/sort_mode
         # comes and goes with the machine upgrade); events/evolution is watched beside them.
-        self.bank = LineBank(options, lines=1, batch=True, watch={"events/evolution": (EvolutionEvent, self._inbox.append)})
+        self.bank = LineBank(
+            options, lines=1, batch=True, watch={"events/evolution": (EvolutionEvent, self._inbox.append)}
+        )
         self._settings: dict | None = None
         self._line_tick: int | None = None
         self._announced: list = []
@@ -166,7 +167,7 @@ class SortingLineEvolvingEnv(gym.Env):
         return message
 
     def _apply(self, message) -> None:
-        for field, value in zip(message.changed, message.values):
+        for field, value in zip(message.changed, message.values, strict=False):
             if field in _SETTINGS:
                 self._settings[field] = _SETTINGS[field](value)
         self._announced.append(event_info(message))

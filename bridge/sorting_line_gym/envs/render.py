@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -87,13 +87,13 @@ class DashboardFrame:
     sorter_accuracy: float  # accuracy the machine's batch is sorted with
     occupancy: float  # belt occupancy 0..1
     speed: float  # 0.1..1.0
-    mode: Optional[int]  # advanced: 0 basic, 1 positive (A-rich), 2 negative (B-rich)
+    mode: int | None  # advanced: 0 basic, 1 positive (A-rich), 2 negative (B-rich)
     purity: float  # container purity, correct / all sorted
     history_reward: list[float]  # per step of this episode so far
     history_speed: list[float]
     history_accuracy: list[float]
     history_occupancy: list[float]
-    history_mode: Optional[list[int]]
+    history_mode: list[int] | None
     max_steps: int  # x-axis length of the series plots (e.g. 50)
 
 
@@ -401,7 +401,7 @@ def _panel_input(fig: Figure, box, frame: DashboardFrame) -> None:
 
 def _material_bars(ax, a: int, b: int) -> None:
     bars = ax.bar((0, 1), (a, b), color=(COLOR_A, COLOR_B), width=0.6)
-    for bar, count in zip(bars, (a, b)):
+    for bar, count in zip(bars, (a, b), strict=False):
         ax.text(bar.get_x() + bar.get_width() / 2, count + 2, str(count), ha="center", va="bottom", fontsize=_FS_ANNOT)
     ax.set_xlim(-0.6, 1.6)
     ax.set_xticks((0, 1), ("A", "B"), fontsize=_FS_LABEL)
@@ -457,7 +457,7 @@ def _panel_containers(ax, frame: DashboardFrame) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(4, integer=True))
     ax.yaxis.set_major_formatter(_compact_units)
     _ylabel(ax, "units")
-    for xi, ok, bad in zip(x, correct, foreign):
+    for xi, ok, bad in zip(x, correct, foreign, strict=False):
         held = ok + bad
         label = f"purity {_pct(ok / held)}\n{ok} / {held}" if held else "empty"
         ax.text(xi, held + ymax * 0.015, label, ha="center", va="bottom", fontsize=_FS_ANNOT)
@@ -488,7 +488,7 @@ def _panel_status(ax, frame: DashboardFrame) -> None:
     values = tuple(_finite(v) for v in (frame.belt_accuracy, frame.occupancy, frame.speed))
     bars = ax.bar((0, 1, 2), values, color=(COLOR_ACCURACY, COLOR_OCCUPANCY, COLOR_SPEED), width=0.6)
     ax.axhline(1.0, color=COLOR_LIMIT, linewidth=1.5, linestyle="--")
-    for bar, v in zip(bars, values):
+    for bar, v in zip(bars, values, strict=False):
         ax.text(
             bar.get_x() + bar.get_width() / 2, min(v, 1.0) + 0.03, f"{v:.2f}", ha="center", va="bottom",
             fontsize=_FS_ANNOT,
@@ -499,7 +499,7 @@ def _panel_status(ax, frame: DashboardFrame) -> None:
     ax.set_yticks((0, 0.5, 1.0))
 
 
-def _mode_name(mode: Optional[int]) -> str:
+def _mode_name(mode: int | None) -> str:
     if mode is None:
         return "n/a"
     return MODE_NAMES.get(int(mode), f"unknown ({mode})")

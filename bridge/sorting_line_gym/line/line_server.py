@@ -50,7 +50,9 @@ _GRAPH_ENV = ("ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "ROS_AUTOMATIC_DISCOVERY_RA
 def server_directory(options: dict[str, object]) -> Path:
     """The directory of the servers for nodes of ``options`` in this process's DDS graph."""
     graph = {k: os.environ.get(k, "") for k in _GRAPH_ENV}
-    key = json.dumps([sorted(options.items()), sorted(graph.items()), network_namespace(), find_node_binary()], default=str)
+    key = json.dumps(
+        [sorted(options.items()), sorted(graph.items()), network_namespace(), find_node_binary()], default=str
+    )
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return host_state_directory() / digest
 
@@ -118,7 +120,14 @@ def lease(options: dict[str, object], timeout: float = 20.0) -> Lease:
 
 def _start_server(directory: Path, index: int, options: dict[str, object], deadline: float) -> None:
     (directory / f"s{index}.json").unlink(missing_ok=True)
-    command = [sys.executable, line_supervisor.__file__, str(directory), str(index), json.dumps(options), find_node_binary()]
+    command = [
+        sys.executable,
+        line_supervisor.__file__,
+        str(directory),
+        str(index),
+        json.dumps(options),
+        find_node_binary(),
+    ]
     # A session of its own: the server serves every process of the host, and a Ctrl-C meant for
     # the script that happened to start it must not stop the others' lines.
     with open(directory / f"s{index}.log", "ab") as log:

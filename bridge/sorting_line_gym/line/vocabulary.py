@@ -14,8 +14,9 @@ decoded ``LineStates`` batch: numpy arrays, entry k = line k) with the same func
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -193,4 +194,4 @@ def line_infos(info: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
     containers as a tuple), converting each array once."""
     columns = {key: (list(map(tuple, v.tolist())) if key == "containers" else v.tolist()) for key, v in info.items()}
     keys = list(columns)
-    return [dict(zip(keys, values)) for values in zip(*columns.values())]
+    return [dict(zip(keys, values, strict=False)) for values in zip(*columns.values(), strict=False)]

@@ -46,7 +46,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -76,7 +76,7 @@ class Cell:
     setup: str
     variant: str
     agent: str
-    train_seed: Optional[int] = None
+    train_seed: int | None = None
     n_envs: int = 1
 
     @property
@@ -98,21 +98,30 @@ def plan(setups, variants, agents, train_seeds, n_envs: int = 1) -> list[Cell]:
     """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
     so a partial run has whole rows: one algorithm on every line before the next."""
     cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
-    cells += [Cell(s, v, a, seed, n_envs) for seed in train_seeds for a in agents if a in ALGOS for s in setups for v in variants]
+    cells += [
+        Cell(s, v, a, seed, n_envs)
+        for seed in train_seeds
+        for a in agents
+        if a in ALGOS
+        for s in setups
+        for v in variants
+    ]
     return cells
 
 
 def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: bool) -> dict[str, Any]:
     """Trains (RL) and evaluates one cell; writes and returns its record. Runs in a worker."""
     from ..training import hyperparams
-    from .evaluate import evaluate
     from ..training.train import train
+    from .evaluate import evaluate
 
     start = time.perf_counter()
     record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
     spec = cell.agent
     if cell.agent in ALGOS:
-        params = hyperparams.load(cell.agent, cell.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"])
+        params = hyperparams.load(
+            cell.agent, cell.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"]
+        )
         models = out / ("models" if cell.n_envs == 1 else f"models_n{cell.n_envs}")
         run = train(
             cell.agent, cell.setup, cell.variant, seed=cell.train_seed, out=models, params=params,
@@ -133,7 +142,7 @@ def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: 
     return record
 
 
-def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> Optional[dict[str, Any]]:
+def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[str, Any] | None:
     """The saved record of ``cell`` if it was run with the same budget and held-out seeds."""
     path = out / "cells" / f"{cell.name}.json"
     if not path.is_file():
@@ -171,7 +180,19 @@ def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> d
     path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
     if path.is_file():
         return json.loads(path.read_text())
-    argv = [find_node_binary(), "oracle", "--setup", setup, "--variant", variant, "--seed", str(seed), "--episodes", str(episodes), "--json"]
+    argv = [
+        find_node_binary(),
+        "oracle",
+        "--setup",
+        setup,
+        "--variant",
+        variant,
+        "--seed",
+        str(seed),
+        "--episodes",
+        str(episodes),
+        "--json",
+    ]
     result = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     if result.returncode != 0:
         raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
@@ -204,7 +225,9 @@ def episode_rewards(records: list[dict[str, Any]], which: str = "heldout") -> np
     return np.array([[e["reward"] for e in r[which]["per_episode"]] for r in records])
 
 
-def summarize(records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[Key, dict[str, Any]]:
+def summarize(
+    records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]
+) -> dict[Key, dict[str, Any]]:
     """Per (setup, variant, agent). On the paper's seeds 42..51: the mean over training seeds of
     each model's mean, with the std across training seeds (the per-episode std for one run). On
     the held-out seeds: mean, IQM and their stratified bootstrap intervals over runs x episodes,
@@ -242,32 +265,49 @@ def summarize(records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict
     return rows
 
 
-def oracle_rows(oracles: dict[tuple[str, str], dict[str, Any]], paper_oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[Key, dict[str, Any]]:
+def oracle_rows(
+    oracles: dict[tuple[str, str], dict[str, Any]], paper_oracles: dict[tuple[str, str], dict[str, Any]]
+) -> dict[Key, dict[str, Any]]:
     """The oracle as a row of the table (it has no runs: the optimum is one number per seed)."""
     rows = {}
     for line, heldout in oracles.items():
         paper = paper_oracles[line]
         rewards = np.array([e["reward"] for e in heldout["per_episode"]])
         rows[line + ("oracle",)] = {
-            "reward_mean": paper["reward_mean"], "reward_std": paper["reward_std"], "seeds": 1,
-            "speed_mean": paper["speed_mean"], "purity_mean": paper["purity_mean"], "speed_changes_mean": paper["speed_changes_mean"],
-            "heldout": {"mean": {"point": float(rewards.mean())}, "iqm": {"point": float(stats.iqm(rewards))}, "oracle_mean": float(rewards.mean()), "gap_mean": 0.0},
+            "reward_mean": paper["reward_mean"],
+            "reward_std": paper["reward_std"],
+            "seeds": 1,
+            "speed_mean": paper["speed_mean"],
+            "purity_mean": paper["purity_mean"],
+            "speed_changes_mean": paper["speed_changes_mean"],
+            "heldout": {
+                "mean": {"point": float(rewards.mean())},
+                "iqm": {"point": float(stats.iqm(rewards))},
+                "oracle_mean": float(rewards.mean()),
+                "gap_mean": 0.0,
+            },
         }
     return rows
 
 
-def improvements(records: list[dict[str, Any]], versus: str = "rba-hold") -> dict[tuple[str, str, str], dict[str, float]]:
+def improvements(
+    records: list[dict[str, Any]], versus: str = "rba-hold"
+) -> dict[tuple[str, str, str], dict[str, float]]:
     """Per line and RL agent: P(agent > ``versus``) on the held-out seeds, with its interval."""
     groups = _group([r for r in records if "heldout" in r])
     found = {}
     for (setup, variant, agent), rs in groups.items():
         if agent in ALGOS and (setup, variant, versus) in groups:
-            interval = stats.probability_of_improvement_interval(episode_rewards(rs), episode_rewards(groups[(setup, variant, versus)]))
+            interval = stats.probability_of_improvement_interval(
+                episode_rewards(rs), episode_rewards(groups[(setup, variant, versus)])
+            )
             found[(setup, variant, agent)] = interval.as_dict()
     return found
 
 
-def normalized_runs(records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]) -> dict[str, dict[tuple[str, str], np.ndarray]]:
+def normalized_runs(
+    records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]
+) -> dict[str, dict[tuple[str, str], np.ndarray]]:
     """Per agent and line: each run's held-out mean reward normalized between the random agent's
     mean (0) and the oracle's (1) on the same seeds. Lines without a random cell are left out."""
     groups = _group([r for r in records if "heldout" in r])
@@ -277,7 +317,9 @@ def normalized_runs(records: list[dict[str, Any]], oracles: dict[tuple[str, str]
             continue
         worst = float(episode_rewards(groups[(setup, variant, "random")]).mean())
         best = float(np.mean([e["reward"] for e in oracles[(setup, variant)]["per_episode"]]))
-        per_agent.setdefault(agent, {})[(setup, variant)] = stats.normalized(episode_rewards(rs).mean(axis=1), worst, best)
+        per_agent.setdefault(agent, {})[(setup, variant)] = stats.normalized(
+            episode_rewards(rs).mean(axis=1), worst, best
+        )
     return per_agent
 
 
@@ -312,14 +354,23 @@ def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, A
                 continue
             many = episode_rewards(rs)
             iqm_one, iqm_many = stats.iqm_interval(one), stats.iqm_interval(many)
-            checks.append({
-                "setup": setup, "variant": variant, "agent": agent, "n_envs": n,
-                "runs": [one.shape[0], many.shape[0]],
-                "iqm_1": iqm_one.as_dict(), "iqm_n": iqm_many.as_dict(),
-                "poi_n_over_1": stats.probability_of_improvement_interval(many, one).as_dict(),
-                "agree": iqm_one.overlaps(iqm_many),
-                "train_wall_s": [statistics.fmean(r["training"]["wall_s"] for r in groups[1]), statistics.fmean(r["training"]["wall_s"] for r in rs)],
-            })
+            checks.append(
+                {
+                    "setup": setup,
+                    "variant": variant,
+                    "agent": agent,
+                    "n_envs": n,
+                    "runs": [one.shape[0], many.shape[0]],
+                    "iqm_1": iqm_one.as_dict(),
+                    "iqm_n": iqm_many.as_dict(),
+                    "poi_n_over_1": stats.probability_of_improvement_interval(many, one).as_dict(),
+                    "agree": iqm_one.overlaps(iqm_many),
+                    "train_wall_s": [
+                        statistics.fmean(r["training"]["wall_s"] for r in groups[1]),
+                        statistics.fmean(r["training"]["wall_s"] for r in rs),
+                    ],
+                }
+            )
     return checks
 
 
@@ -333,7 +384,9 @@ def table_markdown(rows: dict[Key, dict[str, Any]], timesteps: int, agents=AGENT
     from .paper import REFERENCE, TABLE_1, TABLE_1_INDEX
 
     lines = [
-        "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean | held-out: IQM [95% CI] | gap to oracle | speed % | purity % | speed changes | paper: reward | reference impl.: reward |",
+        "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"
+        " held-out: IQM [95% CI] | gap to oracle |"
+        " speed % | purity % | speed changes | paper: reward | reference impl.: reward |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     ran = {(s, v) for s, v, a in rows if a != "oracle"}
@@ -353,12 +406,16 @@ def table_markdown(rows: dict[Key, dict[str, Any]], timesteps: int, agents=AGENT
                 cells = ["not run"] + [""] * 8
                 if row is not None:
                     mean = f"{row['reward_mean']:.2f}"
-                    ours = (f"**{mean}**" if row["reward_mean"] == best and agent != "oracle" else mean) + f" +- {row['reward_std']:.2f}"
+                    ours = (
+                        f"**{mean}**" if row["reward_mean"] == best and agent != "oracle" else mean
+                    ) + f" +- {row['reward_std']:.2f}"
                     h = row.get("heldout")
                     cells = [
                         ours,
                         f"{h['mean']['point']:.2f}" if h else "",
-                        ("exact: " + f"{h['iqm']['point']:.2f}" if agent == "oracle" else _interval(h["iqm"])) if h else "",
+                        ("exact: " + f"{h['iqm']['point']:.2f}" if agent == "oracle" else _interval(h["iqm"]))
+                        if h
+                        else "",
                         f"{h['gap_mean']:.2f}" if h else "",
                         f"{100 * row['speed_mean']:.0f}",
                         f"{100 * row['purity_mean']:.1f}",
@@ -376,13 +433,14 @@ def table_markdown(rows: dict[Key, dict[str, Any]], timesteps: int, agents=AGENT
                     + " |"
                 )
     note = (
-        f"\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10 episodes of 50"
-        f" steps, deterministic policy), mean +- population std over the episodes, or for RL with several runs the mean over runs +-"
-        f" the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean and IQM over runs x episodes, the IQM's"
-        f" 95% stratified bootstrap interval resamples the runs within each evaluation seed (one run: exact); gap to oracle = mean"
-        f" over runs x seeds of `sorting_line oracle` - agent. RL agents trained for {timesteps} steps with the paper's"
-        f" hyperparameters. The paper's Table 1 has no random, rba-hold or oracle rows, and its RBA figures are not what the"
-        f" reference implementation's code gives on the same protocol (last column). Bold: our best agent on seeds 42..51."
+        "\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10"
+        " episodes of 50 steps, deterministic policy), mean +- population std over the episodes, or for RL with several"
+        f" runs the mean over runs +- the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean"
+        " and IQM over runs x episodes, the IQM's 95% stratified bootstrap interval resamples the runs within each"
+        " evaluation seed (one run: exact); gap to oracle = mean over runs x seeds of `sorting_line oracle` - agent. RL"
+        f" agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random,"
+        " rba-hold or oracle rows, and its RBA figures are not what the reference implementation's code gives on the"
+        " same protocol (last column). Bold: our best agent on seeds 42..51."
     )
     return "\n".join(lines) + "\n" + note + "\n"
 
@@ -398,10 +456,20 @@ def statistics_markdown(poi, aggregate, checks) -> str:
         for setup in SETUPS:
             for variant in VARIANTS:
                 if any((setup, variant, a) in poi for a in algos):
-                    out.append(f"| {setup} | {'Adv' if variant == 'advanced' else 'Basic'} | "
-                               + " | ".join(_interval(poi[(setup, variant, a)]) if (setup, variant, a) in poi else "" for a in algos) + " |")
-        out += ["", "P(X > Y): the chance that a run of X beats rba-hold on a held-out seed, averaged over the seeds (ties half);"
-                " 0.5 = no difference. Interval: runs resampled within each seed.", ""]
+                    out.append(
+                        f"| {setup} | {'Adv' if variant == 'advanced' else 'Basic'} | "
+                        + " | ".join(
+                            _interval(poi[(setup, variant, a)]) if (setup, variant, a) in poi else "" for a in algos
+                        )
+                        + " |"
+                    )
+        out += [
+            "",
+            "P(X > Y): the chance that a run of X beats rba-hold on a held-out seed, "
+            "averaged over the seeds (ties half);"
+            " 0.5 = no difference. Interval: runs resampled within each seed.",
+            "",
+        ]
     if aggregate:
         out += ["## Aggregate over the lines: score normalized between random (0) and the oracle (1)", "",
                 "| agent | lines | IQM [95% CI] | mean [95% CI] |", "|---|---|---|---|"]
@@ -409,21 +477,34 @@ def statistics_markdown(poi, aggregate, checks) -> str:
             if agent in aggregate:
                 a = aggregate[agent]
                 out.append(f"| {agent} | {a['lines']} | {_interval(a['iqm'])} | {_interval(a['mean'])} |")
-        out += ["", "Per run and line: (held-out mean reward - random's) / (oracle's - random's); IQM over runs x lines,"
-                " interval by the bootstrap stratified by line.", ""]
+        out += [
+            "",
+            "Per run and line: (held-out mean reward - random's) / (oracle's - random's); IQM over runs x lines,"
+            " interval by the bootstrap stratified by line.",
+            "",
+        ]
     if checks:
-        out += ["## One line against N lines of one node (--n-envs)", "",
-                "| setup | env | agent | lines | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] | P(N lines > 1 line) | agree | training s (1 / N lines) |",
-                "|---|---|---|---|---|---|---|---|---|---|"]
+        out += [
+            "## One line against N lines of one node (--n-envs)",
+            "",
+            "| setup | env | agent | lines | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] "
+            "| P(N lines > 1 line) | agree | training s (1 / N lines) |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
         for c in checks:
-            out.append(f"| {c['setup']} | {'Adv' if c['variant'] == 'advanced' else 'Basic'} | {c['agent']} | {c['n_envs']} | "
-                       f"{c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | {_interval(c['poi_n_over_1'])} | "
-                       f"{'yes' if c['agree'] else 'NO'} | {c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |")
+            out.append(
+                f"| {c['setup']} | {'Adv' if c['variant'] == 'advanced' else 'Basic'} | {c['agent']} | {c['n_envs']} | "
+                f"{c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | "
+                f"{_interval(c['poi_n_over_1'])} | "
+                f"{'yes' if c['agree'] else 'NO'} | {c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |"
+            )
         out += ["", "Agree: the two IQM intervals overlap.", ""]
     return "\n".join(out)
 
 
-def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()) -> list[Path]:
+def write_report(
+    out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()
+) -> list[Path]:
     from .plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure
 
     lines = sorted({(r["cell"]["setup"], r["cell"]["variant"]) for r in records})
@@ -437,13 +518,16 @@ def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agent
     checks = agreement(saved_records(out), timesteps)
     table = out / "table.md"
     table.write_text(
-        f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}\n{statistics_markdown(poi, aggregate, checks)}"
+        f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}"
+        f"\n{statistics_markdown(poi, aggregate, checks)}"
     )
     (out / "table.json").write_text(
         json.dumps(
             {
                 "rows": [{"setup": s, "variant": v, "agent": a, **row} for (s, v, a), row in sorted(rows.items())],
-                "probability_of_improvement_over_rba_hold": [{"setup": s, "variant": v, "agent": a, **p} for (s, v, a), p in sorted(poi.items())],
+                "probability_of_improvement_over_rba_hold": [
+                    {"setup": s, "variant": v, "agent": a, **p} for (s, v, a), p in sorted(poi.items())
+                ],
                 "aggregate_normalized": aggregate,
                 "n_envs_agreement": checks,
             },
@@ -465,20 +549,53 @@ def write_report(out: Path, records: list[dict[str, Any]], timesteps: int, agent
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sorting-line-benchmark", description="The paper's Table 1 and Figure 7 through ROS 2; resumable.")
-    p.add_argument("--out", type=Path, default=Path("results/benchmark"), help="results directory (default results/benchmark)")
+    p = argparse.ArgumentParser(
+        prog="sorting-line-benchmark", description="The paper's Table 1 and Figure 7 through ROS 2; resumable."
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/benchmark"), help="results directory (default results/benchmark)"
+    )
     p.add_argument("--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS))
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS)
-    p.add_argument("--train-seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS), help="training seeds of the RL agents (default 42 43 44 45 46)")
-    p.add_argument("--timesteps", type=int, default=100_000, help="training budget per RL agent (default 100000, the paper's)")
-    p.add_argument("--n-envs", type=int, default=1, help="lines of one node per training, a power of two (default 1, as the paper; hyperparameters mapped, see hyperparams)")
-    p.add_argument("--heldout-seed", type=int, default=HELDOUT_SEED, help=f"first held-out evaluation seed (default {HELDOUT_SEED})")
-    p.add_argument("--heldout-episodes", type=int, default=HELDOUT_EPISODES, help=f"held-out evaluation episodes (default {HELDOUT_EPISODES})")
-    p.add_argument("--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)")
-    p.add_argument("--check-n-envs", action="store_true",
-                   help="with --n-envs N > 1: also train PPO on B advanced and DQN on D basic (where selected) on one line, per "
-                        "training seed, for the check that one line and N lines agree (run last)")
+    p.add_argument(
+        "--train-seeds",
+        nargs="+",
+        type=int,
+        default=list(DEFAULT_SEEDS),
+        help="training seeds of the RL agents (default 42 43 44 45 46)",
+    )
+    p.add_argument(
+        "--timesteps", type=int, default=100_000, help="training budget per RL agent (default 100000, the paper's)"
+    )
+    p.add_argument(
+        "--n-envs",
+        type=int,
+        default=1,
+        help="lines of one node per training, a power of two "
+             "(default 1, as the paper; hyperparameters mapped, see hyperparams)",
+    )
+    p.add_argument(
+        "--heldout-seed",
+        type=int,
+        default=HELDOUT_SEED,
+        help=f"first held-out evaluation seed (default {HELDOUT_SEED})",
+    )
+    p.add_argument(
+        "--heldout-episodes",
+        type=int,
+        default=HELDOUT_EPISODES,
+        help=f"held-out evaluation episodes (default {HELDOUT_EPISODES})",
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
+    )
+    p.add_argument(
+        "--check-n-envs",
+        action="store_true",
+        help="with --n-envs N > 1: also train PPO on B advanced and DQN on D basic (where selected) on one line, per "
+        "training seed, for the check that one line and N lines agree (run last)",
+    )
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     return p
 
@@ -546,15 +663,26 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     args = build_parser().parse_args(argv)
-    for flag, value in (("--timesteps", args.timesteps), ("--n-envs", args.n_envs), ("--jobs", args.jobs), ("--heldout-episodes", args.heldout_episodes)):
+    for flag, value in (
+        ("--timesteps", args.timesteps),
+        ("--n-envs", args.n_envs),
+        ("--jobs", args.jobs),
+        ("--heldout-episodes", args.heldout_episodes),
+    ):
         if value < 1:
             print(f"sorting-line-benchmark: {flag} = {value} is not valid: allowed 1 or more", file=sys.stderr)
             return 2
     if args.n_envs & (args.n_envs - 1) or args.n_envs > 2048:
-        print(f"sorting-line-benchmark: --n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048", file=sys.stderr)
+        print(
+            f"sorting-line-benchmark: --n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048",
+            file=sys.stderr,
+        )
         return 2
     if args.heldout_seed < 0:
-        print(f"sorting-line-benchmark: --heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more", file=sys.stderr)
+        print(
+            f"sorting-line-benchmark: --heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more",
+            file=sys.stderr,
+        )
         return 2
     heldout = heldout_of(args)
     cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs)
@@ -565,11 +693,17 @@ def main(argv: list[str] | None = None) -> int:
     todo = [c for c in cells if c not in done]
     if args.report_only:
         todo = []
-    print(f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, {args.jobs} at a time -> {args.out}", file=sys.stderr)
+    print(
+        f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, "
+        f"{args.jobs} at a time -> {args.out}",
+        file=sys.stderr,
+    )
     failures = []
     if todo:
         signal.signal(signal.SIGTERM, _interrupt)
-        bar = tqdm(total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True)
+        bar = tqdm(
+            total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True
+        )
 
         def finished(cell: Cell, outcome) -> None:
             if isinstance(outcome, Exception):
@@ -579,8 +713,11 @@ def main(argv: list[str] | None = None) -> int:
                 done[cell] = outcome
                 r = outcome["evaluation"]
                 h = outcome["heldout"]
-                bar.write(f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}, held-out {h['reward_mean']:.2f}"
-                          f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)")
+                bar.write(
+                    f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
+                    f", held-out {h['reward_mean']:.2f}"
+                    f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)"
+                )
             bar.update(1)
 
         try:
@@ -600,7 +737,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"written: {path}", file=sys.stderr)
     print((args.out / "table.md").read_text())
     if failures:
-        print(f"sorting-line-benchmark: {len(failures)} cell(s) failed: {', '.join(c.name for c, _ in failures)}", file=sys.stderr)
+        print(
+            f"sorting-line-benchmark: {len(failures)} cell(s) failed: {', '.join(c.name for c, _ in failures)}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

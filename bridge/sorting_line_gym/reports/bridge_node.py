@@ -36,7 +36,7 @@ def parse_agent(text: str, variant: str):
         raise SystemExit(
             f"sorting-line-bridge: agent {text!r} is not valid: allowed random, constant:K (K = 0..9) "
             "or, on the advanced line, constant:K:M (M = 0..2)"
-        )
+        ) from None
     return encode_actions(variant, speed, mode)
 
 
@@ -83,7 +83,10 @@ def main(argv: list[str] | None = None) -> int:
                 speeds.append(info["speed"])
                 done = terminated or truncated
             rewards.append(total)
-            print(f"{i:7d} {args.seed + i:5d} {total:7.2f} {np.mean(speeds):10.2f} {info['purity']:7.3f} {info['speed_changes']:14d}")
+            print(
+                f"{i:7d} {args.seed + i:5d} {total:7.2f} {np.mean(speeds):10.2f}"
+                f" {info['purity']:7.3f} {info['speed_changes']:14d}"
+            )
         print(f"mean reward {np.mean(rewards):.2f} +- {np.std(rewards):.2f} over {args.episodes} episodes")
         if args.dashboard:
             from ..envs.render import save_dashboard

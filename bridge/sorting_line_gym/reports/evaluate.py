@@ -24,9 +24,9 @@ import csv
 import json
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Optional
 
 from ..agents.policies import Agent, make_agent
 from ..line.vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
@@ -67,7 +67,7 @@ class Evaluation:
     per_episode: list[EpisodeStats] = field(default_factory=list)
 
     @classmethod
-    def of(cls, agent: str, setup: str, variant: str, seed: int, per_episode: list[EpisodeStats]) -> "Evaluation":
+    def of(cls, agent: str, setup: str, variant: str, seed: int, per_episode: list[EpisodeStats]) -> Evaluation:
         n = len(per_episode)
 
         def mean(values: list[float]) -> float:
@@ -144,8 +144,8 @@ def evaluate(
     episodes: int = EPISODES,
     seed: int = FIRST_SEED,
     steps: int = EPISODE_STEPS,
-    dashboard: Optional[Path] = None,
-    on_episode: Optional[Callable[[EpisodeStats], None]] = None,
+    dashboard: Path | None = None,
+    on_episode: Callable[[EpisodeStats], None] | None = None,
 ) -> Evaluation:
     """Evaluates ``agent_spec`` on a node of its own; saves the first episode's dashboard to
     ``dashboard`` if given."""
@@ -157,7 +157,9 @@ def evaluate(
         raise ValueError(f"episodes = {episodes}, steps = {steps}: both must be 1 or more")
     agent = make_agent(agent_spec, setup, variant, seed)
     per_episode = []
-    env = SortingLineEnv(setup=setup, variant=variant, max_episode_steps=steps, render_mode="rgb_array" if dashboard else None)
+    env = SortingLineEnv(
+        setup=setup, variant=variant, max_episode_steps=steps, render_mode="rgb_array" if dashboard else None
+    )
     try:
         for i in range(episodes):
             per_episode.append(run_episode(env, agent, seed + i))
@@ -199,10 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="sorting-line-eval",
         description="Evaluate an agent on a sorting line through ROS 2 (seeds 42..51, 50 steps, deterministic).",
     )
-    p.add_argument("--agent", required=True, help="random, rba, rba-hold, constant:K[:M|:cat], or ppo:PATH / dqn:PATH / a2c:PATH")
+    p.add_argument(
+        "--agent", required=True, help="random, rba, rba-hold, constant:K[:M|:cat], or ppo:PATH / dqn:PATH / a2c:PATH"
+    )
     p.add_argument("--setup", required=True, choices=list(SETUPS))
     p.add_argument("--variant", default="basic", choices=VARIANTS)
-    p.add_argument("--episodes", type=int, default=EPISODES, help=f"episodes, seeded seed, seed+1, ... (default {EPISODES})")
+    p.add_argument(
+        "--episodes", type=int, default=EPISODES, help=f"episodes, seeded seed, seed+1, ... (default {EPISODES})"
+    )
     p.add_argument("--seed", type=int, default=FIRST_SEED, help=f"seed of the first episode (default {FIRST_SEED})")
     p.add_argument("--steps", type=int, default=EPISODE_STEPS, help=f"steps per episode (default {EPISODE_STEPS})")
     p.add_argument("--out", type=Path, help="write JSON, CSV, markdown and the first episode's dashboard PNG here")
@@ -214,7 +220,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.episodes < 1 or args.steps < 1:
-        print(f"sorting-line-eval: --episodes = {args.episodes}, --steps = {args.steps}: allowed 1 or more", file=sys.stderr)
+        print(
+            f"sorting-line-eval: --episodes = {args.episodes}, --steps = {args.steps}: allowed 1 or more",
+            file=sys.stderr,
+        )
         return 2
     stem = file_stem(args.agent, args.setup, args.variant)
     dashboard = None
@@ -223,7 +232,10 @@ def main(argv: list[str] | None = None) -> int:
         dashboard = args.out / f"{stem}_seed{args.seed}.png"
 
     def show(e: EpisodeStats) -> None:
-        print(f"  seed {e.seed}: reward {e.reward:.2f}, mean speed {e.speed_mean:.2f}, purity {e.purity:.3f}", file=sys.stderr)
+        print(
+            f"  seed {e.seed}: reward {e.reward:.2f}, mean speed {e.speed_mean:.2f}, purity {e.purity:.3f}",
+            file=sys.stderr,
+        )
 
     try:
         result = evaluate(

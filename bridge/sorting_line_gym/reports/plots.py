@@ -69,7 +69,16 @@ def benchmark_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Pat
         offset = (i - (len(agents) - 1) / 2) * width
         means = [rows[(s, v, agent)]["reward_mean"] if (s, v, agent) in rows else np.nan for s, v in groups]
         stds = [rows[(s, v, agent)]["reward_std"] if (s, v, agent) in rows else 0.0 for s, v in groups]
-        ax.bar(x + offset, means, width, yerr=stds, capsize=2, label=agent, color=AGENT_COLORS[agent], error_kw={"elinewidth": 0.8})
+        ax.bar(
+            x + offset,
+            means,
+            width,
+            yerr=stds,
+            capsize=2,
+            label=agent,
+            color=AGENT_COLORS[agent],
+            error_kw={"elinewidth": 0.8},
+        )
         paper = [TABLE_1.get((s, v, agent), (None, None, np.nan))[2] for s, v in groups]
         if not all(np.isnan(paper)):
             ax.scatter(x + offset, paper, marker="_", s=120, color="black", zorder=3, linewidths=2)
@@ -130,7 +139,11 @@ def analysis_figure(stem: Path) -> list[Path]:
     im = ax.imshow(masked, cmap="viridis", aspect="auto", origin="lower", vmin=THRESHOLD, vmax=1.0,
                    extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
     fig.colorbar(im, ax=ax, label="expected accuracy")
-    ax.set(xlabel="belt occupancy", ylabel="belt speed", title=f"Expected accuracy (black: below the threshold {THRESHOLD})")
+    ax.set(
+        xlabel="belt occupancy",
+        ylabel="belt speed",
+        title=f"Expected accuracy (black: below the threshold {THRESHOLD})",
+    )
 
     ax = axes[1, 0]
     a = np.linspace(THRESHOLD, 1.0, 61)
@@ -159,21 +172,33 @@ def _line_label(setup: str, variant: str) -> str:
 def interval_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Path) -> list[Path]:
     """One panel per line: each agent's held-out IQM with its 95 % interval (a bar for the
     interval, a dot for the IQM), the mean as a cross, and the oracle's mean as a dashed line."""
-    lines = [(s, v) for s in SETUPS for v in VARIANTS if any((s, v, a) in rows and "heldout" in rows[(s, v, a)] for a in AGENT_COLORS)]
+    lines = [
+        (s, v)
+        for s in SETUPS
+        for v in VARIANTS
+        if any((s, v, a) in rows and "heldout" in rows[(s, v, a)] for a in AGENT_COLORS)
+    ]
     if not lines:
         return []
     agents = [a for a in AGENT_COLORS if any((s, v, a) in rows for s, v in lines)]
     columns = min(4, len(lines))
     fig = _figure(figsize=(3.6 * columns, 2.9 * ((len(lines) + columns - 1) // columns)))
     axes = np.atleast_1d(fig.subplots((len(lines) + columns - 1) // columns, columns, squeeze=False)).ravel()
-    for ax, (setup, variant) in zip(axes, lines):
+    for ax, (setup, variant) in zip(axes, lines, strict=False):
         for i, agent in enumerate(agents):
             row = rows.get((setup, variant, agent))
             if row is None or "heldout" not in row:
                 continue
             h = row["heldout"]
             iqm = h["iqm"]
-            ax.plot([iqm["low"], iqm["high"]], [i, i], color=AGENT_COLORS[agent], linewidth=7, alpha=0.55, solid_capstyle="butt")
+            ax.plot(
+                [iqm["low"], iqm["high"]],
+                [i, i],
+                color=AGENT_COLORS[agent],
+                linewidth=7,
+                alpha=0.55,
+                solid_capstyle="butt",
+            )
             ax.plot(iqm["point"], i, "o", color=AGENT_COLORS[agent], markersize=4)
             ax.plot(h["mean"]["point"], i, "x", color="black", markersize=4)
         oracle = rows.get((setup, variant, "oracle"))
@@ -190,7 +215,9 @@ def interval_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Path
     return _save(fig, stem)
 
 
-def aggregate_figure(aggregate: dict[str, dict[str, Any]], normalized: dict[str, dict[tuple[str, str], np.ndarray]], stem: Path) -> list[Path]:
+def aggregate_figure(
+    aggregate: dict[str, dict[str, Any]], normalized: dict[str, dict[tuple[str, str], np.ndarray]], stem: Path
+) -> list[Path]:
     """Left: each agent's IQM and mean over the lines of the normalized score (random 0, oracle 1)
     with their 95 % intervals. Right: performance profiles, the fraction of runs x lines whose
     normalized score exceeds tau."""
@@ -203,18 +230,26 @@ def aggregate_figure(aggregate: dict[str, dict[str, Any]], normalized: dict[str,
         for j, (name, marker) in enumerate((("iqm", "o"), ("mean", "s"))):
             d = aggregate[agent][name]
             y = i + (j - 0.5) * 0.3
-            left.plot([d["low"], d["high"]], [y, y], color=AGENT_COLORS[agent], linewidth=6, alpha=0.55, solid_capstyle="butt")
-            left.plot(d["point"], y, marker, color=AGENT_COLORS[agent], markersize=4, label=name.upper() if i == 0 else None)
+            left.plot(
+                [d["low"], d["high"]], [y, y], color=AGENT_COLORS[agent], linewidth=6, alpha=0.55, solid_capstyle="butt"
+            )
+            left.plot(
+                d["point"], y, marker, color=AGENT_COLORS[agent], markersize=4, label=name.upper() if i == 0 else None
+            )
     left.set_yticks(range(len(agents)), agents)
     left.invert_yaxis()
     left.axvline(1.0, color="black", linestyle="--", linewidth=1)
-    left.set(xlabel="normalized score (random 0, oracle 1)", title="Aggregate over the lines: IQM (o) and mean (s), 95% CI")
+    left.set(
+        xlabel="normalized score (random 0, oracle 1)", title="Aggregate over the lines: IQM (o) and mean (s), 95% CI"
+    )
     left.grid(axis="x", alpha=0.3)
     taus = np.linspace(-0.1, 1.05, 231)
     for agent in agents:
         scores = np.concatenate(list(normalized[agent].values()))
         right.plot(taus, stats.performance_profile(scores, taus), color=AGENT_COLORS[agent], label=agent)
-    right.set(xlabel="normalized score tau", ylabel="fraction of runs x lines with score > tau", title="Performance profiles")
+    right.set(
+        xlabel="normalized score tau", ylabel="fraction of runs x lines with score > tau", title="Performance profiles"
+    )
     right.grid(alpha=0.3)
     right.legend(fontsize=8)
     return _save(fig, stem)

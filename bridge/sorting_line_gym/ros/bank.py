@@ -11,12 +11,11 @@ from __future__ import annotations
 import itertools
 import os
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
-
 from builtin_interfaces.msg import Time
+from rclpy.executors import SingleThreadedExecutor
 from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
 from ..line import line_server
@@ -142,26 +141,34 @@ class LineBank:
         self.waiter.until(
             lambda: key in store["input"] and key in store["belt"],
             timeout,
-            lambda: f"the input and belt/occupancy messages of tick {key[0]}.{key[1]:09d} s on {self.links[k].namespace}",
+            lambda: (
+                f"the input and belt/occupancy messages of tick {key[0]}.{key[1]:09d} s on {self.links[k].namespace}"
+            ),
         )
         return store["input"][key], store["belt"][key]
 
     # ----------------------------------------------------------------------------------------
     def _connect(self, deadline: float) -> None:
         self.waiter.until_deadline(
-            lambda: all(link.endpoints_matched(self.node) for link in self.links)
-            and (self.batch is None or self.batch.matched(self.node))
-            and all(sub.get_publisher_count() > 0 for sub in self._watched),
+            lambda: (
+                all(link.endpoints_matched(self.node) for link in self.links)
+                and (self.batch is None or self.batch.matched(self.node))
+                and all(sub.get_publisher_count() > 0 for sub in self._watched)
+            ),
             deadline,
             self.startup_timeout,
-            lambda: f"the sorting_line node serving {self.namespace} (its reset service and topics; {self._unmatched()})",
+            lambda: (
+                f"the sorting_line node serving {self.namespace} (its reset service and topics; {self._unmatched()})"
+            ),
         )
         self.connected = True
 
     def _unmatched(self) -> str:
         """What discovery still lacks, e.g. "not yet discovered: /ns/line_3 reset service" (when a
         node's endpoints go missing, which ones is the first clue to why)."""
-        missing = [f"{link.namespace} {what}" for link in self.links for what, ok in link.matching(self.node).items() if not ok]
+        missing = [
+            f"{link.namespace} {what}" for link in self.links for what, ok in link.matching(self.node).items() if not ok
+        ]
         if self.batch is not None:
             missing += [f"{self.namespace} {what}" for what, ok in self.batch.matching(self.node).items() if not ok]
         return "not yet discovered: " + ", ".join(missing) if missing else "all discovered"
@@ -191,7 +198,8 @@ class LineBank:
         if self.batch is not None:
             first_state = self.batch.saw_current_ticks
         else:
-            first_state = lambda: all(self.links[k].saw_state_of_current_tick() for k in seeds)
+            def first_state():
+                return all(self.links[k].saw_state_of_current_tick() for k in seeds)
         for attempt, limit in enumerate(HANDSHAKE_TIMEOUTS):
             timeout = min(limit, self.step_timeout)
             try:
@@ -214,7 +222,10 @@ class LineBank:
         self.waiter.until(
             lambda: all(self.links[k].reset_done() for k in seeds),
             timeout,
-            lambda: "the reply of " + ", ".join(f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done()),
+            lambda: (
+                "the reply of "
+                + ", ".join(f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done())
+            ),
         )
         return {k: self.links[k].finish_reset() for k in seeds}
 
@@ -228,7 +239,7 @@ class LineBank:
                 raise BridgeError(f"{link.namespace}: step() before reset()")
         if self.batch is not None:
             raise BridgeError("a bank of several lines steps with step_batch()")
-        for link, (speed, mode) in zip(self.links, actions):
+        for link, (speed, mode) in zip(self.links, actions, strict=False):
             link.send_action(speed, mode)
         pending = set(range(len(self.links)))
 
@@ -259,7 +270,9 @@ class LineBank:
             raise BridgeError("a single-line bank steps with step()")
         self.batch.check_started()
         self.batch.send(speed_indices, modes)
-        self.waiter.until_received([self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait)
+        self.waiter.until_received(
+            [self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait
+        )
         return self.batch.position
 
     def check_usable(self) -> None:

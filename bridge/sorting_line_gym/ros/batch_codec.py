@@ -48,7 +48,12 @@ PRIMITIVES = {
 CDR_LE = b"\x00\x01\x00\x00"
 
 #: The record fields of the header: stamp, and the length (1: just the NUL) and NUL of an empty frame_id.
-HEADER = (("header_sec", "<i4", 0), ("header_nanosec", "<u4", 4), ("header_frame_id_len", "<u4", 8), ("header_frame_id", "u1", 12))
+HEADER = (
+    ("header_sec", "<i4", 0),
+    ("header_nanosec", "<u4", 4),
+    ("header_frame_id_len", "<u4", 8),
+    ("header_frame_id", "u1", 12),
+)
 HEADER_SIZE = 13
 
 
@@ -61,7 +66,9 @@ def _sequences(msg_type) -> list[tuple[str, str]]:
     for name, kind in fields[1:]:
         element = kind[len("sequence<") : -1] if kind.startswith("sequence<") else None
         if element not in PRIMITIVES:
-            raise TypeError(f"{msg_type.__name__}.{name} is {kind}: the codec takes unbounded sequences of primitives only")
+            raise TypeError(
+                f"{msg_type.__name__}.{name} is {kind}: the codec takes unbounded sequences of primitives only"
+            )
         result.append((name, PRIMITIVES[element]))
     return result
 
@@ -102,7 +109,9 @@ class BatchCodec:
         self._template = template.tobytes()
         # The bytes that must be as in the template for a message to fit: the frame_id's length
         # and NUL, and every sequence's count.
-        fixed = [range(8, 13)] + [range(offsets[i], offsets[i] + 4) for i, name in enumerate(names) if name.endswith("__count")]
+        fixed = [range(8, 13)] + [
+            range(offsets[i], offsets[i] + 4) for i, name in enumerate(names) if name.endswith("__count")
+        ]
         self._fixed_at = np.array([len(CDR_LE) + i for r in fixed for i in r])
         self._fixed = np.frombuffer(CDR_LE + template.tobytes(), dtype=np.uint8)[self._fixed_at].tobytes()
         self._sizes = (self.size, _align(self.size, 4))

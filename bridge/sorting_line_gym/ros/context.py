@@ -33,7 +33,6 @@ from rclpy.signals import SignalHandlerOptions
 from ..line.errors import BridgeError
 from ..line.process import die_with_parent
 
-
 _rclpy_lock = threading.Lock()
 _rclpy_users = 0
 _rclpy_ours = False
@@ -150,11 +149,12 @@ def _keep_participant() -> None:
     ``onReaderDiscovery``, waited for the participant's mutex (gdb stacks of a SubprocVecEnv-16
     worker stuck 4 min in ``env.close()``; in CI an AsyncVectorEnv (fork) hung 240 s in its
     ``close()``, with no stacks taken). Running the deletion at ``SCHED_IDLE`` priority did not
-    help (one hang in 5 runs under load, as before). A forked worker ends with ``os._exit``, so its participant is never deleted at all:
-    the others drop it when its lease expires, as for a killed process. The same holds for a
-    process its host kills at the end (:func:`keep_participant_until_killed`). Other processes
-    delete their participant: they may fork after their envs are closed, which needs rclpy shut
-    down (``fork_error``), and they end through interpreter finalisation."""
+    help (one hang in 5 runs under load, as before). A forked worker ends with ``os._exit``, so its
+    participant is never deleted at all: the others drop it when its lease expires, as for a killed
+    process. The same holds for a process its host kills at the end
+    (:func:`keep_participant_until_killed`). Other processes delete their participant: they may fork
+    after their envs are closed, which needs rclpy shut down (``fork_error``), and they end through
+    interpreter finalisation."""
     global _participant_anchor
     if (_in_forked_child or _killed_at_end) and _participant_anchor is None:
         _participant_anchor = rclpy.create_node(

@@ -20,7 +20,6 @@ from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
-
 from sorting_line_interfaces.msg import LineStates
 
 from ..line.errors import BridgeError, BridgeTimeout
@@ -53,7 +52,9 @@ class _Liveness:
         return all(b.process is None or b.process.alive() for b in self.banks)
 
     def death_notice(self) -> str:
-        return "; ".join(b.process.death_notice() for b in self.banks if b.process is not None and not b.process.alive())
+        return "; ".join(
+            b.process.death_notice() for b in self.banks if b.process is not None and not b.process.alive()
+        )
 
 
 class NodeFleet:
@@ -122,7 +123,9 @@ class NodeFleet:
                     raise BridgeError(f"{self.where(b)}: {bank.process.death_notice()}")
                 bank.executor.spin_once(timeout_sec=_RESET_SLICE)
             if pending and time.monotonic() > deadline:
-                names = "; ".join(f"{self.where(b)}: the reply of {self.banks[b].batch.reset_name}" for b in sorted(pending))
+                names = "; ".join(
+                    f"{self.where(b)}: the reply of {self.banks[b].batch.reset_name}" for b in sorted(pending)
+                )
                 raise BridgeTimeout(f"timed out after {self.step_timeout:g} s waiting for {names}")
         results = {}
         for b, local in per_bank.items():
@@ -137,7 +140,7 @@ class NodeFleet:
         n = self.lines_per_node
         speed_indices = np.asarray(speed_indices)
         modes = np.asarray(modes)
-        for b, bank in enumerate(self.banks):
+        for bank in self.banks:
             bank.check_usable()
             bank.batch.check_started()
         for b, bank in enumerate(self.banks):

@@ -15,10 +15,9 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-from builtin_interfaces.msg import Time
 from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, SortModeCommand, SpeedCommand
 from sorting_line_interfaces.srv import ResetLine, ResetLines
 
@@ -107,7 +106,8 @@ class LineLink:
         self.namespace = namespace.rstrip("/") or ""
         self.advanced = advanced
         self.node = node
-        name = lambda rel: f"{self.namespace}/{rel}"
+        def name(rel):
+            return f"{self.namespace}/{rel}"
         self.state_topic = name("state")
         self.speed_pub = self.mode_pub = self.state_sub = self.reset_client = None
         # States arrive in order; keep a short backlog so nothing is lost while we publish.
@@ -221,7 +221,9 @@ class BatchLink:
         self._commands = BatchCodec(LineCommands, n, None if self.advanced else {"modes": 0})
         #: Received ``batch/state`` messages, serialised (the executor's callback and ``_drain`` both append).
         self.inbox: deque[bytes] = deque(maxlen=64)
-        self.state_sub = node.create_subscription(LineStates, self.state_topic, lambda raw: self.inbox.append(raw), QOS, raw=True)
+        self.state_sub = node.create_subscription(
+            LineStates, self.state_topic, lambda raw: self.inbox.append(raw), QOS, raw=True
+        )
         #: Lines no reset has started yet: they cannot be stepped.
         self.unstarted = set(range(n))
         #: The newest batch showing every line's current tick (after a reset: the reply's states),
@@ -260,13 +262,20 @@ class BatchLink:
         # The reply carries every line's state after the reset; lines not reset are where they were.
         b = from_message(response.states)
         if not self._states.assign(self._position, 0, b):
-            raise BridgeError(f"{self.reset_name} replied with the states of {len(b.step)} lines; this bridge drives {len(self.links)}")
+            raise BridgeError(
+                f"{self.reset_name} replied with the states of {len(b.step)} lines"
+                f"; this bridge drives {len(self.links)}"
+            )
         self.unstarted.difference_update(seeds)
         results = {}
         for k in seeds:
             stamp = Time(sec=int(b.stamp_sec[k]), nanosec=int(b.stamp_nanosec[k]))
             results[k] = ResetResult(
-                float(b.observation_quantity[k]), int(b.observation_category[k]), int(b.episode[k]), int(b.seed[k]), stamp
+                float(b.observation_quantity[k]),
+                int(b.observation_category[k]),
+                int(b.episode[k]),
+                int(b.seed[k]),
+                stamp,
             )
         return results
 
@@ -288,7 +297,11 @@ class BatchLink:
     def send(self, speed_indices: np.ndarray, modes: np.ndarray) -> None:
         """Answers every line's current tick (the stamps of the position)."""
         p = self._position
-        fields = {"stamp_sec": p["stamp_sec"][0], "stamp_nanosec": p["stamp_nanosec"][0], "speeds": self._speeds[speed_indices]}
+        fields = {
+            "stamp_sec": p["stamp_sec"][0],
+            "stamp_nanosec": p["stamp_nanosec"][0],
+            "speeds": self._speeds[speed_indices],
+        }
         if self.advanced:
             fields["modes"] = modes
         self._next_step = p["step"][0] + 1
@@ -307,7 +320,7 @@ class BatchLink:
             if (seen == episode).all() and (incoming["step"][0] == step).all():
                 self._position, self._incoming = incoming, self._position
                 return True
-            for link, ours, theirs in zip(self.links, episode.tolist(), seen.tolist()):
+            for link, ours, theirs in zip(self.links, episode.tolist(), seen.tolist(), strict=False):
                 check_not_taken_over(link.namespace, ours, theirs)
         return False
 
@@ -320,6 +333,8 @@ class BatchLink:
 
     def describe_wait(self) -> str:
         p, n = self.position, len(self.links)
-        ticks = ", ".join(f"{self.links[k].namespace} episode {p.episode[k]} step {p.step[k] + 1}" for k in range(min(n, 4)))
+        ticks = ", ".join(
+            f"{self.links[k].namespace} episode {p.episode[k]} step {p.step[k] + 1}" for k in range(min(n, 4))
+        )
         more = f" and {n - 4} more lines" if n > 4 else ""
         return f"{self.state_topic} with the next state of every line ({ticks}{more})"

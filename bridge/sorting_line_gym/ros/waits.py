@@ -7,7 +7,8 @@ No ``spin_until_future_complete`` (it leaks a task per call in rclpy 7.1): every
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from rclpy.executors import SingleThreadedExecutor
 
@@ -43,7 +44,9 @@ class Waiter:
     def until(self, done: Callable[[], bool], timeout: float, what: Callable[[], str]) -> None:
         self.until_deadline(done, time.monotonic() + timeout, timeout, what)
 
-    def until_deadline(self, done: Callable[[], bool], deadline: float, timeout: float, what: Callable[[], str]) -> None:
+    def until_deadline(
+        self, done: Callable[[], bool], deadline: float, timeout: float, what: Callable[[], str]
+    ) -> None:
         """``until`` for a wait that is the last part of a longer one: ``deadline`` (monotonic
         time) is when the whole of it, ``timeout`` seconds long, ends."""
         while not done():

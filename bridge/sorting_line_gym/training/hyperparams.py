@@ -26,8 +26,9 @@ returns per update). N must be a power of two (up to 2048) so these are whole nu
 from __future__ import annotations
 
 import importlib.resources
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import yaml
 
@@ -107,7 +108,9 @@ def for_lines(algo: str, params: dict[str, Any]) -> dict[str, Any]:
     if n == 1:
         return params
     if n & (n - 1) or n > 2048:
-        raise ValueError(f"n_envs = {n} is not valid for the one-line to N-line mapping: allowed a power of two, 1 .. 2048")
+        raise ValueError(
+            f"n_envs = {n} is not valid for the one-line to N-line mapping: allowed a power of two, 1 .. 2048"
+        )
     mapped = dict(params)
     if algo == "ppo" and "n_steps" not in params:
         mapped["n_steps"] = ONE_LINE_ROLLOUT["ppo"]["n_steps"] // n
@@ -126,7 +129,10 @@ def _check_own_keys(params: dict[str, Any], source: str) -> None:
         if not isinstance(value, int) or isinstance(value, bool) or value < low:
             raise ValueError(f"{key} = {value!r} (from {source}) is not valid: allowed an integer >= {low}")
     if not isinstance(params.get("policy"), str):
-        raise ValueError(f"policy = {params.get('policy')!r} (from {source}) is not valid: allowed an SB3 policy name such as MlpPolicy")
+        raise ValueError(
+            f"policy = {params.get('policy')!r} (from {source})"
+            f" is not valid: allowed an SB3 policy name such as MlpPolicy"
+        )
 
 
 def split(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -144,6 +150,7 @@ def _check_constructor_keys(algo: str, params: dict[str, Any], source_of: Callab
     unknown = sorted(set(split(params)[1]) - accepted)
     if unknown:
         raise ValueError(
-            f"{', '.join(f'{k} (from {source_of(k)})' for k in unknown)}: not a hyperparameter of {algo.upper()} (allowed: "
+            f"{', '.join(f'{k} (from {source_of(k)})' for k in unknown)}"
+            f": not a hyperparameter of {algo.upper()} (allowed: "
             f"{', '.join(OWN_KEYS)}, and {algo.upper()}'s arguments: {', '.join(sorted(accepted))})"
         )

@@ -30,7 +30,8 @@ import itertools
 import os
 import sys
 from collections import defaultdict
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import gymnasium
 
@@ -123,11 +124,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--timesteps", type=int, default=4000, help="env steps to train for (whole iterations)")
     p.add_argument("--batch", type=int, default=1000, help="train batch size per iteration")
     p.add_argument("--episode-steps", type=int, default=50)
-    p.add_argument("--nodes", nargs="*", default=None,
-                   help="node namespaces, one per EnvRunner (its envs attach to that node's lines); default: line servers")
+    p.add_argument(
+        "--nodes",
+        nargs="*",
+        default=None,
+        help="node namespaces, one per EnvRunner (its envs attach to that node's lines); default: line servers",
+    )
     p.add_argument("--lines-per-node", type=int, default=4)
     p.add_argument("--address", default=None, help="a Ray cluster to join (default: start a local one)")
-    p.add_argument("--node-ip", default="127.0.0.1", help="this machine's address for a local Ray (default %(default)s)")
+    p.add_argument(
+        "--node-ip", default="127.0.0.1", help="this machine's address for a local Ray (default %(default)s)"
+    )
     p.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray (default: env runners + 1)")
     p.add_argument("--seed", type=int, default=42)
     args = p.parse_args(argv)

@@ -155,18 +155,38 @@ def train(
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="sorting-line-train",
-        description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2 (the paper's settings by default).",
+        description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2"
+                    " (the paper's settings by default).",
     )
     p.add_argument("--algo", required=True, choices=hyperparams.ALGOS)
-    p.add_argument("--setup", required=True, choices=list(SETUPS), help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty")
+    p.add_argument(
+        "--setup",
+        required=True,
+        choices=list(SETUPS),
+        help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty",
+    )
     p.add_argument("--variant", default="basic", choices=VARIANTS)
-    p.add_argument("--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)")
-    p.add_argument("--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)")
+    p.add_argument(
+        "--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)"
+    )
+    p.add_argument(
+        "--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)"
+    )
     p.add_argument("--n-envs", type=int, help="lines trained on at once (default: n_envs of the hyperparameters, 1)")
-    p.add_argument("--hyperparams", metavar="FILE", help="RL Zoo style YAML file (default: the packaged hyperparams/<algo>.yml)")
-    p.add_argument("--hp", action="append", default=[], metavar="KEY=VALUE", help="override one hyperparameter (value read as YAML); repeatable")
+    p.add_argument(
+        "--hyperparams", metavar="FILE", help="RL Zoo style YAML file (default: the packaged hyperparams/<algo>.yml)"
+    )
+    p.add_argument(
+        "--hp",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one hyperparameter (value read as YAML); repeatable",
+    )
     p.add_argument("--out", default="models", help="directory for the model and its JSON (default models/)")
-    p.add_argument("--tensorboard", metavar="DIR", help="TensorBoard log directory (default <out>/tensorboard; 'none' to disable)")
+    p.add_argument(
+        "--tensorboard", metavar="DIR", help="TensorBoard log directory (default <out>/tensorboard; 'none' to disable)"
+    )
     p.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", action="count", default=0, help="SB3's console log (-v)")
@@ -181,7 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.n_envs is not None:
         overrides.append(f"n_envs={args.n_envs}")
     if args.torch_threads < 1:
-        print(f"sorting-line-train: --torch-threads = {args.torch_threads} is not valid: allowed 1 or more", file=sys.stderr)
+        print(
+            f"sorting-line-train: --torch-threads = {args.torch_threads} is not valid: allowed 1 or more",
+            file=sys.stderr,
+        )
         return 2
     try:
         params = hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
@@ -189,7 +212,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sorting-line-train: {e}", file=sys.stderr)
         return 2
     tensorboard = None if args.tensorboard == "none" else (args.tensorboard or str(Path(args.out) / "tensorboard"))
-    print(f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}", file=sys.stderr)
+    print(
+        f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}",
+        file=sys.stderr,
+    )
     run = train(
         args.algo,
         args.setup,
@@ -203,7 +229,8 @@ def main(argv: list[str] | None = None) -> int:
         verbose=args.verbose,
     )
     print(
-        f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s, {run.episodes} episodes); "
+        f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s"
+        f", {run.episodes} episodes); "
         f"model {run.model_path}"
     )
     return 0

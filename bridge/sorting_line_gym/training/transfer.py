@@ -180,7 +180,7 @@ def plot(results: list[dict], baselines: dict, out: Path) -> None:
 
     fig = Figure(figsize=(12, 4.5))
     axes = fig.subplots(1, len(SCENARIOS))
-    for ax, scenario in zip(np.atleast_1d(axes), SCENARIOS):
+    for ax, scenario in zip(np.atleast_1d(axes), SCENARIOS, strict=False):
         runs = [r for r in results if r["scenario"] == scenario]
         if not runs:
             continue
@@ -223,7 +223,7 @@ def table(results: list[dict], baselines: dict) -> str:
             continue
         b = baselines[scenario]
 
-        def steps(key):
+        def steps(key, runs=runs):
             got = [r[key] for r in runs]
             reached = [g for g in got if g is not None]
             text = f"{np.mean(reached):.0f}" if reached else "-"
@@ -232,8 +232,10 @@ def table(results: list[dict], baselines: dict) -> str:
         lines.append(
             f"| {scenario} | {len(runs)} | {ms([np.mean(r['continued_eval']) for r in runs])} | "
             f"{ms([np.mean(r['frozen_eval']) for r in runs])} | {ms([np.mean(r['scratch_eval']) for r in runs])} | "
-            f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f} | {b['before']['rba']:.2f} / {b['after']['rba']:.2f} | "
-            f"{steps('continued_recovery_steps')} | {steps('scratch_recovery_steps')} |")
+            f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f} | "
+            f"{b['before']['rba']:.2f} / {b['after']['rba']:.2f} | "
+            f"{steps('continued_recovery_steps')} | {steps('scratch_recovery_steps')} |"
+        )
     return "\n".join(lines)
 
 
@@ -255,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.torch_threads)
     args.out.mkdir(parents=True, exist_ok=True)
-    log = lambda text: print(f"[{time.strftime('%H:%M:%S')}] {text}", flush=True)
+    def log(text):
+        return print(f"[{time.strftime('%H:%M:%S')}] {text}", flush=True)
     results_file = args.out / "transfer.json"
     done = json.loads(results_file.read_text()) if results_file.exists() else {"runs": []}
     runs = [r for r in done["runs"] if r["before"] == args.before and r["after"] == args.after]
