@@ -6,6 +6,11 @@ Besides the messages, a bag of a line carries under ``custom_data`` (metadata.ya
 (variant, input, noise, penalty, threshold, max_steps, the line's seed, mode, tick_period), so
 that ``sorting-line-bag replay BAG`` can start an identical node with nothing else given.
 
+A bag recorded by another tool (`ros2 bag record`: MCAP or sqlite3 storage, no ``custom_data``,
+extra topics, any namespace) gets its description from its topics instead (:mod:`.foreign`),
+with the source of each option in ``LineInfo.sources``; topics of types this tool does not know
+are listed but never decoded or played.
+
 Bad input (a missing path, something that is not a bag, a corrupt file, a topic the bag does not
 have) raises :class:`BagError`, which the command line turns into a message and exit code 2.
 """
@@ -21,6 +26,7 @@ from pathlib import Path
 import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
+from .foreign import line_namespace_of, options_from_topics, describe_sources
 from .schema import NODE_QOS, decode, relative_to, typestore
 
 #: The custom_data key of the line's description.
@@ -39,6 +45,8 @@ class LineInfo:
     #: The node's options as `sorting_line node` flags take them (underscores), with ``seed`` the
     #: seed of this line (node seed + line index).
     node: dict = field(default_factory=dict)
+    #: Bags of other recorders: where each option in ``node`` came from (empty: custom_data).
+    sources: dict = field(default_factory=dict)
 
     def to_json(self) -> str:
         return json.dumps({"namespace": self.namespace, "node": self.node}, sort_keys=True)
@@ -74,6 +82,8 @@ class Bag:
     messages: list[BagMessage]  # in log-time order
     info: LineInfo | None
     custom: dict[str, str]
+    #: Topics whose types this tool does not know (a bag of another recorder's extra topics).
+    unknown: dict[str, str] = field(default_factory=dict)
 
     def on(self, topic: str) -> list[BagMessage]:
         return [m for m in self.messages if m.topic == topic]
@@ -115,9 +125,7 @@ def open_bag(path: str | Path) -> Bag:
         raise
     except Exception as e:  # noqa: BLE001 - rosbags raises many kinds for a corrupt file; all are bad input
         raise BagError(f"{path}: cannot read the bag: {type(e).__name__}: {e}") from None
-    unknown = sorted({t for t in types.values() if t not in store.fielddefs})
-    if unknown:
-        raise BagError(f"{path}: message types this tool does not know: {', '.join(unknown)}")
+    messages.sort(key=lambda m: m.log_time)
     custom = _custom_data(path) if path.is_dir() else {}
     info = None
     if META_KEY in custom:
@@ -125,8 +133,28 @@ def open_bag(path: str | Path) -> Bag:
             info = LineInfo.from_json(custom[META_KEY])
         except (ValueError, KeyError, TypeError) as e:
             raise BagError(f"{path}: custom_data {META_KEY!r} is not valid ({e})") from None
-    messages.sort(key=lambda m: m.log_time)
-    return Bag(path, types, messages, info, custom)
+    unknown = {topic: t for topic, t in types.items() if t not in store.fielddefs}
+    if info is None:
+        info = _described_by_topics(types, [m for m in messages if m.topic not in unknown])
+    if unknown and info is None:
+        raise BagError(f"{path}: message types this tool does not know: {', '.join(sorted(set(unknown.values())))} "
+                       "(and no sorting line's state topic)")
+    return Bag(path, types, messages, info, custom, unknown)
+
+
+def _described_by_topics(types: dict[str, str], messages: list[BagMessage]) -> LineInfo | None:
+    """A bag of another recorder: its one line and what its topics tell of the node."""
+    namespace = line_namespace_of(types)
+    if namespace is None:
+        return None
+    by_topic: dict[str, list[BagMessage]] = defaultdict(list)
+    for m in messages:
+        by_topic[m.topic].append(m)
+    try:
+        options, sources = options_from_topics(namespace, by_topic)
+    except (KeyError, TypeError, ValueError) as e:
+        raise BagError(f"cannot read the line's description from its topics ({type(e).__name__}: {e})") from None
+    return LineInfo(namespace, options, sources)
 
 
 class BagWriter:
@@ -187,8 +215,11 @@ def describe(bag: Bag) -> str:
         counts[m.topic] += 1
     lines = [f"{bag.path}: {len(bag.messages)} messages"]
     for topic in sorted(bag.types):
-        lines.append(f"  {topic:40s} {bag.types[topic]:45s} {counts[topic]:6d}")
-    if bag.info:
+        unknown = "  (type not known here: not decoded or played)" if topic in bag.unknown else ""
+        lines.append(f"  {topic:40s} {bag.types[topic]:45s} {counts[topic]:6d}{unknown}")
+    if bag.info and bag.info.sources:
+        lines += describe_sources(bag.info)
+    elif bag.info:
         lines.append(f"  line {bag.info.namespace}: {json.dumps(bag.info.node, sort_keys=True)}")
     return "\n".join(lines)
 

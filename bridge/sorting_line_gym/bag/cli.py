@@ -19,6 +19,7 @@ import signal
 import sys
 
 from ..line.errors import BridgeError
+from ..line.vocabulary import SETUPS
 from .bagfile import BagError, describe, open_bag
 
 EXIT_DIFFERENT, EXIT_BAD_INPUT, EXIT_FAILED = 1, 2, 3
@@ -68,6 +69,9 @@ def _parser() -> argparse.ArgumentParser:
                        ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
         rp.add_argument(f"--{name}", type=kind, default=None,
                         help="override the node option the bag stores (needed if the bag does not store it)")
+    rp.add_argument("--setup", choices=list(SETUPS), default=None,
+                    help="the paper's setup of the recorded line: its input, obs-noise, action-penalty and threshold "
+                         "(for a bag that does not store them; the flags above override it)")
     rp.add_argument("--step-timeout", type=float, default=5.0, help="longest wait for one tick or reset (s)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -110,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             from .replay import replay
 
             overrides = {k: getattr(args, k) for k in ("variant", "input", "obs_noise", "action_penalty", "threshold",
-                                                       "max_steps", "seed", "tick_period")}
+                                                       "max_steps", "seed", "tick_period", "setup")}
             result = replay(args.bag, overrides, step_timeout=args.step_timeout,
                             progress=not args.no_progress and sys.stderr.isatty())
             print(result.report(), flush=True)

@@ -4,7 +4,9 @@ recorded data instead of a live node.
 
 By default it plays everything the node published (the sensors ``input``, ``belt/occupancy``,
 ``sensors/ratio``, and ``state``, ``events/reset``, ``/clock``), not the commands: those are the
-controller's to send. ``namespace`` moves the line's topics to another namespace. The CDR bytes
+controller's to send; nor what a bag of another recorder holds besides (``/rosout``,
+``/parameter_events``: they describe the recorded graph's nodes; topics of types not known here).
+``namespace`` moves the line's topics to another namespace. The CDR bytes
 are published as recorded (stamps unchanged). Timing follows the recorder's receive times.
 
 With ``lockstep`` it ignores the timing and plays tick by tick, as a lock-step node would: a
@@ -27,7 +29,7 @@ from rclpy.duration import Duration
 
 from .bagfile import Bag, BagError, BagMessage, open_bag, topics_of
 from .rosnode import ToolNode
-from .schema import COMMANDS, LINE_TYPES, decode, join, relative_to, stamp_ns
+from .schema import COMMANDS, LINE_TYPES, decode, join, rclpy_class, relative_to, stamp_ns
 
 
 @dataclass
@@ -37,6 +39,8 @@ class PlayResult:
     recorded_seconds: float = 0.0
     #: lockstep: stamps (ns) of the ticks whose answer did not come in time
     unanswered: list[int] = field(default_factory=list)
+    #: topics of the bag not played by default (a bag of another recorder), with why
+    skipped: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> str:
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
@@ -44,6 +48,8 @@ class PlayResult:
                 f"(recorded over {self.recorded_seconds:.2f} s): {per_topic}")
         if self.unanswered:
             text += f"; no answer in time for {len(self.unanswered)} ticks (first at {self.unanswered[0] / 1e9:.3f} s)"
+        if self.skipped:
+            text += "; not played: " + ", ".join(f"{t} ({why})" for t, why in sorted(self.skipped.items()))
         return text
 
 
@@ -73,6 +79,7 @@ def play(path, *, rate: float = 1.0, topics: list[str] | None = None, namespace:
         on_ready(f"playing {len(selection.messages)} messages on {len(pubs)} topics"
                  + (f" into {namespace}" if namespace else ""))
         pace = _Pace(tool, selection, pubs, stop, answered, answer_timeout)
+        pace.result.skipped = selection.skipped
         return pace.tick_by_tick() if lockstep else pace.timed(rate)
     finally:
         tool.close()
@@ -89,6 +96,7 @@ class _Selection:
     waits: list[str]  # topics that need a subscriber before the first message
     messages: list[BagMessage]
     recorded_answers: set[int]  # lockstep: stamps of the ticks the bag shows a cmd/speed for
+    skipped: dict[str, str] = field(default_factory=dict)  # topics not played by default, and why
 
     @property
     def out_ns(self) -> str:
@@ -102,10 +110,16 @@ class _Selection:
     def of(cls, bag: Bag, topics: list[str] | None, namespace: str | None, wait_for: list[str] | None,
            lockstep: bool) -> _Selection:
         line_ns = bag.info.namespace if bag.info else ""
+        skipped: dict[str, str] = {}
         if topics:
             chosen = topics_of(bag, topics)
+            for t in chosen:
+                if why := _unplayable(bag, t):
+                    raise BagError(f"{bag.path}: cannot play {t}: {why}")
         else:
             chosen = [t for t in bag.types if (relative_to(line_ns, t) if line_ns else None) not in COMMANDS]
+            skipped = {t: why for t in chosen if (why := _not_played_by_default(bag, t))}
+            chosen = [t for t in chosen if t not in skipped]
         waits = wait_for if wait_for is not None else (["input"] if join(line_ns, "input") in chosen else [])
         recorded_answers: set[int] = set()
         if lockstep:
@@ -114,7 +128,30 @@ class _Selection:
                 raise BagError(f"{bag.path}: --lockstep needs the bag's cmd/speed, the answers it waits for")
             recorded_answers = {stamp_ns(m.plain) for m in bag.on(answers)}
         messages = [m for m in bag.messages if m.topic in chosen]
-        return cls(bag, line_ns, namespace, chosen, waits, messages, recorded_answers)
+        return cls(bag, line_ns, namespace, chosen, waits, messages, recorded_answers, skipped)
+
+
+#: Topics of a recorded graph's nodes, not of the line: played again they would describe nodes
+#: that are not there.
+GRAPH_TOPICS = ("/rosout", "/parameter_events")
+
+
+def _unplayable(bag: Bag, topic: str) -> str | None:
+    """Why ``topic`` cannot be published from here (None: it can)."""
+    msgtype = bag.types[topic]
+    if topic in bag.unknown:
+        return f"type {msgtype} not known here"
+    try:
+        rclpy_class(msgtype)
+    except ImportError:
+        return f"no rclpy class of {msgtype} here"
+    return None
+
+
+def _not_played_by_default(bag: Bag, topic: str) -> str | None:
+    if topic in GRAPH_TOPICS:
+        return "the recorded nodes' own topic"
+    return _unplayable(bag, topic)
 
 
 def _wait_for_subscribers(tool: ToolNode, selection: _Selection, pubs: dict, wait: float) -> None:

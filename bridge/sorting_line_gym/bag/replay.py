@@ -46,11 +46,10 @@ from ..line.process import NodeProcess, private_namespace
 from ..ros.links import LineLink
 from .bagfile import Bag, BagError, BagMessage, open_bag
 from .compare import Comparison, Difference, compare, shifted
+from .foreign import REQUIRED, flags_for, with_setup
 from .rosnode import ToolNode
 from .schema import CLOCK, COMMANDS, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, decode, join, stamp_ns, typestore
 
-#: Node options a replay needs, as `sorting_line node` flags (underscores).
-REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
 HANDSHAKE_ATTEMPTS = 3
 
 
@@ -114,15 +113,17 @@ def sort_modes_by_stamp(events: list[dict]) -> list[tuple[int, bool]]:
 
 
 def node_options(bag: Bag, overrides: dict | None) -> dict:
+    """The options of a fresh node for ``bag``: the bag's, overridden by the flags given
+    (``setup`` stands for its options); BagError naming the flags for what neither has."""
+    overrides = with_setup(overrides)
     options = dict(bag.info.node if bag.info else {})
-    options.update({k: v for k, v in (overrides or {}).items() if v is not None})
-    if options.get("mode", "lockstep") != "lockstep" and not (overrides or {}).get("mode"):
+    options.update(overrides)
+    if options.get("mode", "lockstep") != "lockstep" and not overrides.get("mode"):
         raise BagError(f"{bag.path} was recorded from a {options['mode']} node: replay reproduces lock-step "
                        "recordings only (a realtime node applies commands when they arrive, which a bag does not show)")
     missing = [k for k in REQUIRED if k not in options]
     if missing:
-        flags = " ".join(f"--{k.replace('_', '-')} ..." for k in missing)
-        raise BagError(f"{bag.path} does not say the node's {', '.join(missing)}: pass {flags}")
+        raise BagError(f"{bag.path} does not say the node's {', '.join(missing)}: pass {flags_for(missing)}")
     return {k: options[k] for k in REQUIRED}
 
 
