@@ -21,7 +21,6 @@ import pytest
 import ros_harness as h
 from bag_golden import DATA, GOLDEN
 from ros2_bags import CELL_STATUS, write_ros2_bag
-
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.cli import main
 from sorting_line_gym.bag.replay import replay

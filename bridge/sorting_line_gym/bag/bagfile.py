@@ -26,7 +26,7 @@ from pathlib import Path
 import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-from .foreign import line_namespace_of, options_from_topics, describe_sources
+from .foreign import describe_sources, line_namespace_of, options_from_topics
 from .schema import NODE_QOS, decode, relative_to, typestore
 
 #: The custom_data key of the line's description.
