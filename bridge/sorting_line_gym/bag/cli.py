@@ -5,6 +5,7 @@
     sorting-line-bag play run1 --namespace /test --rate 2         # the sensors, twice as fast
     sorting-line-bag play run1 --namespace /test --lockstep       # tick by tick, after each answer
     sorting-line-bag info run1
+    sorting-line-bag check run1 --controller 'my_controller --setup D'   # 0 pass, 1 fail (see check --help)
 
 Exit codes: 0 done (replay: identical), 1 replay found a difference, 2 bad input (a missing or
 corrupt bag, an unknown topic, an existing output, a bag replay cannot use), 3 the graph or the
@@ -92,7 +93,59 @@ def _parser() -> argparse.ArgumentParser:
 
     i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
     i.add_argument("bag")
+    _check_parser(sub)
     return p
+
+
+def _check_parser(sub) -> None:
+    c = sub.add_parser("check", help="test a controller against a bag: a verdict (exit 0 pass, 1 fail, 2 bad input, "
+                                     "3 the run failed), as text, JSON and JUnit XML",
+                       description="Does a controller still answer a recorded line as it did, and is it no worse? "
+                                   "Tests it against a bag at topic level.", epilog=CHECK_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("bag")
+    c.add_argument("--namespace", default=None,
+                   help="where the line is played (open loop) or served (closed loop); default: the bag's line namespace")
+    c.add_argument("--controller", default=None, metavar="CMD",
+                   help="start this command (a shell-like string, e.g. 'sorting-line-controller --setup D') with "
+                        "'--ros-args -r __ns:=<namespace>' appended, and stop it at the end; default: wait for a "
+                        "controller already running in the namespace")
+    c.add_argument("--closed-loop", action="store_true",
+                   help="a fresh lock-step node with the bag's options, reset as the bag was, driven by the "
+                        "controller; its episodes are compared with the bag's")
+    c.add_argument("--record", default=None, metavar="OUT", help="--closed-loop: record the run into bag directory OUT")
+    c.add_argument("--json", default=None, metavar="FILE", help="write the verdict as JSON to FILE")
+    c.add_argument("--junit", default=None, metavar="FILE",
+                   help="write the verdict as JUnit XML to FILE (a test case per episode, one for missing answers)")
+    c.add_argument("--answer-timeout", type=float, default=5.0, metavar="S",
+                   help="longest wait for the controller's answer to one tick (s); the run goes on without it")
+    c.add_argument("--wait", type=float, default=None, metavar="S",
+                   help="longest wait for the controller to appear (s; default 60 with --controller, else 10)")
+    for figure in ("reward", "accuracy", "purity"):
+        c.add_argument(f"--max-{figure}-drop", default=None, metavar="X|X%",
+                       help=f"--closed-loop: how much lower than the bag's an episode's {figure} may be, absolute "
+                            "or as a percentage of the bag's (default 0: equal or better)")
+    for name, kind in [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float),
+                       ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
+        c.add_argument(f"--{name}", type=kind, default=None,
+                       help="--closed-loop: the node option, if the bag does not store it (as replay's flag)")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
+
+
+CHECK_EPILOG = """\
+open loop (default): the bag's node side is played tick by tick (as play --lockstep); each tick the
+  bag shows a command for waits for the controller's answer (cmd/speed, cmd/sort_mode, or batch/cmd)
+  and compares it with the bag's: the first difference by tick, topic and field, counts of
+  matching, differing and missing answers, answer latency p50/p99/max. Passes when every answer
+  matches and none is missing.
+closed loop: episode reward, mean accuracy, purity, speed changes and the first tick where the
+  trajectories part, per episode of the bag; equal or better passes (tolerances: --max-*-drop).
+exit codes: 0 pass, 1 the verdict failed, 2 bad input, 3 the run failed (the controller died,
+  the node failed, nobody answered).
+examples:
+  sorting-line-bag check run1 --controller 'sorting-line-controller --setup D' --junit check.xml
+  sorting-line-bag check run1 --closed-loop --max-reward-drop 5% --controller './my_node'
+"""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
                             progress=not args.no_progress and sys.stderr.isatty())
             print(result.report(), flush=True)
             return 0 if result.identical else EXIT_DIFFERENT
+        if args.command == "check":
+            return _check(args)
         if args.command == "play":
             from .play import play
 
@@ -136,6 +191,29 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
         return EXIT_FAILED
     raise AssertionError(f"unhandled command {args.command}")
+
+
+def _check(args) -> int:
+    from pathlib import Path
+
+    from .check import check_controller
+
+    overrides = {k: getattr(args, k) for k in ("variant", "input", "obs_noise", "action_penalty", "threshold",
+                                               "max_steps", "seed", "tick_period")}
+    with _Stop() as stop:
+        verdict = check_controller(args.bag, namespace=args.namespace, controller=args.controller,
+                                   closed_loop=args.closed_loop, record=args.record,
+                                   answer_timeout=args.answer_timeout, wait=args.wait,
+                                   max_reward_drop=args.max_reward_drop, max_accuracy_drop=args.max_accuracy_drop,
+                                   max_purity_drop=args.max_purity_drop, overrides=overrides, stop=stop,
+                                   progress=not args.no_progress and sys.stderr.isatty())
+    print(verdict.summary(), flush=True)
+    if verdict.error:
+        print(f"sorting-line-bag check: {verdict.error}", file=sys.stderr, flush=True)
+    for path, text in ((args.json, verdict.to_json), (args.junit, verdict.to_junit)):
+        if path:
+            Path(path).write_text(text())
+    return verdict.exit_code
 
 
 if __name__ == "__main__":

@@ -421,9 +421,10 @@ class _NoBar:
         pass
 
 
-def _progress(total: int, enabled: bool):
+def _progress(total: int, enabled: bool, desc: str = "replay", unit: str = "msg"):
+    """A tqdm bar on stderr (the caller enables it where stderr is a terminal), or nothing."""
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
 
-    return tqdm(total=total, desc="replay", unit="msg", leave=False)
+    return tqdm(total=total, desc=desc, unit=unit, leave=False)

@@ -60,6 +60,15 @@ def die_with_parent(sig: int, keep_existing: bool = False) -> None:
         libc.prctl(PR_SET_PDEATHSIG, sig)
 
 
+def file_tail(path: str | Path, lines: int) -> str:
+    """The last ``lines`` lines of a child process's log ("" if it cannot be read)."""
+    try:
+        text = Path(path).read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return ""
+    return "\n".join(text[-lines:])
+
+
 class NodeProcess:
     """A `sorting_line node` process owned by a bridge: started with the given options in its own
     namespace (plus ``ros_args``, e.g. remaps, after ``--ros-args``), its log kept in a temporary
@@ -90,11 +99,7 @@ class NodeProcess:
         return self.process.poll() is None
 
     def log_tail(self, lines: int = 8) -> str:
-        try:
-            text = Path(self.log_path).read_text(errors="replace").strip().splitlines()
-        except OSError:
-            return ""
-        return "\n".join(text[-lines:])
+        return file_tail(self.log_path, lines)
 
     def death_notice(self) -> str:
         return (
