@@ -19,10 +19,11 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
-from sorting_line_gym.bag import open_bag
-from sorting_line_gym.bag.schema import stamp_ns
 from sorting_line_interfaces.msg import MaterialInput, SortModeCommand, SpeedCommand
 from std_msgs.msg import Header
+
+from sorting_line_gym.bag import open_bag
+from sorting_line_gym.bag.schema import stamp_ns
 
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
                  history=HistoryPolicy.KEEP_LAST)

@@ -25,6 +25,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+
 import ros_harness as h
 from bag_golden import DATA, GOLDEN, BagProcess
 from sorting_line_gym.bag.bagfile import META_KEY, BagWriter, open_bag

@@ -60,7 +60,7 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
     started = time.monotonic()
     try:
         tolerances = {f: Tolerance.parse(v, f"--max-{f}-drop") for f, v in
-                      zip(FIGURES, (max_reward_drop, max_accuracy_drop, max_purity_drop))}
+                      zip(FIGURES, (max_reward_drop, max_accuracy_drop, max_purity_drop), strict=True)}
         verdict.tolerances = {f: str(t) for f, t in tolerances.items()} if closed_loop else {}
         if answer_timeout <= 0:
             raise ValueError(f"--answer-timeout {answer_timeout}: must be > 0 (seconds)")

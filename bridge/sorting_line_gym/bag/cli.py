@@ -105,7 +105,8 @@ def _check_parser(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("bag")
     c.add_argument("--namespace", default=None,
-                   help="where the line is played (open loop) or served (closed loop); default: the bag's line namespace")
+                   help="where the line is played (open loop) or served (closed loop); "
+                        "default: the bag's line namespace")
     c.add_argument("--controller", default=None, metavar="CMD",
                    help="start this command (a shell-like string, e.g. 'sorting-line-controller --setup D') with "
                         "'--ros-args -r __ns:=<namespace>' appended, and stop it at the end; default: wait for a "
