@@ -1,292 +1,159 @@
-"""`sorting-line-transfer`: the transfer study of the evolving line (issue 16; the paper's future
-work), through ROS: MaskablePPO on `SortingLineEvolving-v0`.
+"""`sorting-line-transfer`: the transfer study of the evolving line (the paper's future work),
+through ROS: MaskablePPO and A2C on `SortingLineEvolving-v0`, resumable cell by cell.
 
-For each scenario and training seed:
-- **continued** (a): one agent trains on the line before the change for `--before` episodes and
-  goes on training, unchanged, after it for `--after` episodes (the change is in the schedule:
-  the agent is not told);
-- **frozen** (b): that agent's snapshot at the change, evaluated on the changed line without
-  further learning (before the machine upgrade its masks allow mode 0 only, and so they stay:
-  "frozen with mode 0");
-- **scratch** (c): a new agent trained on the changed line from the start for `--after` episodes;
-- the rule-based agents `rba` and `rba-hold` on the line before and after (`sorting_line eval`,
-  offline, same seeds).
+    sorting-line-transfer --full                 # the paper's scale: 2000 + 2000 episodes, 5 seeds, PPO and A2C
+    sorting-line-transfer --smoke --out /tmp/t   # the same pipeline at CI size
+    sorting-line-transfer --seeds 1 2 3 --before 300 --after 300 --algos ppo --evaluations 20
 
-Scenarios: `upgrade` (basic B -> advanced B: machine and sensor upgrade, the paper's) and
-`drift` (B with sensor noise 0 -> 0.3 and threshold 0.7 -> 0.8 in three steps). The schedules are
-the ready ones in `evolutions/`, with the change moved to episode `--before` + 1.
+For each scenario, algorithm and training seed: (a) **continued**, an agent trained `--before`
+episodes before the change and `--after` more after it, unchanged (the schedule changes the line:
+the agent is not told); (b) **frozen**, its snapshot at the change, evaluated on the changed line
+without further learning; (c) **from scratch**, a new agent trained `--after` episodes on the changed
+line; against rba and rba-hold (`sorting_line eval`, offline) and the oracle after the change
+where it can solve that line. Scenarios: `upgrade` (basic B -> advanced B: machine and sensor
+upgrade, the paper's) and `drift` (B with sensor noise 0 -> 0.3 and threshold 0.7 -> 0.8 in three
+steps), from the ready schedules in `evolutions/` with the change moved to episode `--before` + 1.
+What a cell runs: ``transfer_cells``; the statistics: ``reports.transfer_report``.
 
-Reported: reward per episode around the change (training episodes of (a) and (c), evaluation
-episodes of (b)), each agent's final reward, and the steps (a) and (c) need after the change to
-reach 90 % of (c)'s final reward (10-episode moving mean). Writes `transfer.json`, `transfer.md`
-(the table) and `transfer.png` / `transfer.svg` (the curves) to `--out`.
+Each finished cell is saved at once in `<out>/cells/` (whole or not at all); a rerun of the same
+command skips the finished cells and goes on, and a run with other result-changing options
+(`--before`, `--after`, `--evaluations`, the hyperparameters, the schedules) into the same `--out`
+is refused. `--max-cells N` stops after N cells (to split a study into sittings); Ctrl-C keeps the
+finished cells. A progress bar (plain lines when stderr is not a terminal) projects the end time.
+Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfer.png`/`.svg`.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
-import time
 from pathlib import Path
 
-import numpy as np
-import yaml
+from ..reports import transfer_report
+from ..reports.cell_store import CellProgress, CellStore, ConfigurationMismatch, write_atomic
+from . import transfer_cells as tc
 
-EPISODE_STEPS = 50
-SCENARIOS = ("upgrade", "drift")
-WINDOW = 10  # episodes of the moving mean
-
-
-def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
-    """(the evolving schedule with the change after `before` episodes, the changed line's schedule
-    from episode 0), written to `out`, from the ready schedule of `scenario`."""
-    from ..envs.evolving import schedule_file
-
-    events = yaml.safe_load(schedule_file(scenario).read_text())["events"]
-    changes = sorted({e["at"]["episode"] for e in events if e["at"].get("episode", 0) > 0})
-    first = changes[0]
-    evolving, final = [], {}
-    for e in events:
-        e = dict(e)
-        episode = e["at"]["episode"]
-        if episode > 0:
-            # The first change lands at before + 1; later ones keep their spacing, scaled to 1/20.
-            e["at"] = {"episode": before + 1 + (episode - first) // 20}
-        evolving.append(e)
-        final.update({k: v for k, v in e.items() if k != "at"})
-    a = out / f"{scenario}-at-{before + 1}.yaml"
-    b = out / f"{scenario}-after.yaml"
-    a.write_text(yaml.safe_dump({"events": evolving}, sort_keys=False))
-    b.write_text(yaml.safe_dump({"events": [{"at": {"episode": 0}, **final}]}, sort_keys=False))
-    return a, b
+#: --full: the paper's scale (2000 episodes = 100,000 steps, the paper's training budget).
+FULL = {"before": 2000, "after": 2000, "seeds": [1, 2, 3, 4, 5], "evaluations": 100}
+#: --smoke: every step of the pipeline, in about a minute per cell kind.
+SMOKE = {"before": 10, "after": 10, "seeds": [1, 2], "evaluations": 3}
+DEFAULTS = {"before": 200, "after": 200, "seeds": [1, 2, 3], "evaluations": 20}
 
 
-def make_env(schedule: Path, setup: str):
-    import gymnasium
-    from stable_baselines3.common.monitor import Monitor
-
-    import sorting_line_gym  # noqa: F401 - registers the ids
-
-    env = gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", evolution=str(schedule), setup=setup,
-                         max_episode_steps=EPISODE_STEPS, step_timeout=10.0)
-    return Monitor(env)
-
-
-def new_model(env, seed: int):
-    from sb3_contrib import MaskablePPO
-
-    return MaskablePPO("MlpPolicy", env, n_steps=10 * EPISODE_STEPS, batch_size=100, n_epochs=5, seed=seed,
-                       device="cpu", verbose=0)
-
-
-def evaluate(model, env, episodes: int, seed: int, mode0: bool) -> list[float]:
-    """Deterministic episodes of `model` on `env` (seeds seed, seed+1, ...); `mode0`: the masks of a
-    machine without sort modes, whatever the line has."""
-    rewards = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
-        total, done = 0.0, False
-        while not done:
-            masks = env.get_wrapper_attr("action_masks")()
-            if mode0:
-                masks = np.array([a % 3 == 0 for a in range(len(masks))])
-            action, _ = model.predict(obs, action_masks=masks, deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(int(action))
-            total += reward
-            done = terminated or truncated
-        rewards.append(total)
-    return rewards
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sorting-line-transfer", description=__doc__.split("\n\n")[0])
+    preset = p.add_mutually_exclusive_group()
+    preset.add_argument("--full", action="store_true", help=f"the paper's scale: {FULL} (options given override it)")
+    preset.add_argument("--smoke", action="store_true", help=f"CI size: {SMOKE} (options given override it)")
+    p.add_argument("--scenarios", nargs="+", choices=tc.SCENARIOS, default=list(tc.SCENARIOS), help="default: both")
+    p.add_argument("--algos", nargs="+", choices=tc.ALGOS, default=list(tc.ALGOS), help="default: ppo a2c")
+    p.add_argument("--seeds", type=int, nargs="+", help=f"training seeds (default {DEFAULTS['seeds']})")
+    p.add_argument("--before", type=int, help=f"episodes before the change (default {DEFAULTS['before']})")
+    p.add_argument("--after", type=int, help=f"episodes after it, and from scratch (default {DEFAULTS['after']})")
+    p.add_argument(
+        "--evaluations",
+        type=int,
+        help=f"held-out evaluation episodes, seeds {tc.EVAL_SEED}... (default {DEFAULTS['evaluations']})",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/transfer"), help="results directory (default results/transfer)"
+    )
+    p.add_argument("--max-cells", type=int, help="stop after running this many cells (the rest on the next run)")
+    p.add_argument("--report-only", action="store_true", help="train nothing: the report of the cells saved in --out")
+    return p
 
 
-def rule_based(setup: str, variant: str, schedule: Path | None, episodes: int, seed: int) -> dict[str, float]:
-    from ..line.process import find_node_binary
-
-    out = {}
-    for agent in ("rba", "rba-hold"):
-        argv = [find_node_binary(), "eval", "--agent", agent, "--setup", setup, "--variant", variant,
-                "--episodes", str(episodes), "--seed", str(seed), "--json"]
-        if schedule is not None:
-            argv += ["--evolution", str(schedule)]
-        r = subprocess.run(argv, capture_output=True, text=True, check=True, timeout=120)
-        out[agent] = json.loads(r.stdout)["reward_mean"]
-    return out
-
-
-def recovery_steps(curve: list[float], target: float) -> int | None:
-    """Steps until the moving mean of `curve` (episode rewards) first reaches `target`."""
-    for k in range(len(curve)):
-        window = curve[max(0, k - WINDOW + 1): k + 1]
-        if len(window) == min(WINDOW, k + 1) and np.mean(window) >= target and k + 1 >= WINDOW:
-            return (k + 1) * EPISODE_STEPS
-    return None
-
-
-def run_seed(scenario: str, seed: int, before: int, after: int, evaluations: int, out: Path, log) -> dict:
-    evolving, changed = schedules(scenario, before, out)
-    setup = "B"
-    started = time.monotonic()
-    env = make_env(evolving, setup)
-    model = new_model(env, seed)
-    model.learn(before * EPISODE_STEPS)
-    snapshot = out / f"{scenario}-seed{seed}-before.zip"
-    model.save(snapshot)
-    log(f"{scenario} seed {seed}: trained {before} episodes before the change ({time.monotonic() - started:.0f} s)")
-    model.learn(after * EPISODE_STEPS, reset_num_timesteps=False)
-    continued = [float(r) for r in env.get_episode_rewards()]
-    env.close()
-    log(f"{scenario} seed {seed}: continued {after} episodes after it ({time.monotonic() - started:.0f} s)")
-
-    from sb3_contrib import MaskablePPO
-
-    eval_env = make_env(changed, setup)
-    frozen_model = MaskablePPO.load(snapshot, device="cpu")
-    mode0 = scenario == "upgrade"
-    frozen = evaluate(frozen_model, eval_env, evaluations, 10_000, mode0)
-    continued_final = evaluate(model, eval_env, evaluations, 10_000, False)
-    eval_env.close()
-
-    env = make_env(changed, setup)
-    scratch_model = new_model(env, seed)
-    scratch_model.learn(after * EPISODE_STEPS)
-    scratch = [float(r) for r in env.get_episode_rewards()]
-    env.close()
-    scratch_env = make_env(changed, setup)
-    scratch_final = evaluate(scratch_model, scratch_env, evaluations, 10_000, False)
-    scratch_env.close()
-    log(f"{scenario} seed {seed}: scratch {after} episodes, evaluations done ({time.monotonic() - started:.0f} s)")
-
-    target = 0.9 * float(np.mean(scratch_final))
-    after_change = continued[before:]
-    return {
-        "scenario": scenario, "seed": seed, "before": before, "after": after,
-        "continued_curve": continued, "scratch_curve": scratch, "frozen_eval": frozen,
-        "continued_eval": continued_final, "scratch_eval": scratch_final,
-        "target_90": target,
-        "continued_recovery_steps": recovery_steps(after_change, target),
-        "scratch_recovery_steps": recovery_steps(scratch, target),
-        "seconds": time.monotonic() - started,
-    }
-
-
-def moving(curve, window=WINDOW):
-    c = np.asarray(curve, dtype=float)
-    return np.array([c[max(0, k - window + 1): k + 1].mean() for k in range(len(c))])
-
-
-def plot(results: list[dict], baselines: dict, out: Path) -> None:
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(12, 4.5))
-    axes = fig.subplots(1, len(SCENARIOS))
-    for ax, scenario in zip(np.atleast_1d(axes), SCENARIOS, strict=False):
-        runs = [r for r in results if r["scenario"] == scenario]
-        if not runs:
-            continue
-        before = runs[0]["before"]
-        for i, r in enumerate(runs):
-            x = np.arange(len(r["continued_curve"])) - before
-            ax.plot(x, moving(r["continued_curve"]), color="tab:blue", alpha=0.8,
-                    label="(a) continued" if i == 0 else None)
-            xs = np.arange(len(r["scratch_curve"]))
-            ax.plot(xs, moving(r["scratch_curve"]), color="tab:orange", alpha=0.8,
-                    label="(c) from scratch (after the change)" if i == 0 else None)
-        frozen = np.mean([np.mean(r["frozen_eval"]) for r in runs])
-        ax.axhline(frozen, color="tab:gray", ls="--", label=f"(b) frozen at the change: {frozen:.1f}")
-        for agent, style in (("rba-hold", ":"), ("rba", "-.")):
-            value = baselines[scenario]["after"][agent]
-            ax.axhline(value, color="tab:green", ls=style, label=f"{agent} after the change: {value:.1f}")
-        ax.axvline(0, color="black", lw=0.8)
-        ax.set_title(f"{scenario}: change after {before} episodes ({len(runs)} seeds)")
-        ax.set_xlabel("episodes relative to the change (50 steps each)")
-        ax.set_ylabel(f"episode reward ({WINDOW}-episode moving mean)")
-        ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(out / "transfer.png", dpi=110)
-    fig.savefig(out / "transfer.svg")
-
-
-def table(results: list[dict], baselines: dict) -> str:
-    def ms(values):
-        values = [v for v in values if v is not None]
-        if not values:
-            return "not reached"
-        return f"{np.mean(values):.2f} +- {np.std(values):.2f}" if len(values) > 1 else f"{values[0]:.2f}"
-
-    lines = ["| scenario | seeds | (a) continued, final | (b) frozen | (c) scratch, final | rba-hold before / after | "
-             "rba before / after | steps to 90 % of (c): (a) | (c) |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for scenario in SCENARIOS:
-        runs = [r for r in results if r["scenario"] == scenario]
-        if not runs:
-            continue
-        b = baselines[scenario]
-
-        def steps(key, runs=runs):
-            got = [r[key] for r in runs]
-            reached = [g for g in got if g is not None]
-            text = f"{np.mean(reached):.0f}" if reached else "-"
-            return f"{text} ({len(reached)}/{len(got)} reached)"
-
-        lines.append(
-            f"| {scenario} | {len(runs)} | {ms([np.mean(r['continued_eval']) for r in runs])} | "
-            f"{ms([np.mean(r['frozen_eval']) for r in runs])} | {ms([np.mean(r['scratch_eval']) for r in runs])} | "
-            f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f} | "
-            f"{b['before']['rba']:.2f} / {b['after']['rba']:.2f} | "
-            f"{steps('continued_recovery_steps')} | {steps('scratch_recovery_steps')} |"
+def options(argv: list[str] | None):
+    """The parsed options with the preset's values filled in; exits 2 naming a bad value."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    preset = FULL if args.full else SMOKE if args.smoke else DEFAULTS
+    for name, value in preset.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    if args.before < tc.WINDOW or args.before % tc.WINDOW:
+        parser.error(
+            f"--before = {args.before} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW} "
+            "(PPO's rollout is 10 episodes: the snapshot must be taken at the change)"
         )
-    return "\n".join(lines)
+    if args.after < tc.WINDOW or args.after % tc.WINDOW:
+        parser.error(f"--after = {args.after} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW}")
+    if args.evaluations < 1:
+        parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
+    if args.max_cells is not None and args.max_cells < 1:
+        parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
+    args.settings = tc.Settings(args.before, args.after, args.evaluations)
+    return args
+
+
+def kind_of(name: str) -> str:
+    """A cell's kind for the projection: baselines, or an algorithm's transfer or scratch cells."""
+    parts = name.split("_")
+    return "baselines" if parts[-1] == "baselines" else f"{parts[1]}_{parts[2]}"
+
+
+def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]) -> bool:
+    """Runs ``todo`` (the first ``--max-cells`` of them) one after the other, saving each; False if
+    interrupted. The projection is of the whole study."""
+    progress = CellProgress([c.name for c in todo], {n: r["seconds"] for n, r in done.items()}, kind_of, "transfer")
+    limit = f" ({args.max_cells} of them now: --max-cells)" if args.max_cells is not None else ""
+    progress.line(
+        f"transfer: {len(todo) + len(done)} cells, {len(done)} already done, {len(todo)} to run{limit} -> {args.out}"
+    )
+    try:
+        for cell in todo[: args.max_cells]:
+            progress.bar.set_description_str(cell.name)
+            record = tc.run_cell(cell, args.settings, args.out)
+            done[cell.name] = store.save(cell.name, record)
+            progress.done(cell.name, record["seconds"])
+    except KeyboardInterrupt:
+        progress.line(f"interrupted: {len(done)} cells are saved in {args.out}; the same command goes on from there")
+        return False
+    finally:
+        progress.close()
+    return True
+
+
+def report(args, key: dict, done: dict[str, dict]) -> str:
+    records = list(done.values())
+    summary = transfer_report.summarize(records, key, args.scenarios, args.algos)
+    write_atomic(args.out / "transfer.json", {"key": key, "summary": summary})
+    text = transfer_report.markdown(summary, key)
+    (args.out / "transfer.md").write_text(text)
+    transfer_report.plot(records, summary, key, args.out / "transfer")
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="sorting-line-transfer", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
-    parser.add_argument("--before", type=int, default=200, help="episodes before the change (default 200)")
-    parser.add_argument("--after", type=int, default=200, help="episodes after it, and from scratch (default 200)")
-    parser.add_argument("--evaluations", type=int, default=20, help="evaluation episodes (seeds 10000...)")
-    parser.add_argument("--out", type=Path, default=Path("results/transfer"))
-    parser.add_argument("--torch-threads", type=int, default=1)
-    parser.add_argument("--report-only", action="store_true",
-                        help="train nothing: table and plot of the runs already in OUT/transfer.json")
-    args = parser.parse_args(argv)
-    if args.before < 1 or args.after < WINDOW:
-        parser.error(f"--before must be >= 1 and --after >= {WINDOW}")
-    import torch
-
-    torch.set_num_threads(args.torch_threads)
+    args = options(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    def log(text):
-        return print(f"[{time.strftime('%H:%M:%S')}] {text}", flush=True)
-    results_file = args.out / "transfer.json"
-    done = json.loads(results_file.read_text()) if results_file.exists() else {"runs": []}
-    runs = [r for r in done["runs"] if r["before"] == args.before and r["after"] == args.after]
-    baselines = done.get("baselines", {})
-    for scenario in args.scenarios:
-        if args.report_only:
-            continue
-        evolving, changed = schedules(scenario, args.before, args.out)
-        # Before: basic B for the upgrade, advanced B for the drift; after: the changed line.
-        before_variant = "basic" if scenario == "upgrade" else "advanced"
-        baselines[scenario] = {
-            "before": rule_based("B", before_variant, None, args.evaluations, 10_000),
-            "after": rule_based("B", "advanced", changed, args.evaluations, 10_000),
-        }
-        for seed in args.seeds:
-            if any(r["scenario"] == scenario and r["seed"] == seed for r in runs):
-                log(f"{scenario} seed {seed}: in {results_file} already (resumed)")
-                continue
-            runs.append(run_seed(scenario, seed, args.before, args.after, args.evaluations, args.out, log))
-            results_file.write_text(json.dumps({"runs": runs, "baselines": baselines}, indent=1))
-    results_file.write_text(json.dumps({"runs": runs, "baselines": baselines}, indent=1))
-    chosen = [r for r in runs if r["scenario"] in args.scenarios and (args.report_only or r["seed"] in args.seeds)]
-    plot(chosen, baselines, args.out)
-    text = table(chosen, baselines)
-    (args.out / "transfer.md").write_text(text + "\n")
-    print(text)
-    log(f"wrote {results_file}, {args.out / 'transfer.md'}, {args.out / 'transfer.png'} and .svg")
-    return 0
+    key = args.settings.key()
+    try:
+        store = CellStore(args.out, key)
+    except ConfigurationMismatch as e:
+        print(f"sorting-line-transfer: {e}", file=sys.stderr)
+        return 2
+    cells = tc.plan(args.scenarios, args.algos, args.seeds)
+    done = {c.name: r for c in cells if (r := store.load(c.name)) is not None}
+    todo = [] if args.report_only else [c for c in cells if c.name not in done]
+    finished = True
+    if todo:
+        store.begin(sys.argv if argv is None else ["sorting-line-transfer", *argv])
+        for scenario in args.scenarios:
+            tc.schedules(scenario, args.before, args.out)
+        finished = run_cells(todo, store, args, done)
+    if not done:
+        print("sorting-line-transfer: no finished cells to report", file=sys.stderr)
+        return 1
+    print(report(args, key, done))
+    left = len([c for c in cells if c.name not in done])
+    print(
+        f"sorting-line-transfer: {len(done)} of {len(cells)} cells done"
+        + (f"; {left} left: the same command goes on" if left else "")
+        + f"; wrote {args.out}/transfer.{{json,md,png,svg}}",
+        file=sys.stderr,
+    )
+    return 0 if finished else 130
 
 
 if __name__ == "__main__":
