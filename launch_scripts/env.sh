@@ -6,6 +6,7 @@
 #   FASTRTPS_DEFAULT_PROFILES_FILE=<this dir>/fastdds_profile.xml   100 ms writer heartbeat
 #   ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST      nothing discovered beyond this host; to reach other
 #                                                hosts export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET afterwards
+#   PATH=<repo>/target/release:$PATH             the `sorting_line` binary (release build, made by setup.sh)
 # ROS_DOMAIN_ID is left to the caller (tests should pick their own).
 # Nothing here is needed just to import rclpy / sorting_line_interfaces from .venv/bin/python.
 
@@ -29,5 +30,12 @@ fi
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export FASTRTPS_DEFAULT_PROFILES_FILE="$_sl_scripts/fastdds_profile.xml"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+if [ ! -x "$_sl_root/target/release/sorting_line" ]; then
+  echo "env.sh: $_sl_root/target/release/sorting_line missing; run launch_scripts/setup.sh first" >&2
+fi
+case ":$PATH:" in
+  *":$_sl_root/target/release:"*) ;;
+  *) export PATH="$_sl_root/target/release:$PATH" ;;
+esac
 
 unset _sl_env_file _sl_scripts _sl_root
