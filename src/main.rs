@@ -47,12 +47,16 @@ enum Command {
 
 #[derive(Args)]
 struct TraceArgs {
+    /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
     #[arg(long)]
     setup: Setup,
+    /// The line: basic (belt speed only) or advanced (speed and sort mode, ratio sensor).
     #[arg(long, default_value = "basic")]
     variant: Variant,
+    /// Seed of the first episode (its random streams); `r<N>` in --actions reseeds.
     #[arg(long, default_value_t = 42)]
     seed: u64,
+    /// Steps per episode: the line reports `truncated` at the last one.
     #[arg(long, default_value_t = 50)]
     max_steps: u32,
     /// Comma-separated Gymnasium actions (basic: speed index; advanced: speed index * 3 + mode);
@@ -73,11 +77,13 @@ struct EpisodeArgs {
     /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
     #[arg(long)]
     setup: Setup,
+    /// The line: basic (belt speed only) or advanced (speed and sort mode, ratio sensor).
     #[arg(long, default_value = "basic")]
     variant: Variant,
     /// Number of episodes; episode i is reset with seed SEED + i.
     #[arg(long, default_value_t = 10)]
     episodes: usize,
+    /// Seed of episode 0 (SEED); episode i uses SEED + i.
     #[arg(long, default_value_t = 42)]
     seed: u64,
     /// Steps per episode (the advanced oracle: at most 2000).
@@ -126,12 +132,14 @@ struct PolicyArgs {
     /// The paper's setup: A (random), B (seasonal, penalty 0.5), C (random, noise 0.3), D (both).
     #[arg(long)]
     setup: Setup,
+    /// The line: basic (belt speed only) or advanced (speed and sort mode, ratio sensor).
     #[arg(long, default_value = "basic")]
     variant: Variant,
 }
 
 #[derive(Args)]
 struct TableArgs {
+    /// The line: basic (belt speed only) or advanced (speed and sort mode, ratio sensor).
     #[arg(long, default_value = "basic")]
     variant: Variant,
     /// Accuracy threshold of the reward.
@@ -435,4 +443,33 @@ fn run_vocabulary() -> Result<(), String> {
     });
     let mut out = io::stdout().lock();
     writeln!(out, "{vocabulary}").map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// Every option and argument of every subcommand says what it is for in `--help`.
+    #[test]
+    fn every_flag_has_help_text() {
+        fn walk(command: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in command.get_arguments() {
+                let generated = matches!(arg.get_id().as_str(), "help" | "version");
+                if !generated && arg.get_help().is_none() && arg.get_long_help().is_none() {
+                    missing.push(format!("{path} --{}", arg.get_long().unwrap_or(arg.get_id().as_str())));
+                }
+            }
+            for sub in command.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut command = Cli::command();
+        command.build();
+        let mut missing = Vec::new();
+        walk(&command, "sorting_line", &mut missing);
+        assert!(missing.is_empty(), "flags without help text: {missing:?}");
+        let subcommands: Vec<&str> = command.get_subcommands().map(|c| c.get_name()).collect();
+        assert!(subcommands.contains(&"node") && subcommands.len() >= 7, "{subcommands:?}");
+    }
 }

@@ -24,8 +24,12 @@ pub struct NodeArgs {
     /// (`LineConfig::for_setup`); any of those three given explicitly, from any source, overrides it.
     #[arg(long)]
     pub setup: Option<Setup>,
+    /// The line: basic (belt speed only) or advanced (speed and sort mode, ratio sensor);
+    /// default basic.
     #[arg(long)]
     pub variant: Option<Variant>,
+    /// The material input: random (independent batches), seasonal (the paper's 9 patterns) or
+    /// seasonal3 (the seasonal amounts with a random A/B split); default random, or --setup's.
     #[arg(long)]
     pub input: Option<InputKind>,
     /// Relative noise of the input sensor, 0.0..=1.0.
@@ -43,6 +47,8 @@ pub struct NodeArgs {
     /// Seed of line 0; line k uses seed + k.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// How time advances: lockstep (default; a tick when its commands arrived) or realtime
+    /// (--rate ticks per second on the last valid command).
     #[arg(long, value_enum)]
     pub mode: Option<TickMode>,
     /// Ticks per second of wall time in realtime mode.
