@@ -244,9 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--namespace", default=None,
                    help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)")
     p.add_argument("--setup", choices=list(SETUPS), required=True, help="the setup of the node's line (A..D)")
-    p.add_argument("--variant", choices=VARIANTS, default="basic")
-    p.add_argument("--agent", choices=["rba", "rba-hold"], default="rba")
-    p.add_argument("--node-name", default="sorting_line_controller")
+    p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
+    p.add_argument(
+        "--agent", choices=["rba", "rba-hold"], default="rba", help="the rule-based policy (default %(default)s)"
+    )
+    p.add_argument("--node-name", default="sorting_line_controller", help="this ROS node's name (default %(default)s)")
     p.add_argument("--decision-log", default=None, metavar="FILE",
                    help="write one JSON line per decision (readings, decision, latency) to FILE")
     args = p.parse_args(remove_ros_args(full)[1:])

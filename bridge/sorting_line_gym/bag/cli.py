@@ -65,7 +65,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--wait", type=float, default=10.0, help="how long to wait for the line to show up (s)")
 
     rp = sub.add_parser("replay", help="replay a bag's resets and commands into a fresh lock-step node and compare")
-    rp.add_argument("bag")
+    rp.add_argument("bag", help="the bag directory to replay")
     for name, kind in [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float),
                        ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
         rp.add_argument(f"--{name}", type=kind, default=None,
@@ -77,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     pl = sub.add_parser("play", help="publish a bag's recorded node data again, with its timing")
-    pl.add_argument("bag")
+    pl.add_argument("bag", help="the bag directory to play")
     pl.add_argument("--rate", type=float, default=1.0, help="speed factor: 2 = twice as fast, 0 = no waiting")
     pl.add_argument("--namespace", default=None, help="publish the line's topics in this namespace instead")
     pl.add_argument("--topic", action="append", dest="topics", metavar="TOPIC",
@@ -92,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     pl.add_argument("--answer-timeout", type=float, default=5.0, help="--lockstep: longest wait for an answer (s)")
 
     i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
-    i.add_argument("bag")
+    i.add_argument("bag", help="the bag directory")
     _check_parser(sub)
     return p
 
@@ -103,7 +103,7 @@ def _check_parser(sub) -> None:
                        description="Does a controller still answer a recorded line as it did, and is it no worse? "
                                    "Tests it against a bag at topic level.", epilog=CHECK_EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    c.add_argument("bag")
+    c.add_argument("bag", help="the bag directory to check against")
     c.add_argument("--namespace", default=None,
                    help="where the line is played (open loop) or served (closed loop); "
                         "default: the bag's line namespace")

@@ -555,9 +555,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--out", type=Path, default=Path("results/benchmark"), help="results directory (default results/benchmark)"
     )
-    p.add_argument("--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS))
-    p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
-    p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS)
+    p.add_argument(
+        "--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS), help="setups to run (default all)"
+    )
+    p.add_argument(
+        "--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS, help="variants to run (default both)"
+    )
+    p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS, help="agents to run (default all)")
     p.add_argument(
         "--train-seeds",
         nargs="+",

@@ -42,14 +42,17 @@ def parse_agent(text: str, variant: str):
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="sorting-line-bridge", description=__doc__.split("\n\n")[0])
-    p.add_argument("--setup", choices=list(SETUPS), default="A")
-    p.add_argument("--variant", choices=VARIANTS, default="basic")
-    p.add_argument("--episodes", type=int, default=3)
+    p.add_argument("--setup", choices=list(SETUPS), default="A", help="the paper's setup A..D (default %(default)s)")
+    p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
+    p.add_argument("--episodes", type=int, default=3, help="episodes to run (default %(default)s)")
     p.add_argument("--seed", type=int, default=42, help="episode i is reset with seed + i")
     p.add_argument("--agent", default="random", help="random, constant:K or constant:K:M")
-    p.add_argument("--node", choices=["spawn", "attach"], default="spawn")
+    p.add_argument(
+        "--node", choices=["spawn", "attach"], default="spawn",
+        help="spawn a node of its own, or attach to the one serving --namespace (default %(default)s)",
+    )
     p.add_argument("--namespace", default=None, help="namespace of the node (needed with --node attach)")
-    p.add_argument("--step-timeout", type=float, default=2.0)
+    p.add_argument("--step-timeout", type=float, default=2.0, help="longest wait for one step, s (default %(default)s)")
     p.add_argument("--dashboard", default=None, help="save the last episode's dashboard (.png or .svg)")
     args = p.parse_args(argv)
     if args.episodes < 1:

@@ -204,8 +204,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--agent", required=True, help="random, rba, rba-hold, constant:K[:M|:cat], or ppo:PATH / dqn:PATH / a2c:PATH"
     )
-    p.add_argument("--setup", required=True, choices=list(SETUPS))
-    p.add_argument("--variant", default="basic", choices=VARIANTS)
+    p.add_argument("--setup", required=True, choices=list(SETUPS), help="the paper's setup A..D")
+    p.add_argument("--variant", default="basic", choices=VARIANTS, help="basic or advanced line (default %(default)s)")
     p.add_argument(
         "--episodes", type=int, default=EPISODES, help=f"episodes, seeded seed, seed+1, ... (default {EPISODES})"
     )

@@ -118,25 +118,28 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
     p.add_argument("--id", default=DEFAULT_ID, help="Gymnasium id (default %(default)s)")
-    p.add_argument("--setup", default="B", choices=list("ABCD"))
-    p.add_argument("--env-runners", type=int, default=2)
-    p.add_argument("--envs-per-runner", type=int, default=4)
+    p.add_argument("--setup", default="B", choices=list("ABCD"), help="the paper's setup A..D (default %(default)s)")
+    p.add_argument("--env-runners", type=int, default=2, help="EnvRunner processes (default %(default)s)")
+    p.add_argument("--envs-per-runner", type=int, default=4, help="envs in each EnvRunner (default %(default)s)")
     p.add_argument("--timesteps", type=int, default=4000, help="env steps to train for (whole iterations)")
     p.add_argument("--batch", type=int, default=1000, help="train batch size per iteration")
-    p.add_argument("--episode-steps", type=int, default=50)
+    p.add_argument("--episode-steps", type=int, default=50, help="steps per episode (default %(default)s)")
     p.add_argument(
         "--nodes",
         nargs="*",
         default=None,
         help="node namespaces, one per EnvRunner (its envs attach to that node's lines); default: line servers",
     )
-    p.add_argument("--lines-per-node", type=int, default=4)
+    p.add_argument(
+        "--lines-per-node", type=int, default=4,
+        help="lines of each --nodes node an EnvRunner uses (default %(default)s)",
+    )
     p.add_argument("--address", default=None, help="a Ray cluster to join (default: start a local one)")
     p.add_argument(
         "--node-ip", default="127.0.0.1", help="this machine's address for a local Ray (default %(default)s)"
     )
     p.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray (default: env runners + 1)")
-    p.add_argument("--seed", type=int, default=42)
+    p.add_argument("--seed", type=int, default=42, help="seed of the algorithm (default %(default)s)")
     args = p.parse_args(argv)
 
     quiet_ray_environment()

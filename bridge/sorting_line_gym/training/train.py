@@ -158,14 +158,14 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2"
                     " (the paper's settings by default).",
     )
-    p.add_argument("--algo", required=True, choices=hyperparams.ALGOS)
+    p.add_argument("--algo", required=True, choices=hyperparams.ALGOS, help="the Stable-Baselines3 algorithm")
     p.add_argument(
         "--setup",
         required=True,
         choices=list(SETUPS),
         help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty",
     )
-    p.add_argument("--variant", default="basic", choices=VARIANTS)
+    p.add_argument("--variant", default="basic", choices=VARIANTS, help="basic or advanced line (default %(default)s)")
     p.add_argument(
         "--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)"
     )
