@@ -104,3 +104,18 @@ def test_a_bag_of_other_types_only_is_refused(tmp_path, capsys):
     assert main(["info", str(tmp_path / "other")]) == 2
     err = capsys.readouterr().err
     assert f"message types this tool does not know: {CELL_STATUS} (and no sorting line's state topic)" in err, err
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_open_loop_check_passes_the_controller_that_drove_the_line(ros2_bags, storage):
+    """The bag's node side played tick by tick in its own namespace to `sorting-line-controller`:
+    its answers are the recorded ones (the extra topics are neither played nor in the way)."""
+    from sorting_line_gym.bag.check import check_controller
+
+    name = "basic_d" if storage == "mcap" else "advanced_b"
+    spec = GOLDEN[name]
+    verdict = check_controller(ros2_bags[storage], controller=f"sorting-line-controller --setup {spec['setup']} "
+                                                              f"--variant {spec['variant']} --agent {spec['agent']}")
+    assert verdict.passed and verdict.exit_code == 0, verdict.summary()
+    assert verdict.namespace == ("/factory/cell_3" if storage == "mcap" else "/plant/line_2"), verdict.summary()
+    assert verdict.count("matching") >= 250 and not verdict.differences, verdict.summary()
