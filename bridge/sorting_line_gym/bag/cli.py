@@ -130,6 +130,9 @@ def _check_parser(sub) -> None:
                        ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
         c.add_argument(f"--{name}", type=kind, default=None,
                        help="--closed-loop: the node option, if the bag does not store it (as replay's flag)")
+    c.add_argument("--setup", choices=list(SETUPS), default=None,
+                   help="--closed-loop: the paper's setup of the recorded line (its input, obs-noise, action-penalty "
+                        "and threshold), if the bag does not store them; the flags above override it")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
 
 
@@ -200,7 +203,7 @@ def _check(args) -> int:
     from .check import check_controller
 
     overrides = {k: getattr(args, k) for k in ("variant", "input", "obs_noise", "action_penalty", "threshold",
-                                               "max_steps", "seed", "tick_period")}
+                                               "max_steps", "seed", "tick_period", "setup")}
     with _Stop() as stop:
         verdict = check_controller(args.bag, namespace=args.namespace, controller=args.controller,
                                    closed_loop=args.closed_loop, record=args.record,
