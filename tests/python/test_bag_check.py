@@ -3,7 +3,7 @@ real `sorting-line-controller` (and a small scripted controller, scripted_contro
 answers as a bag recorded except where told to misbehave) over real rclpy and DDS.
 
 Runs inside the loopback-only network namespace that launch_scripts/test.sh makes. Cost: about
-40-60 s on a busy 2-core machine (each check starts a controller process: ~2-4 s).
+60 s on a busy 2-core machine (each check starts a controller process, ~2-4 s; closed loop a node too).
 
 What is checked:
 - `sorting-line-controller` passes against both golden bags, open loop (the command line: exit 0,
@@ -57,9 +57,11 @@ def scripted(name: str, *misbehaviour: str) -> list[str]:
 
 
 def test_our_controller_passes_open_loop_on_the_command_line(namespace, tmp_path):
-    """basic_d through the console script: exit 0, the summary, JSON and a JUnit file that parses."""
-    tool = BagProcess(["check", DATA / "basic_d", "--namespace", namespace("cli"), "--controller",
-                       our_controller("basic_d"), "--json", tmp_path / "v.json", "--junit", tmp_path / "v.xml"],
+    """basic_d through the console script: exit 0, the summary, JSON and a JUnit file that parses.
+    The controller is told another namespace: the remap the check appends wins, as for any ROS node."""
+    cmd = our_controller("basic_d") + " --namespace /somewhere_else"
+    tool = BagProcess(["check", DATA / "basic_d", "--namespace", namespace("cli"), "--controller", cmd,
+                       "--json", tmp_path / "v.json", "--junit", tmp_path / "v.xml"],
                       tmp_path / "check.log")
     assert tool.wait(120) == 0, tool.describe()
     assert "255 matching, 0 differing, 0 missing" in tool.log() and "PASSED" in tool.log(), tool.log()
@@ -71,12 +73,25 @@ def test_our_controller_passes_open_loop_on_the_command_line(namespace, tmp_path
     assert suite.get("failures") == "0" and suite.get("errors") == "0"
 
 
-def test_our_controller_passes_open_loop_on_the_advanced_line(namespace):
-    verdict = check_controller(DATA / "advanced_b", namespace=namespace("adv"), controller=our_controller("advanced_b"))
-    assert verdict.passed, verdict.summary()
-    # both commands of every tick: a sort mode and a speed
-    assert verdict.count("matching") == 510 and verdict.exit_code == 0, verdict.summary()
-    assert ET.fromstring(verdict.to_junit()).find("testsuite").get("tests") == "6"
+def test_our_controller_already_running_passes_open_and_closed_loop_on_the_advanced_line(namespace, tmp_path):
+    """Without --controller: one controller, started as a user would, checked open loop and then
+    closed loop in its namespace (it starts over when the closed loop's fresh node begins)."""
+    from test_controller import ControllerProcess
+
+    spec, ns = GOLDEN["advanced_b"], namespace("adv")
+    controller = ControllerProcess(tmp_path, "adv", ["--setup", spec["setup"], "--variant", spec["variant"],
+                                                     "--agent", spec["agent"], "--namespace", ns])
+    try:
+        verdict = check_controller(DATA / "advanced_b", namespace=ns, wait=30)
+        assert verdict.passed, verdict.summary()
+        # both commands of every tick: a sort mode and a speed
+        assert verdict.count("matching") == 510 and verdict.exit_code == 0, verdict.summary()
+        assert ET.fromstring(verdict.to_junit()).find("testsuite").get("tests") == "6"
+        closed = check_controller(DATA / "advanced_b", namespace=ns, closed_loop=True)
+        assert closed.passed and len(closed.episodes) == 5, closed.summary()
+        assert all(e.parted is None for e in closed.episodes), closed.summary()
+    finally:
+        assert controller.stop() == 0, controller.describe()
 
 
 # --------------------------------------------------------------------------------------------
@@ -144,6 +159,56 @@ def test_no_controller_fails_the_run_after_the_wait(namespace):
 
 
 # --------------------------------------------------------------------------------------------
+# Closed loop
+
+
+def test_our_controller_passes_closed_loop_and_the_recorded_run_replays(namespace, tmp_path):
+    from sorting_line_gym.bag.replay import replay
+
+    out = tmp_path / "run"
+    verdict = check_controller(DATA / "basic_d", namespace=namespace("closed"), controller=our_controller("basic_d"),
+                               closed_loop=True, record=out)
+    assert verdict.passed, verdict.summary()
+    assert [e.episode for e in verdict.episodes] == [1, 2, 3, 4, 5] and verdict.ticks == 255, verdict.summary()
+    assert all(e.parted is None and e.run == e.bag for e in verdict.episodes), verdict.summary()
+    suite = ET.fromstring(verdict.to_junit()).find("testsuite")
+    assert (suite.get("tests"), suite.get("failures")) == ("6", "0")
+    # The recording of the run is a bag like the golden one: it replays exactly.
+    result = replay(out)
+    assert result.identical and result.resets == 5, result.report()
+
+
+def test_rba_instead_of_rba_hold_fails_closed_loop_where_the_trajectories_part(namespace):
+    verdict = check_controller(DATA / "advanced_b", namespace=namespace("closed_rba"), closed_loop=True,
+                               controller=our_controller("advanced_b", agent="rba"))
+    assert verdict.exit_code == 1, verdict.summary()
+    first = verdict.episodes[0]
+    assert first.parted.startswith("tick 4 (stamp 4.000000000 s, step 3), field speed: bag 0.8, run 0.9"), first.parted
+    assert first.run.reward < first.bag.reward and "reward" in first.failures[0], verdict.summary()
+    # The tolerances decide: the same episodes pass within loose ones (rba loses up to ~30% here).
+    from sorting_line_gym.bag.check_verdict import Tolerance
+
+    loose = {"reward": Tolerance.parse("35%", "r"), "accuracy": Tolerance.parse("0.01", "a"),
+             "purity": Tolerance.parse("1%", "p")}
+    for e in verdict.episodes:
+        e.failures.clear()
+        e.judge(loose)
+    assert all(e.passed for e in verdict.episodes), [e.describe() for e in verdict.episodes]
+
+
+def test_closed_loop_names_the_nodes_reason_for_a_refused_answer(namespace):
+    """An out-of-range speed at tick 60: the node refuses it, the episode stalls there."""
+    verdict = check_controller(DATA / "basic_d", namespace=namespace("closed_bad"), closed_loop=True,
+                               answer_timeout=1.0, controller=scripted("basic_d", "--speed-at", "60=1.5"))
+    assert verdict.exit_code == 1, verdict.summary()
+    assert verdict.episodes[0].passed and not verdict.episodes[1].passed, verdict.summary()
+    stall = verdict.answers[0]
+    assert (stall.tick, stall.episode, stall.step, stall.status) == (60, 2, 8, "missing"), verdict.summary()
+    assert "rejected speed 1.5 for stamp 60.000000000" in stall.reason and "[invalid_speed]" in stall.reason
+    assert "the run stopped at step 8 of 50" in verdict.summary()
+
+
+# --------------------------------------------------------------------------------------------
 # Bad input (no ROS needed: each is refused before anything starts)
 
 
@@ -187,6 +252,8 @@ def test_bad_input_exits_with_2_and_says_why(tmp_path, capsys):
         ((tmp_path / "missing",), "no such bag"),
         ((DATA / "basic_d", "--max-reward-drop", "lots", "--closed-loop"), "--max-reward-drop 'lots': expected"),
         ((DATA / "basic_d", "--controller", "no-such-controller-program"), "is not a program on PATH"),
+        ((DATA / "basic_d", "--namespace", "/a-b"), "--namespace '/a-b' is not a valid ROS namespace"),
+        ((DATA / "basic_d", "--record", tmp_path / "out"), "--record records the closed-loop run"),
     ]
     for args, message in cases:
         code = main(["check", *[str(a) for a in args], "--wait", "1"])

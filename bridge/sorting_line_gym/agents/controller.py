@@ -22,8 +22,9 @@ tick's stamp.
 
 ``--setup`` and ``--variant`` must describe the node's line (the table depends on the input
 generator, the sensor noise and the penalty). QoS is the node's: reliable, volatile, keep-last 10.
-``--ros-args`` (e.g. ``-r __ns:=/plant``) is handed to rclpy. SIGINT or SIGTERM stops it cleanly
-(within 0.1 s), logging how many decisions it made.
+``--ros-args`` (e.g. ``-r __ns:=/plant``) is handed to rclpy; a ``__ns`` remap sets the namespace as
+for any ROS node, over ``--namespace`` (`sorting-line-bag check --controller` appends one). SIGINT
+or SIGTERM stops it cleanly (within 0.1 s), logging how many decisions it made.
 """
 
 from __future__ import annotations

@@ -66,8 +66,10 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
             raise ValueError(f"--answer-timeout {answer_timeout}: must be > 0 (seconds)")
         if record is not None and not closed_loop:
             raise ValueError("--record records the closed-loop run: add --closed-loop")
+        if record is not None and Path(record).exists():
+            raise ValueError(f"--record {record}: exists already: choose a new output directory")
         loaded = usable_bag(bag, closed_loop)
-        verdict.namespace = namespace or line_namespace(loaded)
+        verdict.namespace = valid_namespace(namespace or line_namespace(loaded))
     except (BagError, ValueError) as e:
         return _ended(verdict, EXIT_BAD_INPUT, str(e), started)
     process = None
@@ -77,10 +79,7 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
             verdict.controller = process.command
         wait = wait if wait is not None else (WAIT_STARTED if process else WAIT_RUNNING)
         if closed_loop:
-            try:
-                from .check_closed import run_closed_loop
-            except ImportError:
-                raise ValueError("--closed-loop: not in this version yet (open loop only)") from None
+            from .check_closed import run_closed_loop
 
             run_closed_loop(loaded, verdict, tolerances, answer_timeout=answer_timeout, wait=wait, process=process,
                             overrides=overrides, record=record, stop=stop, progress=progress)
@@ -132,6 +131,19 @@ def usable_bag(path: str | Path, closed_loop: bool) -> Bag:
                            "recorded while a controller drove the line (or use --closed-loop, which compares "
                            "episodes instead)")
     return bag
+
+
+def valid_namespace(namespace: str) -> str:
+    """``namespace`` if ROS takes it as a namespace; ValueError saying why not otherwise."""
+    from rclpy.exceptions import InvalidNamespaceException
+    from rclpy.validate_namespace import validate_namespace
+
+    try:
+        validate_namespace(namespace)
+    except InvalidNamespaceException as e:
+        reason = str(e).splitlines()[0].rstrip(":")
+        raise ValueError(f"--namespace {namespace!r} is not a valid ROS namespace ({reason})") from None
+    return namespace
 
 
 def tick_period_ns(bag: Bag) -> int:

@@ -233,7 +233,7 @@ class Verdict:
         if self.error:
             what = "bad input" if self.exit_code == EXIT_BAD_INPUT else "the run failed"
             lines.append(f"{what}: {self.error}")
-        if self.answers or self.wrong_stamps:
+        if (self.answers or self.wrong_stamps) and not self.closed_loop:
             lines.append(f"{self.ticks} ticks played in {self.seconds:.1f} s; answers: {self.count('matching')} "
                          f"matching, {self.count('differing')} differing, {self.count('missing')} missing "
                          f"({sum(a.late for a in self.answers)} of them late), {len(self.wrong_stamps)} with a "

@@ -181,16 +181,12 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
         result.notes.append(f"not sent: {plan.ineffective} commands for ticks the recorded node did not step from "
                             "(the episode was over, a reset came first, or the recording ended)")
     replay_ns = private_namespace()
-    options = dict(plan.options, mode="lockstep", lines=1)
     scratch = tempfile.TemporaryDirectory(prefix="sorting_line_replay_")
     if plan.evolution is not None:
-        schedule = Path(scratch.name) / "evolution.yaml"
-        schedule.write_text(plan.evolution)
-        options["evolution"] = str(schedule)
         result.notes.append("evolving line: replayed with the schedule stored in the bag; sensors/ratio not compared "
                             "(its publisher appears with the sensor upgrade; the reading is compared in state)")
-    process = NodeProcess(replay_ns, options,
-                          ros_args=("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
+    process = lockstep_node(plan, replay_ns, Path(scratch.name),
+                            ("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
     tool = None
     try:
         tool = ToolNode("sorting_line_bag_replay", process)
@@ -203,6 +199,17 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
             tool.close()
         process.stop()
         scratch.cleanup()
+
+
+def lockstep_node(plan: _Plan, namespace: str, scratch: Path, ros_args: tuple[str, ...] = ()) -> NodeProcess:
+    """A fresh one-line lock-step node with the plan's options in ``namespace`` (an evolving line's
+    schedule, stored in the bag, written to ``scratch`` for it)."""
+    options = dict(plan.options, mode="lockstep", lines=1)
+    if plan.evolution is not None:
+        schedule = scratch / "evolution.yaml"
+        schedule.write_text(plan.evolution)
+        options["evolution"] = str(schedule)
+    return NodeProcess(namespace, options, ros_args=ros_args)
 
 
 @dataclass
