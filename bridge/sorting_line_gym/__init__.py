@@ -14,8 +14,10 @@ Subpackages, by what they depend on (each builds only on those before it):
 ``line`` (nothing ROS: the vocabulary, options, the node process, line servers), ``ros`` (rclpy:
 context, waits, links, the batch codec, the bank of lines), ``envs`` (the Gymnasium and SB3
 environments, the dashboard), ``agents``, ``training`` (SB3), ``reports`` (evaluation, benchmark,
-plots), ``bag`` (record, play, replay). ``zoo`` holds RL Zoo conf files, ``evolutions`` ready
-schedules of the evolving line.
+plots), ``bag`` (record, play, replay). ``workarounds`` holds every workaround for a defect
+outside this repository (Fast DDS, rclpy, DDS discovery, orphaned processes), one module each, its
+docstring the list; each module imports only what its defect needs. ``zoo`` holds RL Zoo conf
+files, ``evolutions`` ready schedules of the evolving line.
 
 ``import sorting_line_gym`` registers the Gymnasium ids and imports neither rclpy nor SB3: the
 environment classes below load on first use.

@@ -89,8 +89,9 @@ class Hosts:
 
     def argv(self, host: str, argv: list[str]) -> list[str]:
         """`argv` run inside `host` (ip and setpriv exec it: same pid, dies with the test process)."""
-        death = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
-        return ["ip", "netns", "exec", self.names[host], *death, *argv]
+        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
+
+        return ["ip", "netns", "exec", self.names[host], *with_parent_death_signal(argv)]
 
     def popen(self, host: str, argv: list[str], **kwargs) -> subprocess.Popen:
         """A process inside `host` (killed at exit if still running)."""

@@ -178,17 +178,19 @@ class NodeProcess:
     """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
 
     def __init__(self, args: Iterable[str], log_path: Path, env: dict[str, str] | None = None):
+        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
+
         self.args = [str(a) for a in args]
         self.log_path = Path(log_path)
         self.argv = [str(node_binary()), "node", *self.args]
-        # setpriv execs the node (same pid) with a parent-death signal: a test run that is killed
-        # does not leave nodes behind.
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
         full_env = dict(os.environ)
         if env:
             full_env.update(env)
         self._log = open(self.log_path, "wb")
-        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=full_env)
+        # With a parent-death signal: a test run that is killed does not leave nodes behind.
+        self.proc = subprocess.Popen(
+            with_parent_death_signal(self.argv), stdout=self._log, stderr=subprocess.STDOUT, env=full_env
+        )
         self.pid = self.proc.pid
         self.stopped_by_test = False
 
@@ -249,10 +251,13 @@ class ScriptProcess:
         self.label = label or name
         self.log_path = Path(log_path)
         self.argv = [str(script), *[str(a) for a in args]]
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
+        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
+
         self._log = open(self.log_path, "wb")
         env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen(launcher + self.argv, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        self.proc = subprocess.Popen(
+            with_parent_death_signal(self.argv), stdout=self._log, stderr=subprocess.STDOUT, env=env
+        )
         self.returncode = None
 
     def running(self) -> bool:

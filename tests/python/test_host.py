@@ -1,4 +1,5 @@
-"""The host's lock for joining the DDS graph one environment at a time (line/host.py), without ROS:
+"""The host's lock for joining the DDS graph one environment at a time, without ROS
+(workarounds/simultaneous_discovery.py):
 a queue that moves is waited out however long it is; a holder that keeps the lock past the
 timeout makes the waiter fail, naming the holder."""
 
@@ -11,7 +12,7 @@ import time
 import pytest
 
 from sorting_line_gym import BridgeTimeout
-from sorting_line_gym.line.host import joining_graph
+from sorting_line_gym.workarounds.simultaneous_discovery import joining_graph
 
 
 @pytest.fixture(autouse=True)

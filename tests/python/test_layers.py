@@ -58,7 +58,16 @@ def test_the_line_layer_needs_no_ros():
     assert loaded_after_import(*modules) == []
 
 
-@pytest.mark.parametrize("subpackage", ["ros", "envs", "agents", "training", "reports", "bag"])
+def test_the_workarounds_the_line_layer_uses_need_no_ros():
+    """The line layer starts processes and joins the graph through two workarounds; the package
+    itself imports none of its modules."""
+    assert loaded_after_import("sorting_line_gym.workarounds") == []
+    no_ros = ["sorting_line_gym.workarounds.orphaned_processes", "sorting_line_gym.workarounds.simultaneous_discovery"]
+    assert set(no_ros) < set(modules_of("workarounds"))
+    assert loaded_after_import(*no_ros) == []
+
+
+@pytest.mark.parametrize("subpackage", ["ros", "envs", "agents", "training", "reports", "bag", "workarounds"])
 def test_no_layer_needs_sb3_but_those_that_train(subpackage):
     """SB3 and torch (half a GB, seconds of start-up) load only where a model is trained or loaded:
     the SB3 VecEnv, training, and the reports that train (the benchmark)."""

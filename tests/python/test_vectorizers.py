@@ -520,11 +520,11 @@ import multiprocessing, sys
 import gymnasium as gym
 import rclpy
 import sorting_line_gym  # noqa: F401
-from sorting_line_gym.ros import context
+from sorting_line_gym.workarounds import participant_deletion_hang
 
 
 def state():
-    return {"rclpy_ok": rclpy.ok(), "anchor": context.keeps_participant()}
+    return {"rclpy_ok": rclpy.ok(), "anchor": participant_deletion_hang.keeps_participant()}
 
 
 def worker(env_id, queue):
@@ -552,7 +552,7 @@ if __name__ == "__main__":
 
 def test_a_forked_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp_path):
     """In a forked worker, closing the last env neither deletes the DDS participant nor shuts
-    rclpy down (ros.context._keep_participant: deleting it while the other workers close can hang
+    rclpy down (workarounds.participant_deletion_hang: deleting it while the other workers close can hang
     for minutes in Fast DDS 2.14); elsewhere rclpy is shut down when the last env closes, so that
     the process may fork afterwards."""
     out = run_script(tmp_path, "keeps_participant", KEEPS_ITS_PARTICIPANT, [BASIC], timeout=180)

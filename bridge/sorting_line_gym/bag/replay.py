@@ -44,6 +44,7 @@ from pathlib import Path
 from ..line.errors import BridgeTimeout
 from ..line.process import NodeProcess, private_namespace
 from ..ros.links import LineLink
+from ..workarounds.late_matching import retried_handshake
 from .bagfile import Bag, BagError, BagMessage, open_bag
 from .compare import Comparison, Difference, compare, shifted
 from .foreign import REQUIRED, flags_for, with_setup
@@ -388,21 +389,22 @@ def _compare(plan: _Plan, result: ReplayResult, capture: _Capture) -> None:
 
 def _handshake(tool: ToolNode, link: LineLink, seed: int, timeout: float) -> None:
     """A seeded reset, repeated until its reply and its step-0 state arrive (either can be lost
-    while the node is still matching our endpoints; a seeded reset repeated is the same)."""
-    for attempt in range(1, HANDSHAKE_ATTEMPTS + 1):
-        try:
-            link.send_reset(seed)
-            tool.until(link.reset_done, min(2.0, timeout), f"the reply of {link.namespace}/reset (handshake)")
-            link.finish_reset()
-            tool.until(link.saw_state_of_current_tick, min(2.0, timeout),
-                       f"{link.state_topic} after the handshake reset")
-            return
-        except BridgeTimeout:
-            if link._reset_future is not None:
-                link.reset_client.remove_pending_request(link._reset_future)
-                link._reset_future = None
-            if attempt == HANDSHAKE_ATTEMPTS:
-                raise
+    while the node is still matching our endpoints, ``workarounds.late_matching``; a seeded reset
+    repeated is the same)."""
+
+    def attempt(limit: float) -> None:
+        link.send_reset(seed)
+        tool.until(link.reset_done, limit, f"the reply of {link.namespace}/reset (handshake)")
+        link.finish_reset()
+        tool.until(link.saw_state_of_current_tick, limit, f"{link.state_topic} after the handshake reset")
+
+    def drop_pending_request() -> None:
+        if link._reset_future is not None:
+            link.reset_client.remove_pending_request(link._reset_future)
+            link._reset_future = None
+
+    limits = [min(2.0, timeout)] * HANDSHAKE_ATTEMPTS
+    retried_handshake(attempt, limits, BridgeTimeout, after_loss=drop_pending_request)
 
 
 def _restamped(store, m: BagMessage, stamp: int) -> bytes:

@@ -1,17 +1,12 @@
-"""What the environments of one host share: a per-user state directory, the network namespace
-(DDS traffic does not cross it, files do), and the lock for joining the DDS graph one at a time."""
+"""What the environments of one host share: a per-user state directory and the network namespace
+(DDS traffic does not cross it, files do). The lock for joining the DDS graph one at a time, which
+lives in that directory, is a workaround: ``workarounds/simultaneous_discovery.py``."""
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
-import hashlib
 import os
 import tempfile
-import time
 from pathlib import Path
-
-from .errors import BridgeTimeout
 
 
 def host_state_directory() -> Path:
@@ -27,51 +22,3 @@ def network_namespace() -> str:
         return os.readlink("/proc/self/ns/net")
     except OSError:
         return "host"
-
-
-@contextlib.contextmanager
-def joining_graph(timeout: float):
-    """Holds this host's lock for joining the DDS graph of ``ROS_DOMAIN_ID`` (per network
-    namespace) while a bank starts its participant and node and discovers the node's endpoints.
-
-    Measured (benches/discovery.py, README "Many envs per host"): when several client and node
-    participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast
-    DDS and RustDDS lose some endpoint announcements between them for good (a node's reset
-    service never becomes ready for its client, even after 60 s); one participant pair joining at
-    a time discovers completely, whatever the number of participants.
-
-    A waiter gives up only when the queue stops moving: when one holder has kept the lock for
-    ``timeout`` (a holder's own start is bounded by its startup_timeout, so that means it hangs).
-    The whole queue may take longer: 16 workers joining one after the other at 1-2 s each on a
-    busy machine must not time out for waiting their turn. Each holder writes its pid and the
-    time of its turn into the lock file, which is how waiters see the lock change hands; a holder
-    that dies frees the lock at once (flock)."""
-    digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
-    path = host_state_directory() / f"join-{digest}.lock"
-    with open(path, "a+") as f:
-        holder, since = None, time.monotonic()
-        while True:
-            try:
-                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                now = time.monotonic()
-                current = os.pread(f.fileno(), 64, 0)  # "pid time", as the holder wrote it
-                if current != holder:
-                    holder, since = current, now  # the lock changed hands: the queue moves
-                elif now - since > timeout:
-                    pid = holder.decode(errors="replace").split(" ")[0] or "?"
-                    raise BridgeTimeout(
-                        f"timed out after {timeout:g} s waiting for other environments of this host to join "
-                        f"the DDS graph: pid {pid} has held the lock (file {path}) for {now - since:.0f} s"
-                    ) from None
-                time.sleep(0.01)
-        try:
-            f.seek(0)
-            f.truncate()
-            f.write(f"{os.getpid()} {time.time_ns()}")
-            f.flush()
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
-

@@ -36,6 +36,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..workarounds.orphaned_processes import with_parent_death_signal
 from . import line_supervisor
 from .errors import BridgeError, BridgeTimeout
 from .host import host_state_directory, network_namespace
@@ -60,7 +61,7 @@ def server_directory(options: dict[str, object]) -> Path:
 @dataclass
 class Lease:
     """Line ``line`` of server ``index``, held until :meth:`release` (or this process's exit).
-    It stands in for the node process in a bank's liveness checks (``alive``, ``death_notice``)."""
+    A ``process.HeldNode``: it stands in for the node process in a bank's waits."""
 
     namespace: str
     directory: Path
@@ -126,7 +127,7 @@ def _start_server(directory: Path, index: int, options: dict[str, object], deadl
         str(directory),
         str(index),
         json.dumps(options),
-        find_node_binary(),
+        json.dumps(with_parent_death_signal([find_node_binary()])),
     ]
     # A session of its own: the server serves every process of the host, and a Ctrl-C meant for
     # the script that happened to start it must not stop the others' lines.

@@ -1,15 +1,16 @@
 """A line server's supervisor, and the file locks line servers are made of (see ``line_server``).
 
 This module imports nothing but the standard library, and runs as a script by its path
-(``python line_supervisor.py DIRECTORY INDEX OPTIONS_JSON BINARY``), not through the package: a
-supervisor then starts in tens of milliseconds instead of the seconds that importing Gymnasium,
-numpy and rclpy take, and envs wait for it while they join the graph.
+(``python line_supervisor.py DIRECTORY INDEX OPTIONS_JSON NODE_COMMAND_JSON``), not through the
+package: a supervisor then starts in tens of milliseconds instead of the seconds that importing
+Gymnasium, numpy and rclpy take, and envs wait for it while they join the graph.
 
 The supervisor holds ``s<i>.server.lock`` as long as it runs, starts ``sorting_line node --lines
-LINES`` (which gets SIGTERM if the supervisor dies), publishes where it serves in ``s<i>.json``, and
-stops the node and itself when no line has been leased for ``IDLE_EXIT`` seconds (deciding that
-with ``start.lock`` held, so nobody leases a line of a stopping server), when the node dies, or on
-SIGINT/SIGTERM.
+LINES`` through the command it is given (``line_server`` gives the binary behind the parent-death
+launcher of ``workarounds.orphaned_processes``, so the node gets SIGTERM if the supervisor dies),
+publishes where it serves in ``s<i>.json``, and stops the node and itself when no line has been
+leased for ``IDLE_EXIT`` seconds (deciding that with ``start.lock`` held, so nobody leases a line
+of a stopping server), when the node dies, or on SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import contextlib
 import fcntl
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -83,15 +83,14 @@ def idle(directory: Path, index: int, lines: int) -> bool:
                 f.close()
 
 
-def start_node(binary: str, namespace: str, options: dict[str, object], log: Path) -> subprocess.Popen:
-    """``sorting_line node`` with ``options`` as flags, in ``namespace``; SIGTERM when we die."""
-    args = [binary, "node"]
+def start_node(command: list[str], namespace: str, options: dict[str, object], log: Path) -> subprocess.Popen:
+    """``sorting_line node`` (``command`` runs the binary) with ``options`` as flags, in ``namespace``."""
+    args = [*command, "node"]
     for key, value in options.items():
         args += [f"--{key.replace('_', '-')}", str(value)]
     args += ["--lines", str(LINES), "--ros-args", "-r", f"__ns:={namespace}"]
-    launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
     with open(log, "ab") as out:
-        return subprocess.Popen(launcher + args, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
+        return subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
 
 
 def stop_node(node: subprocess.Popen) -> int | None:
@@ -105,7 +104,7 @@ def stop_node(node: subprocess.Popen) -> int | None:
     return node.returncode
 
 
-def serve(directory: Path, index: int, options: dict[str, object], binary: str) -> int:
+def serve(directory: Path, index: int, options: dict[str, object], command: list[str]) -> int:
     server_lock = try_lock(directory / f"s{index}.server.lock")
     if server_lock is None:
         print(f"line server s{index}: another supervisor holds {directory}/s{index}.server.lock", flush=True)
@@ -114,7 +113,7 @@ def serve(directory: Path, index: int, options: dict[str, object], binary: str) 
     signal.signal(signal.SIGTERM, lambda *_: stop.append("SIGTERM"))
     signal.signal(signal.SIGINT, lambda *_: stop.append("SIGINT"))
     namespace = f"/sorting_line_gym/server_{directory.name}_{index}_p{os.getpid()}"  # never reused
-    node = start_node(binary, namespace, options, directory / f"s{index}.log")
+    node = start_node(command, namespace, options, directory / f"s{index}.log")
     info = directory / f"s{index}.json"
     info.write_text(json.dumps({"namespace": namespace, "lines": LINES, "pid": os.getpid(), "node_pid": node.pid}))
     print(f"line server s{index}: {LINES} lines in {namespace} (node pid {node.pid})", flush=True)
@@ -140,9 +139,11 @@ def serve(directory: Path, index: int, options: dict[str, object], binary: str) 
 
 def main() -> None:
     if len(sys.argv) != 5:
-        sys.exit("usage: line_supervisor.py DIRECTORY INDEX OPTIONS_JSON BINARY (started by sorting_line_gym)")
-    directory, index, options, binary = Path(sys.argv[1]), int(sys.argv[2]), json.loads(sys.argv[3]), sys.argv[4]
-    sys.exit(serve(directory, index, options, binary))
+        sys.exit(
+            "usage: line_supervisor.py DIRECTORY INDEX OPTIONS_JSON NODE_COMMAND_JSON (started by sorting_line_gym)"
+        )
+    directory, index, options, command = Path(sys.argv[1]), int(sys.argv[2]), json.loads(sys.argv[3]), sys.argv[4]
+    sys.exit(serve(directory, index, options, json.loads(command)))
 
 
 if __name__ == "__main__":

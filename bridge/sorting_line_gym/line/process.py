@@ -8,11 +8,12 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import warnings
 from pathlib import Path
+from typing import Protocol
 
+from ..workarounds.orphaned_processes import with_parent_death_signal
 from .errors import BridgeError
 
 
@@ -42,22 +43,16 @@ def private_namespace() -> str:
     return f"/sorting_line_gym/p{os.getpid()}_{next(_spawn_counter)}"
 
 
-def die_with_parent(sig: int, keep_existing: bool = False) -> None:
-    """Asks the kernel to send ``sig`` to this process when its parent dies (Linux
-    ``PR_SET_PDEATHSIG``; the parent is the thread that started this process, so a process that
-    outlives a parent that already died before this call gets nothing: callers check that
-    themselves). ``keep_existing`` leaves a signal the process chose before in place. Does nothing
-    elsewhere than on Linux."""
-    if not sys.platform.startswith("linux"):
-        return
-    import ctypes
+class HeldNode(Protocol):
+    """A node process the bridge holds, as a wait watches it: :class:`NodeProcess` (a node it
+    started), ``line_server.Lease`` (a line of a shared node) and ``ros.fleet``'s nodes of a fleet
+    (several as one). A wait fails at once, with the notice, when ``alive()`` turns False."""
 
-    PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
-    libc = ctypes.CDLL(None, use_errno=True)
-    current = ctypes.c_int(0)
-    libc.prctl(PR_GET_PDEATHSIG, ctypes.byref(current))
-    if not (keep_existing and current.value):
-        libc.prctl(PR_SET_PDEATHSIG, sig)
+    def alive(self) -> bool: ...
+
+    def death_notice(self) -> str:
+        """What happened to the node, with the tail of its log."""
+        ...
 
 
 def file_tail(path: str | Path, lines: int) -> str:
@@ -76,8 +71,8 @@ class NodeProcess:
 
     The log is deleted when the node stopped cleanly (exit code 0) and kept when it failed: then
     its path is in the error (``death_notice``) or in the warning ``stop`` gives. The node gets
-    SIGTERM if the bridge dies (``setpriv --pdeathsig``, where available), so a killed bridge
-    leaves no node behind. (The parent-death signal follows the thread that started the node: a
+    SIGTERM if the bridge dies (``workarounds.orphaned_processes``), so a killed bridge leaves no
+    node behind. (The parent-death signal follows the thread that started the node: a
     bridge made in a short-lived thread should be made elsewhere.)"""
 
     def __init__(self, namespace: str, options: dict[str, object], ros_args: tuple[str, ...] = ()):
@@ -90,9 +85,8 @@ class NodeProcess:
         self.command = args
         self._log = tempfile.NamedTemporaryFile(prefix="sorting_line_node_", suffix=".log", delete=False)
         self.log_path = self._log.name
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
         self.process = subprocess.Popen(
-            launcher + args, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT
+            with_parent_death_signal(args), stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT
         )
 
     def alive(self) -> bool:

@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from ..line.process import die_with_parent
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
+from ..workarounds.orphaned_processes import die_with_parent
 from . import stats
 
 BASELINES = ("random", "rba", "rba-hold")

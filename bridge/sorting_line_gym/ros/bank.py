@@ -1,9 +1,10 @@
 """The lines of one node, driven together: what both the single-line environment and the
 vector environments stand on.
 
-A bank owns one rclpy node and one executor, and (with ``node="spawn"``) the node process. One
-call to :meth:`LineBank.step` publishes the commands of every line and waits for every line's next
-``state``: one round trip steps all lines.
+A bank owns one rclpy node and one executor, and (with ``node="spawn"``) the node process, or
+(``node="shared"``) the lease of a line server's line. One call to :meth:`LineBank.step` (or
+:meth:`LineBank.step_batch`) publishes the commands of every line and waits for every line's next
+state: one round trip steps all lines. It reaches the lines through a :mod:`.transports` class.
 """
 
 from __future__ import annotations
@@ -20,25 +21,25 @@ from sorting_line_interfaces.msg import BeltOccupancy, LineState, MaterialInput
 
 from ..line import line_server
 from ..line.errors import BridgeError
-from ..line.host import joining_graph
+from ..line.line_server import Lease
 from ..line.options import LineOptions
 from ..line.process import NodeProcess, private_namespace
-from .context import acquire_rclpy, fork_error, release_rclpy
+from ..workarounds.fork_unsafe_dds import fork_error
+from ..workarounds.late_matching import HANDSHAKE_TIMEOUTS, retried_handshake
+from ..workarounds.simultaneous_discovery import joining_graph
+from .context import acquire_rclpy, release_rclpy
 from .links import QOS, BatchLink, LineLink, stamp_key
+from .transports import BatchTransport, PerLineTransport, Transport
 from .waits import Waiter
-
-#: Time allowed to each attempt of the first reset (reply, then step-0 state) before it is
-#: retried: the first exchange after discovery is lost now and then (late matching), and a short
-#: first attempt keeps that from costing every env seconds of start-up.
-HANDSHAKE_TIMEOUTS = (0.2, 0.4, 0.8, 1.6, 2.0)
 
 _bank_ids = itertools.count()
 
 
 class LineBank:
     """N lines hosted by one `sorting_line node`, stepped in lock-step together: with
-    ``batch=False`` through each line's own topics (:meth:`step`), with ``batch=True`` through the
-    node's ``batch/cmd`` and ``batch/state`` (:meth:`step_batch`)."""
+    ``batch=False`` through each line's own topics (:class:`PerLineTransport`, :meth:`step`), with
+    ``batch=True`` through the node's ``batch/cmd`` and ``batch/state`` (:class:`BatchTransport`,
+    :meth:`step_batch`)."""
 
     def __init__(self, options: LineOptions, *, lines: int = 1, watch_sensors: bool = False, batch: bool = False,
                  watch: dict | None = None):
@@ -53,7 +54,8 @@ class LineBank:
         self.step_timeout = options.step_timeout
         self.startup_timeout = options.startup_timeout
         self.namespace = options.namespace or private_namespace()
-        self.process: NodeProcess | None = None
+        #: The node process this bank started, or the line it leased; None when it attaches.
+        self.process: NodeProcess | Lease | None = None
         self._closed = False
         self._opened_in: int | None = None  # the pid that opened the bank (see open())
         self._node_mode = options.node
@@ -64,7 +66,9 @@ class LineBank:
         #: Extra topics of line 0 to subscribe to when the bank opens, {relative topic: (type,
         #: callback)}; the first reset waits until each is matched with a publisher (e.g. events/evolution).
         self._watch = dict(watch or {})
+        self.transport: Transport | None = None
         self.links: list[LineLink] = []
+        #: The batch topics (with ``batch=True``), for a fleet that steps several banks together.
         self.batch: BatchLink | None = None
         #: Whether the first reset's handshake is done (the bank joined the graph and found the node).
         self.connected = False
@@ -100,11 +104,12 @@ class LineBank:
             self.executor.add_node(self.node)
             base = self.namespace.rstrip("/")
             spaces = [base] if lines == 1 else [f"{base}/line_{k}" for k in range(lines)]
-            # The single-line env uses the line's own topics (the documented per-line protocol);
-            # vector envs the batch topics, two messages per round trip whatever the number of lines.
-            per_line = not self._batch
-            self.links = [LineLink(self.node, ns, self.advanced, per_line_topics=per_line) for ns in spaces]
-            self.batch = None if per_line else BatchLink(self.node, self.namespace, self.links)
+            if self._batch:
+                self.transport = BatchTransport(self.node, self.namespace, spaces, self.advanced)
+                self.batch = self.transport.batch
+            else:
+                self.transport = PerLineTransport(self.node, spaces, self.advanced)
+            self.links = self.transport.links
             self.waiter = Waiter(self.executor, self.process)
             self.sensors: list[dict[str, dict]] = [{"input": {}, "belt": {}} for _ in spaces]
             self._watched = [
@@ -151,8 +156,7 @@ class LineBank:
     def _connect(self, deadline: float) -> None:
         self.waiter.until_deadline(
             lambda: (
-                all(link.endpoints_matched(self.node) for link in self.links)
-                and (self.batch is None or self.batch.matched(self.node))
+                not self.transport.missing(self.node)
                 and all(sub.get_publisher_count() > 0 for sub in self._watched)
             ),
             deadline,
@@ -166,11 +170,7 @@ class LineBank:
     def _unmatched(self) -> str:
         """What discovery still lacks, e.g. "not yet discovered: /ns/line_3 reset service" (when a
         node's endpoints go missing, which ones is the first clue to why)."""
-        missing = [
-            f"{link.namespace} {what}" for link in self.links for what, ok in link.matching(self.node).items() if not ok
-        ]
-        if self.batch is not None:
-            missing += [f"{self.namespace} {what}" for what, ok in self.batch.matching(self.node).items() if not ok]
+        missing = self.transport.missing(self.node)
         return "not yet discovered: " + ", ".join(missing) if missing else "all discovered"
 
     def reset(self, seeds: dict[int, int | None]):
@@ -195,39 +195,28 @@ class LineBank:
 
     def _handshake(self, seeds: dict[int, int | None], deadline: float):
         self._connect(deadline)
-        if self.batch is not None:
-            first_state = self.batch.saw_current_ticks
-        else:
-            def first_state():
-                return all(self.links[k].saw_state_of_current_tick() for k in seeds)
-        for attempt, limit in enumerate(HANDSHAKE_TIMEOUTS):
+
+        def attempt(limit: float):
             timeout = min(limit, self.step_timeout)
-            try:
-                responses = self._reset_once(seeds, timeout=timeout)
-                self.waiter.until(first_state, timeout, lambda: f"the first state of {self.namespace} after reset")
-                return responses
-            except BridgeError:
-                if attempt == len(HANDSHAKE_TIMEOUTS) - 1 or (self.process and not self.process.alive()):
-                    raise
-        raise AssertionError("unreachable")
+            responses = self._reset_once(seeds, timeout=timeout)
+            self.waiter.until(
+                lambda: self.transport.saw_first_states(seeds),
+                timeout,
+                lambda: f"the first state of {self.namespace} after reset",
+            )
+            return responses
+
+        return retried_handshake(
+            attempt, HANDSHAKE_TIMEOUTS, BridgeError, hopeless=lambda: bool(self.process and not self.process.alive())
+        )
 
     def _reset_once(self, seeds: dict[int, int | None], timeout: float | None = None):
         timeout = self.step_timeout if timeout is None else timeout
-        if self.batch is not None:
-            self.batch.send_reset(seeds)
-            self.waiter.until(self.batch.reset_done, timeout, lambda: f"the reply of {self.batch.reset_name}")
-            return self.batch.finish_reset(seeds)
-        for k, seed in seeds.items():
-            self.links[k].send_reset(seed)
+        self.transport.send_reset(seeds)
         self.waiter.until(
-            lambda: all(self.links[k].reset_done() for k in seeds),
-            timeout,
-            lambda: (
-                "the reply of "
-                + ", ".join(f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done())
-            ),
+            lambda: self.transport.reset_done(seeds), timeout, lambda: self.transport.awaited_reply(seeds)
         )
-        return {k: self.links[k].finish_reset() for k in seeds}
+        return self.transport.finish_reset(seeds)
 
     def step(self, actions: Sequence[tuple[int, int]]) -> list[LineState]:
         """Sends (speed index, mode) to every line and waits for each line's next state."""
@@ -237,43 +226,26 @@ class LineBank:
         for link in self.links:
             if link.tick is None:
                 raise BridgeError(f"{link.namespace}: step() before reset()")
-        if self.batch is not None:
+        if not isinstance(self.transport, PerLineTransport):
             raise BridgeError("a bank of several lines steps with step_batch()")
-        for link, (speed, mode) in zip(self.links, actions, strict=False):
-            link.send_action(speed, mode)
-        pending = set(range(len(self.links)))
-
-        def arrived() -> bool:
-            for k in list(pending):
-                link = self.links[k]
-                if link.take_next_state():
-                    pending.discard(k)
-                    continue
-                link.drain()
-                if link.take_next_state():
-                    pending.discard(k)
-            return not pending
-
-        self.waiter.until_received(
-            [link.state_sub for link in self.links],
-            arrived,
-            self.step_timeout,
-            lambda: "; ".join(self.links[k].describe_wait() for k in sorted(pending)),
-        )
-        return [link.last_state for link in self.links]
+        self._round_trip([speed for speed, _ in actions], [mode for _, mode in actions])
+        return self.transport.states()
 
     def step_batch(self, speed_indices, modes):
         """Steps every line through ``batch/cmd`` and returns the ``batch/state`` message (arrays,
         entry k = line k)."""
         self.check_usable()
-        if self.batch is None:
+        if not isinstance(self.transport, BatchTransport):
             raise BridgeError("a single-line bank steps with step()")
-        self.batch.check_started()
-        self.batch.send(speed_indices, modes)
+        self._round_trip(speed_indices, modes)
+        return self.transport.states()
+
+    def _round_trip(self, speed_indices, modes) -> None:
+        transport = self.transport
+        transport.send(speed_indices, modes)
         self.waiter.until_received(
-            [self.batch.state_sub], self.batch.take_next_states, self.step_timeout, self.batch.describe_wait
+            transport.state_subscriptions(), transport.take_next_states, self.step_timeout, transport.describe_wait
         )
-        return self.batch.position
 
     def check_usable(self) -> None:
         """Raises unless this bank was opened (by a reset) in this very process: a bank

@@ -42,8 +42,9 @@ def split_lines(num_envs: int, nodes: int) -> int:
     return num_envs // nodes
 
 
-class _Liveness:
-    """The bank processes a wait must fail at once for, as one process (``Waiter`` asks one)."""
+class _FleetNodes:
+    """The banks' node processes as one ``line.process.HeldNode`` (a ``Waiter`` watches one): alive
+    while every one is, and a wait fails at once, naming the dead ones, when one is not."""
 
     def __init__(self, banks: list[LineBank]):
         self.banks = banks
@@ -155,7 +156,7 @@ class NodeFleet:
 
         if self._waiter is None:
             first = self.banks[0]
-            self._waiter = Waiter(first.executor, _Liveness(self.banks))
+            self._waiter = Waiter(first.executor, _FleetNodes(self.banks))
         self._waiter.until_received(
             [bank.batch.state_sub for bank in self.banks],
             arrived,

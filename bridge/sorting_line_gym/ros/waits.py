@@ -1,8 +1,8 @@
 """Waiting on rclpy with a deadline: every wait of the bridge goes through :class:`Waiter`, which
 fails with an error naming what it waited for, and at once if the node process it watches died.
 
-No ``spin_until_future_complete`` (it leaks a task per call in rclpy 7.1): every wait is
-``executor.spin_once`` (or an rcl wait set) in a loop with a deadline."""
+No ``spin_until_future_complete`` (it leaks a task per call in rclpy 7.1; ``workarounds`` lists
+it): every wait is ``executor.spin_once`` (or an rcl wait set) in a loop with a deadline."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from rclpy.executors import SingleThreadedExecutor
 from ..line.errors import BridgeError, BridgeTimeout
 
 if TYPE_CHECKING:
-    from ..line.process import NodeProcess
+    from ..line.process import HeldNode
 
 
 #: Longest single wait: how soon a dead node or the deadline is noticed.
@@ -27,7 +27,7 @@ class Waiter:
     executor (services, any subscription); ``until_received`` waits on the given subscriptions
     alone, for conditions that take their messages themselves (the step loop)."""
 
-    def __init__(self, executor: SingleThreadedExecutor, process: NodeProcess | None):
+    def __init__(self, executor: SingleThreadedExecutor, process: HeldNode | None):
         self.executor = executor
         self.process = process
         self._wait_set = None

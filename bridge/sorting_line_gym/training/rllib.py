@@ -63,7 +63,7 @@ def make_env(config) -> gymnasium.Env:
     """Ray Tune's env creator: ``config`` is RLlib's ``EnvContext`` (a dict of ``env_config``
     with ``worker_index``)."""
     import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids in this (EnvRunner) process
-    from sorting_line_gym.ros.context import keep_participant_until_killed
+    from sorting_line_gym.workarounds.participant_deletion_hang import keep_participant_until_killed
 
     worker_index = int(getattr(config, "worker_index", 0))
     if worker_index > 0:
@@ -94,17 +94,17 @@ def quiet_ray_environment() -> dict[str, str]:
 def where_envs_live(algo) -> list[dict[str, Any]]:
     """For each remote EnvRunner: its Ray node's address, its pid, the namespaces of its envs'
     lines (known once they have reset), and whether its DDS participant outlives its envs
-    (:func:`~sorting_line_gym.ros.context.keep_participant_until_killed`)."""
+    (:func:`~sorting_line_gym.workarounds.participant_deletion_hang.keep_participant_until_killed`)."""
 
     def report(runner):
         import ray.util
 
-        from sorting_line_gym.ros import context
+        from sorting_line_gym.workarounds import participant_deletion_hang
 
         envs = getattr(runner.env.unwrapped, "envs", [])  # RLlib wraps Gymnasium's SyncVectorEnv
         return {"node_ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
                 "worker_index": runner.worker_index, "lines": [e.unwrapped.namespace for e in envs],
-                "keeps_participant": context.keeps_participant()}
+                "keeps_participant": participant_deletion_hang.keeps_participant()}
 
     return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
 
