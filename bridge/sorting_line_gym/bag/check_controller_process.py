@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 from ..line.process import file_tail
+from ..workarounds.orphaned_processes import with_parent_death_signal
 
 #: Output lines a death notice shows.
 TAIL_LINES = 12
@@ -46,11 +47,15 @@ class ControllerProcess:
         self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115
             prefix="sorting_line_check_controller_", suffix=".log", delete=False)
         self.log_path = self._log.name
-        launcher = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
         # Its own process group: stopping it stops what it started (a launch file, a shell script).
-        self.process = subprocess.Popen(launcher + self.command, stdin=subprocess.DEVNULL, stdout=self._log,
-                                        stderr=subprocess.STDOUT, start_new_session=True,
-                                        env=env if env is not None else os.environ.copy())
+        self.process = subprocess.Popen(
+            with_parent_death_signal(self.command),
+            stdin=subprocess.DEVNULL,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            env=env if env is not None else os.environ.copy(),
+        )
         self.stopped_by_us = False
 
     def alive(self) -> bool:
