@@ -5,7 +5,7 @@ evolving node, the statistics and the plot), stopped after some cells and resume
 What must hold:
 - a stopped study resumes without redoing finished cells: their files are not rewritten (same
   mtime, same bytes, still marked as run by the first invocation) and the second invocation runs
-  exactly the rest (``study.json`` lists what each invocation ran);
+  exactly the rest (``study.json`` lists what each invocation ran), here two at a time in workers;
 - the report has IQM intervals per strategy, probabilities of improvement and steps to recover
   with intervals, and the plot;
 - progress comes as plain lines with a projected end when stderr is not a terminal;
@@ -44,9 +44,9 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
     first = snapshot(out / "cells")
     assert sorted(first) == sorted(FIRST)
 
-    assert transfer.main(argv) == 0
+    assert transfer.main([*argv, "--jobs", "2"]) == 0  # the rest two at a time, in worker processes
     err = capsys.readouterr().err
-    assert "5 cells, 2 already done, 3 to run" in err and "5 of 5 cells done" in err
+    assert "5 cells, 2 already done, 3 to run, 2 at a time" in err and "5 of 5 cells done" in err
     after = snapshot(out / "cells")
     assert {name: after[name] for name in FIRST} == first, "a finished cell was run again"
     invocations = json.loads((out / "study.json").read_text())["invocations"]
@@ -91,6 +91,7 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
         (["--after", "0"], "--after = 0"),
         (["--evaluations", "0"], "--evaluations = 0"),
         (["--max-cells", "0"], "--max-cells = 0"),
+        (["--jobs", "0"], "--jobs = 0"),
         (["--full", "--smoke"], "not allowed with argument"),
     ],
 )

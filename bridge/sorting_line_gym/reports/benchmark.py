@@ -38,12 +38,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import signal
 import statistics
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -52,8 +50,8 @@ import numpy as np
 
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
-from ..workarounds.orphaned_processes import die_with_parent
-from . import stats
+from . import cell_pool, stats
+from .cell_store import write_atomic
 
 BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
@@ -134,11 +132,7 @@ def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: 
     record["evaluation"] = asdict(evaluate(spec, cell.setup, cell.variant, dashboard=dashboard))
     record["heldout"] = asdict(evaluate(spec, cell.setup, cell.variant, seed=heldout.seed, episodes=heldout.episodes))
     record["wall_s"] = time.perf_counter() - start
-    path = out / "cells" / f"{cell.name}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(record, indent=2) + "\n")
-    tmp.replace(path)  # a cell file is whole or absent, even if the run is killed while writing
+    write_atomic(out / "cells" / f"{cell.name}.json", record)  # whole or absent, even if the run is killed
     return record
 
 
@@ -608,25 +602,6 @@ def heldout_of(args) -> Heldout:
     return Heldout(args.heldout_seed, args.heldout_episodes)
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def _die_with_the_benchmark() -> None:
-    """Worker initializer: the kernel kills this worker when the benchmark process dies, however
-    it dies (a benchmark killed with SIGKILL runs no handler, and nothing else would tell them)."""
-    die_with_parent(signal.SIGKILL)
-
-
-def _stop_workers(pool: ProcessPoolExecutor) -> None:
-    """Kills the pool's workers at once (their nodes get SIGTERM through their parent-death
-    signal): a worker would otherwise finish its cell, a training of several minutes, before the
-    pool's shutdown reached it."""
-    for child in multiprocessing.active_children():
-        child.kill()
-    pool.shutdown(wait=False, cancel_futures=True)
-
-
 def run_all(todo: list[Cell], args, finished, bar) -> None:
     """Runs the cells, ``args.jobs`` at a time; ``finished(cell, record or exception)`` for each."""
     if args.jobs == 1:
@@ -639,29 +614,14 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
                 outcome = e
             finished(cell, outcome)
         return
-    # rclpy is not fork-safe: workers start fresh interpreters. Only this bar, with the cells running.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context, initializer=_die_with_the_benchmark) as pool:
-        try:
-            pending = {}
-            queue = list(todo)
-            while queue or pending:
-                while queue and len(pending) < args.jobs:
-                    cell = queue.pop(0)
-                    pending[pool.submit(run_cell, cell, args.out, args.timesteps, heldout_of(args), False)] = cell
-                    bar.set_postfix_str(", ".join(c.name for c in pending.values()))
-                complete, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in complete:
-                    cell = pending.pop(future)
-                    try:
-                        outcome = future.result()
-                    except Exception as e:  # noqa: BLE001
-                        outcome = e
-                    finished(cell, outcome)
-        except KeyboardInterrupt:
-            _stop_workers(pool)  # before the with-block's shutdown, which would wait for the cells
-            raise
-
+    # Only this bar, with the cells running (each worker is a fresh interpreter with its own node).
+    cell_pool.run_parallel(
+        todo,
+        lambda cell: (run_cell, cell, args.out, args.timesteps, heldout_of(args), False),
+        args.jobs,
+        finished,
+        lambda cells: bar.set_postfix_str(", ".join(c.name for c in cells)),
+    )
 
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
@@ -704,7 +664,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     failures = []
     if todo:
-        signal.signal(signal.SIGTERM, _interrupt)
+        signal.signal(signal.SIGTERM, cell_pool.interrupt)
         bar = tqdm(
             total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True
         )

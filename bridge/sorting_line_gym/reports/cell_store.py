@@ -98,12 +98,15 @@ def _clock(seconds_from_now: float) -> str:
 class CellProgress:
     """Progress over the cells of a study: a tqdm bar on a terminal, plain lines otherwise; the
     projected end from the durations of the finished cells of the same kind (``kind_of(name)``),
-    or of all finished cells while a kind has none."""
+    or of all finished cells while a kind has none; ``parallel`` cells at a time."""
 
-    def __init__(self, todo: list[str], done: dict[str, float], kind_of: Callable[[str], str], desc: str, stream=None):
+    def __init__(
+        self, todo: list[str], done: dict[str, float], kind_of: Callable[[str], str], desc: str, parallel: int = 1
+    ):
         from tqdm import tqdm
 
-        self.stream = stream or sys.stderr
+        self.stream = sys.stderr
+        self.parallel = parallel
         self.todo = list(todo)
         self.kind_of = kind_of
         self.durations: dict[str, list[float]] = {}
@@ -123,33 +126,32 @@ class CellProgress:
         )
         self._show()
 
-    def remaining_seconds(self) -> float | None:
-        """The projected time the unfinished cells take, one after the other; None before any is done."""
-        every = [s for kind in self.durations.values() for s in kind]
+    def remaining_seconds(self) -> tuple[float, int] | None:
+        """(the projected time the unfinished cells take one after the other, how many kinds of
+        them have no finished cell yet: timed as the slowest kind so far); None before any is done."""
         if not self.todo:
-            return 0.0
-        if not every:
+            return 0.0, 0
+        if not self.durations:
             return None
-        fallback = sum(every) / len(every)
         estimate = {k: sum(v) / len(v) for k, v in self.durations.items()}
-        return sum(estimate.get(self.kind_of(name), fallback) for name in self.todo)
+        slowest = max(estimate.values())
+        untimed = {self.kind_of(name) for name in self.todo} - set(estimate)
+        return sum(estimate.get(self.kind_of(name), slowest) for name in self.todo), len(untimed)
 
-    def projection(self, parallel: int = 1) -> str:
-        remaining = self.remaining_seconds()
-        if remaining is None:
+    def projection(self) -> str:
+        found = self.remaining_seconds()
+        if found is None:
             return "end projected once a cell is done"
-        remaining /= parallel
-        left = (
-            f"{remaining:.0f} s"
-            if remaining < 120
-            else f"{remaining / 60:.0f} min"
-            if remaining < 7200
-            else f"{remaining / 3600:.1f} h"
-        )
-        return f"projected end {_clock(remaining)} (in {left}; projected from the finished cells)"
+        remaining, untimed = found[0] / self.parallel, found[1]
+        if remaining < 120:
+            left = f"{remaining:.0f} s"
+        else:
+            left = f"{remaining / 60:.0f} min" if remaining < 7200 else f"{remaining / 3600:.1f} h"
+        rough = f"; rough: {untimed} kind(s) of cell not timed yet" if untimed else ""
+        return f"projected end {_clock(remaining)} (in {left}, from the finished cells{rough})"
 
-    def _show(self, parallel: int = 1) -> None:
-        self.bar.set_postfix_str(self.projection(parallel), refresh=True)
+    def _show(self) -> None:
+        self.bar.set_postfix_str(self.projection(), refresh=True)
 
     def line(self, text: str) -> None:
         stamped = f"[{time.strftime('%H:%M:%S')}] {text}"
@@ -158,14 +160,14 @@ class CellProgress:
         else:
             print(stamped, file=self.stream, flush=True)
 
-    def done(self, name: str, seconds: float, parallel: int = 1) -> None:
+    def done(self, name: str, seconds: float) -> None:
         """Cell ``name`` finished in ``seconds``: one line, and the bar and projection moved on."""
         self.todo.remove(name)
         self.durations.setdefault(self.kind_of(name), []).append(seconds)
         self.finished += 1
         self.bar.update(1)
-        self._show(parallel)
-        self.line(f"cell {self.finished}/{self.total} done: {name} ({seconds:.0f} s); {self.projection(parallel)}")
+        self._show()
+        self.line(f"cell {self.finished}/{self.total} done: {name} ({seconds:.0f} s); {self.projection()}")
 
     def close(self) -> None:
         self.bar.close()

@@ -26,10 +26,11 @@ Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfe
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
-from ..reports import transfer_report
+from ..reports import cell_pool, transfer_report
 from ..reports.cell_store import CellProgress, CellStore, ConfigurationMismatch, write_atomic
 from . import transfer_cells as tc
 
@@ -58,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--out", type=Path, default=Path("results/transfer"), help="results directory (default results/transfer)"
     )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
+    )
     p.add_argument("--max-cells", type=int, help="stop after running this many cells (the rest on the next run)")
     p.add_argument("--report-only", action="store_true", help="train nothing: the report of the cells saved in --out")
     return p
@@ -80,6 +84,8 @@ def options(argv: list[str] | None):
         parser.error(f"--after = {args.after} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW}")
     if args.evaluations < 1:
         parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
+    if args.jobs < 1:
+        parser.error(f"--jobs = {args.jobs} is not valid: allowed 1 or more")
     if args.max_cells is not None and args.max_cells < 1:
         parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
     args.settings = tc.Settings(args.before, args.after, args.evaluations)
@@ -92,26 +98,54 @@ def kind_of(name: str) -> str:
     return "baselines" if parts[-1] == "baselines" else f"{parts[1]}_{parts[2]}"
 
 
-def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]) -> bool:
-    """Runs ``todo`` (the first ``--max-cells`` of them) one after the other, saving each; False if
-    interrupted. The projection is of the whole study."""
-    progress = CellProgress([c.name for c in todo], {n: r["seconds"] for n, r in done.items()}, kind_of, "transfer")
+def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]) -> int:
+    """Runs ``todo`` (the first ``--max-cells`` of them), ``--jobs`` at a time, saving each as it
+    finishes; 0, 1 if a cell failed (the others go on), 130 if interrupted. The projection is of
+    the whole study."""
+    times = {n: r["seconds"] for n, r in done.items()}
+    progress = CellProgress([c.name for c in todo], times, kind_of, "transfer", parallel=args.jobs)
     limit = f" ({args.max_cells} of them now: --max-cells)" if args.max_cells is not None else ""
     progress.line(
-        f"transfer: {len(todo) + len(done)} cells, {len(done)} already done, {len(todo)} to run{limit} -> {args.out}"
+        f"transfer: {len(todo) + len(done)} cells, {len(done)} already done, {len(todo)} to run{limit}, "
+        f"{args.jobs} at a time -> {args.out}"
     )
+    failed = []
+
+    def finished(cell: tc.Cell, outcome) -> None:
+        if isinstance(outcome, Exception):
+            failed.append(cell.name)
+            progress.line(f"{cell.name}: FAILED: {outcome!r}")
+            return
+        done[cell.name] = store.save(cell.name, outcome)
+        progress.done(cell.name, outcome["seconds"])
+
+    def running(cells: list[tc.Cell]) -> None:
+        progress.bar.set_description_str(", ".join(c.name for c in cells))
+
     try:
-        for cell in todo[: args.max_cells]:
-            progress.bar.set_description_str(cell.name)
-            record = tc.run_cell(cell, args.settings, args.out)
-            done[cell.name] = store.save(cell.name, record)
-            progress.done(cell.name, record["seconds"])
+        batch = todo[: args.max_cells]
+        if args.jobs == 1:
+            for cell in batch:
+                running([cell])
+                finished(cell, _outcome(cell, args))
+        else:
+            cell_pool.run_parallel(
+                batch, lambda c: (tc.run_cell, c, args.settings, args.out), args.jobs, finished, running
+            )
     except KeyboardInterrupt:
         progress.line(f"interrupted: {len(done)} cells are saved in {args.out}; the same command goes on from there")
-        return False
+        return 130
     finally:
         progress.close()
-    return True
+    return 1 if failed else 0
+
+
+def _outcome(cell: tc.Cell, args):
+    """The record of ``cell`` run in this process, or the exception it raised."""
+    try:
+        return tc.run_cell(cell, args.settings, args.out)
+    except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
+        return e
 
 
 def report(args, key: dict, done: dict[str, dict]) -> str:
@@ -136,12 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     cells = tc.plan(args.scenarios, args.algos, args.seeds)
     done = {c.name: r for c in cells if (r := store.load(c.name)) is not None}
     todo = [] if args.report_only else [c for c in cells if c.name not in done]
-    finished = True
+    status = 0
     if todo:
         store.begin(sys.argv if argv is None else ["sorting-line-transfer", *argv])
         for scenario in args.scenarios:
             tc.schedules(scenario, args.before, args.out)
-        finished = run_cells(todo, store, args, done)
+        signal.signal(signal.SIGTERM, cell_pool.interrupt)
+        status = run_cells(todo, store, args, done)
     if not done:
         print("sorting-line-transfer: no finished cells to report", file=sys.stderr)
         return 1
@@ -153,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         + f"; wrote {args.out}/transfer.{{json,md,png,svg}}",
         file=sys.stderr,
     )
-    return 0 if finished else 130
+    return status
 
 
 if __name__ == "__main__":

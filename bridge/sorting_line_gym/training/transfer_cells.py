@@ -190,6 +190,7 @@ def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
 
 def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, models: Path) -> dict[str, Any]:
     """Strategies continued and frozen: one agent through the change, and its snapshot at it."""
+    started = time.monotonic()
     env = make_env(evolving)
     try:
         model = new_model(cell.algo, env, cell.seed)
@@ -200,6 +201,7 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
         curve = [float(r) for r in env.get_episode_rewards()]
     finally:
         env.close()
+    trained = time.monotonic()
     frozen_model = algorithm_class(cell.algo).load(snapshot, device="cpu")
     eval_env = make_env(changed)
     try:
@@ -207,11 +209,13 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
         continued = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
     finally:
         eval_env.close()
-    return {"continued_curve": curve, "continued_eval": continued, "frozen_eval": frozen}
+    timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
+    return {"continued_curve": curve, "continued_eval": continued, "frozen_eval": frozen, **timing}
 
 
 def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
     """Strategy from scratch: a new agent on the changed line."""
+    started = time.monotonic()
     env = make_env(changed)
     try:
         model = new_model(cell.algo, env, cell.seed)
@@ -219,12 +223,14 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
         curve = [float(r) for r in env.get_episode_rewards()]
     finally:
         env.close()
+    trained = time.monotonic()
     eval_env = make_env(changed)
     try:
         final = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
     finally:
         eval_env.close()
-    return {"scratch_curve": curve, "scratch_eval": final}
+    timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
+    return {"scratch_curve": curve, "scratch_eval": final, **timing}
 
 
 def library(command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None) -> list[float]:
