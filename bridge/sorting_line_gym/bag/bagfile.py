@@ -1,5 +1,5 @@
-"""Reading and writing sorting_line bags: ROS 2 bag directories (metadata.yaml + one MCAP file,
-Jazzy's default storage) through `rosbags`, with every message's schema embedded.
+"""Reading sorting_line bags: ROS 2 bag directories (metadata.yaml + MCAP files, Jazzy's default
+storage) through `rosbags`, with every message's schema embedded (:mod:`.writer` writes them).
 
 Besides the messages, a bag of a line carries under ``custom_data`` (metadata.yaml) the key
 ``sorting_line``: JSON with the line's namespace and the options of the node that served it
@@ -19,15 +19,15 @@ from __future__ import annotations
 
 import json
 from collections import defaultdict
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader
 
 from .foreign import describe_sources, line_namespace_of, options_from_topics
-from .schema import NODE_QOS, decode, relative_to, typestore
+from .schema import decode, relative_to, typestore
 
 #: The custom_data key of the line's description.
 META_KEY = "sorting_line"
@@ -114,6 +114,9 @@ def open_bag(path: str | Path) -> Bag:
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag (expected a bag directory with metadata.yaml, or an .mcap file)")
+    from .recovery import check_complete  # (recovery reads bags through this module)
+
+    check_complete(path)  # a recording that was cut: says how to recover it
     if path.is_dir() and not (path / "metadata.yaml").is_file():
         raise BagError(f"{path}: not a ROS 2 bag directory (no metadata.yaml)")
     store = typestore()
@@ -157,57 +160,6 @@ def _described_by_topics(types: dict[str, str], messages: list[BagMessage]) -> L
     return LineInfo(namespace, options, sources)
 
 
-class BagWriter:
-    """A new bag directory (rosbag2 version 9, MCAP storage), schemas from :func:`typestore`."""
-
-    def __init__(self, path: str | Path, custom: dict[str, str] | None = None):
-        self.path = Path(path)
-        if self.path.exists():
-            raise BagError(f"{self.path} exists already: choose a new output directory")
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        for key, value in (custom or {}).items():
-            self._writer.set_custom_data(key, value)
-        self._connections: dict[str, object] = {}
-        self.counts: dict[str, int] = defaultdict(int)
-        self._writer.open()
-
-    def add_topic(self, topic: str, msgtype: str) -> None:
-        if topic not in self._connections:
-            self._connections[topic] = self._writer.add_connection(
-                topic, msgtype, typestore=typestore(), offered_qos_profiles=[NODE_QOS])
-
-    def write(self, topic: str, log_time: int, data: bytes | memoryview) -> None:
-        self._writer.write(self._connections[topic], log_time, data)
-        self.counts[topic] += 1
-
-    def close(self) -> None:
-        self._writer.close()
-
-
-def rewrite_bag(src: str | Path, dst: str | Path,
-                change: Callable[[BagMessage], object | None] = lambda m: None) -> int:
-    """Copies bag ``src`` to ``dst`` (custom_data included). ``change(message)`` may return a new
-    message object (a rosbags message of the same type) to store instead; returns how many were
-    changed. For tests (a tampered golden bag) and for trimming a bag by hand."""
-    bag = open_bag(src)
-    store = typestore()
-    writer = BagWriter(dst, bag.custom)
-    changed = 0
-    try:
-        for topic, msgtype in bag.types.items():
-            writer.add_topic(topic, msgtype)
-        for m in bag.messages:
-            new = change(m)
-            data = m.data
-            if new is not None:
-                data = bytes(store.serialize_cdr(new, m.msgtype))
-                changed += 1
-            writer.write(m.topic, m.log_time, data)
-    finally:
-        writer.close()
-    return changed
-
-
 def describe(bag: Bag) -> str:
     """A short summary: topics with types and counts, and the line's description."""
     counts: dict[str, int] = defaultdict(int)
@@ -221,6 +173,9 @@ def describe(bag: Bag) -> str:
         lines += describe_sources(bag.info)
     elif bag.info:
         lines.append(f"  line {bag.info.namespace}: {json.dumps(bag.info.node, sort_keys=True)}")
+    from .losses import recording_notes
+
+    lines.extend(recording_notes(bag.custom))  # how the recording went, what it missed
     return "\n".join(lines)
 
 

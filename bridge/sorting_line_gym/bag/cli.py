@@ -6,11 +6,15 @@
     sorting-line-bag play run1 --namespace /test --lockstep       # tick by tick, after each answer
     sorting-line-bag info run1
     sorting-line-bag check run1 --controller 'my_controller --setup D'   # 0 pass, 1 fail (see check --help)
+    sorting-line-bag record --namespace /plant -o run2 --compression zstd --max-bag-size 100000000
+    sorting-line-bag reindex run2                                 # after the recorder was killed
 
 Exit codes: 0 done (replay: identical), 1 replay found a difference, 2 bad input (a missing or
-corrupt bag, an unknown topic, an existing output, a bag replay cannot use), 3 the graph or the
-replay node failed (a wait timed out, the node died). SIGINT/SIGTERM end `record` and `play`
-cleanly (the bag is closed with its metadata).
+corrupt bag, an unknown topic, an existing or unwritable output, a bad option, a bag replay cannot
+use), 3 the graph, the replay node or the disk failed (a wait timed out, the node died, the disk
+filled while recording). SIGINT/SIGTERM end `record` and `play` cleanly (the bag is closed with
+its metadata); a recorder killed outright leaves a bag `reindex` recovers, with everything received
+up to about half a second before the kill (docs/reliability.md, "Recording").
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import sys
 from ..line.errors import BridgeError
 from ..line.vocabulary import SETUPS
 from .bagfile import BagError, describe, open_bag
+from .writer import BagWriteError
 
 EXIT_DIFFERENT, EXIT_BAD_INPUT, EXIT_FAILED = 1, 2, 3
 
@@ -63,6 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     r.add_argument("--max-ticks", type=int, default=None, help="stop once this many states were recorded")
     r.add_argument("--wait", type=float, default=10.0, help="how long to wait for the line to show up (s)")
+    _add_write_options(r)
 
     rp = sub.add_parser("replay", help="replay a bag's resets and commands into a fresh lock-step node and compare")
     rp.add_argument("bag", help="the bag directory to replay")
@@ -94,6 +100,9 @@ def _parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
     i.add_argument("bag", help="the bag directory")
     _check_parser(sub)
+    x = sub.add_parser("reindex", help="recover a bag whose recorder was killed: rebuild metadata.yaml (and the "
+                                       "MCAP summary of a cut file) from what is on disk, as `ros2 bag reindex`")
+    x.add_argument("bag", help="the bag directory")
     return p
 
 
@@ -152,19 +161,54 @@ examples:
 """
 
 
+def _option(check, kind):
+    """An argparse type from a writer check: the check's message names the value and the allowed range."""
+    def parse(text: str):
+        try:
+            return check(kind(text))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {'whole number' if kind is int else 'number'}") from None
+        except BagError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    return parse
+
+
+def _add_write_options(r: argparse.ArgumentParser) -> None:
+    from .writer import MIN_SPLIT_DURATION, MIN_SPLIT_SIZE, check_compression, check_max_bag_duration, \
+        check_max_bag_size
+
+    r.add_argument("--max-bag-size", type=_option(check_max_bag_size, int), default=0, metavar="BYTES",
+                   help=f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "
+                        f"the default; else >= {MIN_SPLIT_SIZE}), as `ros2 bag record --max-bag-size`")
+    r.add_argument("--max-bag-duration", type=_option(check_max_bag_duration, float), default=0.0, metavar="S",
+                   help=f"start a new MCAP file once the current one spans this many seconds (0: never, the "
+                        f"default; else >= {MIN_SPLIT_DURATION:g})")
+    r.add_argument("--compression", type=_option(check_compression, str), default="none",
+                   help="compress each MCAP chunk: zstd (as rosbag2's zstd presets; rosbags, mcap and Foxglove "
+                        "read it), lz4, or none (the default)")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
     try:
         if args.command == "info":
             print(describe(open_bag(args.bag)))
             return 0
+        if args.command == "reindex":
+            from .recovery import reindex
+
+            print(reindex(args.bag).summary())
+            return 0
         if args.command == "record":
             from .record import record
+            from .writer import WriteOptions
 
+            options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
             with _Stop() as stop:
                 result = record(args.namespace, args.output, args.topics, duration=args.duration,
                                 max_ticks=args.max_ticks, wait=args.wait, stop=stop,
-                                on_ready=lambda s: print(s, flush=True), diagnostics=args.diagnostics)
+                                on_ready=lambda s: print(s, flush=True), diagnostics=args.diagnostics,
+                                options=options)
             print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
             return 0
         if args.command == "replay":
@@ -188,6 +232,9 @@ def main(argv: list[str] | None = None) -> int:
                               answer_timeout=args.answer_timeout)
             print(result.summary(), flush=True)
             return 0
+    except BagWriteError as e:
+        print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
+        return EXIT_FAILED
     except BagError as e:
         print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

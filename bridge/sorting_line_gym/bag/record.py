@@ -4,7 +4,10 @@ By default it records every topic of the line in namespace NS (``input``, ``belt
 ``sensors/ratio`` on the advanced line, ``state``, ``events/reset`` - the resets, since services
 are not recorded - and the commands ``cmd/speed`` and ``cmd/sort_mode``) and ``/clock``. Messages
 are stored as the CDR bytes rclpy received (``raw=True``), stamped with their receive time, in a
-bag directory with metadata.yaml and one MCAP file whose schemas are the .msg definitions.
+bag directory with metadata.yaml and MCAP files whose schemas are the .msg definitions, written
+by :mod:`.writer`: on disk within about half a second of arriving (a recorder killed outright
+leaves a bag ``sorting-line-bag reindex`` recovers), split by ``--max-bag-size`` /
+``--max-bag-duration`` and chunk-compressed by ``--compression`` as rosbag2 does.
 
 It also asks the node serving the line for its parameters (``get_parameters``) and stores them in
 the bag (see :mod:`.bagfile`), which is what makes ``sorting-line-bag replay BAG`` self-contained.
@@ -15,19 +18,26 @@ the line has arrived (proof that the node sends to this recorder); then it print
 (a controller that joins later: wait for its line before driving, or its first commands are
 not in the bag). It stops on SIGINT/SIGTERM, after ``--duration`` seconds, or once
 ``--max-ticks`` states were recorded, and drains what is still in flight before closing the bag.
+At the end it compares what it received with the node's own counters (:mod:`.losses`) and says
+how many messages it missed, on which topics; metadata.yaml keeps that for ``info``. A full disk
+ends the recording with exit code 3, a message, and the bag as far as it got (readable).
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .bagfile import META_KEY, BagError, BagWriter, LineInfo
+from .bagfile import META_KEY, BagError, LineInfo
+from .losses import LossCounter, describe_losses
 from .rosnode import ToolNode
 from .schema import CLOCK, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
+from .writer import BagWriter, WriteOptions
 
 #: The node's parameters that describe a line (and thus a replay's node).
 NODE_PARAMETERS = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "mode",
@@ -42,12 +52,15 @@ class RecordResult:
     counts: dict[str, int] = field(default_factory=dict)
     info: LineInfo | None = None
     seconds: float = 0.0
+    losses: dict | None = None
+    files: int = 1
 
     def summary(self) -> str:
         total = sum(self.counts.values())
         size = sum(f.stat().st_size for f in self.path.iterdir() if f.is_file()) if self.path.exists() else 0
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
-        return f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB ({per_topic})"
+        return (f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB in {self.files} "
+                f"file(s) ({per_topic})\n{describe_losses(self.losses)}")
 
 
 def _parameter_value(v):
@@ -131,49 +144,95 @@ def _store_schedule(options: dict) -> None:
 
 def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, duration: float | None = None,
            max_ticks: int | None = None, wait: float = 10.0, stop: Callable[[], bool] = lambda: False,
-           on_ready: Callable[[str], None] = print, diagnostics: bool = False) -> RecordResult:
+           on_ready: Callable[[str], None] = print, diagnostics: bool = False,
+           options: WriteOptions | None = None) -> RecordResult:
     """Records until ``stop()`` says so, ``duration`` seconds pass or ``max_ticks`` states arrived.
 
     ``topics``: absolute names or names relative to ``namespace``; None = the line's topics and
-    /clock (plus /diagnostics with ``diagnostics=True``). Raises BagError for bad input (an
-    unknown topic, an existing output) and TimeoutError when the line does not show up.
+    /clock (plus /diagnostics with ``diagnostics=True``). ``options``: splitting and compression.
+    Raises BagError for bad input (an unknown topic, an existing or unwritable output, a bad
+    option), BagWriteError when writing fails on the way (a full disk), and TimeoutError when the
+    line does not show up.
 
     Two phases: match (find the line's node and its parameters, the topics and their types, and
     wait until the node's topics are matched) and write (store what arrives until the end, then
-    drain what is in flight)."""
+    drain what is in flight, and compare with the node's counters: :mod:`.losses`)."""
     namespace = "/" + namespace.strip("/")
     out = Path(out)
-    if out.exists():
-        raise BagError(f"{out} exists already: choose a new output directory")
+    options = (options or WriteOptions()).check()
+    _check_output(out)
     tool = ToolNode("sorting_line_bag_record")
     writer = None
     try:
-        options, types = _match(tool, namespace, topics, diagnostics, wait)
-        info = LineInfo(namespace, options or {})
-        writer = BagWriter(out, {META_KEY: info.to_json()})
+        node_options, types = _match(tool, namespace, topics, diagnostics, wait)
+        info = LineInfo(namespace, node_options or {})
+        writer = BagWriter(out, {META_KEY: info.to_json()}, options)
         for name, msgtype in types.items():
             writer.add_topic(name, msgtype)
+        evolving = bool(node_options and node_options.get("evolution_file"))
+        counter = LossCounter(namespace, list(types), info.node.get("variant"), evolving,
+                              float(info.node.get("tick_period") or 1.0))
+        diag = _line_reports(tool, namespace, counter)
         states = [0]
         state = join(namespace, "state")
 
         def keep(name):
             def on(data: bytes, received: int):
                 writer.write(name, received, data)
+                counter.on_message(name, data)
                 if name == state:
                     states[0] += 1
             return on
 
         subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
-        _await_matched(tool, namespace, subs, wait, evolving=bool(options and options.get("evolution_file")))
+        _await_matched(tool, namespace, subs, wait, evolving=evolving)
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
         _write(tool, writer, subs, lambda: states[0], duration=duration, max_ticks=max_ticks, stop=stop,
                on_ready=on_ready)
-        return RecordResult(out, dict(writer.counts), info, time.monotonic() - started)
+        seconds = time.monotonic() - started
+        losses = _compare_and_close(tool, writer, counter, diag)
+        return RecordResult(out, dict(writer.counts), info, seconds, losses, len(writer.files))
     finally:
         if writer is not None:
-            writer.close()
+            writer.close(state="stopped by an error")
         tool.close()
+
+
+def _compare_and_close(tool: ToolNode, writer: BagWriter, counter: LossCounter, diag) -> dict:
+    """Waits for one more report of the node's counters, compares, stores the result, closes the bag."""
+    last = counter.last
+    with contextlib.suppress(TimeoutError):  # a report after the drain: the window covers (nearly) all
+        tool.until(lambda: counter.last != last, 1.5, "a /diagnostics report of the line")
+        tool.spin_for(0.3)  # the line's messages sent before that report (other topics may come later)
+    tool.node.destroy_subscription(diag)
+    losses = counter.report()
+    writer.set_losses(losses)
+    writer.close()
+    return losses
+
+
+def _check_output(out: Path) -> None:
+    """Fails before any waiting when the bag directory cannot be made."""
+    if out.exists():
+        raise BagError(f"{out} exists already: choose a new output directory")
+    parent = out.absolute().parent
+    if not parent.is_dir():
+        raise BagError(f"{out}: cannot create the bag directory: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise BagError(f"{out}: cannot create the bag directory: {parent} is not writable")
+
+
+def _line_reports(tool: ToolNode, namespace: str, counter: LossCounter):
+    """Feeds the line's /diagnostics reports (its counters) to ``counter``."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def on(array):
+        for status in array.status:
+            if status.hardware_id == namespace:
+                counter.on_status({kv.key: kv.value for kv in status.values})
+
+    return tool.node.create_subscription(DiagnosticArray, "/diagnostics", on, 10)
 
 
 def _match(tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics: bool,
@@ -235,6 +294,7 @@ def _write(tool: ToolNode, writer: BagWriter, subs: dict, states: Callable[[], i
                     matched[name] = n
                     on_ready(f"matched {name}: {n} publisher(s)")
         tool.executor.spin_once(timeout_sec=0.05)
+        writer.tick()  # what arrived more than FLUSH_INTERVAL ago goes to disk, even when nothing more comes
     # Drain what is in flight: spin until nothing has arrived for 0.2 s (at most 2 s).
     deadline = time.monotonic() + 2.0
     while time.monotonic() < deadline:
