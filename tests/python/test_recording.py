@@ -27,7 +27,6 @@ import yaml
 
 import ros_harness as h
 from bag_golden import DATA, BagProcess
-
 from sorting_line_gym.bag import open_bag, rewrite_bag
 from sorting_line_gym.bag.losses import header_stamp
 from sorting_line_gym.bag.schema import PUBLISHED, relative_to

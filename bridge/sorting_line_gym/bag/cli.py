@@ -167,15 +167,21 @@ def _option(check, kind):
         try:
             return check(kind(text))
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a {'whole number' if kind is int else 'number'}") from None
+            what = "whole number" if kind is int else "number"
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {what}") from None
         except BagError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
     return parse
 
 
 def _add_write_options(r: argparse.ArgumentParser) -> None:
-    from .writer import MIN_SPLIT_DURATION, MIN_SPLIT_SIZE, check_compression, check_max_bag_duration, \
-        check_max_bag_size
+    from .writer import (
+        MIN_SPLIT_DURATION,
+        MIN_SPLIT_SIZE,
+        check_compression,
+        check_max_bag_duration,
+        check_max_bag_size,
+    )
 
     r.add_argument("--max-bag-size", type=_option(check_max_bag_size, int), default=0, metavar="BYTES",
                    help=f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "

@@ -35,10 +35,10 @@ import json
 import os
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import version
 from pathlib import Path
-from typing import Callable
 
 import yaml
 from mcap.writer import CompressionType, Writer
@@ -82,7 +82,7 @@ class WriteOptions:
     max_bag_duration: float = 0.0
     compression: str = "none"
 
-    def check(self) -> "WriteOptions":
+    def check(self) -> WriteOptions:
         check_max_bag_size(self.max_bag_size)
         check_max_bag_duration(self.max_bag_duration)
         check_compression(self.compression)
