@@ -12,7 +12,8 @@ What must hold:
 - other result-changing options into the same --out are refused, naming what differs; bad flags
   fail at once with exit code 2.
 
-Cost: about 30-40 s on a busy 2-core machine (5 cells of 10 + 10 episodes, 3 evaluation episodes).
+Cost: about 42 s of CPU (5 cells of 10 + 10 episodes, 3 evaluation episodes; the last 3 two at a time);
+115 s of wall time at load 13-17 under nice -n 19.
 """
 
 from __future__ import annotations
