@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PROJECT_VENV = ROOT / ".venv"
+PROJECT_VENV = (ROOT / ".venv").resolve()  # (a symbolic link in a git worktree)
 # What launch_scripts/setup.sh compiled into .venv (the standard's simulation_interfaces too: no wheel has it).
 INTERFACES_MANIFESTS = [PROJECT_VENV / ".sorting_line" / f"{package}_install_manifest.txt"
                         for package in ("sorting_line_interfaces", "simulation_interfaces")]
