@@ -9,6 +9,8 @@ of a type this project does not know, the line in another namespace), from the g
   (exit 2), then with `--setup D` reproduces every message; the sqlite3 bag, whose recorder
   caught the node's parameters on /parameter_events (seed of line_2 = node seed + 2), replays
   with no flags at all;
+- open-loop `check` of `sorting-line-controller` passes on both; closed-loop `check` of the MCAP
+  bag names the missing flags (exit 2), then passes with `--setup D` (as `overrides`);
 - a bag of nothing but other types is refused with the types named (exit 2).
 """
 
@@ -119,3 +121,15 @@ def test_open_loop_check_passes_the_controller_that_drove_the_line(ros2_bags, st
     assert verdict.passed and verdict.exit_code == 0, verdict.summary()
     assert verdict.namespace == ("/factory/cell_3" if storage == "mcap" else "/plant/line_2"), verdict.summary()
     assert verdict.count("matching") >= 250 and not verdict.differences, verdict.summary()
+
+
+def test_closed_loop_check_names_the_missing_flags_then_passes_with_them(ros2_bags):
+    from sorting_line_gym.bag.check import check_controller
+
+    spec = GOLDEN["basic_d"]
+    verdict = check_controller(ros2_bags["mcap"], closed_loop=True, wait=1.0)
+    assert verdict.exit_code == 2, verdict.summary()
+    assert "pass --obs-noise ... --action-penalty ... --threshold ... (--setup A|B|C|D" in verdict.error, verdict.error
+    verdict = check_controller(ros2_bags["mcap"], closed_loop=True, overrides={"setup": spec["setup"]},
+                               controller=f"sorting-line-controller --setup {spec['setup']} --agent {spec['agent']}")
+    assert verdict.passed and len(verdict.episodes) == 5, verdict.summary()
