@@ -9,6 +9,7 @@ of a type this project does not know, the line in another namespace), from the g
   (exit 2), then with `--setup D` reproduces every message; the sqlite3 bag, whose recorder
   caught the node's parameters on /parameter_events (seed of line_2 = node seed + 2), replays
   with no flags at all;
+- `play` leaves out /rosout, /parameter_events and the unknown type;
 - open-loop `check` of `sorting-line-controller` passes on both; closed-loop `check` of the MCAP
   bag names the missing flags (exit 2), then passes with `--setup D` (as `overrides`);
 - a bag of nothing but other types is refused with the types named (exit 2).
@@ -133,3 +134,12 @@ def test_closed_loop_check_names_the_missing_flags_then_passes_with_them(ros2_ba
     verdict = check_controller(ros2_bags["mcap"], closed_loop=True, overrides={"setup": spec["setup"]},
                                controller=f"sorting-line-controller --setup {spec['setup']} --agent {spec['agent']}")
     assert verdict.passed and len(verdict.episodes) == 5, verdict.summary()
+
+
+def test_play_leaves_out_the_recorded_graphs_own_topics(ros2_bags, capsys):
+    assert main(["play", str(ros2_bags["mcap"]), "--rate", "0", "--no-wait", "--namespace", "/elsewhere"]) == 0
+    out = capsys.readouterr().out
+    # 255 ticks of input, belt/occupancy, state and /clock, 5 resets, 1 /diagnostics; not the commands
+    assert "played 1026 messages" in out and "/elsewhere/state 255" in out, out
+    assert ("not played: /factory/cell_status (type factory_msgs/msg/CellStatus not known here), /parameter_events "
+            "(the recorded nodes' own topic), /rosout (the recorded nodes' own topic)") in out, out
