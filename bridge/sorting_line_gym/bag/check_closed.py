@@ -71,7 +71,8 @@ def run_closed_loop(bag: Bag, verdict: Verdict, tolerances: dict[str, Tolerance]
         run = _Run(plan, verdict, tool, node, answer_timeout, stop)
         run.wait_for_graph(wait)
         if record is not None:
-            recorder = _Recorder(verdict.namespace, record, wait)
+            speed = join(verdict.namespace, "cmd/speed")
+            recorder = _Recorder(verdict.namespace, record, wait, {speed: tool.node.count_publishers(speed)})
         started = time.monotonic()
         run.drive(progress)
         verdict.seconds = time.monotonic() - started
@@ -182,17 +183,26 @@ class _Run:
 class _Recorder:
     """`sorting-line-bag record` of the check's line, in a thread of its own, until ``stop()``."""
 
-    def __init__(self, namespace: str, out, wait: float):
+    def __init__(self, namespace: str, out, wait: float, writers: dict[str, int]):
+        """``writers``: command topic -> how many writers it has (the check sees them): the
+        recorder is ready once it has matched them all, so the run's first commands are in the bag."""
         from .record import record
 
         self._stop, self._ready = threading.Event(), threading.Event()
         self.error: BaseException | None = None
         self.result = None
+        self.matched: dict[str, int] = {}
+
+        def on_ready(text: str) -> None:
+            if text.startswith("matched "):
+                name, count = text[len("matched "):].rsplit(": ", 1)
+                self.matched[name] = int(count.split()[0])
+            elif text.startswith("recording"):
+                self._ready.set()
 
         def run() -> None:
             try:
-                self.result = record(namespace, out, stop=self._stop.is_set, wait=wait,
-                                     on_ready=lambda _text: self._ready.set())
+                self.result = record(namespace, out, stop=self._stop.is_set, wait=wait, on_ready=on_ready)
             except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
                 self.error = e
                 self._ready.set()
@@ -202,7 +212,9 @@ class _Recorder:
         if not self._ready.wait(wait + 30) or self.error is not None:
             self.stop()
             raise self.error or BridgeTimeout(f"--record: the recorder did not start within {wait + 30:g} s")
-        time.sleep(0.5)  # the controller's command writers, discovered by the recorder too
+        deadline = time.monotonic() + wait
+        while any(self.matched.get(t, 0) < n for t, n in writers.items()) and time.monotonic() < deadline:
+            time.sleep(0.05)
 
     def stop(self) -> str | None:
         self._stop.set()

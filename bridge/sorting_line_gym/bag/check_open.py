@@ -88,9 +88,10 @@ class _CheckPace(_Pace):
     """`play --lockstep`'s pacing, noting when each tick was published and awaiting the answers
     the bag shows for it (on every command topic, not only ``cmd/speed``)."""
 
-    def __init__(self, tool, selection, pubs, stop, answers: _Answers, expected, answer_timeout: float, bar):
+    def __init__(self, tool, selection, pubs, stop, answers: _Answers, expected, answer_timeout: float, bar,
+                 subs: list[tuple]):
         super().__init__(tool, selection, pubs, stop, set(), answer_timeout)
-        self.answers, self.expected, self.bar = answers, expected, bar
+        self.answers, self.expected, self.bar, self.subs = answers, expected, bar, subs
         self.published_at: dict[int, int] = {}
         self.timed_out: set[int] = set()
 
@@ -106,23 +107,29 @@ class _CheckPace(_Pace):
         topics = self.expected.get(stamp)
         if not topics:
             return
+        def answered() -> bool:
+            self.tool.take_into(self.subs)
+            return self.answers.answered(stamp, topics) or self.stop()
+
         try:
-            self.tool.until(lambda: self.answers.answered(stamp, topics) or self.stop(), self.answer_timeout,
-                            lambda: f"the controller's answer to the tick stamped {stamp / 1e9:.3f} s")
+            # On the command subscriptions alone, not the executor: the shorter round trip.
+            self.tool.waiter.until_received([sub for sub, _ in self.subs], answered, self.answer_timeout,
+                                            lambda: f"the controller's answer to the tick stamped {stamp / 1e9:.3f} s")
         except BridgeTimeout:
             self.timed_out.add(stamp)
 
 
-def _subscribe_commands(tool: ToolNode, namespace: str, answers: _Answers) -> list:
-    subs = []
-    for topic in FIELDS:
-        msgtype = LINE_TYPES[topic]
-        subs.append(tool.raw_subscription(join(namespace, topic), msgtype,
-                                          lambda data, t, topic=topic, msgtype=msgtype:
-                                          answers.on_command(topic, topic, decode(data, msgtype), t)))
-    subs.append(tool.raw_subscription(join(namespace, BATCH), BATCH_TYPE,
-                                      lambda data, t: answers.on_batch(decode(data, BATCH_TYPE), t)))
-    return subs
+def _subscribe_commands(tool: ToolNode, namespace: str, answers: _Answers) -> list[tuple]:
+    """The raw command subscriptions, each with the callback that files what it receives."""
+    def on_command(topic: str):
+        return lambda data, t: answers.on_command(topic, topic, decode(data, LINE_TYPES[topic]), t)
+
+    def on_batch(data: bytes, t: int) -> None:
+        answers.on_batch(decode(data, BATCH_TYPE), t)
+
+    handlers = [(join(namespace, topic), LINE_TYPES[topic], on_command(topic)) for topic in FIELDS]
+    handlers.append((join(namespace, BATCH), BATCH_TYPE, on_batch))
+    return [(tool.raw_subscription(name, msgtype, callback), callback) for name, msgtype, callback in handlers]
 
 
 def _wait_for_controller(tool: ToolNode, selection: _Selection, pubs: dict, subs: list, wait: float) -> None:
@@ -131,8 +138,8 @@ def _wait_for_controller(tool: ToolNode, selection: _Selection, pubs: dict, subs
     started = time.monotonic()
     try:
         _wait_for_subscribers(tool, selection, pubs, wait)
-        tool.until(lambda: any(s.get_publisher_count() for s in subs), max(0.1, wait - (time.monotonic() - started)),
-                   lambda: "a writer of " + ", ".join(s.topic_name for s in subs))
+        tool.until(lambda: any(s.get_publisher_count() for s, _ in subs), max(0.1, wait - (time.monotonic() - started)),
+                   lambda: "a writer of " + ", ".join(s.topic_name for s, _ in subs))
     except TimeoutError as e:
         raise BridgeTimeout(f"{e}: no controller answers in {selection.out_ns} (start one there, or pass "
                             "--controller CMD)") from None
@@ -166,9 +173,10 @@ def run_open_loop(bag: Bag, verdict: Verdict, *, namespace: str | None, answer_t
         subs = _subscribe_commands(tool, selection.out_ns, answers)
         _wait_for_controller(tool, selection, pubs, subs, wait)
         started = time.monotonic()
-        pace = _CheckPace(tool, selection, pubs, stop, answers, expected, answer_timeout, bar)
+        pace = _CheckPace(tool, selection, pubs, stop, answers, expected, answer_timeout, bar, subs)
         pace.tick_by_tick()
         tool.spin_for(0.05)  # answers still in flight
+        tool.take_into(subs)
         verdict.seconds = time.monotonic() - started
     finally:
         bar.close()

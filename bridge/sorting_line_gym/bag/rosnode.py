@@ -23,6 +23,12 @@ DEEP_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=R
                       durability=DurabilityPolicy.VOLATILE)
 
 
+def received_ns(info) -> int:
+    """When DDS received a message (its message info), else now (ns since the epoch)."""
+    received = info.get("received_timestamp") if isinstance(info, dict) else None
+    return int(received) if received else time.time_ns()
+
+
 class ToolNode:
     """One rclpy context with one node and one executor; ``close()`` shuts all three down."""
 
@@ -50,10 +56,18 @@ class ToolNode:
         # Two parameters: rclpy then passes the message info, whose receive time is the DDS
         # layer's. (The time the executor gets round to the callback would reorder topics.)
         def on_message(data, info):
-            received = info.get("received_timestamp") if isinstance(info, dict) else None
-            callback(data, int(received) if received else time.time_ns())
+            callback(data, received_ns(info))
 
         return self.node.create_subscription(rclpy_class(msgtype), topic, on_message, qos, raw=True)
+
+    def take_into(self, subscriptions: list[tuple[object, Callable[[bytes, int], None]]]) -> None:
+        """Hands every message the raw ``subscriptions`` already received to their callbacks
+        (``(subscription, callback)`` pairs), without the executor: for a loop that waits on them
+        with ``waiter.until_received``, whose round trip is shorter than the executor's."""
+        for sub, callback in subscriptions:
+            with sub.handle:
+                while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
+                    callback(taken[0], received_ns(taken[1]))
 
     def publisher(self, topic: str, msgtype: str, qos=DEEP_QOS):
         """A publisher of ``msgtype``; ``publish(bytes)`` sends CDR bytes as they are."""
