@@ -28,9 +28,10 @@ import pytest
 
 import ros_harness as h
 from bag_golden import DATA, GOLDEN, BagProcess
-from sorting_line_gym.bag.bagfile import META_KEY, BagWriter, open_bag
+from sorting_line_gym.bag.bagfile import META_KEY, open_bag
 from sorting_line_gym.bag.check import check_controller
 from sorting_line_gym.bag.schema import typestore
+from sorting_line_gym.bag.writer import BagWriter
 
 SCRIPT = Path(__file__).with_name("scripted_controller.py")
 
