@@ -6,7 +6,8 @@ bag recorded for it, except where told to misbehave. Written as a user's rclpy n
 
 Misbehaviours (TICK = stamp in whole tick periods): ``--speed-at TICK=SPEED`` answers that tick
 with SPEED; ``--stamp-shift-at TICK=S`` answers it with its stamp moved by S seconds; ``--skip
-TICK`` (repeatable) or ``--skip-all`` does not answer; ``--exit-at TICK=CODE`` writes a line on
+TICK`` (repeatable) or ``--skip-all`` does not answer; ``--skip-once TICK`` does not answer
+it the first time it comes; ``--exit-at TICK=CODE`` writes a line on
 stderr and exits with CODE when that tick comes.
 """
 
@@ -41,6 +42,7 @@ def main() -> int:
     p.add_argument("--stamp-shift-at", action="append", default=[])
     p.add_argument("--skip", action="append", type=int, default=[])
     p.add_argument("--skip-all", action="store_true")
+    p.add_argument("--skip-once", action="append", type=int, default=[])
     p.add_argument("--exit-at", action="append", default=[])
     args = p.parse_args(remove_ros_args(sys.argv)[1:])
     speeds, shifts, exits = _pairs(args.speed_at, float), _pairs(args.stamp_shift_at, float), _pairs(args.exit_at, int)
@@ -67,6 +69,9 @@ def main() -> int:
             exit_code.append(exits[tick])
             return
         recorded = commands.get(key, {})
+        if tick in args.skip_once:
+            args.skip_once.remove(tick)
+            return
         if args.skip_all or tick in args.skip or "cmd/speed" not in recorded:
             return
         if tick in shifts:

@@ -64,12 +64,12 @@ def run_closed_loop(bag: Bag, verdict: Verdict, tolerances: dict[str, Tolerance]
     BagError for a bag it cannot use, BridgeError when the node or the controller fails."""
     plan = _plan(bag, overrides)
     scratch = tempfile.TemporaryDirectory(prefix="sorting_line_check_")
-    node = lockstep_node(plan, verdict.namespace, Path(scratch.name))
-    tool = recorder = None
+    watch = _Watch(process)
+    tool = ToolNode("sorting_line_bag_check", watch)
+    run = recorder = None
     try:
-        tool = ToolNode("sorting_line_bag_check", _Watch(node, process))
-        run = _Run(plan, verdict, tool, node, answer_timeout, stop)
-        run.wait_for_graph(wait)
+        run = _Run(plan, verdict, tool, watch, Path(scratch.name), answer_timeout, wait, stop)
+        run.start_node()
         if record is not None:
             speed = join(verdict.namespace, "cmd/speed")
             recorder = _Recorder(verdict.namespace, record, wait, {speed: tool.node.count_publishers(speed)})
@@ -80,20 +80,22 @@ def run_closed_loop(bag: Bag, verdict: Verdict, tolerances: dict[str, Tolerance]
     finally:
         if recorder is not None:
             verdict.recorded = recorder.stop()
-        if tool is not None:
-            tool.close()
-        node.stop()
+        tool.close()
+        if run is not None:
+            run.stop_node()
         scratch.cleanup()
     _judge(plan, verdict, run, tolerances)
 
 
 class _Run:
-    """The drive phase: the bag's resets, each followed by the controller's episode."""
+    """The drive phase: a fresh node, the bag's resets, each followed by the controller's episode."""
 
-    def __init__(self, plan: _Plan, verdict: Verdict, tool: ToolNode, node, answer_timeout: float, stop):
-        self.plan, self.verdict, self.tool, self.node = plan, verdict, tool, node
-        self.answer_timeout, self.stop = answer_timeout, stop
+    def __init__(self, plan: _Plan, verdict: Verdict, tool: ToolNode, watch: _Watch, scratch: Path,
+                 answer_timeout: float, wait: float, stop):
+        self.plan, self.verdict, self.tool, self.watch, self.scratch = plan, verdict, tool, watch, scratch
+        self.answer_timeout, self.wait, self.stop = answer_timeout, wait, stop
         self.namespace = verdict.namespace
+        self.node = None
         self.link = LineLink(tool.node, self.namespace, advanced=False)
         self.states: list[dict] = []
         self.newest: dict[int, tuple[int, bool]] = {}  # run episode -> (newest step, ended)
@@ -101,6 +103,26 @@ class _Run:
                                                self._on_state)
         self.resets = plan.rel_msgs.get("events/reset", [])
         self.episodes: dict[int, int] = {}  # bag episode -> run episode
+
+    def start_node(self) -> None:
+        self.node = lockstep_node(self.plan, self.namespace, self.scratch)
+        self.watch.processes.append(self.node)
+        self.wait_for_graph(self.wait)
+
+    def stop_node(self) -> None:
+        if self.node is not None:
+            self.watch.processes.remove(self.node)
+            self.node.stop()
+            self.node = None
+
+    def restart_node(self) -> None:
+        """A fresh node again: the only way to repeat a first reset without a seed exactly."""
+        self.stop_node()
+        self.states.clear()
+        self.newest.clear()
+        self.start_node()
+        self.verdict.notes.append("the controller did not answer the first tick (its first answer can be lost "
+                                  "while endpoints still match): the node was restarted and the run began again")
 
     def _on_state(self, data: bytes, _received: int) -> None:
         s = decode(data, LINE_TYPES["state"])
@@ -141,6 +163,7 @@ class _Run:
 
     def _episode(self, recorded: dict, target: int, bar) -> None:
         seed = int(recorded["seed"]) if recorded.get("seeded", True) else None
+        first_act = not self.episodes  # the bag's first reset: the node's first act
         for attempt in range(1, RESET_ATTEMPTS + 1):
             self.link.send_reset(seed)
             self.tool.until(self.link.reset_done, max(5.0, self.answer_timeout), f"the reply of {self.namespace}/reset")
@@ -149,10 +172,13 @@ class _Run:
             stalled = self._follow(episode, target, bar)
             if stalled is None:
                 return
-            if stalled > 0 or seed is None or attempt == RESET_ATTEMPTS:
+            if stalled > 0 or (seed is None and not first_act) or attempt == RESET_ATTEMPTS:
                 self._stalled(recorded, episode, stalled)
                 return
-            # The first tick of a seeded episode got no answer: the same seeded reset again.
+            # The first tick got no answer: a seeded reset again is the same episode again; the
+            # node's first reset without a seed needs a fresh node.
+            if seed is None:
+                self.restart_node()
 
     def _follow(self, episode: int, target: int, bar) -> int | None:
         """Waits while the controller drives ``episode`` to step ``target`` (or its end): None

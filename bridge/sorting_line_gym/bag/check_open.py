@@ -143,7 +143,7 @@ def _wait_for_controller(tool: ToolNode, selection: _Selection, pubs: dict, subs
     except TimeoutError as e:
         raise BridgeTimeout(f"{e}: no controller answers in {selection.out_ns} (start one there, or pass "
                             "--controller CMD)") from None
-    tool.spin_for(0.3)  # our readers are matched; give theirs a moment too
+    tool.spin_for(0.5)  # our readers are matched; give theirs a moment too
 
 
 def _tick_positions(selection: _Selection) -> dict[int, tuple[int, int]]:
