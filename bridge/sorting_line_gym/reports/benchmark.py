@@ -57,12 +57,12 @@ BASELINES = ("random", "rba", "rba-hold")
 AGENTS = BASELINES + ALGOS
 #: Row order of the table: the paper's within a line (RBA, DQN, PPO, A2C), our extras first.
 TABLE_ORDER = ("random", "rba", "rba-hold", "dqn", "ppo", "a2c")
-#: Five training seeds per RL cell (issue 17), the paper's 42 first.
+#: Five training seeds per RL cell, for interval estimates over runs; the paper's 42 first.
 DEFAULT_SEEDS = (42, 43, 44, 45, 46)
 #: The held-out evaluation: seeds far from every training start (s .. s + n_envs - 1).
 HELDOUT_SEED = 10_000
 HELDOUT_EPISODES = 100
-#: Where --check-n-envs compares one line with N (issue 17): ((setups), (variants)), agent.
+#: Where --check-n-envs compares one line with N: ((setups), (variants)), agent.
 AGREEMENT_CELLS = ((("B",), ("advanced",)), "ppo"), ((("D",), ("basic",)), "dqn")
 
 
@@ -368,137 +368,10 @@ def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, A
     return checks
 
 
-def _interval(d: dict[str, float]) -> str:
-    return f"{d['point']:.2f} [{d['low']:.2f}, {d['high']:.2f}]"
-
-
-def table_markdown(rows: dict[Key, dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()) -> str:
-    """Our figures beside the paper's and the reference's, for ``agents`` (and the oracle) on every
-    line that has results ("not run" marks a requested agent whose cells are missing)."""
-    from .paper import REFERENCE, TABLE_1, TABLE_1_INDEX
-
-    lines = [
-        "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"
-        " held-out: IQM [95% CI] | gap to oracle |"
-        " speed % | purity % | speed changes | paper: reward | reference impl.: reward |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    ran = {(s, v) for s, v, a in rows if a != "oracle"}
-    for setup in SETUPS:
-        for variant in VARIANTS:
-            if (setup, variant) not in ran:
-                continue
-            shown = [a for a in TABLE_ORDER if a in agents] + ["oracle"]
-            best = max(rows[(setup, variant, a)]["reward_mean"] for a in shown[:-1] if (setup, variant, a) in rows)
-            for agent in shown:
-                key = (setup, variant, agent)
-                row = rows.get(key)
-                paper = TABLE_1.get(key)
-                ref = REFERENCE.get(key)
-                if row is None and paper is None:
-                    continue
-                cells = ["not run"] + [""] * 8
-                if row is not None:
-                    mean = f"{row['reward_mean']:.2f}"
-                    ours = (
-                        f"**{mean}**" if row["reward_mean"] == best and agent != "oracle" else mean
-                    ) + f" +- {row['reward_std']:.2f}"
-                    h = row.get("heldout")
-                    cells = [
-                        ours,
-                        f"{h['mean']['point']:.2f}" if h else "",
-                        ("exact: " + f"{h['iqm']['point']:.2f}" if agent == "oracle" else _interval(h["iqm"]))
-                        if h
-                        else "",
-                        f"{h['gap_mean']:.2f}" if h else "",
-                        f"{100 * row['speed_mean']:.0f}",
-                        f"{100 * row['purity_mean']:.1f}",
-                        f"{row['speed_changes_mean']:.1f}",
-                    ]
-                    cells.insert(0, "" if agent == "oracle" else str(row["seeds"]))
-                else:
-                    cells = ["", "not run", "", "", "", "", "", ""]
-                lines.append(
-                    "| "
-                    + " | ".join(
-                        [TABLE_1_INDEX.get(key, ""), setup, "Adv" if variant == "advanced" else "Basic", agent, *cells,
-                         f"{paper[2]:.2f}" if paper else "", f"{ref[0]:.2f} +- {ref[1]:.2f}" if ref else ""]
-                    )
-                    + " |"
-                )
-    note = (
-        "\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10"
-        " episodes of 50 steps, deterministic policy), mean +- population std over the episodes, or for RL with several"
-        f" runs the mean over runs +- the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean"
-        " and IQM over runs x episodes, the IQM's 95% stratified bootstrap interval resamples the runs within each"
-        " evaluation seed (one run: exact); gap to oracle = mean over runs x seeds of `sorting_line oracle` - agent. RL"
-        f" agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random,"
-        " rba-hold or oracle rows, and its RBA figures are not what the reference implementation's code gives on the"
-        " same protocol (last column). Bold: our best agent on seeds 42..51."
-    )
-    return "\n".join(lines) + "\n" + note + "\n"
-
-
-def statistics_markdown(poi, aggregate, checks) -> str:
-    """Probability of improvement, aggregate IQM and the --n-envs agreement check as markdown."""
-    out = []
-    if poi:
-        algos = [a for a in ALGOS if any(k[2] == a for k in poi)]
-        out += ["## Probability of improvement over rba-hold (held-out seeds, 95% CI)", "",
-                "| setup | env | " + " | ".join(f"P({a} > rba-hold)" for a in algos) + " |",
-                "|---|---|" + "---|" * len(algos)]
-        for setup in SETUPS:
-            for variant in VARIANTS:
-                if any((setup, variant, a) in poi for a in algos):
-                    out.append(
-                        f"| {setup} | {'Adv' if variant == 'advanced' else 'Basic'} | "
-                        + " | ".join(
-                            _interval(poi[(setup, variant, a)]) if (setup, variant, a) in poi else "" for a in algos
-                        )
-                        + " |"
-                    )
-        out += [
-            "",
-            "P(X > Y): the chance that a run of X beats rba-hold on a held-out seed, "
-            "averaged over the seeds (ties half);"
-            " 0.5 = no difference. Interval: runs resampled within each seed.",
-            "",
-        ]
-    if aggregate:
-        out += ["## Aggregate over the lines: score normalized between random (0) and the oracle (1)", "",
-                "| agent | lines | IQM [95% CI] | mean [95% CI] |", "|---|---|---|---|"]
-        for agent in TABLE_ORDER:
-            if agent in aggregate:
-                a = aggregate[agent]
-                out.append(f"| {agent} | {a['lines']} | {_interval(a['iqm'])} | {_interval(a['mean'])} |")
-        out += [
-            "",
-            "Per run and line: (held-out mean reward - random's) / (oracle's - random's); IQM over runs x lines,"
-            " interval by the bootstrap stratified by line.",
-            "",
-        ]
-    if checks:
-        out += [
-            "## One line against N lines of one node (--n-envs)",
-            "",
-            "| setup | env | agent | lines | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] "
-            "| P(N lines > 1 line) | agree | training s (1 / N lines) |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for c in checks:
-            out.append(
-                f"| {c['setup']} | {'Adv' if c['variant'] == 'advanced' else 'Basic'} | {c['agent']} | {c['n_envs']} | "
-                f"{c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | "
-                f"{_interval(c['poi_n_over_1'])} | "
-                f"{'yes' if c['agree'] else 'NO'} | {c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |"
-            )
-        out += ["", "Agree: the two IQM intervals overlap.", ""]
-    return "\n".join(out)
-
-
 def write_report(
     out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout = Heldout()
 ) -> list[Path]:
+    from .benchmark_tables import statistics_markdown, table_markdown
     from .plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure
 
     lines = sorted({(r["cell"]["setup"], r["cell"]["variant"]) for r in records})
@@ -623,10 +496,8 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
         lambda cells: bar.set_postfix_str(", ".join(c.name for c in cells)),
     )
 
-def main(argv: list[str] | None = None) -> int:
-    from tqdm import tqdm
-
-    args = build_parser().parse_args(argv)
+def _invalid(args) -> str | None:
+    """What is wrong with the command line's values, if anything."""
     for flag, value in (
         ("--timesteps", args.timesteps),
         ("--n-envs", args.n_envs),
@@ -634,64 +505,81 @@ def main(argv: list[str] | None = None) -> int:
         ("--heldout-episodes", args.heldout_episodes),
     ):
         if value < 1:
-            print(f"sorting-line-benchmark: {flag} = {value} is not valid: allowed 1 or more", file=sys.stderr)
-            return 2
+            return f"{flag} = {value} is not valid: allowed 1 or more"
     if args.n_envs & (args.n_envs - 1) or args.n_envs > 2048:
-        print(
-            f"sorting-line-benchmark: --n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048",
-            file=sys.stderr,
-        )
-        return 2
+        return f"--n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048"
     if args.heldout_seed < 0:
-        print(
-            f"sorting-line-benchmark: --heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more",
-            file=sys.stderr,
-        )
-        return 2
-    heldout = heldout_of(args)
+        return f"--heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more"
+    return None
+
+
+def _cells_of(args) -> list[Cell]:
+    """The cells the command line asks for, the one-line cells of --check-n-envs last."""
     cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs)
     if args.check_n_envs and args.n_envs > 1:
-        cells += [c for line, agent in AGREEMENT_CELLS for c in plan(*line, [agent], args.train_seeds, 1)
-                  if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants]
+        cells += [
+            c
+            for line, agent in AGREEMENT_CELLS
+            for c in plan(*line, [agent], args.train_seeds, 1)
+            if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants
+        ]
+    return cells
+
+
+def _run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: list, args) -> bool:
+    """Runs ``todo`` under a progress bar, adding to ``done`` and ``failures``; False if interrupted."""
+    from tqdm import tqdm
+
+    signal.signal(signal.SIGTERM, cell_pool.interrupt)
+    bar = tqdm(total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True)
+
+    def finished(cell: Cell, outcome) -> None:
+        if isinstance(outcome, Exception):
+            failures.append((cell, outcome))
+            bar.write(f"{cell.name}: FAILED: {outcome}")
+        else:
+            done[cell] = outcome
+            r = outcome["evaluation"]
+            h = outcome["heldout"]
+            bar.write(
+                f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
+                f", held-out {h['reward_mean']:.2f}"
+                f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)"
+            )
+        bar.update(1)
+
+    try:
+        run_all(todo, args, finished, bar)
+    except KeyboardInterrupt:
+        return False
+    finally:
+        bar.close()
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    problem = _invalid(args)
+    if problem:
+        print(f"sorting-line-benchmark: {problem}", file=sys.stderr)
+        return 2
+    heldout = heldout_of(args)
+    cells = _cells_of(args)
     done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
-    todo = [c for c in cells if c not in done]
-    if args.report_only:
-        todo = []
+    todo = [] if args.report_only else [c for c in cells if c not in done]
     print(
         f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, "
         f"{args.jobs} at a time -> {args.out}",
         file=sys.stderr,
     )
     failures = []
-    if todo:
-        signal.signal(signal.SIGTERM, cell_pool.interrupt)
-        bar = tqdm(
-            total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True
+    if todo and not _run_with_bar(todo, cells, done, failures, args):
+        print(
+            f"sorting-line-benchmark: interrupted; {len(done)} of {len(cells)} cells are saved in {args.out}: "
+            "the same command goes on from there",
+            file=sys.stderr,
         )
-
-        def finished(cell: Cell, outcome) -> None:
-            if isinstance(outcome, Exception):
-                failures.append((cell, outcome))
-                bar.write(f"{cell.name}: FAILED: {outcome}")
-            else:
-                done[cell] = outcome
-                r = outcome["evaluation"]
-                h = outcome["heldout"]
-                bar.write(
-                    f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
-                    f", held-out {h['reward_mean']:.2f}"
-                    f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)"
-                )
-            bar.update(1)
-
-        try:
-            run_all(todo, args, finished, bar)
-        except KeyboardInterrupt:
-            bar.close()
-            print(f"sorting-line-benchmark: interrupted; {len(done)} of {len(cells)} cells are saved in {args.out}: "
-                  "the same command goes on from there", file=sys.stderr)
-            return 130
-        bar.close()
+        return 130
     # The table is of the run's --n-envs; the one-line cells of --check-n-envs go to the agreement check.
     records = [done[c] for c in cells if c in done and (c.agent not in ALGOS or c.n_envs == args.n_envs)]
     if not records:

@@ -40,7 +40,7 @@ def parse_agent(text: str, variant: str):
     return encode_actions(variant, speed, mode)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sorting-line-bridge", description=__doc__.split("\n\n")[0])
     p.add_argument("--setup", choices=list(SETUPS), default="A", help="the paper's setup A..D (default %(default)s)")
     p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
@@ -48,12 +48,39 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=42, help="episode i is reset with seed + i")
     p.add_argument("--agent", default="random", help="random, constant:K or constant:K:M")
     p.add_argument(
-        "--node", choices=["spawn", "attach"], default="spawn",
+        "--node",
+        choices=["spawn", "attach"],
+        default="spawn",
         help="spawn a node of its own, or attach to the one serving --namespace (default %(default)s)",
     )
     p.add_argument("--namespace", default=None, help="namespace of the node (needed with --node attach)")
     p.add_argument("--step-timeout", type=float, default=2.0, help="longest wait for one step, s (default %(default)s)")
     p.add_argument("--dashboard", default=None, help="save the last episode's dashboard (.png or .svg)")
+    return p
+
+
+def _run_episodes(env, args, action) -> list[float]:
+    """Runs ``args.episodes`` episodes, a line printed for each; returns their rewards."""
+    rewards = []
+    for i in range(args.episodes):
+        obs, info = env.reset(seed=args.seed + i)
+        total, speeds, done = 0.0, [], False
+        while not done:
+            a = env.action_space.sample() if action is None else action
+            obs, r, terminated, truncated, info = env.step(a)
+            total += r
+            speeds.append(info["speed"])
+            done = terminated or truncated
+        rewards.append(total)
+        print(
+            f"{i:7d} {args.seed + i:5d} {total:7.2f} {np.mean(speeds):10.2f}"
+            f" {info['purity']:7.3f} {info['speed_changes']:14d}"
+        )
+    return rewards
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = _parser()
     args = p.parse_args(argv)
     if args.episodes < 1:
         p.error(f"--episodes {args.episodes} is out of range: allowed 1 or more")
@@ -71,25 +98,11 @@ def main(argv: list[str] | None = None) -> int:
     except (BridgeError, ValueError) as e:
         print(f"sorting-line-bridge: {e}", file=sys.stderr)
         return 2
-    rewards = []
     try:
         env.action_space.seed(args.seed)
         print(f"{env_id} setup {args.setup}, agent {args.agent}, node {env.unwrapped.namespace}")
         print("episode  seed  reward  mean speed  purity  speed changes")
-        for i in range(args.episodes):
-            obs, info = env.reset(seed=args.seed + i)
-            total, speeds, done = 0.0, [], False
-            while not done:
-                a = env.action_space.sample() if action is None else action
-                obs, r, terminated, truncated, info = env.step(a)
-                total += r
-                speeds.append(info["speed"])
-                done = terminated or truncated
-            rewards.append(total)
-            print(
-                f"{i:7d} {args.seed + i:5d} {total:7.2f} {np.mean(speeds):10.2f}"
-                f" {info['purity']:7.3f} {info['speed_changes']:14d}"
-            )
+        rewards = _run_episodes(env, args, action)
         print(f"mean reward {np.mean(rewards):.2f} +- {np.std(rewards):.2f} over {args.episodes} episodes")
         if args.dashboard:
             from ..envs.render import save_dashboard
@@ -102,7 +115,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         env.close()
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

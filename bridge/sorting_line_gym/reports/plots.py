@@ -107,7 +107,9 @@ def reward_of(accuracy: np.ndarray, speed: float) -> np.ndarray:
     return np.where(accuracy < THRESHOLD, -0.1, r)
 
 
-def analysis_figure(stem: Path) -> list[Path]:
+def _dynamics_grid() -> tuple[np.ndarray, list[float], np.ndarray, np.ndarray]:
+    """The basic line's table (category 0, mode 0) as grids over (speed, occupancy): (occupancies,
+    speeds, expected accuracy, expected reward)."""
     rows = [r for r in read_table("basic") if r["category"] == "0" and r["mode"] == "0"]
     occupancies = sorted({float(r["occupancy"]) for r in rows})
     speeds = sorted({float(r["speed"]) for r in rows})
@@ -119,8 +121,13 @@ def analysis_figure(stem: Path) -> list[Path]:
         i, j = si[float(r["speed"])], oi[float(r["occupancy"])]
         acc[i, j] = float(r["expected_accuracy"])
         reward[i, j] = float(r["expected_reward"])
-    occ = np.array(occupancies)
+    return np.array(occupancies), speeds, acc, reward
+
+
+def analysis_figure(stem: Path) -> list[Path]:
+    occ, speeds, acc, reward = _dynamics_grid()
     cmap = matplotlib.colormaps["viridis"]
+    extent = (occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05)
 
     fig = _figure(figsize=(13, 9.5))
     axes = fig.subplots(2, 2)
@@ -134,10 +141,8 @@ def analysis_figure(stem: Path) -> list[Path]:
 
     ax = axes[0, 1]
     masked = np.ma.masked_where(acc < THRESHOLD, acc)
-    ax.imshow(np.ones_like(acc), cmap=ListedColormap(["black"]), aspect="auto", origin="lower",
-              extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
-    im = ax.imshow(masked, cmap="viridis", aspect="auto", origin="lower", vmin=THRESHOLD, vmax=1.0,
-                   extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
+    ax.imshow(np.ones_like(acc), cmap=ListedColormap(["black"]), aspect="auto", origin="lower", extent=extent)
+    im = ax.imshow(masked, cmap="viridis", aspect="auto", origin="lower", vmin=THRESHOLD, vmax=1.0, extent=extent)
     fig.colorbar(im, ax=ax, label="expected accuracy")
     ax.set(
         xlabel="belt occupancy",
@@ -154,9 +159,8 @@ def analysis_figure(stem: Path) -> list[Path]:
     ax.grid(alpha=0.3)
 
     ax = axes[1, 1]
-    im = ax.imshow(reward, cmap="magma", aspect="auto", origin="lower",
-                   extent=(occ[0], occ[-1], speeds[0] - 0.05, speeds[-1] + 0.05))
-    best = [speeds[int(np.nanargmax(reward[:, j]))] for j in range(len(occupancies))]
+    im = ax.imshow(reward, cmap="magma", aspect="auto", origin="lower", extent=extent)
+    best = [speeds[int(np.nanargmax(reward[:, j]))] for j in range(len(occ))]
     ax.plot(occ, best, color="cyan", linewidth=1.5, drawstyle="steps-mid", label="best speed (rba)")
     fig.colorbar(im, ax=ax, label="expected step reward")
     ax.set(xlabel="belt occupancy", ylabel="belt speed", title="Expected reward per speed and occupancy")

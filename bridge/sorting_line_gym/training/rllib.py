@@ -109,12 +109,8 @@ def where_envs_live(algo) -> list[dict[str, Any]]:
     return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """`python -m sorting_line_gym.training.rllib`: PPO on the line with RLlib, progress per
-    iteration on stderr, a JSON summary on stdout."""
+def _parser():
     import argparse
-    import json
-    import time
 
     p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
     p.add_argument("--id", default=DEFAULT_ID, help="Gymnasium id (default %(default)s)")
@@ -131,7 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         help="node namespaces, one per EnvRunner (its envs attach to that node's lines); default: line servers",
     )
     p.add_argument(
-        "--lines-per-node", type=int, default=4,
+        "--lines-per-node",
+        type=int,
+        default=4,
         help="lines of each --nodes node an EnvRunner uses (default %(default)s)",
     )
     p.add_argument("--address", default=None, help="a Ray cluster to join (default: start a local one)")
@@ -140,16 +138,78 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray (default: env runners + 1)")
     p.add_argument("--seed", type=int, default=42, help="seed of the algorithm (default %(default)s)")
-    args = p.parse_args(argv)
+    return p
 
+
+def _ppo_config(ppo_config, args):
+    """RLlib's PPO config for ``args``: the paper's PPO settings (hyperparams/ppo.yml)."""
+    env_config: dict[str, Any] = {"id": args.id, "setup": args.setup, "max_episode_steps": args.episode_steps}
+    if args.nodes:
+        env_config.update(nodes=args.nodes, lines_per_node=args.lines_per_node)
+    return (
+        ppo_config()
+        .environment(register(), env_config=env_config)
+        .env_runners(
+            num_env_runners=args.env_runners,
+            num_envs_per_env_runner=args.envs_per_runner,
+            rollout_fragment_length="auto",
+            num_cpus_per_env_runner=1,
+        )
+        .training(
+            train_batch_size_per_learner=args.batch,
+            minibatch_size=min(250, args.batch),
+            num_epochs=4,
+            gamma=0.85,
+            lr=7e-4,
+            entropy_coeff=0.03,
+        )
+        .learners(num_learners=0)
+        .debugging(seed=args.seed)
+    )
+
+
+def _train(algo, timesteps: int, log) -> tuple[list[dict], int]:
+    """Trains whole iterations until ``timesteps`` env steps are sampled: (a row per iteration, steps)."""
+    import time
+
+    history, sampled = [], 0
+    while sampled < timesteps:
+        t = time.monotonic()
+        runners = algo.train().get("env_runners", {})
+        sampled = int(runners.get("num_env_steps_sampled_lifetime", 0))
+        row = {
+            "iteration": len(history) + 1,
+            "env_steps": sampled,
+            "seconds": round(time.monotonic() - t, 2),
+            "episode_return_mean": runners.get("episode_return_mean"),
+            "episodes": runners.get("num_episodes_lifetime"),
+        }
+        history.append(row)
+        log(
+            f"iteration {row['iteration']}: {sampled} env steps, return mean {row['episode_return_mean']}, "
+            f"{row['seconds']} s"
+        )
+    return history, sampled
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m sorting_line_gym.training.rllib`: PPO on the line with RLlib, progress per
+    iteration on stderr, a JSON summary on stdout."""
+    import json
+    import time
+
+    args = _parser().parse_args(argv)
     quiet_ray_environment()
     t0 = time.monotonic()
     try:
         import ray
         from ray.rllib.algorithms.ppo import PPOConfig
     except ImportError as e:
-        print(f"sorting_line_gym.training.rllib: Ray RLlib is not installed ({e}): install it with "
-              "`bash launch_scripts/setup.sh --rllib` (launch_scripts/requirements-rllib.txt)", file=sys.stderr)
+        print(
+            f"sorting_line_gym.training.rllib: Ray RLlib is not installed ({e}): install it with "
+            "`bash launch_scripts/setup.sh --rllib` (launch_scripts/requirements-rllib.txt)",
+            file=sys.stderr,
+        )
         return 2
 
     def log(msg: str) -> None:
@@ -159,43 +219,23 @@ def main(argv: list[str] | None = None) -> int:
     if args.address:
         ray.init(address=args.address, log_to_driver=False)
     else:
-        ray.init(num_cpus=args.num_cpus or args.env_runners + 1, include_dashboard=False,
-                 _node_ip_address=args.node_ip, log_to_driver=False)
+        ray.init(
+            num_cpus=args.num_cpus or args.env_runners + 1,
+            include_dashboard=False,
+            _node_ip_address=args.node_ip,
+            log_to_driver=False,
+        )
     log(f"ray up: {ray.cluster_resources()}")
-    env_config: dict[str, Any] = {"id": args.id, "setup": args.setup, "max_episode_steps": args.episode_steps}
-    if args.nodes:
-        env_config.update(nodes=args.nodes, lines_per_node=args.lines_per_node)
-    config = (
-        PPOConfig()
-        .environment(register(), env_config=env_config)
-        .env_runners(num_env_runners=args.env_runners, num_envs_per_env_runner=args.envs_per_runner,
-                     rollout_fragment_length="auto", num_cpus_per_env_runner=1)
-        .training(train_batch_size_per_learner=args.batch, minibatch_size=min(250, args.batch), num_epochs=4,
-                  gamma=0.85, lr=7e-4, entropy_coeff=0.03)  # the paper's PPO settings (hyperparams/ppo.yml)
-        .learners(num_learners=0)
-        .debugging(seed=args.seed)
-    )
-    algo = config.build_algo()
+    algo = _ppo_config(PPOConfig, args).build_algo()
     log("algorithm built")
-    history, sampled = [], 0
     try:
-        while sampled < args.timesteps:
-            t = time.monotonic()
-            result = algo.train()
-            runners = result.get("env_runners", {})
-            sampled = int(runners.get("num_env_steps_sampled_lifetime", 0))
-            row = {"iteration": len(history) + 1, "env_steps": sampled, "seconds": round(time.monotonic() - t, 2),
-                   "episode_return_mean": runners.get("episode_return_mean"),
-                   "episodes": runners.get("num_episodes_lifetime")}
-            history.append(row)
-            log(f"iteration {row['iteration']}: {sampled} env steps, return mean {row['episode_return_mean']}, "
-                f"{row['seconds']} s")
+        history, sampled = _train(algo, args.timesteps, log)
         placement = where_envs_live(algo)
     finally:
         algo.stop()
         ray.shutdown()
-    print(json.dumps({"iterations": history, "env_steps": sampled, "env_runners": placement,
-                      "seconds": round(time.monotonic() - t0, 1)}))
+    summary = {"iterations": history, "env_steps": sampled, "env_runners": placement}
+    print(json.dumps({**summary, "seconds": round(time.monotonic() - t0, 1)}))
     return 0
 
 

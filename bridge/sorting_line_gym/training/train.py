@@ -97,9 +97,8 @@ def train(
     torch_threads: int = 1,
     verbose: int = 0,
 ) -> TrainingRun:
-    """Trains ``algo`` on the line (setup, variant) with ``params`` (as ``hyperparams.load`` gives
-    them, which checks them; default: the packaged hyperparameters) and saves the model; returns
-    what it did."""
+    """Trains ``algo`` on the line (setup, variant) with ``params`` (as ``hyperparams.load`` gives them,
+    which checks them; default: the packaged hyperparameters) and saves the model; returns what it did."""
     import torch
 
     from .callbacks import LineKpiCallback
@@ -113,15 +112,10 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     stem = model_stem(algo, setup, variant, seed)
     env = make_training_env(setup, variant, own["n_envs"], own["episode_steps"])
+    log_dir = None if tensorboard is None else str(tensorboard)
     try:
-        cls = hyperparams.algorithm_class(algo)
-        model = cls(
-            own["policy"],
-            env,
-            seed=seed,
-            verbose=verbose,
-            tensorboard_log=str(tensorboard) if tensorboard is not None else None,
-            **kwargs,
+        model = hyperparams.algorithm_class(algo)(
+            own["policy"], env, seed=seed, verbose=verbose, tensorboard_log=log_dir, **kwargs
         )
         kpis = LineKpiCallback()
         start = time.perf_counter()
