@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import ros_harness as h
+from line_client import LineClient
 
 DATA = h.ROOT / "tests" / "data" / "bags"
 MAX_STEPS = 50
@@ -66,7 +67,7 @@ def wait_for_command_writers(session: h.RosSession, recorder: BagProcess, namesp
                            f"the recorder to match {writers} writer(s) of {rel}", context)
 
 
-def drive(session: h.RosSession, client: h.LineClient, plan: list, context=lambda: "") -> None:
+def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda: "") -> None:
     """Resets the line as `plan` says and waits, each time, until the controller has driven the
     episode to its end. The controller's first answer can be lost while endpoints still match:
     then nothing moves and the reset is repeated (the bag records both; replay does the same)."""
@@ -99,7 +100,7 @@ def record_golden(name: str, out: Path, session: h.RosSession, workdir: Path, na
                           "--max-steps", MAX_STEPS, "--ros-args", "-r", f"__ns:={namespace}"],
                          workdir / f"node_{name}.log")
     recorder = controller = None
-    client = h.LineClient(session, namespace, spec["variant"], node_proc=node)
+    client = LineClient(session, namespace, spec["variant"], node_proc=node)
     try:
         client.wait_connected()
         controller = ControllerProcess(workdir, name, ["--namespace", namespace, "--setup", spec["setup"],

@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import ros2_cli  # noqa: E402
 import ros_harness as h  # noqa: E402
+from line_client import LineClient  # noqa: E402
 
 h.ros_environment()  # before anything imports rclpy
 
@@ -118,10 +119,10 @@ def start_node(tmp_path, request):
 @pytest.fixture
 def client_factory(ros):
     """client_factory(namespace, variant, node_proc=..., ...) -> LineClient, destroyed at teardown."""
-    clients: list[h.LineClient] = []
+    clients: list[LineClient] = []
 
-    def make(namespace: str, variant: str = "basic", **kwargs) -> h.LineClient:
-        c = h.LineClient(ros, namespace, variant, **kwargs)
+    def make(namespace: str, variant: str = "basic", **kwargs) -> LineClient:
+        c = LineClient(ros, namespace, variant, **kwargs)
         clients.append(c)
         return c
 
@@ -136,3 +137,46 @@ def probe(ros):
     node = ros.make_node("test_probe")
     yield node
     ros.destroy_node(node)
+
+
+@pytest.fixture
+def make_env(request):
+    """make_env(id_or_None, **kwargs): gymnasium.make(id, ...) or, with id None, SortingLineEnv(...);
+    every env is closed at teardown (a second close is harmless). For the bridge's tests."""
+    envs = []
+
+    def close_all():
+        errors = []
+        for env in reversed(envs):
+            try:
+                env.close()
+            except Exception as e:  # noqa: BLE001 - report every env that fails to close
+                errors.append(repr(e))
+        assert not errors, f"closing the envs failed: {errors}"
+
+    request.addfinalizer(close_all)
+
+    import gymnasium
+
+    from sorting_line_gym import SortingLineEnv
+
+    def make(env_id=None, **kwargs):
+        env = gymnasium.make(env_id, **kwargs) if env_id is not None else SortingLineEnv(**kwargs)
+        envs.append(env)
+        return env
+
+    return make
+
+
+@pytest.fixture
+def make_vec(request):
+    """make_vec(cls, **kwargs): a SortingLineVectorEnv or SortingLineSB3VecEnv closed at teardown."""
+    envs = []
+    request.addfinalizer(lambda: [env.close() for env in reversed(envs)])
+
+    def make(cls, **kwargs):
+        env = cls(**kwargs)
+        envs.append(env)
+        return env
+
+    return make

@@ -1,0 +1,253 @@
+"""The test harness's rclpy client of one line (:class:`LineClient`): every topic of the line
+recorded, commands published, the reset service called with retries, readiness proven by a real
+reply. Built on ros_harness's session and recorders."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import defaultdict
+
+from ros_harness import (
+    NS_PER_S,
+    NodeProcess,
+    RosSession,
+    WaitTimeout,
+    decode_action,
+    diagnostic_values,
+    join_ns,
+    show_ns,
+    stamp_ns,
+)
+
+
+class LineClient:
+    """One line of the node, seen from rclpy: its topics, its `reset` service, lock-step stepping.
+
+    `msgs[topic]` lists every message received per topic (topic names relative to the line), and
+    `by_stamp[topic][stamp_ns]` the messages per tick stamp.
+    """
+
+    TOPICS = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
+
+    def __init__(self, session: RosSession, namespace: str, variant: str = "basic", tick_period: float = 1.0,
+                 node=None, node_proc: NodeProcess | None = None, topics: list[str] | None = None,
+                 mode_topic: bool = False, depth: int = 10):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sorting_line_interfaces.msg import (
+            BeltOccupancy,
+            LineState,
+            MaterialInput,
+            MaterialRatio,
+            ResetEvent,
+            SortModeCommand,
+            SpeedCommand,
+        )
+        from sorting_line_interfaces.srv import ResetLine
+
+        self.session, self.ns, self.variant = session, namespace, variant
+        self.period_ns = round(tick_period * NS_PER_S)
+        self.node_proc = node_proc
+        self.own_node = node is None
+        self.node = node if node is not None else session.make_node()
+        self.msgs: dict[str, list] = defaultdict(list)
+        self.source_times: dict[str, list[int]] = defaultdict(list)  # parallel to msgs
+        self.by_stamp: dict[str, dict[int, list]] = defaultdict(lambda: defaultdict(list))
+        self.stamp: int | None = None  # the tick the line waits at (ns), known after reset()
+        self.first_reset: int | None = None  # stamp of the first reset() of this client
+        # /diagnostics first: a status of our line arriving on it proves that the node sends to
+        # this participant's readers (see wait_connected); (receive time, values) per status.
+        self.diagnostics: list[tuple[float, dict[str, str]]] = []
+        self.diag_sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        types = {"input": MaterialInput, "belt/occupancy": BeltOccupancy, "sensors/ratio": MaterialRatio,
+                 "state": LineState, "events/reset": ResetEvent}
+        wanted = topics if topics is not None else self.TOPICS
+        if variant != "advanced":
+            wanted = [t for t in wanted if t != "sensors/ratio"]
+        # depth: the node's QoS is keep-last 10; a deeper reader queue lets a stalled client (a busy
+        # machine) catch up on a realtime stream without losing samples.
+        self.subs = {t: self.node.create_subscription(types[t], self.name(t), self._recorder(t), depth)
+                     for t in wanted}
+        self.speed_pub = self.node.create_publisher(SpeedCommand, self.name("cmd/speed"), 10)
+        # The basic line has no cmd/sort_mode: publish it there only on request (mode_topic=True).
+        self.mode_pub = (self.node.create_publisher(SortModeCommand, self.name("cmd/sort_mode"), 10)
+                         if variant == "advanced" or mode_topic else None)
+        self.reset_client = self.node.create_client(ResetLine, self.name("reset"))
+        self._SpeedCommand, self._SortModeCommand, self._ResetLine = SpeedCommand, SortModeCommand, ResetLine
+
+    def name(self, rel: str) -> str:
+        return join_ns(self.ns, rel)
+
+    def since_reset(self, topic: str) -> list:
+        """The messages of `topic` from the first reset() of this client on. (Whether the node's
+        start-up tick, published before anyone can have matched, reaches us depends on timing.)"""
+        assert self.first_reset is not None, "reset() first"
+        return [m for m in self.msgs[topic] if stamp_ns(m.header.stamp) >= self.first_reset]
+
+    def _on_diagnostics(self, array) -> None:
+        values = diagnostic_values(array, self.ns)
+        if values is not None:
+            self.diagnostics.append((time.monotonic(), values))
+
+    def _recorder(self, topic: str):
+        msgs, by_stamp, sent = self.msgs[topic], self.by_stamp[topic], self.source_times[topic]
+
+        def record(msg, info):
+            msgs.append(msg)
+            by_stamp[stamp_ns(msg.header.stamp)].append(msg)
+            sent.append(info["source_timestamp"])  # ns, the node's clock when it published
+
+        return record
+
+    def destroy(self) -> None:
+        if self.own_node:
+            self.session.destroy_node(self.node)
+
+    # ---- diagnostics for error messages
+
+    def context(self) -> str:
+        states = [show_ns(stamp_ns(s.header.stamp)) for s in self.msgs["state"][-5:]]
+        matched = {t: s.get_publisher_count() for t, s in self.subs.items()}
+        matched["cmd/speed (subscribers)"] = self.speed_pub.get_subscription_count()
+        if self.mode_pub is not None:
+            matched["cmd/sort_mode (subscribers)"] = self.mode_pub.get_subscription_count()
+        lines = [f"line {self.ns}: waiting at stamp {show_ns(self.stamp) if self.stamp is not None else '?'}; "
+                 f"last states seen: {states or 'none'}; matched endpoints: {matched}; "
+                 f"nodes in the graph: {sorted(self.node.get_node_names_and_namespaces())}"]
+        if self.node_proc is not None:
+            lines.append(self.node_proc.describe())
+        return "\n".join(lines)
+
+    def node_gone(self) -> str | None:
+        if self.node_proc is not None and not self.node_proc.running():
+            return f"the node process exited with {self.node_proc.proc.returncode}"
+        return None
+
+    # ---- waiting
+
+    def wait_connected(self, timeout: float = 10.0) -> None:
+        """Waits until our command publishers and subscriptions are matched with the node (our view),
+        and until a /diagnostics status of this line (1 Hz) has arrived (the node's view: it has
+        discovered this participant and sends to its readers).
+
+        A match count alone proves nothing (stale endpoints linger ~50 s after a node exits), and
+        the node's side may lag ours: a `reset` reply sent before the node has matched our reply
+        reader is lost for good (volatile). The first reset() reply is the proof the node serves."""
+        def matched():
+            ok = self.speed_pub.get_subscription_count() >= 1 and self.subs["state"].get_publisher_count() >= 1
+            if self.variant == "advanced":
+                ok = ok and self.mode_pub.get_subscription_count() >= 1
+            return ok and all(s.get_publisher_count() >= 1 for s in self.subs.values())
+
+        self.session.spin_until(matched, timeout, f"{self.ns}: command publishers and topic subscriptions to match",
+                                self.context, abort=self.node_gone)
+        self.session.spin_until(lambda: self.diagnostics, timeout, f"/diagnostics: a status of {self.ns}",
+                                self.context, abort=self.node_gone)
+
+    def wait_message(self, topic: str, stamp: int, timeout: float = 5.0):
+        """The first message on `topic` stamped `stamp` (ns)."""
+        found = self.by_stamp[topic]
+        return self.session.spin_until(lambda: found.get(stamp, [None])[0], timeout,
+                                       f"{self.name(topic)} for the tick stamped {show_ns(stamp)}", self.context,
+                                       abort=self.node_gone)
+
+    def wait_state(self, stamp: int, timeout: float = 5.0):
+        return self.wait_message("state", stamp, timeout)
+
+    # ---- the service
+
+    def reset(self, seed: int | None = None, timeout: float = 10.0, wait_tick: bool = True):
+        """Calls `reset` and returns its response; waits for the new tick's state.
+
+        Waits (bounded) for the service, then calls it. A call without a reply within 3 s is retried
+        only when the line has evidently not been reset meanwhile (no events/reset, and a /diagnostics
+        status received well after the call still counts the same episodes), so a reset is never
+        executed twice. If the reset did happen but its reply was lost, the response is rebuilt from
+        events/reset and the state of the new tick (`response.message` says so)."""
+        what = f"{self.name('reset')} (seed {seed})"
+        request = self._ResetLine.Request(has_seed=seed is not None, seed=seed or 0)
+        self.session.spin_until(self.reset_client.service_is_ready, timeout, f"service {what} to be available",
+                                self.context, abort=self.node_gone)
+        response = None
+        for attempt in range(1, 4):
+            events_before = len(self.msgs["events/reset"])
+            episodes_before = self.diagnostics[-1][1].get("episodes") if self.diagnostics else None
+            called = time.monotonic()
+            future = self.reset_client.call_async(request)
+            try:
+                response = self.session.wait_future(future, 3.0, f"a reply from {what} (attempt {attempt}/3)",
+                                                    self.context, self.node_gone)
+                break
+            except WaitTimeout:
+                pass
+            # No reply. Did the reset happen? Look for evidence before calling again.
+            def evidence():
+                if len(self.msgs["events/reset"]) > events_before:
+                    return "event"
+                late = [v for t, v in self.diagnostics if t > called + 1.5]
+                if late:
+                    return "diag-reset" if late[-1].get("episodes") != episodes_before else "diag-same"
+                return None
+
+            found = self.session.spin_until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics",
+                                            self.context, abort=self.node_gone)
+            if future.done():
+                response = future.result()
+                break
+            self.reset_client.remove_pending_request(future)
+            print(f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
+                  file=sys.stderr)
+            if found == "event":
+                event = self.msgs["events/reset"][events_before]
+                state = self.wait_state(stamp_ns(event.header.stamp))
+                response = self._ResetLine.Response(
+                    success=True, seed=event.seed, episode=event.episode, stamp=event.header.stamp,
+                    quantity=state.observation_quantity, category=state.observation_category,
+                    message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}")
+                break
+            if found == "diag-reset":
+                raise WaitTimeout(f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
+                                  f"events/reset nor the state arrived\n{self.context()}")
+            # "diag-same": the request never reached the node; calling again is safe.
+        if response is None:
+            raise WaitTimeout(f"no reply from {what} after 3 attempts\n{self.context()}")
+        assert response.success, f"{self.name('reset')} failed: {response.message}"
+        self.stamp = stamp_ns(response.stamp)
+        if self.first_reset is None:
+            self.first_reset = self.stamp
+        if wait_tick:
+            self.wait_state(self.stamp)
+        return response
+
+    # ---- commands
+
+    def _time(self, stamp: int):
+        from builtin_interfaces.msg import Time
+
+        return Time(sec=stamp // NS_PER_S, nanosec=stamp % NS_PER_S)
+
+    def send_speed(self, speed: float, stamp: int | None = None) -> None:
+        msg = self._SpeedCommand(speed=float(speed))
+        msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
+        self.speed_pub.publish(msg)
+
+    def send_mode(self, mode: int, stamp: int | None = None) -> None:
+        msg = self._SortModeCommand(mode=int(mode))
+        msg.header.stamp = self._time(self.stamp if stamp is None else stamp)
+        self.mode_pub.publish(msg)
+
+    def step(self, speed: float, mode: int | None = None, timeout: float = 5.0):
+        """Answers the current tick (speed, and mode on the advanced line); returns the next tick's state."""
+        assert self.stamp is not None, "reset() first: the client does not know the current tick"
+        if self.variant == "advanced":
+            assert mode is not None, "the advanced line needs a sort mode every tick"
+            self.send_mode(mode)
+        self.send_speed(speed)
+        state = self.wait_state(self.stamp + self.period_ns, timeout)
+        self.stamp += self.period_ns
+        return state
+
+    def act(self, action: int, timeout: float = 5.0):
+        """Steps with a Gymnasium action (as `sorting_line trace` takes them)."""
+        speed, mode = decode_action(self.variant, action)
+        return self.step(speed, mode, timeout)

@@ -1,0 +1,103 @@
+"""Size limits of the Python code (bridge/, benches/, tests/python/): no function over 60 lines, no
+file over 700 lines, so that every function fits on a screen and every module is one concept.
+(Lines are at most 120 columns: ruff checks that, ruff.toml.) No node, no DDS; well under a second.
+
+A function counts from its first decorator to its last line, docstring, comments and blank lines
+included, as ``ruff format`` lays it out. ``OVER_60_LINES`` lists the functions that are longer
+today: the list may only shrink (an entry whose function is gone fails the test too, so that the
+list stays true); a new long function is a failure, not an entry.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+TREES = ("bridge", "benches", "tests/python")
+MAX_FUNCTION_LINES = 60
+MAX_FILE_LINES = 700
+
+#: path::qualified name of the functions still over the limit (to be split; do not add to it).
+OVER_60_LINES = {
+    "benches/bridge_throughput.py::main",
+    "benches/discovery.py::main",
+    "benches/multihost.py::main",
+    "benches/node_lockstep.py::main",
+    "benches/soak.py::run_soak",
+    "benches/train_timing.py::main",
+    "benches/vector_scaling.py::main",
+    "bridge/sorting_line_gym/bag/check.py::check_controller",
+    "bridge/sorting_line_gym/bag/cli.py::_check_parser",
+    "bridge/sorting_line_gym/bag/cli.py::_parser",
+    "bridge/sorting_line_gym/bag/cli.py::main",
+    "bridge/sorting_line_gym/reports/transfer_report.py::markdown",
+    "tests/python/line_client.py::LineClient.reset",
+    "tests/python/test_controller.py::check_realtime_run",
+    "tests/python/test_controller.py::test_controller_drives_a_lockstep_episode_exactly",
+    "tests/python/test_controller.py::test_controller_drives_a_realtime_line",
+    "tests/python/test_discovery_range.py::test_discovery_range_and_static_peers_across_a_veth_pair",
+    "tests/python/test_evolving.py::test_a_recorded_evolving_run_replays_exactly",
+    "tests/python/test_evolving.py::test_evolving_env_is_the_trace_with_masks_and_unknown_category",
+    "tests/python/test_evolving.py::test_evolving_node_follows_its_schedule_like_trace",
+    "tests/python/test_multihost.py::test_one_vector_env_over_three_hosts_faults_and_recovery",
+    "tests/python/test_node.py::test_bad_command_flood_leaves_the_state_stream_identical",
+    "tests/python/test_node.py::test_every_topic_and_the_reset_service",
+    "tests/python/test_node_lines.py::test_malformed_batch_requests_are_rejected_counted_and_change_nothing",
+    "tests/python/test_node.py::test_started_like_launch_ros",
+    "tests/python/test_rllib.py::test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker",
+    "tests/python/test_ros2cli.py::test_echo_once_every_topic",
+    "tests/python/test_ros2cli.py::test_ros2_launch_params_file_namespace_lines_and_overrides",
+    "tests/python/test_simulation_interfaces.py::test_simulate_steps_action_feedback_refusal_and_cancel",
+    "tests/python/test_simulation_interfaces.py::test_standard_services_drive_the_line_as_trace_does",
+    "tests/python/test_training.py::test_benchmark_stops_on_sigterm_with_its_workers_and_nodes",
+}
+
+
+def python_files() -> list[Path]:
+    files = [p for tree in TREES for p in (ROOT / tree).rglob("*.py") if "__pycache__" not in p.parts]
+    assert len(files) > 100, f"found only {len(files)} Python files under {TREES}"
+    return sorted(files)
+
+
+def function_lengths(path: Path) -> dict[str, int]:
+    """Every function and method of ``path`` (nested ones too), by qualified name -> its lines."""
+    lengths: dict[str, int] = {}
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                name = f"{prefix}{child.name}"
+                if not isinstance(child, ast.ClassDef):
+                    first = min([child.lineno] + [d.lineno for d in child.decorator_list])
+                    lengths[name] = child.end_lineno - first + 1
+                visit(child, f"{name}.")
+            else:
+                visit(child, prefix)
+
+    visit(ast.parse(path.read_text(), str(path)), "")
+    return lengths
+
+
+def test_no_python_file_is_over_700_lines():
+    lines = {str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in python_files()}
+    long = {path: n for path, n in lines.items() if n > MAX_FILE_LINES}
+    assert not long, f"files over {MAX_FILE_LINES} lines (split them by concept): {long}"
+
+
+def test_no_python_function_is_over_60_lines():
+    found = {
+        f"{p.relative_to(ROOT)}::{name}": n for p in python_files() for name, n in function_lengths(p).items()
+    }
+    long = {k: n for k, n in found.items() if n > MAX_FUNCTION_LINES and k not in OVER_60_LINES}
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them): {long}"
+    gone = sorted(OVER_60_LINES - found.keys())
+    assert not gone, f"OVER_60_LINES lists functions that no longer exist (remove them): {gone}"
+
+
+def test_the_size_checks_can_fail(tmp_path):
+    """The measure itself: a 61-line function is over the limit, decorators count."""
+    body = "".join(f"        x{k} = {k}\n" for k in range(58))
+    path = tmp_path / "long.py"
+    path.write_text(f"class C:\n    @staticmethod\n    def f():\n{body}        return 0\n")
+    assert function_lengths(path) == {"C.f": 61}
