@@ -16,7 +16,7 @@ down, a one-line env by up to 40 %); medians over the rounds:
   (c) `SortingLineVectorEnv` over 1, 4 and 16 lines of one node (batch topics): with 50-step
       episodes (SAME_STEP autoresets included) and without episode ends (max_episode_steps=1e6);
       env-steps/s = round trips/s x lines.
-Then the targets of the bridge issue: one line >= 3,000 env-steps/s, and the vectorised env at 16
+Then the bridge's speed targets: one line >= 3,000 env-steps/s, and the vectorised env at 16
 lines >= 10x the single-line env's env-steps/s, as the median of the per-round ratios (16-line
 VectorEnv against SortingLineEnv in the same round, like for like: without episode ends, and with
 50-step episodes); the ratios to the 1-line VectorEnv and to the raw ceiling are printed as well.

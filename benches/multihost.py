@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Lines on several hosts, one vector env driving them all (issue 15): what a round trip costs as
+"""Lines on several hosts, one vector env driving them all: what a round trip costs as
 hosts are added, and a soak across hosts.
 
 The hosts are network namespaces made here (tests/python/netns_hosts.py: veth pairs into a Linux

@@ -5,8 +5,8 @@ the reference's in-process Python env.
     .venv/bin/python benches/train_timing.py --reference DIR --algo ppo dqn a2c --n-envs 1 8 --timesteps 20000
 
 Targets: 100k PPO steps through ROS on one line cost at most 1.2x the same training on the
-reference's env (issue 5); the whole Table 1 with 5 seeds per RL cell (``run.sh --full``) takes
-under 2 hours on 2 cores (issue 17): the last lines project the full study's training time from
+reference's env; the whole Table 1 with 5 seeds per RL cell (``run.sh --full``) takes under 2
+hours on 2 cores: the last lines project the full study's training time from
 the steps/s measured here. Both sides are measured the same way, one after the other in this process
 tree: the algorithm with the paper's hyperparameters (``hyperparams/<algo>.yml``; on N lines
 mapped as ``hyperparams.for_lines`` says), seed 42,

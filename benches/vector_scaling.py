@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Many envs on one host through the vectorizers users bring, against the real node (issue 13).
+"""Many envs on one host through the vectorizers users bring, against the real node.
 
 Subjects, each a process of its own (started, warmed up, timed, stopped) on a ROS_DOMAIN_ID of its
 own (so it starts its own line servers instead of reusing the previous subject's):

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The reliability suite (issue 7) in full size: message-level fuzzing of commands, parameter files
+# The reliability suite in full size: message-level fuzzing of commands, parameter files
 # and --ros-args (proptest, FUZZ_CASES cases per property), the Python/ROS reliability tests
 # (faults, bad input at the real node, determinism across paths, a 50,000-tick soak), Ray RLlib
 # (tests/python/test_rllib.py: PPO with 2 EnvRunners x 4 envs, and a Ray cluster of a head and a

@@ -22,7 +22,7 @@ bash launch_scripts/setup.sh
 
 # The real ros2 CLI for tests/python/test_ros2cli.py: built (or found in its cache) here, outside the
 # test network namespace, because it needs PyPI; in the background, next to the Rust tests.
-# Ray RLlib for tests/python/test_rllib.py (issue 15): ~1 min warm, more cold, mostly download, so
+# Ray RLlib for tests/python/test_rllib.py: ~1 min warm, more cold, mostly download, so
 # also in the background next to the Rust tests; the Python tests start once it is in (pip must not
 # write into the venv while they import from it).
 if [[ $RUST_ONLY == 0 ]]; then

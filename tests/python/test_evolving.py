@@ -1,4 +1,5 @@
-"""The evolving line (issue 16) against the real node over DDS: `sorting_line node --evolution FILE`.
+"""The evolving line (upgrades and drifts during a run) against the real node over DDS:
+`sorting_line node --evolution FILE`.
 
 - The same seed and commands give the trajectory of `sorting_line trace --evolution FILE`, state
   by state, and `events/evolution` announces exactly the events the trace applies.

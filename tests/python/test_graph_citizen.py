@@ -151,7 +151,7 @@ def leave_after(ros, start_node, namespace, sig, listed_in) -> float:
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_running_peer_stops_listing_the_node_and_its_endpoints(ros, start_node, namespace, sig):
-    """Issue 12 asks for 2 s (without the disposes a peer kept them for the DDS lease, 50 s);
+    """The goal is 2 s (without the disposes a peer kept them for the DDS lease, 50 s);
     the check allows 5 s for a loaded machine and prints the measured time."""
     took = leave_after(ros, start_node, namespace, sig,
                        lambda probe, ns: (("sorting_line", ns) in probe.get_node_names_and_namespaces()

@@ -1,4 +1,4 @@
-"""Lines on several hosts of one DDS domain, driven by one vector env on another host (issue 15).
+"""Lines on several hosts of one DDS domain, driven by one vector env on another host.
 
 The hosts are network namespaces this test makes, each plugged by a veth pair into a Linux bridge,
 with addresses that exist only inside them (tests/python/netns_hosts.py): h1, h2, h3 each run a

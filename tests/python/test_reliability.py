@@ -1,4 +1,5 @@
-"""Reliability of the line and the bridge under load, faults and bad input (issue 7), in CI size.
+"""Reliability of the line and the bridge under load, faults and bad input, in CI size
+(launch_scripts/reliability.sh runs it in full size).
 
 - soak: 50,000 lock-step line-ticks through the vector env (benches/soak.py at reduced size):
   nothing lost, misaligned or different from `sorting_line trace`, memory bounded; and the soak's

@@ -1,4 +1,4 @@
-"""Ray RLlib trains on the sorting line (issue 15): our Gymnasium ids registered with Ray Tune
+"""Ray RLlib trains on the sorting line: our Gymnasium ids registered with Ray Tune
 (sorting_line_gym.training.rllib), envs made by ``gymnasium.make`` inside RLlib's EnvRunners.
 
 - PPO with 2 EnvRunners x 4 envs on this machine, each EnvRunner's envs on the lines of a node of

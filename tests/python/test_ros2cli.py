@@ -447,7 +447,7 @@ def test_topic_pub_speed_command_on_a_realtime_line(ros2, ros, start_node, clien
 
 def test_the_daemon_stops_listing_a_stopped_node_at_once(ros2, start_node, namespace):
     """A peer that was already running (the ros2 daemon) drops the node soon after SIGINT or
-    SIGTERM, not after the DDS lease (tens of seconds). Issue 12 asks for 2 s; the bound here
+    SIGTERM, not after the DDS lease (tens of seconds). The goal is 2 s; the bound here
     adds the start of a `ros2` process on a busy machine and still cannot be met by the lease."""
     ns = namespace("leave")
     nodes = {sig: (start_node("--ros-args", "-r", f"__ns:={ns}", "-r", f"__node:=by_{sig.name.lower()}"),

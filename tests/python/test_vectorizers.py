@@ -1,4 +1,4 @@
-"""The envs under the vectorizers users bring, at scale, against the REAL node (issue 13).
+"""The envs under the vectorizers users bring, at scale, against the REAL node.
 
 - Gymnasium's AsyncVectorEnv with its default context (fork on Linux): the envs connect at their
   first reset, so the forked workers never inherit a live rclpy context; and a child forked from a
