@@ -41,9 +41,9 @@ from sorting_line_gym.agents import (
     RuleBasedAgent,
     level,
     load_policy,
-    make_agent,
 )
 from sorting_line_gym.line.vocabulary import SPEEDS
+from sorting_line_gym.training.trained_agent import make_agent
 
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),

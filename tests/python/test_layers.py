@@ -7,6 +7,7 @@ rclpy (and with it DDS), Stable-Baselines3 (and torch). No node, no DDS traffic.
 
 from __future__ import annotations
 
+import ast
 import json
 import pkgutil
 import subprocess
@@ -76,3 +77,21 @@ def test_no_layer_needs_sb3_but_those_that_train(subpackage):
     modules = [m for m in modules_of(subpackage) if m not in allowed_sb3]
     assert modules
     assert "stable_baselines3" not in loaded_after_import(*modules), modules
+
+
+def test_agents_do_not_import_training():
+    """The agents layer sits below training: no module of agents/ imports training/, not even
+    lazily (loading a saved SB3 model is training's: ``training.trained_agent``)."""
+    offenders = []
+    for path in sorted((PACKAGE / "agents").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                names = [("." * node.level) + (node.module or "")]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            else:
+                continue
+            names = [n + "." for n in names]
+            if any(n.startswith(("..training.", "sorting_line_gym.training.")) for n in names):
+                offenders.append(f"{path.name}:{node.lineno}")
+    assert not offenders, f"agents/ imports training/ at {offenders}"

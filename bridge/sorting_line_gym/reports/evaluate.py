@@ -7,7 +7,7 @@ Protocol (the reference's ``utils/benchmark.py``): episode i is reset with seed 
 episodes, 50 steps each), the agent acts deterministically (the random agent is reseeded with the
 episode's seed), and the score is the episode's summed reward; mean and population standard
 deviation over the episodes. Agents: ``random``, ``rba``, ``rba-hold``, ``constant:K[:M|:cat]``,
-or a saved SB3 model ``ppo:PATH`` / ``dqn:PATH`` / ``a2c:PATH`` (see ``agents.make_agent``).
+or a saved SB3 model ``ppo:PATH`` / ``dqn:PATH`` / ``a2c:PATH`` (see ``training.trained_agent.make_agent``).
 
 The line is a real node process stepped over DDS (``SortingLineEnv``), so the figures of the
 built-in agents equal ``sorting_line eval --json``'s (the library, no ROS) number for number;
@@ -28,8 +28,9 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ..agents.policies import Agent, make_agent
+from ..agents.policies import Agent
 from ..line.vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
+from ..training.trained_agent import make_agent
 
 #: The paper's evaluation protocol (episodes of EPISODE_STEPS steps).
 FIRST_SEED = 42
