@@ -28,6 +28,7 @@ OVER_60_LINES = {
     "benches/train_timing.py::main",
     "benches/vector_scaling.py::main",
     "bridge/sorting_line_gym/bag/check.py::check_controller",
+    "bridge/sorting_line_gym/bag/record.py::record",
     "bridge/sorting_line_gym/bag/cli.py::_check_parser",
     "bridge/sorting_line_gym/bag/cli.py::_parser",
     "bridge/sorting_line_gym/bag/cli.py::main",
