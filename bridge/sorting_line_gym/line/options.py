@@ -1,7 +1,7 @@
 """What a user chooses about the line(s) an environment drives, as one checked, frozen object.
 
 Each environment face (``SortingLineEnv``, ``SortingLineVectorEnv``, ``SortingLineSB3VecEnv``)
-keeps its public keyword arguments (``gymnasium.make`` passes them; CONTRACT.md and the README
+keeps its public keyword arguments (``gymnasium.make`` passes them; the README's tables
 name them), turns them into a :class:`LineOptions` once, and hands that to its bank of lines: the
 checks and the node's options are written here only. No ROS: constructing options starts nothing.
 """

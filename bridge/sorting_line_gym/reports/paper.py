@@ -1,10 +1,10 @@
 """Published figures to compare against: the paper's Table 1 and the reference implementation's.
 
-- :data:`TABLE_1`: the SortingEnv paper's Table 1 (shared/reference/sortingenv-paper.md): per
+- :data:`TABLE_1`: the SortingEnv paper's Table 1: per
   setup, variant and algorithm, the mean speed and mean purity (both in %) and the mean reward,
   as printed. The paper has no random-agent rows and no ``rba-hold`` (ours).
 - :data:`REFERENCE`: what the reference implementation gives on the paper's evaluation protocol
-  (seeds 42..51, 50 steps), measured on its code (shared/reference/dynamics-of-the-reference.md):
+  (seeds 42..51, 50 steps), measured on its code (docs/reference-comparison.md):
   its RBA and its (unseeded) random agent on all eight setups, and PPO on B advanced. Each value
   is (mean, population std) of the episode reward.
 """

@@ -1,7 +1,7 @@
 """One line's endpoints on the bridge's rclpy node (:class:`LineLink`), all lines of a node through
 its batch topics (:class:`BatchLink`), and the lock-step position of each.
 
-Rules kept here (shared/platform/ros2-without-a-ros-install.md explains why):
+Rules kept here (docs/ros-without-a-ros-install.md explains why):
 - QoS is explicit (reliable, volatile, keep-last 10, as the node);
 - the first exchange is a handshake: a reset whose step-0 ``state`` must arrive, which proves
   that commands and states flow before the first step (volatile samples sent before matching
