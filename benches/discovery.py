@@ -6,7 +6,7 @@ whether it has matched what a bridge needs of every node: the `state` writer, a 
 
 Printed: each process's DDS participant id (from its SPDP unicast port, `ss -uanp`: port = 7410 +
 250 * domain + 2 * id), and for each client the nodes it sees and does not see. This is how the
-many-envs-per-host failures were traced to their cause (README, "Many envs per host").
+many-envs-per-host failures were traced to their cause (docs/many-envs.md).
 
     .venv/bin/python benches/discovery.py --nodes 16 --clients 1            # SyncVectorEnv(16 spawned envs)
     .venv/bin/python benches/discovery.py --nodes 16 --clients 16 --pairs   # 16 worker processes

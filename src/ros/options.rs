@@ -60,8 +60,8 @@ pub struct NodeArgs {
     /// Simulated seconds per tick (the stamp step and the /clock step).
     #[arg(long)]
     pub tick_period: Option<f64>,
-    /// An evolution schedule (YAML; format in src/sim/evolution.rs, the README's "The evolving
-    /// line"): every hosted line evolves by it. Parameter `evolution_file`.
+    /// An evolution schedule (YAML; format in src/sim/evolution.rs and docs/evolving.md): every
+    /// hosted line evolves by it. Parameter `evolution_file`.
     #[arg(long, value_name = "FILE")]
     pub evolution: Option<PathBuf>,
     /// A YAML parameter file (flat keys, or the launch_ros form with `/**:` / node-name keys).

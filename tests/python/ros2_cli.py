@@ -38,7 +38,7 @@ PROJECT_VENV = (ROOT / ".venv").resolve()  # (a symbolic link in a git worktree)
 # What launch_scripts/setup.sh compiled into .venv (the standard's simulation_interfaces too: no wheel has it).
 INTERFACES_MANIFESTS = [PROJECT_VENV / ".sorting_line" / f"{package}_install_manifest.txt"
                         for package in ("sorting_line_interfaces", "simulation_interfaces")]
-BUILD_TIMEOUT = 900.0  # s; the README says ~45 s on a quiet machine
+BUILD_TIMEOUT = 900.0  # s; docs/ros-without-a-ros-install.md says ~45 s on a quiet machine
 
 
 def shared_dir() -> Path | None:
@@ -219,10 +219,29 @@ def describe() -> str:
     return f"venv {venv}" if built(venv) else f"none: {venv} not built (CLI tests skipped; see ros2_cli.py --build)"
 
 
+def run_cli(args: list[str]) -> int:
+    """Runs `ros2 ARGS` in this terminal, as the tests run it (for users without a ROS install)."""
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="sorting_line_ros2cli_"))
+    cli, origin = locate(scratch / "overlay", scratch / "log")
+    if cli is None:
+        print(origin, file=sys.stderr)
+        return 2
+    try:
+        return subprocess.run(cli.argv(*args), env=cli.env).returncode
+    except KeyboardInterrupt:
+        return 130
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--build", action="store_true", help="build the cached venv unless ros2 is on PATH")
+    parser.add_argument("--run", nargs=argparse.REMAINDER, metavar="ARGS",
+                        help="run `ros2 ARGS` with the project's interfaces (after --build), e.g. --run topic list")
     args = parser.parse_args()
+    if args.run is not None:
+        return run_cli(args.run)
     if not args.build:
         parser.print_help()
         return 2

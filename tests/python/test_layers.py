@@ -1,4 +1,4 @@
-"""The bridge package's layers (README, "Layout"): each subpackage imports only the layers below it,
+"""The bridge package's layers (docs/layout.md): each subpackage imports only the layers below it,
 so that what needs no ROS loads without ROS and registering the Gymnasium ids costs nothing.
 
 Each check imports modules in a fresh interpreter and lists the heavy dependencies it pulled in:

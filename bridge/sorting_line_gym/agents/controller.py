@@ -5,7 +5,7 @@
     sorting-line-controller --namespace /plant --setup B --variant advanced --agent rba-hold
 
 This is the model of a controller for the line, written as a user would: it knows nothing of the
-node's internals, only its topics (README, "The ROS 2 node"). Each tick the node publishes, stamped
+node's internals, only its topics (docs/ros-node.md). Each tick the node publishes, stamped
 with the tick's simulated time, the input sensor (``input``: the reading of the next batch), the
 belt (``belt/occupancy``: its current ``speed``) and, on the advanced line, the ratio sensor
 (``sensors/ratio``: the next batch's category). The controller collects the readings of one stamp

@@ -55,7 +55,7 @@ class _Stop:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sorting-line-bag", description=__doc__.split("\n\n")[0],
-                                epilog="README, section 'Recorded bags', describes what a bag contains.")
+                                epilog="docs/bags.md describes what a bag contains.")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("record", help="record a running line's topics into a bag directory")

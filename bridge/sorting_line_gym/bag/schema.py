@@ -49,7 +49,7 @@ GLOBAL_TYPES = {
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
-#: The node's QoS (README, "The ROS 2 node"), as a rosbag2 offered QoS profile.
+#: The node's QoS (docs/ros-node.md), as a rosbag2 offered QoS profile.
 NODE_QOS = Qos(
     history=QosHistory.KEEP_LAST,
     depth=10,

@@ -152,7 +152,7 @@ def sim_seconds(sec, nanosec):
     return sec + nanosec * 1e-9
 
 
-#: The info keys of a step, in order (the README's list); ``containers`` is (a, a_false, b, b_false).
+#: The info keys of a step, in order (docs/gymnasium.md lists them); ``containers`` is (a, a_false, b, b_false).
 INFO_KEYS = (
     "accuracy", "purity", "recall_a", "recall_b", "speed", "speed_index", "mode", "occupancy", "containers",
     "speed_changes", "cumulative_reward", "step", "sim_time", "seed",

@@ -102,7 +102,7 @@ def read_table(variant: str = "basic") -> list[dict[str, str]]:
 
 
 def reward_of(accuracy: np.ndarray, speed: float) -> np.ndarray:
-    """The step reward without a speed change (README, "Reward")."""
+    """The step reward without a speed change (src/sim/reward.rs)."""
     r = 0.5 * (accuracy - THRESHOLD) / (1 - THRESHOLD) + 0.5 * (speed - SPEEDS[0]) / (SPEEDS[-1] - SPEEDS[0])
     return np.where(accuracy < THRESHOLD, -0.1, r)
 

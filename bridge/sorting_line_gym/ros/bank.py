@@ -182,7 +182,7 @@ class LineBank:
 
         Joining the DDS graph (rclpy's participant, the node's, discovery of the node's endpoints)
         happens one bank at a time per host and domain (:func:`joining_graph`): participants that
-        join together lose endpoint announcements for good (README, "Many envs per host")."""
+        join together lose endpoint announcements for good (docs/many-envs.md)."""
         if self.connected:
             self.check_usable()
             return self._reset_once(seeds)

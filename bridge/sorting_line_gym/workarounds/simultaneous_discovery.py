@@ -1,6 +1,6 @@
 """Workaround: DDS participants starting together lose endpoint announcements, so banks join one at a time.
 
-Measured (benches/discovery.py, README "Many envs per host"): when several client and node
+Measured (benches/discovery.py, docs/many-envs.md): when several client and node
 participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast DDS
 2.14 (rclpy's) and RustDDS (the node's) lose some endpoint announcements between them for good (a
 node's reset service never becomes ready for its client, even after 60 s): 4 AsyncVectorEnv workers

@@ -1,0 +1,109 @@
+"""The README's first screen runs as written: its quickstart snippets are taken from the README itself and run.
+
+Each snippet is the fenced block right after a `<!-- readme-test: NAME -->` marker: `ros-shell` (the node's command
+and `ros2 topic echo`), `ros-controller` (a user's rclpy controller, run against that node), `gymnasium` (an
+episode) and `ppo` (SB3 PPO, with its step budget cut to one rollout). Everything runs in a ROS domain of its own,
+derived from the test's, because the quickstart uses the root namespace. About 25 s in all on a quiet machine (at
+load 14 on 2 cores: 60 s), mostly importing torch and SB3.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+import shlex
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+FIRST_SCREEN = 60
+MARKERS = ("ros-shell", "ros-controller", "gymnasium", "ppo")
+
+
+def snippet(name: str) -> str:
+    """The fenced block right after `<!-- readme-test: NAME -->`."""
+    match = re.search(rf"<!-- readme-test: {re.escape(name)} -->\n```\w*\n(.*?)\n```", README.read_text(), re.S)
+    assert match, f"README.md has no fenced block after <!-- readme-test: {name} -->"
+    return match.group(1)
+
+
+def quickstart_domain() -> str:
+    """A domain id of its own (within 100..199), derived from the test's."""
+    base = int(os.environ.get("ROS_DOMAIN_ID", "100"))
+    return str(100 + (base - 100 + 37) % 100)
+
+
+def shell_command(program: str) -> list[str]:
+    """The argv of the ros-shell snippet's line that runs `program` (its comment dropped)."""
+    for line in snippet("ros-shell").splitlines():
+        argv = shlex.split(line, comments=True)
+        if argv and argv[0] == program:
+            return argv
+    raise AssertionError(f"the README's ros-shell snippet has no `{program}` line")
+
+
+def run_python(code: str, tmp_path: Path, name: str, timeout: float) -> subprocess.CompletedProcess:
+    script = tmp_path / name
+    script.write_text(code)
+    env = dict(os.environ, ROS_DOMAIN_ID=quickstart_domain())
+    try:
+        done = subprocess.run([sys.executable, script.name], cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired as e:
+        why = f"{name} (from the README) did not finish within {timeout} s\n{e.stdout}\n{e.stderr}"
+        raise AssertionError(why) from None
+    assert done.returncode == 0, f"{name} (from the README) exited with {done.returncode}\n{done.stdout}\n{done.stderr}"
+    return done
+
+
+def test_first_screen_holds_prerequisites_commands_and_quickstarts():
+    first = "\n".join(README.read_text().splitlines()[:FIRST_SCREEN])
+    for needed in ("Prerequisites", "launch_scripts/run.sh", "launch_scripts/test.sh", "Python 3.11", "root"):
+        assert needed in first, f"the README's first {FIRST_SCREEN} lines do not mention {needed!r}"
+    rust = tomllib.loads((ROOT / "Cargo.toml").read_text())["package"]["rust-version"]
+    assert f"Rust >= {rust}" in first, f"the README's first screen must state Cargo.toml's rust-version {rust}"
+    for name in MARKERS:
+        assert snippet(name) in first, f"the {name} quickstart is not within the README's first {FIRST_SCREEN} lines"
+
+
+@pytest.fixture
+def quickstart_node(start_node):
+    argv = shell_command("sorting_line")
+    assert argv[1] == "node", argv
+    return start_node(*argv[2:], env={"ROS_DOMAIN_ID": quickstart_domain()})
+
+
+def test_ros_controller_drives_the_node(quickstart_node, tmp_path):
+    done = run_python(snippet("ros-controller"), tmp_path, "my_controller.py", timeout=90.0)
+    steps = re.findall(r"step +\d+ speed (\d\.\d) accuracy [\d.]+ reward [+-][\d.]+", done.stdout)
+    assert len(steps) == 20, done.stdout
+    # The node starts at speed 0.6 and holds it without valid commands: other speeds are the controller's.
+    assert len(set(steps)) > 1, f"the speed never changed: the controller's commands had no effect\n{done.stdout}"
+    assert quickstart_node.running(), quickstart_node.describe()
+
+
+def test_ros2_topic_echo_shows_rewards(quickstart_node, ros2):
+    argv = shell_command("ros2")
+    cli = dataclasses.replace(ros2, env=dict(ros2.env, ROS_DOMAIN_ID=quickstart_domain()))
+    out = cli.run(*argv[1:], "--once", timeout=60.0).stdout
+    assert re.search(r"^-?\d+\.\d+$", out, re.M), f"`{' '.join(argv)} --once` printed no reward:\n{out}"
+
+
+def test_gymnasium_episode(tmp_path):
+    done = run_python(snippet("gymnasium"), tmp_path, "episode.py", timeout=120.0)
+    assert re.search(r"episode reward -?\d+\.\d\d, purity \d\.\d{3}", done.stdout), done.stdout
+
+
+def test_ppo(tmp_path):
+    # A tiny budget: 4 rollouts of 64 steps instead of the snippet's 20,000 steps in rollouts of 2,048.
+    code, budget = re.subn(r"total_timesteps=[\d_]+", "total_timesteps=256", snippet("ppo"))
+    code, rollout = re.subn(r'PPO\("MlpPolicy", env, ', 'PPO("MlpPolicy", env, n_steps=64, batch_size=64, ', code)
+    assert (budget, rollout) == (1, 1), "the README's PPO snippet must make PPO(\"MlpPolicy\", env, ...) and learn()"
+    done = run_python(code, tmp_path, "ppo.py", timeout=300.0)
+    assert "total_timesteps" in done.stdout, f"SB3 reported no training progress\n{done.stdout}\n{done.stderr}"
