@@ -192,6 +192,10 @@ def run_open_loop(bag: Bag, verdict: Verdict, *, namespace: str | None, answer_t
     if answers.duplicates:
         verdict.notes.append(f"{answers.duplicates} second commands for a tick already answered (the node drops "
                              "them; the first one is compared)")
+    unexpected = sum(1 for s, got in answers.got.items() for t in got if t not in expected_msgs.get(s, {}))
+    if unexpected:
+        verdict.notes.append(f"{unexpected} answers to ticks the bag shows no such command for (not compared: the "
+                             "recorded controller's was lost, or it did not answer there)")
 
 
 def _judge(verdict: Verdict, expected_msgs: dict, answers: _Answers, pace: _CheckPace, positions: dict,
