@@ -4,7 +4,8 @@ sorting_line_gym.testing`` loads it explicitly, ``-p no:sorting_line_gym.testing
 
 Nothing happens until a test asks for a fixture; importing this module imports no rclpy. Each test
 that uses one gets a graph of its own: a ``ROS_DOMAIN_ID`` of its own (from ``--sorting-line-domain``,
-by default 100 + the pid mod 80, then the next of 20 for each test), a namespace of its own, and
+by default 100 + the pid mod 80, then the next of 20 for each test; ``--sorting-line-same-domain``
+keeps the first for every test), a namespace of its own, and
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (set for the test, restored after it), so nothing
 is discovered beyond this host. Outside a loopback-only network namespace (``unshare -n``) the
 first such test warns once that DDS traffic stays on this host only by that setting;
@@ -61,6 +62,9 @@ def pytest_addoption(parser):
     group.addoption("--sorting-line-domain", type=int, default=None, metavar="N",
                     help="first ROS_DOMAIN_ID of the tests' graphs (each test takes the next of "
                          f"{DOMAINS_PER_SESSION}; default 100 + pid mod 80)")
+    group.addoption("--sorting-line-same-domain", action="store_true",
+                    help="every test on the first domain (for ROS objects that outlive a test: a session-wide "
+                         "rclpy context, a module-scoped env); tests still get namespaces of their own")
     group.addoption("--sorting-line-require-netns", action="store_true",
                     help="skip the tests that start ROS graphs unless in a loopback-only network namespace")
 
@@ -111,19 +115,24 @@ def sorting_line_graph(request, monkeypatch) -> Graph:
             f"sorting_line_gym.testing: {problem}: the tests' DDS traffic stays on this host only through "
             "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (run under `unshare -n` with lo up to isolate it fully, "
             "or pass --sorting-line-require-netns to skip instead)"), stacklevel=1)
-    first = config.getoption("--sorting-line-domain")
-    if first is None:
-        first = 100 + os.getpid() % 80
     k = next(_TESTS)
-    domain = first + k % DOMAINS_PER_SESSION
-    if not 0 <= domain <= 232:
-        raise pytest.UsageError(f"--sorting-line-domain {first}: the tests' domains {first}.."
-                                f"{first + DOMAINS_PER_SESSION - 1} must lie within 0..232")
+    same = config.getoption("--sorting-line-same-domain")
+    domain = domain_of_test(config.getoption("--sorting-line-domain"), k, same)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
     monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     return Graph(domain, f"/sorting_line_test/{_token(request.node.name)}_{os.getpid()}_{k}")
+
+
+def domain_of_test(first: int | None, k: int, same: bool = False) -> int:
+    """The ROS_DOMAIN_ID of the session's k-th test (``first``: --sorting-line-domain, or None)."""
+    if first is None:
+        first = 100 + os.getpid() % 80
+    if not 0 <= first <= 232 - DOMAINS_PER_SESSION:
+        raise pytest.UsageError(f"--sorting-line-domain {first}: the tests' domains {first}.."
+                                f"{first + DOMAINS_PER_SESSION - 1} must lie within 0..232")
+    return first if same else first + k % DOMAINS_PER_SESSION
 
 
 class LineNode:

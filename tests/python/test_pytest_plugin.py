@@ -24,6 +24,8 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pytest
+
 import ros_harness as h
 from bag_golden import DATA
 
@@ -124,6 +126,17 @@ def test_outside_a_network_namespace_it_can_skip_instead(tmp_path):
     proc, outcomes = run_pytest(tmp_path, "--sorting-line-require-netns", timeout=60)
     assert outcomes == {"test_warning::test_warns": "skipped"}, proc.stdout
     assert "--sorting-line-require-netns: not in a loopback-only network namespace" in proc.stdout, proc.stdout
+
+
+def test_each_test_gets_a_domain_of_its_own_within_the_range():
+    from sorting_line_gym.testing import DOMAINS_PER_SESSION, domain_of_test
+
+    ks = (0, 1, DOMAINS_PER_SESSION - 1, DOMAINS_PER_SESSION)
+    assert [domain_of_test(150, k) for k in ks] == [150, 151, 150 + DOMAINS_PER_SESSION - 1, 150]
+    assert {domain_of_test(150, k, same=True) for k in range(30)} == {150}
+    assert all(100 <= domain_of_test(None, k) <= 199 for k in range(30))
+    with pytest.raises(pytest.UsageError, match="--sorting-line-domain 220: the tests' domains 220..239"):
+        domain_of_test(220, 0)
 
 
 def test_pytest_finds_the_plugin_by_its_entry_point():
