@@ -7,8 +7,8 @@ bag recorded for it, except where told to misbehave. Written as a user's rclpy n
 Misbehaviours (TICK = stamp in whole tick periods): ``--speed-at TICK=SPEED`` answers that tick
 with SPEED; ``--stamp-shift-at TICK=S`` answers it with its stamp moved by S seconds; ``--skip
 TICK`` (repeatable) or ``--skip-all`` does not answer; ``--skip-once TICK`` does not answer
-it the first time it comes; ``--exit-at TICK=CODE`` writes a line on
-stderr and exits with CODE when that tick comes.
+it the first time it comes; ``--exit-at TICK=CODE`` writes a line on stderr and exits with CODE
+when that tick comes. ``--batch`` answers on ``batch/cmd`` (one entry) instead of the line's topics.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
-from sorting_line_interfaces.msg import MaterialInput, SortModeCommand, SpeedCommand
+from sorting_line_interfaces.msg import LineCommands, MaterialInput, SortModeCommand, SpeedCommand
 from std_msgs.msg import Header
 
 from sorting_line_gym.bag import open_bag
@@ -44,6 +44,7 @@ def main() -> int:
     p.add_argument("--skip-all", action="store_true")
     p.add_argument("--skip-once", action="append", type=int, default=[])
     p.add_argument("--exit-at", action="append", default=[])
+    p.add_argument("--batch", action="store_true", help="answer on batch/cmd (entry 0) instead")
     args = p.parse_args(remove_ros_args(sys.argv)[1:])
     speeds, shifts, exits = _pairs(args.speed_at, float), _pairs(args.stamp_shift_at, float), _pairs(args.exit_at, int)
     commands: dict[int, dict[str, dict]] = {}
@@ -57,6 +58,7 @@ def main() -> int:
     node = rclpy.create_node("scripted_controller")
     speed_pub = node.create_publisher(SpeedCommand, "cmd/speed", QOS)
     mode_pub = node.create_publisher(SortModeCommand, "cmd/sort_mode", QOS)
+    batch_pub = node.create_publisher(LineCommands, "batch/cmd", QOS) if args.batch else None
     exit_code: list[int] = []
 
     def on_input(msg: MaterialInput) -> None:
@@ -77,11 +79,15 @@ def main() -> int:
         if tick in shifts:
             moved = key + round(shifts[tick] * 1e9)
             stamp.sec, stamp.nanosec = moved // 1_000_000_000, moved % 1_000_000_000
-        if "cmd/sort_mode" in recorded:
-            mode = recorded["cmd/sort_mode"]["mode"]
+        mode = recorded["cmd/sort_mode"]["mode"] if "cmd/sort_mode" in recorded else None
+        speed = float(speeds.get(tick, recorded["cmd/speed"]["speed"]))
+        if batch_pub is not None:
+            batch_pub.publish(LineCommands(stamp_sec=[stamp.sec], stamp_nanosec=[stamp.nanosec], speeds=[speed],
+                                           modes=[] if mode is None else [mode]))
+            return
+        if mode is not None:
             mode_pub.publish(SortModeCommand(header=Header(stamp=stamp), mode=mode))
-        speed = speeds.get(tick, recorded["cmd/speed"]["speed"])
-        speed_pub.publish(SpeedCommand(header=Header(stamp=stamp), speed=float(speed)))
+        speed_pub.publish(SpeedCommand(header=Header(stamp=stamp), speed=speed))
 
     node.create_subscription(MaterialInput, "input", on_input, QOS)
     try:

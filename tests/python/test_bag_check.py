@@ -127,9 +127,10 @@ def test_one_wrong_speed_at_a_known_tick(namespace):
 
 
 def test_missing_answers_wrong_stamp_and_bad_speed_are_reported_and_the_run_goes_on(namespace):
+    """A controller answering on batch/cmd (entry 0), as a vectorised one would."""
     verdict = check_controller(DATA / "basic_d", namespace=namespace("bad"), answer_timeout=0.5,
-                               controller=scripted("basic_d", "--skip", "10", "--skip", "11", "--stamp-shift-at",
-                                                   "30=0.5", "--speed-at", "40=1.5"))
+                               controller=scripted("basic_d", "--batch", "--skip", "10", "--skip", "11",
+                                                   "--stamp-shift-at", "30=0.5", "--speed-at", "40=1.5"))
     assert verdict.exit_code == 1, verdict.summary()
     missing = [a.tick for a in verdict.answers if a.status == "missing"]
     assert missing == [10, 11], verdict.summary()
@@ -137,6 +138,7 @@ def test_missing_answers_wrong_stamp_and_bad_speed_are_reported_and_the_run_goes
     assert set(by_tick) == {30, 40}, verdict.summary()
     assert by_tick[30].field == "header.stamp" and by_tick[30].reason.startswith("unknown_tick"), str(by_tick[30])
     assert by_tick[40].answered == 1.5 and by_tick[40].reason.startswith("invalid_speed"), str(by_tick[40])
+    assert (by_tick[40].topic, by_tick[40].field) == ("batch/cmd", "speeds[0]"), str(by_tick[40])
     assert verdict.count("matching") == 251, verdict.summary()  # everything after the misbehaviour still checked
     text = verdict.summary()
     assert "no answer in time (2): ticks 10, 11" in text and "the node refuses it: invalid_speed" in text, text
