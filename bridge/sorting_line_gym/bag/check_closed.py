@@ -273,7 +273,10 @@ def _judge(plan: _Plan, verdict: Verdict, run: _Run, tolerances: dict[str, Toler
     for reset in run.resets:
         episode = int(reset.plain["episode"])
         bag_states = by_step(s for s in plan.bag_states.values() if s["episode"] == episode)
-        target = bag_states[-1]["step"] if bag_states else 0
+        if not bag_states:
+            verdict.notes.append(f"episode {episode}: the bag has no state of it (the recording ended): not compared")
+            continue
+        target = bag_states[-1]["step"]
         ours = run.episodes.get(episode)
         run_states = by_step(s for s in run.states if s["episode"] == ours and s["step"] <= target)
         result = EpisodeResult(episode, Figures.of(bag_states), Figures.of(run_states) if run_states else None)
