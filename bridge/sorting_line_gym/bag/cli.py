@@ -72,13 +72,7 @@ def _parser() -> argparse.ArgumentParser:
 
     rp = sub.add_parser("replay", help="replay a bag's resets and commands into a fresh lock-step node and compare")
     rp.add_argument("bag", help="the bag directory to replay")
-    for name, kind in [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float),
-                       ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
-        rp.add_argument(f"--{name}", type=kind, default=None,
-                        help="override the node option the bag stores (needed if the bag does not store it)")
-    rp.add_argument("--setup", choices=list(SETUPS), default=None,
-                    help="the paper's setup of the recorded line: its input, obs-noise, action-penalty and threshold "
-                         "(for a bag that does not store them; the flags above override it)")
+    _add_node_options(rp, "")
     rp.add_argument("--step-timeout", type=float, default=5.0, help="longest wait for one tick or reset (s)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -135,14 +129,27 @@ def _check_parser(sub) -> None:
         c.add_argument(f"--max-{figure}-drop", default=None, metavar="X|X%",
                        help=f"--closed-loop: how much lower than the bag's an episode's {figure} may be, absolute "
                             "or as a percentage of the bag's (default 0: equal or better)")
-    for name, kind in [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float),
-                       ("threshold", float), ("max-steps", int), ("seed", int), ("tick-period", float)]:
-        c.add_argument(f"--{name}", type=kind, default=None,
-                       help="--closed-loop: the node option, if the bag does not store it (as replay's flag)")
-    c.add_argument("--setup", choices=list(SETUPS), default=None,
-                   help="--closed-loop: the paper's setup of the recorded line (its input, obs-noise, action-penalty "
-                        "and threshold), if the bag does not store them; the flags above override it")
+    _add_node_options(c, "--closed-loop: ")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
+
+
+#: Node options a fresh node for a bag takes from flags (replay, closed-loop check), named as `sorting_line node`.
+NODE_OPTIONS = [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float), ("threshold", float),
+                ("max-steps", int), ("seed", int), ("tick-period", float)]
+
+
+def _add_node_options(parser, scope: str) -> None:
+    """The node options and --setup, for a bag that does not store them (or to override them)."""
+    for name, kind in NODE_OPTIONS:
+        parser.add_argument(f"--{name}", type=kind, default=None,
+                            help=f"{scope}the node option, overriding the bag's (needed if the bag does not store it)")
+    parser.add_argument("--setup", choices=list(SETUPS), default=None,
+                        help=f"{scope}the paper's setup of the recorded line: its input, obs-noise, action-penalty and "
+                             "threshold (for a bag that does not store them; the flags above override it)")
+
+
+def _node_options(args) -> dict:
+    return {k: getattr(args, k) for k in [name.replace("-", "_") for name, _ in NODE_OPTIONS] + ["setup"]}
 
 
 CHECK_EPILOG = """\
@@ -220,9 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "replay":
             from .replay import replay
 
-            overrides = {k: getattr(args, k) for k in ("variant", "input", "obs_noise", "action_penalty", "threshold",
-                                                       "max_steps", "seed", "tick_period", "setup")}
-            result = replay(args.bag, overrides, step_timeout=args.step_timeout,
+            result = replay(args.bag, _node_options(args), step_timeout=args.step_timeout,
                             progress=not args.no_progress and sys.stderr.isatty())
             print(result.report(), flush=True)
             return 0 if result.identical else EXIT_DIFFERENT
@@ -255,8 +260,7 @@ def _check(args) -> int:
 
     from .check import check_controller
 
-    overrides = {k: getattr(args, k) for k in ("variant", "input", "obs_noise", "action_penalty", "threshold",
-                                               "max_steps", "seed", "tick_period", "setup")}
+    overrides = _node_options(args)
     with _Stop() as stop:
         verdict = check_controller(args.bag, namespace=args.namespace, controller=args.controller,
                                    closed_loop=args.closed_loop, record=args.record,
