@@ -99,9 +99,18 @@ def test_our_controller_already_running_passes_open_and_closed_loop_on_the_advan
 # A changed controller
 
 
-def test_rba_instead_of_rba_hold_fails_naming_tick_and_field(namespace):
-    verdict = check_controller(DATA / "advanced_b", namespace=namespace("rba"),
-                               controller=our_controller("advanced_b", agent="rba"))
+def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loop(namespace, tmp_path):
+    """One controller running rba where the bag was recorded with rba-hold, checked both ways."""
+    from test_controller import ControllerProcess
+
+    spec, ns = GOLDEN["advanced_b"], namespace("rba")
+    controller = ControllerProcess(tmp_path, "rba", ["--setup", spec["setup"], "--variant", spec["variant"],
+                                                     "--agent", "rba", "--namespace", ns])
+    try:
+        verdict = check_controller(DATA / "advanced_b", namespace=ns, wait=30)
+        closed = check_controller(DATA / "advanced_b", namespace=ns, closed_loop=True)
+    finally:
+        assert controller.stop() == 0, controller.describe()
     assert verdict.exit_code == 1, verdict.summary()
     first = verdict.first_difference
     assert (first.tick, first.topic, first.field) == (3, "cmd/speed", "speed"), verdict.summary()
@@ -109,6 +118,21 @@ def test_rba_instead_of_rba_hold_fails_naming_tick_and_field(namespace):
            "controller 0.9" in verdict.summary(), verdict.summary()
     junit = ET.fromstring(verdict.to_junit()).find("testsuite")
     assert junit.find("testcase[@name='episode 1']/failure") is not None
+
+    assert closed.exit_code == 1, closed.summary()
+    episode = closed.episodes[0]
+    assert episode.parted.startswith("tick 4 (stamp 4.000000000 s, step 3), field speed: bag 0.8, run 0.9"), \
+        episode.parted
+    assert episode.run.reward < episode.bag.reward and "reward" in episode.failures[0], closed.summary()
+    # The tolerances decide: the same episodes pass within loose ones (rba loses up to ~30% here).
+    from sorting_line_gym.bag.check_verdict import Tolerance
+
+    loose = {"reward": Tolerance.parse("35%", "r"), "accuracy": Tolerance.parse("0.01", "a"),
+             "purity": Tolerance.parse("1%", "p")}
+    for e in closed.episodes:
+        e.failures.clear()
+        e.judge(loose)
+    assert all(e.passed for e in closed.episodes), [e.describe() for e in closed.episodes]
 
 
 def test_one_wrong_speed_at_a_known_tick(namespace):
@@ -179,24 +203,6 @@ def test_our_controller_passes_closed_loop_and_the_recorded_run_replays(namespac
     # The recording of the run is a bag like the golden one: it replays exactly.
     result = replay(out)
     assert result.identical and result.resets == 5, result.report()
-
-
-def test_rba_instead_of_rba_hold_fails_closed_loop_where_the_trajectories_part(namespace):
-    verdict = check_controller(DATA / "advanced_b", namespace=namespace("closed_rba"), closed_loop=True,
-                               controller=our_controller("advanced_b", agent="rba"))
-    assert verdict.exit_code == 1, verdict.summary()
-    first = verdict.episodes[0]
-    assert first.parted.startswith("tick 4 (stamp 4.000000000 s, step 3), field speed: bag 0.8, run 0.9"), first.parted
-    assert first.run.reward < first.bag.reward and "reward" in first.failures[0], verdict.summary()
-    # The tolerances decide: the same episodes pass within loose ones (rba loses up to ~30% here).
-    from sorting_line_gym.bag.check_verdict import Tolerance
-
-    loose = {"reward": Tolerance.parse("35%", "r"), "accuracy": Tolerance.parse("0.01", "a"),
-             "purity": Tolerance.parse("1%", "p")}
-    for e in verdict.episodes:
-        e.failures.clear()
-        e.judge(loose)
-    assert all(e.passed for e in verdict.episodes), [e.describe() for e in verdict.episodes]
 
 
 def test_closed_loop_names_the_nodes_reason_for_a_refused_answer(namespace):
