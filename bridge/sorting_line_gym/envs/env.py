@@ -44,7 +44,8 @@ of 50 steps (`max_episode_steps=250` for training); constructing the class direc
 own and stop a node process in a namespace of its own), "shared" (lease a line of this host's line
 server, `line_server`: for many envs per host) or "attach" (use the node serving `namespace`);
 `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
-`startup_timeout`; `render_mode` "rgb_array" or "human".
+`startup_timeout`; `render_mode` "rgb_array" or "human"; `input`, `obs_noise`, `action_penalty` (instead of the
+setup's) and `threshold` (0.7), as the node's options of the same name, with their ranges.
 
 ## Info
 accuracy, purity (correct / all sorted), recall_a, recall_b, speed, speed_index, mode, occupancy,
@@ -63,6 +64,7 @@ from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,
     ENV_IDS,
+    THRESHOLD,
     check_variant,
     decode_action,
     observations,
@@ -100,12 +102,17 @@ class SortingLineEnv(gym.Env):
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         render_mode: str | None = None,
+        input: str | None = None,
+        obs_noise: float | None = None,
+        action_penalty: float | None = None,
+        threshold: float = THRESHOLD,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
         options = LineOptions(
             setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
             step_timeout=step_timeout, startup_timeout=startup_timeout,
+            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
         )
         self.variant = variant
         self.render_mode = render_mode

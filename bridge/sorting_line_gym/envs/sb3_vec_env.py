@@ -14,7 +14,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from ..line.options import LineOptions
-from ..line.vocabulary import EPISODE_STEPS, line_infos
+from ..line.vocabulary import EPISODE_STEPS, THRESHOLD, line_infos
 from .env import action_space, observation_space
 from .vector import Lines, node_namespaces
 
@@ -33,11 +33,16 @@ class SortingLineSB3VecEnv(VecEnv):
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         seed: int | None = None,
+        input: str | None = None,
+        obs_noise: float | None = None,
+        action_penalty: float | None = None,
+        threshold: float = THRESHOLD,
     ):
         namespaces = node_namespaces(namespace)
         options = LineOptions(
             setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
             max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
+            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
         )
         self._lines = Lines(num_envs, options, namespaces)
         self.render_mode = None

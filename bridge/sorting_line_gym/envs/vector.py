@@ -25,7 +25,15 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..line.options import LineOptions
-from ..line.vocabulary import EPISODE_STEPS, decode_actions, line_infos, observations, sim_seconds, state_info
+from ..line.vocabulary import (
+    EPISODE_STEPS,
+    THRESHOLD,
+    decode_actions,
+    line_infos,
+    observations,
+    sim_seconds,
+    state_info,
+)
 from ..ros.bank import LineBank
 from ..ros.fleet import NodeFleet, split_lines
 from .env import SEED_BOUND, action_space, observation_space
@@ -100,6 +108,10 @@ class SortingLineVectorEnv(VectorEnv):
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
         render_mode: str | None = None,
+        input: str | None = None,
+        obs_noise: float | None = None,
+        action_penalty: float | None = None,
+        threshold: float = THRESHOLD,
     ):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
@@ -107,6 +119,7 @@ class SortingLineVectorEnv(VectorEnv):
         options = LineOptions(
             setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
             max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
+            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
         )
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)

@@ -11,12 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .vocabulary import MAX_EPISODE_STEPS, SETUPS, THRESHOLD, check_setup, check_variant
+from .vocabulary import INPUTS, MAX_EPISODE_STEPS, SETUPS, THRESHOLD, check, check_setup, check_variant
 
 #: How an environment reaches its node: ``spawn`` starts, owns and stops a node process in a
 #: namespace of its own; ``shared`` leases a line of this host's line server; ``attach`` uses the
 #: node serving ``namespace``.
 NODE_MODES = ("spawn", "shared", "attach")
+
+#: The line's settings an environment takes beside its setup, as the node's options of the same name,
+#: with their ranges (low, high, whether high is allowed): src/sim/config.rs checks the same.
+SETTING_RANGES = {"obs_noise": (0.0, 1.0, True), "action_penalty": (0.0, 10.0, True), "threshold": (0.0, 1.0, False)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,6 +38,10 @@ class LineOptions:
     step_timeout: float = 2.0
     startup_timeout: float = 20.0
     threshold: float = THRESHOLD
+    #: The setup's input generator, sensor noise and switching penalty, unless given here.
+    input: str | None = None
+    obs_noise: float | None = None
+    action_penalty: float | None = None
     #: An evolution schedule file the node runs the line by (``--evolution``), or None.
     evolution: str | None = None
 
@@ -49,6 +57,13 @@ class LineOptions:
             raise ValueError("step_timeout and startup_timeout must be positive (seconds)")
         if self.node == "attach" and not self.namespace:
             raise ValueError("node='attach' needs the namespace of the running node")
+        if self.input is not None:
+            check("input", self.input, INPUTS)
+        for name, (low, high, high_allowed) in SETTING_RANGES.items():
+            value = getattr(self, name)
+            if value is not None and not (low <= value <= high and (high_allowed or value < high)):
+                bound = "..=" if high_allowed else "..<"
+                raise ValueError(f"{name} = {value!r} is out of range: allowed {low} {bound} {high}")
 
     @property
     def advanced(self) -> bool:
@@ -58,6 +73,7 @@ class LineOptions:
         """The options of a node serving ``lines`` lines with these settings (what
         ``NodeProcess`` turns into flags and the line server matches leases on)."""
         options = dict(SETUPS[self.setup], variant=self.variant, threshold=self.threshold, lines=lines)
+        options.update({k: v for k in ("input", "obs_noise", "action_penalty") if (v := getattr(self, k)) is not None})
         options["max_steps"] = self.max_episode_steps if self.max_episode_steps is not None else MAX_EPISODE_STEPS
         if self.evolution is not None:
             options["evolution"] = self.evolution
