@@ -78,12 +78,11 @@ class LineBank:
         constructor leaves to the first reset, so that an environment costs nothing until it is
         used (Gymnasium's AsyncVectorEnv builds one in the parent only to read its spaces, then
         forks) and a forked child never inherits a live rclpy context."""
+        self._check_not_closed()
         if self._opened_in is not None:
             if self._opened_in != os.getpid():
                 raise fork_error() or BridgeError(f"{self.namespace}: this bank was opened in pid {self._opened_in}")
             return
-        if self._closed:
-            raise BridgeError(f"{self.namespace}: the environment is closed")
         acquire_rclpy()
         self._opened_in = os.getpid()
         lines = self._lines
@@ -250,10 +249,18 @@ class LineBank:
     def check_usable(self) -> None:
         """Raises unless this bank was opened (by a reset) in this very process: a bank
         used before its first reset, or inherited by a forked child, cannot step."""
+        self._check_not_closed()
         if self._opened_in is None:
             raise BridgeError(f"{self.namespace}: step() before reset()")
         if self._opened_in != os.getpid():
             raise fork_error() or BridgeError(f"{self.namespace}: this bank was opened in pid {self._opened_in}")
+
+    def _check_not_closed(self) -> None:
+        """A closed environment fails with our error, not rclpy's InvalidHandle of a destroyed node."""
+        if self._closed:
+            raise BridgeError(
+                f"{self.namespace}: the environment is closed (close() was called): make a new one to reset or step"
+            )
 
     def close(self) -> None:
         if self._closed:
