@@ -8,8 +8,8 @@ Runs inside the loopback-only network namespace that launch_scripts/test.sh make
                         python -m pytest tests/python/test_recording.py -q'
 
 The full-disk test mounts a small tmpfs in a mount namespace of its own (`unshare -m`, as root,
-which the CI tests are). Cost: about 60 s on the 2-core CI machine (two golden replays ~10 s
-each, the killed recorder ~15 s, the full disk ~15 s).
+which the CI tests are). Cost: 30 s in all on the 2-core machine at load ~5, 95 s at load 15
+(the killed recorder 9-26 s, the full disk 7-22 s, two golden replays 4-25 s each).
 """
 
 from __future__ import annotations
@@ -205,3 +205,48 @@ def test_a_full_disk_ends_the_recording_with_a_message_and_a_readable_bag(start_
     assert stated == len(bag.messages) > 200, log
     assert not (copied / ".sorting_line_reserve").exists()
     assert len(list(copied.glob("*.mcap"))) >= 2  # split by time, the last file ends at the full disk
+
+
+def _cdr_with_stamp(stamp_ns: int) -> bytes:
+    """A line message's first bytes as far as the loss counter reads them: CDR_LE header, stamp."""
+    import struct
+
+    return b"\x00\x01\x00\x00" + struct.pack("<iI", stamp_ns // 10**9, stamp_ns % 10**9) + bytes(16)
+
+
+def test_the_loss_counter_names_what_the_node_published_and_the_recorder_missed():
+    """No ROS: the node's reports (sim_time, messages_published) against the stamps received."""
+    from sorting_line_gym.bag.losses import LossCounter, describe_losses
+
+    ns, s = "/l", 10**9
+    topics = [f"{ns}/{t}" for t in ("input", "belt/occupancy", "state", "events/reset", "cmd/speed")]
+    counter = LossCounter(ns, topics, "basic", False, 1.0)
+    counter.on_message(f"{ns}/state", _cdr_with_stamp(5 * s))  # before the first report: outside the window
+    counter.on_status({"sim_time": "5.000000000", "messages_published": "100"})
+    for tick in range(6, 16):  # ticks 6..15: 3 per-tick messages each, a reset at tick 10
+        for rel in ("input", "belt/occupancy", "state"):
+            if not (rel == "state" and tick in (8, 9)) and not (rel == "input" and tick == 12):
+                counter.on_message(f"{ns}/{rel}", _cdr_with_stamp(tick * s))
+        if tick == 10:
+            counter.on_message(f"{ns}/events/reset", _cdr_with_stamp(tick * s))
+        if tick == 13:
+            counter.on_status({"sim_time": "13.000000000", "messages_published": str(100 + 8 * 3 + 1)})
+    report = counter.report()
+    assert report == {"compared": True, "window_ns": [5 * s, 13 * s], "ticks": 8, "published": 25, "received": 22,
+                      "missing": 3, "topics": {"state": 2, "input": 1}}, report
+    assert "MESSAGES MISSED: 3 of the 25" in describe_losses(report) and "state 2" in describe_losses(report)
+    partial = LossCounter(ns, topics[:2], "basic", False, 1.0)
+    assert not partial.report()["compared"] and "state" in partial.report()["why"]
+
+
+def test_a_recording_says_it_missed_nothing(ros, start_node, namespace, tmp_path, capsys):
+    ns = namespace("complete")
+    start_node("--mode", "realtime", "--rate", "50", "--ros-args", "-r", f"__ns:={ns}")
+    out = tmp_path / "run"
+    recorder = BagProcess(["record", "--namespace", ns, "-o", out, "--duration", "3"], tmp_path / "record.log")
+    assert recorder.wait(60) == 0, recorder.describe()
+    assert "messages missed: none (the node published" in recorder.log(), recorder.log()
+    from sorting_line_gym.bag.cli import main
+
+    assert main(["info", str(out)]) == 0
+    assert "messages missed: none" in capsys.readouterr().out

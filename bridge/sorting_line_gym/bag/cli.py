@@ -58,7 +58,8 @@ def _parser() -> argparse.ArgumentParser:
                                 epilog="docs/bags.md describes what a bag contains.")
     sub = p.add_subparsers(dest="command", required=True)
 
-    r = sub.add_parser("record", help="record a running line's topics into a bag directory")
+    r = sub.add_parser("record", help="record a running line's topics into a bag directory",
+                       description=RECORD_DESCRIPTION)
     r.add_argument("--namespace", required=True, help="the line's namespace (e.g. /plant or /plant/line_2)")
     r.add_argument("-o", "--output", required=True, help="the bag directory to create (must not exist)")
     r.add_argument("--topic", action="append", dest="topics", metavar="TOPIC",
@@ -166,6 +167,14 @@ examples:
   sorting-line-bag check run1 --controller 'sorting-line-controller --setup D' --junit check.xml
   sorting-line-bag check run1 --closed-loop --max-reward-drop 5% --controller './my_node'
 """
+
+
+RECORD_DESCRIPTION = """\
+Records a running line into a ROS 2 bag (metadata.yaml + MCAP) as it goes: whatever arrived more
+than about half a second ago is on disk, so a recorder killed outright (SIGKILL, the OOM killer, a
+pulled plug) leaves a bag that `sorting-line-bag reindex BAG` recovers. At the end it compares what
+it received with the node's own /diagnostics counters and says how many messages it missed, and on
+which topics (also shown by `info`). A full disk stops it with exit code 3 and a readable bag."""
 
 
 def _option(check, kind):
