@@ -34,7 +34,7 @@ def _pairs(items: list[str], kind) -> dict[int, object]:
     return {int(k): kind(v) for k, v in (i.split("=", 1) for i in items)}
 
 
-def main() -> int:
+def _arguments() -> argparse.Namespace:
     p = argparse.ArgumentParser()
     p.add_argument("--bag", required=True)
     p.add_argument("--period", type=float, default=1.0, help="the line's tick period (s)")
@@ -45,13 +45,23 @@ def main() -> int:
     p.add_argument("--skip-once", action="append", type=int, default=[])
     p.add_argument("--exit-at", action="append", default=[])
     p.add_argument("--batch", action="store_true", help="answer on batch/cmd (entry 0) instead")
-    args = p.parse_args(remove_ros_args(sys.argv)[1:])
-    speeds, shifts, exits = _pairs(args.speed_at, float), _pairs(args.stamp_shift_at, float), _pairs(args.exit_at, int)
+    return p.parse_args(remove_ros_args(sys.argv)[1:])
+
+
+def _recorded_commands(bag: str) -> dict[int, dict[str, dict]]:
+    """stamp -> topic -> the bag's first command of that kind for the tick."""
     commands: dict[int, dict[str, dict]] = {}
-    for rel, msgs in open_bag(args.bag).by_relative_topic().items():
+    for rel, msgs in open_bag(bag).by_relative_topic().items():
         if rel in ("cmd/speed", "cmd/sort_mode"):
             for m in msgs:
                 commands.setdefault(stamp_ns(m.plain), {}).setdefault(rel, m.plain)
+    return commands
+
+
+def main() -> int:
+    args = _arguments()
+    speeds, shifts, exits = _pairs(args.speed_at, float), _pairs(args.stamp_shift_at, float), _pairs(args.exit_at, int)
+    commands = _recorded_commands(args.bag)
     period_ns = round(args.period * 1e9)
 
     rclpy.init(args=sys.argv)
