@@ -10,19 +10,22 @@
 # loopback-only network namespace, otherwise with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 #
 # Usage: launch_scripts/run.sh [--quick-steps N] [--full|--smoke [--jobs J] [--train-seeds S...] [--timesteps N]
-#                               [--n-envs N] [--heldout-episodes N]] [--out DIR]
+#                               [--n-envs N] [--lines-mapping M] [--heldout-episodes N]] [--out DIR]
 #   --quick-steps N   PPO budget of step 2 (default 20000)
 #   --full            instead: the whole study of docs/benchmark.md (Table 1: 8 lines x random, rba,
 #                     rba-hold, and DQN, PPO, A2C at 100k steps for each of 5 training seeds on 8 lines
 #                     of one node; every agent on seeds 42..51 and 100 held-out seeds, the oracle, IQM
-#                     with CIs; PPO on B advanced and DQN on D basic also on one line, for the --n-envs
-#                     check) -> results/benchmark/; resumable (finished cells are kept), progress shown
+#                     with CIs; DQN, PPO and A2C on B advanced and D basic also on one line, for the
+#                     per-algorithm --n-envs check) -> results/benchmark/; resumable (finished cells are
+#                     kept), progress shown
 #   --smoke           the same pipeline at CI size (B advanced: random, rba-hold, PPO at 512 steps, 2
 #                     seeds, 2 lines and 1 line, 5 held-out seeds) -> results/smoke/; a few minutes
 #   --jobs J          cells at once in --full/--smoke (default 2)
 #   --train-seeds S.. training seeds (default 42 43 44 45 46; --smoke 42 43)
 #   --timesteps N     training budget per RL cell (default 100000; --smoke 512)
 #   --n-envs N        lines of one node per training, a power of two (default 8; --smoke 2)
+#   --lines-mapping M how the one-line hyperparameters go to N lines: same-rollout (default) or
+#                     same-line-rollout (see bridge/sorting_line_gym/training/hyperparams.py)
 #   --heldout-episodes N  held-out evaluation seeds from 10000 (default 100; --smoke 5)
 #   --out DIR         results directory (default results)
 set -euo pipefail
@@ -35,6 +38,7 @@ JOBS=2
 SEEDS=()
 TIMESTEPS=""
 N_ENVS=""
+MAPPING=same-rollout
 HELDOUT=""
 OUT=results
 usage() { sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; }
@@ -45,12 +49,13 @@ while [[ $# -gt 0 ]]; do
     --smoke) SMOKE=1; shift ;;
     --timesteps) TIMESTEPS="$2"; shift 2 ;;
     --n-envs) N_ENVS="$2"; shift 2 ;;
+    --lines-mapping) MAPPING="$2"; shift 2 ;;
     --heldout-episodes) HELDOUT="$2"; shift 2 ;;
     --jobs) JOBS="$2"; shift 2 ;;
     --train-seeds) shift; SEEDS=(); while [[ $# -gt 0 && "$1" != --* ]]; do SEEDS+=("$1"); shift; done ;;
     --out) OUT="$2"; shift 2 ;;
     -h|--help) usage; exit 0 ;;
-    *) echo "run.sh: unknown argument '$1' (allowed: --quick-steps N, --full, --smoke, --jobs J, --train-seeds S..., --timesteps N, --n-envs N, --heldout-episodes N, --out DIR)" >&2; exit 2 ;;
+    *) echo "run.sh: unknown argument '$1' (allowed: --quick-steps N, --full, --smoke, --jobs J, --train-seeds S..., --timesteps N, --n-envs N, --lines-mapping M, --heldout-episodes N, --out DIR)" >&2; exit 2 ;;
   esac
 done
 if [[ $FULL == 1 && $SMOKE == 1 ]]; then echo "run.sh: --full and --smoke exclude each other" >&2; exit 2; fi
@@ -61,6 +66,10 @@ else
   [[ ${#SEEDS[@]} -gt 0 ]] || SEEDS=(42 43 44 45 46)
   TIMESTEPS="${TIMESTEPS:-100000}" N_ENVS="${N_ENVS:-8}" HELDOUT="${HELDOUT:-100}"
 fi
+case "$MAPPING" in
+  same-rollout|same-line-rollout) ;;
+  *) echo "run.sh: --lines-mapping '$MAPPING' is not valid: allowed same-rollout, same-line-rollout" >&2; exit 2 ;;
+esac
 for value in "$QUICK_STEPS" "$JOBS" "$TIMESTEPS" "$N_ENVS" "$HELDOUT" "${SEEDS[@]}"; do
   if ! [[ "$value" =~ ^[0-9]+$ ]]; then echo "run.sh: '$value' is not valid: allowed a whole number" >&2; exit 2; fi
 done
@@ -83,7 +92,7 @@ job() {
     fi
     local start=$SECONDS
     sorting-line-benchmark --out "$dir" --jobs "$JOBS" --train-seeds "${seeds[@]}" --timesteps "$TIMESTEPS" \
-      --n-envs "$N_ENVS" --check-n-envs --heldout-episodes "$HELDOUT" "${selection[@]}"
+      --n-envs "$N_ENVS" --lines-mapping "$MAPPING" --check-n-envs --heldout-episodes "$HELDOUT" "${selection[@]}"
     echo "run.sh: the study took $(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s (cells already done were not rerun) -> $dir" >&2
     return
   fi
@@ -110,7 +119,7 @@ job() {
   echo "written: $OUT/summary.md, $OUT/baselines/, $OUT/quick_ppo/" >&2
 }
 export -f job
-export FULL SMOKE JOBS QUICK_STEPS TIMESTEPS N_ENVS HELDOUT OUT
+export FULL SMOKE JOBS QUICK_STEPS TIMESTEPS N_ENVS MAPPING HELDOUT OUT
 export SEEDS_LIST="${SEEDS[*]}"
 
 if [[ $(id -u) == 0 ]] && command -v unshare >/dev/null && unshare -n true 2>/dev/null; then

@@ -32,7 +32,6 @@ OVER_60_LINES = {
     "bridge/sorting_line_gym/bag/cli.py::_check_parser",
     "bridge/sorting_line_gym/bag/cli.py::_parser",
     "bridge/sorting_line_gym/bag/cli.py::main",
-    "bridge/sorting_line_gym/reports/transfer_report.py::markdown",
     "tests/python/line_client.py::LineClient.reset",
     "tests/python/test_controller.py::check_realtime_run",
     "tests/python/test_controller.py::test_controller_drives_a_lockstep_episode_exactly",

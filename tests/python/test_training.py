@@ -234,6 +234,35 @@ def test_hyperparameters_are_mapped_from_one_line_to_n_lines():
         hyperparams.load("ppo", "basic", overrides=["n_envs=6"])
 
 
+def test_named_lines_mappings_keep_minibatches_and_gradient_steps_per_transition():
+    """Both one-line to N-line mappings keep PPO's and DQN's gradient steps per transition and the
+    minibatch size; same-line-rollout keeps each line's rollout (PPO N x 2048 steps per update, DQN a
+    training round every 4 vector steps with N gradient steps, A2C N x 5 transitions per update)."""
+    from sorting_line_gym.training import hyperparams as hp
+
+    assert hp.mapped_rollout("ppo", 8) == {"n_steps": 256} and hp.mapped_rollout("a2c", 8) == {"n_steps": 1}
+    assert hp.mapped_rollout("dqn", 8) == {"train_freq": 1, "gradient_steps": 2}
+    assert hp.mapped_rollout("ppo", 8, "same-line-rollout") == {"n_steps": 2048}
+    assert hp.mapped_rollout("dqn", 8, "same-line-rollout") == {"train_freq": 4, "gradient_steps": 8}
+    assert hp.mapped_rollout("a2c", 8, "same-line-rollout") == {"n_steps": 5}
+    one = {algo: hp.load(algo, "advanced") for algo in hp.ALGOS}
+    assert hp.gradient_steps_per_transition("ppo", one["ppo"]) == pytest.approx(10 * (2048 // 64) / 2048)
+    assert hp.gradient_steps_per_transition("dqn", one["dqn"]) == 0.25
+    assert hp.gradient_steps_per_transition("a2c", one["a2c"]) == pytest.approx(1 / 5)
+    for mapping in hp.MAPPINGS:
+        for n in (2, 8, 64):
+            for algo in ("ppo", "dqn"):
+                params = hp.load(algo, "advanced", overrides=[f"n_envs={n}"], mapping=mapping)
+                assert hp.gradient_steps_per_transition(algo, params) == pytest.approx(
+                    hp.gradient_steps_per_transition(algo, one[algo])
+                ), (algo, mapping, n)
+                assert "batch_size" not in params  # the minibatch stays SB3's default, as on one line
+    a2c = hp.load("a2c", "advanced", overrides=["n_envs=8"], mapping="same-line-rollout")
+    assert hp.gradient_steps_per_transition("a2c", a2c) == pytest.approx(1 / 40)
+    with pytest.raises(ValueError, match="lines mapping 'fast' is not valid: allowed same-rollout, same-line-rollout"):
+        hp.load("ppo", "basic", overrides=["n_envs=2"], mapping="fast")
+
+
 def test_hyperparameter_files_need_an_entry_for_the_line(tmp_path):
     from sorting_line_gym.training import hyperparams
 
@@ -335,11 +364,18 @@ def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
         2,
         [2, 2],
     )
+    assert check["mapping"] == "same-rollout" and check["gradient_steps_per_transition"] == [0.25, 0.25]
+    (verdict,) = report["n_envs_agreement_by_algorithm"]
+    assert (verdict["agent"], verdict["lines"], verdict["verdict"]) == (
+        "dqn",
+        ["D basic"],
+        "too few runs (fewer than 5 a side)",
+    )
     table = (out / "table.md").read_text()
     assert (
         "| D2 | D | Basic | dqn | 2 |" in table
         and "P(dqn > rba-hold)" in table
-        and "| D | Basic | dqn | 2 | 2 / 2 |" in table
+        and "| D | Basic | dqn | 2 | same-rollout | 2 / 2 |" in table
     )
     for seed in (42, 43):
         two = json.loads((out / "cells" / f"D_basic_dqn_n2_seed{seed}.json").read_text())["training"]

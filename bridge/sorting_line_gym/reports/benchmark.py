@@ -6,9 +6,10 @@
 
 For every setup (A-D) and variant (basic, advanced) it evaluates the baselines (random, rba,
 rba-hold) and, for each training seed, trains DQN, PPO and A2C with the paper's hyperparameters
-(``sorting-line-train``; with ``--n-envs N`` on N lines of one node, the hyperparameters mapped as
-``training.hyperparams.for_lines`` says) and evaluates the model. Every agent is evaluated twice with
-``sorting-line-eval``'s protocol (50 steps, deterministic): on the paper's 10 seeds 42..51, and
+(``sorting-line-train``; with ``--n-envs N`` on N lines of one node, the hyperparameters mapped by
+``--lines-mapping``, one of ``training.hyperparams.MAPPINGS``) and evaluates the model. Every agent
+is evaluated twice with ``sorting-line-eval``'s protocol (50 steps, deterministic): on the paper's
+10 seeds 42..51, and
 on ``--heldout-episodes`` (100) held-out seeds from ``--heldout-seed`` (10000), which no training
 starts from (training seed s starts its N lines from seeds s..s+N-1 and draws the later
 episodes' seeds at random from [0, 2^63)). Every line is a real node process stepped over DDS.
@@ -19,8 +20,10 @@ Statistics (``reports/stats.py``, rliable's method on scipy): per cell the mean,
 training seeds x held-out episodes with its 95 % stratified bootstrap interval (training seeds
 resampled within each evaluation seed), the probability that each RL agent beats rba-hold per
 line, and per agent the IQM over the 8 lines of the score normalized between the random agent
-(0) and the oracle (1). Where cells of one agent on one line exist with two ``--n-envs`` values
-(in the same ``--out``), the report checks that they agree.
+(0) and the oracle (1). Where cells of one agent on one line exist on one line and on N lines (in
+the same ``--out``; ``--check-n-envs`` trains the one-line cells of DQN, PPO and A2C on B advanced
+and D basic), the report checks that they agree, per line and per algorithm (a verdict needs at
+least 5 training seeds a side), with each side's gradient steps per transition.
 
 Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
 interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
@@ -49,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..line.vocabulary import SETUPS, VARIANTS
-from ..training.hyperparams import ALGOS
+from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS, gradient_steps_per_transition
 from . import cell_pool, stats
 from .cell_store import write_atomic
 
@@ -63,7 +66,9 @@ DEFAULT_SEEDS = (42, 43, 44, 45, 46)
 HELDOUT_SEED = 10_000
 HELDOUT_EPISODES = 100
 #: Where --check-n-envs compares one line with N: ((setups), (variants)), agent.
-AGREEMENT_CELLS = ((("B",), ("advanced",)), "ppo"), ((("D",), ("basic",)), "dqn")
+AGREEMENT_CELLS = tuple(((("B",), ("advanced",)), a) for a in ALGOS) + tuple(((("D",), ("basic",)), a) for a in ALGOS)
+#: Runs (training seeds) per side that an agreement verdict needs.
+AGREEMENT_RUNS = 5
 
 
 @dataclass(frozen=True)
@@ -76,10 +81,19 @@ class Cell:
     agent: str
     train_seed: int | None = None
     n_envs: int = 1
+    #: How the one-line hyperparameters go to ``n_envs`` lines (``hyperparams.MAPPINGS``).
+    mapping: str = DEFAULT_MAPPING
+
+    @property
+    def lines(self) -> str:
+        """``_n<N>`` for N lines, with the mapping when it is not the default; empty for one line."""
+        if self.n_envs == 1:
+            return ""
+        return f"_n{self.n_envs}" + (f"_{self.mapping}" if self.mapping != DEFAULT_MAPPING else "")
 
     @property
     def name(self) -> str:
-        lines = f"_n{self.n_envs}" if self.n_envs != 1 else ""
+        lines = self.lines
         seed = f"_seed{self.train_seed}" if self.train_seed is not None else ""
         return f"{self.setup}_{self.variant}_{self.agent}{lines}{seed}"
 
@@ -92,12 +106,12 @@ class Heldout:
     episodes: int = HELDOUT_EPISODES
 
 
-def plan(setups, variants, agents, train_seeds, n_envs: int = 1) -> list[Cell]:
+def plan(setups, variants, agents, train_seeds, n_envs: int = 1, mapping: str = DEFAULT_MAPPING) -> list[Cell]:
     """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
     so a partial run has whole rows: one algorithm on every line before the next."""
     cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
     cells += [
-        Cell(s, v, a, seed, n_envs)
+        Cell(s, v, a, seed, n_envs, mapping if n_envs > 1 else DEFAULT_MAPPING)
         for seed in train_seeds
         for a in agents
         if a in ALGOS
@@ -118,12 +132,21 @@ def run_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: 
     spec = cell.agent
     if cell.agent in ALGOS:
         params = hyperparams.load(
-            cell.agent, cell.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"]
+            cell.agent,
+            cell.variant,
+            overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"],
+            mapping=cell.mapping,
         )
-        models = out / ("models" if cell.n_envs == 1 else f"models_n{cell.n_envs}")
+        models = out / f"models{cell.lines}"
         run = train(
-            cell.agent, cell.setup, cell.variant, seed=cell.train_seed, out=models, params=params,
-            tensorboard=out / "tensorboard", progress=progress,
+            cell.agent,
+            cell.setup,
+            cell.variant,
+            seed=cell.train_seed,
+            out=models,
+            params=params,
+            tensorboard=out / "tensorboard",
+            progress=progress,
         )
         record["training"] = asdict(run)
         spec = f"{cell.agent}:{run.model_path}"
@@ -330,20 +353,28 @@ def aggregates(normalized: dict[str, dict[tuple[str, str], np.ndarray]]) -> dict
     return found
 
 
+def _updates_per_transition(agent: str, records: list[dict[str, Any]]) -> float:
+    r = records[0]["training"]
+    return gradient_steps_per_transition(agent, {**r["hyperparams"], "n_envs": r["n_envs"]})
+
+
 def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, Any]]:
-    """Where one agent on one line was trained with two numbers of lines (same budget): their IQM
-    intervals and P(N lines > 1 line); they agree when the IQM intervals overlap."""
-    by_lines: dict[tuple[str, str, str], dict[int, list[dict[str, Any]]]] = {}
+    """Where one agent on one line was trained on one line and on N lines (same budget, per
+    mapping): their IQM intervals and P(N lines > 1 line); they agree when the IQM intervals
+    overlap."""
+    by_lines: dict[tuple[str, str, str], dict[tuple[int, str], list[dict[str, Any]]]] = {}
     for r in records:
         c = r["cell"]
         if c["agent"] in ALGOS and "heldout" in r and r.get("timesteps") == timesteps:
-            by_lines.setdefault((c["setup"], c["variant"], c["agent"]), {}).setdefault(c.get("n_envs", 1), []).append(r)
+            lines = (c.get("n_envs", 1), c.get("mapping", DEFAULT_MAPPING))
+            by_lines.setdefault((c["setup"], c["variant"], c["agent"]), {}).setdefault(lines, []).append(r)
     checks = []
     for (setup, variant, agent), groups in sorted(by_lines.items()):
-        if 1 not in groups or len(groups) < 2:
+        ones = [rs for (n, _), rs in groups.items() if n == 1]
+        if not ones:
             continue
-        one = episode_rewards(groups[1])
-        for n, rs in sorted(groups.items()):
+        one = episode_rewards(ones[0])
+        for (n, mapping), rs in sorted(groups.items()):
             if n == 1:
                 continue
             many = episode_rewards(rs)
@@ -354,18 +385,44 @@ def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, A
                     "variant": variant,
                     "agent": agent,
                     "n_envs": n,
+                    "mapping": mapping,
                     "runs": [one.shape[0], many.shape[0]],
                     "iqm_1": iqm_one.as_dict(),
                     "iqm_n": iqm_many.as_dict(),
                     "poi_n_over_1": stats.probability_of_improvement_interval(many, one).as_dict(),
                     "agree": iqm_one.overlaps(iqm_many),
+                    "gradient_steps_per_transition": [
+                        _updates_per_transition(agent, ones[0]),
+                        _updates_per_transition(agent, rs),
+                    ],
                     "train_wall_s": [
-                        statistics.fmean(r["training"]["wall_s"] for r in groups[1]),
+                        statistics.fmean(r["training"]["wall_s"] for r in ones[0]),
                         statistics.fmean(r["training"]["wall_s"] for r in rs),
                     ],
                 }
             )
     return checks
+
+
+def agreement_by_algorithm(checks: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per agent, number of lines and mapping: on how many of the checked lines one line and N lines
+    agree, and the verdict: "agrees" (on every checked line), "does not agree" (on some line not),
+    each with at least ``AGREEMENT_RUNS`` runs a side, else "too few runs"."""
+    groups: dict[tuple[str, int, str], list[dict[str, Any]]] = {}
+    for c in checks:
+        groups.setdefault((c["agent"], c["n_envs"], c["mapping"]), []).append(c)
+    rows = []
+    for (agent, n, mapping), cs in sorted(groups.items(), key=lambda kv: (ALGOS.index(kv[0][0]), kv[0][1:])):
+        agreeing = sum(c["agree"] for c in cs)
+        if any(min(c["runs"]) < AGREEMENT_RUNS for c in cs):
+            verdict = f"too few runs (fewer than {AGREEMENT_RUNS} a side)"
+        else:
+            verdict = "agrees" if agreeing == len(cs) else "does not agree"
+        lines = [f"{c['setup']} {c['variant']}" for c in cs]
+        rows.append(
+            {"agent": agent, "n_envs": n, "mapping": mapping, "lines": lines, "agreeing": agreeing, "verdict": verdict}
+        )
+    return rows
 
 
 def write_report(
@@ -397,6 +454,7 @@ def write_report(
                 ],
                 "aggregate_normalized": aggregate,
                 "n_envs_agreement": checks,
+                "n_envs_agreement_by_algorithm": agreement_by_algorithm(checks),
             },
             indent=2,
         )
@@ -444,7 +502,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=1,
         help="lines of one node per training, a power of two "
-             "(default 1, as the paper; hyperparameters mapped, see hyperparams)",
+        "(default 1, as the paper; hyperparameters mapped, see hyperparams)",
     )
     p.add_argument(
         "--heldout-seed",
@@ -461,14 +519,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
     )
+    _add_check_options(p)
+    p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
+    return p
+
+
+def _add_check_options(p: argparse.ArgumentParser) -> None:
+    """The options of the one-line against N-line check."""
     p.add_argument(
         "--check-n-envs",
         action="store_true",
-        help="with --n-envs N > 1: also train PPO on B advanced and DQN on D basic (where selected) on one line, per "
-        "training seed, for the check that one line and N lines agree (run last)",
+        help="with --n-envs N > 1: also train the selected RL agents on B advanced and D basic (where selected) on "
+        "one line, per training seed, for the check that one line and N lines agree, per algorithm (run last)",
     )
-    p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
-    return p
+    p.add_argument(
+        "--lines-mapping",
+        choices=MAPPINGS,
+        default=DEFAULT_MAPPING,
+        help=f"with --n-envs N > 1: how the one-line hyperparameters go to N lines (default {DEFAULT_MAPPING}; "
+        "see training/hyperparams.py)",
+    )
 
 
 def heldout_of(args) -> Heldout:
@@ -496,6 +566,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
         lambda cells: bar.set_postfix_str(", ".join(c.name for c in cells)),
     )
 
+
 def _invalid(args) -> str | None:
     """What is wrong with the command line's values, if anything."""
     for flag, value in (
@@ -515,7 +586,7 @@ def _invalid(args) -> str | None:
 
 def _cells_of(args) -> list[Cell]:
     """The cells the command line asks for, the one-line cells of --check-n-envs last."""
-    cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs)
+    cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs, args.lines_mapping)
     if args.check_n_envs and args.n_envs > 1:
         cells += [
             c

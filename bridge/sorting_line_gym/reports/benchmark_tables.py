@@ -7,7 +7,7 @@ from typing import Any
 
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
-from .benchmark import AGENTS, TABLE_ORDER, Heldout, Key
+from .benchmark import AGENTS, AGREEMENT_RUNS, TABLE_ORDER, Heldout, Key, agreement_by_algorithm
 
 TABLE_HEADER = [
     "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"
@@ -129,22 +129,41 @@ def _aggregate_markdown(aggregate) -> list[str]:
     ]
 
 
-def _agreement_markdown(checks) -> list[str]:
+def _agreement_markdown(checks: list[dict[str, Any]]) -> list[str]:
     out = [
         "## One line against N lines of one node (--n-envs)",
         "",
-        "| setup | env | agent | lines | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] "
-        "| P(N lines > 1 line) | agree | training s (1 / N lines) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| setup | env | agent | lines | mapping | runs | IQM, 1 line [95% CI] | IQM, N lines [95% CI] "
+        "| P(N lines > 1 line) | agree | gradient steps per 1000 transitions (1 / N lines) "
+        "| training s (1 / N lines) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in checks:
+        g = c["gradient_steps_per_transition"]
         out.append(
             f"| {c['setup']} | {_env(c['variant'])} | {c['agent']} | {c['n_envs']} | "
-            f"{c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | "
-            f"{_interval(c['poi_n_over_1'])} | "
-            f"{'yes' if c['agree'] else 'NO'} | {c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |"
+            f"{c['mapping']} | {c['runs'][0]} / {c['runs'][1]} | {_interval(c['iqm_1'])} | {_interval(c['iqm_n'])} | "
+            f"{_interval(c['poi_n_over_1'])} | {'yes' if c['agree'] else 'NO'} | "
+            f"{1000 * g[0]:.0f} / {1000 * g[1]:.0f} | "
+            f"{c['train_wall_s'][0]:.0f} / {c['train_wall_s'][1]:.0f} |"
         )
-    return out + ["", "Agree: the two IQM intervals overlap.", ""]
+    out += [
+        "",
+        "Agree: the two IQM intervals overlap. Mapping: how the one-line hyperparameters go to N lines"
+        " (`training/hyperparams.py`).",
+        "",
+        "### Per algorithm",
+        "",
+        "| agent | lines | mapping | checked on | agree on | verdict |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in agreement_by_algorithm(checks):
+        out.append(
+            f"| {row['agent']} | {row['n_envs']} | {row['mapping']} | {', '.join(row['lines'])} | "
+            f"{row['agreeing']} of {len(row['lines'])} | {row['verdict']} |"
+        )
+    out += ["", f"Verdicts need at least {AGREEMENT_RUNS} runs (training seeds) a side on each checked line.", ""]
+    return out
 
 
 def statistics_markdown(poi, aggregate, checks) -> str:

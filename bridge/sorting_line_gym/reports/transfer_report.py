@@ -150,8 +150,17 @@ def _steps(r: dict[str, Any] | None) -> str:
     return f"{_interval(r['iqm'], 0)} ({r['reached']}/{r['runs']} reached)"
 
 
-def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
-    """The three tables: final scores, probabilities of improvement, steps to recover."""
+def _baseline_cells(b: dict[str, Any] | None) -> list[str]:
+    if b is None:
+        return ["-", "-", "-"]
+    return [
+        f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f}",
+        f"{b['before']['rba']:.2f} / {b['after']['rba']:.2f}",
+        f"{b['after']['oracle']:.2f}" if "oracle" in b["after"] else "n/a (not a fixed setup)",
+    ]
+
+
+def _score_table(summary: dict[str, Any], key: dict[str, Any]) -> list[str]:
     lines = [
         f"## Final score after the change: IQM [95 % CI] over runs x {key['evaluations']} held-out seeds "
         f"(from {key['eval_seed']})",
@@ -161,29 +170,18 @@ def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for scenario, s in summary.items():
-        b = s["baselines"]
-        base = (
-            ["-", "-", "-"]
-            if b is None
-            else [
-                f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f}",
-                f"{b['before']['rba']:.2f} / {b['after']['rba']:.2f}",
-                f"{b['after']['oracle']:.2f}" if "oracle" in b["after"] else "n/a (not a fixed setup)",
-            ]
-        )
+        base = _baseline_cells(s["baselines"])
         for algo, a in s["algos"].items():
             st = a["strategies"]
             runs = "/".join(str(st[x]["runs"]) if x in st else "0" for x in EVALUATIONS)
-            lines.append(
-                f"| {scenario} | {algo} | {runs} | "
-                + " | ".join(_interval(st.get(x, {}).get("iqm")) for x in EVALUATIONS)
-                + " | "
-                + " | ".join(base)
-                + " |"
-            )
+            scores = [_interval(st.get(x, {}).get("iqm")) for x in EVALUATIONS]
+            lines.append(f"| {scenario} | {algo} | {runs} | " + " | ".join(scores + base) + " |")
+    return lines
+
+
+def _improvement_table(summary: dict[str, Any]) -> list[str]:
     pairs = [f"{x} > {y}" for x, y in COMPARISONS] + [f"{x} > rba-hold" for x in EVALUATIONS]
-    lines += [
-        "",
+    lines = [
         "## Probability of improvement P(X > Y) [95 % CI]",
         "",
         "| scenario | algorithm | " + " | ".join(pairs) + " |",
@@ -194,8 +192,11 @@ def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
             lines.append(
                 f"| {scenario} | {algo} | " + " | ".join(_interval(a["improvement"].get(p)) for p in pairs) + " |"
             )
-    lines += [
-        "",
+    return lines
+
+
+def _recovery_table(summary: dict[str, Any]) -> list[str]:
+    lines = [
         f"## Steps to recover: to {RECOVERY_SHARE:.0%} of the from-scratch final score, IQM [95 % CI] over runs",
         "",
         "| scenario | algorithm | target reward | (a) continued, after the change | (c) from scratch |",
@@ -209,6 +210,12 @@ def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
                 if r
                 else f"| {scenario} | {algo} | - | - | - |"
             )
+    return lines
+
+
+def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
+    """The three tables: final scores, probabilities of improvement, steps to recover."""
+    lines = _score_table(summary, key) + [""] + _improvement_table(summary) + [""] + _recovery_table(summary)
     lines += [
         "",
         "Runs: training seeds. A run that does not reach the target within its budget counts as the whole "

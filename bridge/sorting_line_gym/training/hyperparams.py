@@ -14,13 +14,25 @@ Everything else is handed to the algorithm's constructor; ``load`` refuses, by n
 constructor does not take.
 
 Several lines (``n_envs`` = N > 1) change what one update sees unless the rollout keys follow, so
-``load`` maps the paper's one-line settings to N lines (:func:`for_lines`), for each key the file
-and the overrides leave at SB3's default: PPO keeps its 2048-step rollout as N x ``n_steps`` (same
-samples, minibatches and epochs per update); DQN keeps one gradient step per 4 transitions
-(``train_freq`` counts vector steps of N transitions, so ``train_freq`` x N / 4 gradient steps;
-``target_update_interval`` SB3 already divides by N); A2C keeps its update as close to 5
-transitions as N allows (``n_steps`` = max(1, 5 // N): from 5 lines on, N transitions and 1-step
-returns per update). N must be a power of two (up to 2048) so these are whole numbers.
+``load`` maps the paper's one-line settings to N lines (:func:`for_lines`), for each algorithm's
+rollout keys the file and the overrides leave at SB3's default, by one of two named mappings
+(:data:`MAPPINGS`). Both keep the minibatch size and, for PPO and DQN, the gradient steps per
+transition (:func:`gradient_steps_per_transition`); they differ in what one update sees:
+
+- ``same-rollout`` (the default): each update sees as many transitions as on one line. PPO keeps
+  its 2048-step rollout as N x ``n_steps`` (same samples, minibatches and epochs per update); DQN
+  keeps one gradient step per 4 transitions (``train_freq`` counts vector steps of N transitions,
+  so ``train_freq`` x N / 4 gradient steps; ``target_update_interval`` SB3 already divides by N);
+  A2C keeps its update as close to 5 transitions as N allows (``n_steps`` = max(1, 5 // N): from 5
+  lines on, N transitions and 1-step returns per update). Each line then contributes a short
+  stretch of experience to an update (256 steps of PPO on 8 lines, about one training episode).
+- ``same-line-rollout``: each line's stretch per update stays the one-line rollout. PPO collects
+  N x 2048 steps per update (its epochs over 64-sample minibatches unchanged: the same gradient
+  steps per transition, N times fewer policy refreshes); DQN trains every 4 vector steps (4 N
+  transitions) with N gradient steps; A2C updates on N x 5 transitions (one gradient step per
+  update, as on one line: N times fewer, larger updates).
+
+N must be a power of two (up to 2048) so these are whole numbers.
 """
 
 from __future__ import annotations
@@ -38,6 +50,11 @@ from ..line.vocabulary import ENV_IDS, check_variant  # ENV_IDS: the keys of the
 ALGOS = ("ppo", "dqn", "a2c")
 #: Keys of a hyperparameter entry that are not constructor arguments of the algorithm.
 OWN_KEYS = ("n_timesteps", "policy", "n_envs", "episode_steps")
+#: SB3's defaults of the keys that set how much one update sees, for one line (the paper's).
+ONE_LINE_ROLLOUT = {"ppo": {"n_steps": 2048}, "dqn": {"train_freq": 4, "gradient_steps": 1}, "a2c": {"n_steps": 5}}
+#: The named one-line to N-line mappings (module docstring), the default first.
+MAPPINGS = ("same-rollout", "same-line-rollout")
+DEFAULT_MAPPING = MAPPINGS[0]
 
 
 def algorithm_class(algo: str):
@@ -65,9 +82,16 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise ValueError(f"hyperparameter override {text!r}: the value is not valid YAML ({e})") from None
 
 
-def load(algo: str, variant: str, path: str | Path | None = None, overrides: Iterable[str] = ()) -> dict[str, Any]:
+def load(
+    algo: str,
+    variant: str,
+    path: str | Path | None = None,
+    overrides: Iterable[str] = (),
+    mapping: str = DEFAULT_MAPPING,
+) -> dict[str, Any]:
     """The hyperparameters of ``algo`` for the line ``variant``: the entry for its Gymnasium id in
-    ``path`` (default: the packaged file), then ``overrides`` applied."""
+    ``path`` (default: the packaged file), then ``overrides`` applied, then mapped to ``n_envs``
+    lines by ``mapping``."""
     check_algo(algo)
     env_id = ENV_IDS[check_variant(variant)]
     if path is None:
@@ -94,33 +118,61 @@ def load(algo: str, variant: str, path: str | Path | None = None, overrides: Ite
         overridden.add(key)
     _check_own_keys(params, source)
     _check_constructor_keys(algo, params, lambda key: "an override" if key in overridden else source)
-    return for_lines(algo, params)
+    return for_lines(algo, params, mapping)
 
 
-#: SB3's defaults of the keys that set how much one update sees, for one line (the paper's).
-ONE_LINE_ROLLOUT = {"ppo": {"n_steps": 2048}, "dqn": {"train_freq": 4, "gradient_steps": 1}, "a2c": {"n_steps": 5}}
+def check_mapping(mapping: str) -> str:
+    if mapping not in MAPPINGS:
+        raise ValueError(f"lines mapping {mapping!r} is not valid: allowed {', '.join(MAPPINGS)}")
+    return mapping
 
 
-def for_lines(algo: str, params: dict[str, Any]) -> dict[str, Any]:
-    """``params`` with the rollout keys mapped from one line to ``params["n_envs"]`` lines (see the
-    module docstring); keys given explicitly are kept as they are. One line: unchanged."""
+def mapped_rollout(algo: str, n: int, mapping: str = DEFAULT_MAPPING) -> dict[str, int]:
+    """The rollout keys of ``algo`` on ``n`` lines under ``mapping`` (the arithmetic of the module
+    docstring), from the one-line values in :data:`ONE_LINE_ROLLOUT`."""
+    one = ONE_LINE_ROLLOUT[check_algo(algo)]
+    if check_mapping(mapping) == "same-line-rollout":
+        if algo == "dqn":
+            return {"train_freq": one["train_freq"], "gradient_steps": one["gradient_steps"] * n}
+        return dict(one)
+    if algo == "ppo":
+        return {"n_steps": one["n_steps"] // n}
+    if algo == "a2c":
+        return {"n_steps": max(1, one["n_steps"] // n)}
+    per_gradient_step = one["train_freq"] // one["gradient_steps"]
+    train_freq = max(1, per_gradient_step // n)
+    return {"train_freq": train_freq, "gradient_steps": train_freq * n // per_gradient_step}
+
+
+def for_lines(algo: str, params: dict[str, Any], mapping: str = DEFAULT_MAPPING) -> dict[str, Any]:
+    """``params`` with the rollout keys mapped from one line to ``params["n_envs"]`` lines by
+    ``mapping`` (see the module docstring), unless one of them is given explicitly. One line:
+    unchanged."""
     n = params["n_envs"]
+    check_mapping(mapping)
     if n == 1:
         return params
     if n & (n - 1) or n > 2048:
         raise ValueError(
             f"n_envs = {n} is not valid for the one-line to N-line mapping: allowed a power of two, 1 .. 2048"
         )
-    mapped = dict(params)
-    if algo == "ppo" and "n_steps" not in params:
-        mapped["n_steps"] = ONE_LINE_ROLLOUT["ppo"]["n_steps"] // n
-    elif algo == "dqn" and "train_freq" not in params and "gradient_steps" not in params:
-        per_gradient_step = ONE_LINE_ROLLOUT["dqn"]["train_freq"] // ONE_LINE_ROLLOUT["dqn"]["gradient_steps"]
-        mapped["train_freq"] = max(1, per_gradient_step // n)
-        mapped["gradient_steps"] = mapped["train_freq"] * n // per_gradient_step
-    elif algo == "a2c" and "n_steps" not in params:
-        mapped["n_steps"] = max(1, ONE_LINE_ROLLOUT["a2c"]["n_steps"] // n)
-    return mapped
+    if any(key in params for key in ONE_LINE_ROLLOUT[algo]):
+        return params
+    return {**params, **mapped_rollout(algo, n, mapping)}
+
+
+def gradient_steps_per_transition(algo: str, params: dict[str, Any]) -> float:
+    """Gradient steps per environment transition with ``params`` (rollout keys at SB3's default
+    when absent): PPO ``n_epochs`` x minibatches per rollout / rollout, DQN ``gradient_steps`` /
+    (``train_freq`` x N), A2C one per rollout of ``n_steps`` x N."""
+    n = params["n_envs"]
+    rollout = {**ONE_LINE_ROLLOUT[algo], **{k: params[k] for k in ONE_LINE_ROLLOUT[algo] if k in params}}
+    if algo == "ppo":
+        samples = rollout["n_steps"] * n
+        return params.get("n_epochs", 10) * -(-samples // params.get("batch_size", 64)) / samples
+    if algo == "dqn":
+        return rollout["gradient_steps"] / (rollout["train_freq"] * n)
+    return 1 / (rollout["n_steps"] * n)
 
 
 def _check_own_keys(params: dict[str, Any], source: str) -> None:
