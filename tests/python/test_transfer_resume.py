@@ -9,8 +9,10 @@ What must hold:
 - the report has IQM intervals per strategy, probabilities of improvement and steps to recover
   with intervals, and the plot;
 - progress comes as plain lines with a projected end when stderr is not a terminal;
-- other result-changing options into the same --out are refused, naming what differs; bad flags
-  fail at once with exit code 2.
+- other result-changing options into the same --out are refused, naming what differs, and so is
+  a --out with the earlier format's transfer.json; bad flags fail at once with exit code 2;
+- the statistics on known records (no node): steps to recover, a run that never recovers counted
+  as its budget, IQM and probability of improvement.
 
 Cost: about 42 s of CPU (5 cells of 10 + 10 episodes, 3 evaluation episodes; the last 3 two at a time);
 115 s of wall time at load 13-17 under nice -n 19.
@@ -103,3 +105,52 @@ def test_transfer_rejects_bad_arguments(argv, names, tmp_path, capsys):
         transfer.main([*argv, "--out", str(tmp_path / "t")])
     assert exit_.value.code == 2 and names in capsys.readouterr().err
     assert not (tmp_path / "t").exists(), "nothing is written when the arguments are bad"
+
+
+def _record(kind: str, seed: int, **values) -> dict:
+    return {"cell": {"scenario": "upgrade", "kind": kind, "algo": "ppo", "seed": seed}, **values}
+
+
+def test_transfer_statistics_on_known_records():
+    """Steps to recover against 90 % of the from-scratch IQM, a run that never reaches it counted as
+    its whole budget; the strategies' IQM and probability of improvement; no node."""
+    from sorting_line_gym.reports import transfer_report as tr
+
+    key = {"before": 10, "after": 20, "episode_steps": 50, "window": 10, "evaluations": 4, "eval_seed": 10_000}
+    ramp = [float(k) for k in range(20)]  # the 10-episode moving mean is k - 4.5 at index k: 9.5 at 14
+    records = [
+        _record("transfer", 1, continued_curve=[0.0] * 10 + ramp, continued_eval=[10.0] * 4, frozen_eval=[1.0] * 4),
+        _record("transfer", 2, continued_curve=[0.0] * 30, continued_eval=[11.0] * 4, frozen_eval=[2.0] * 4),
+        _record("scratch", 1, scratch_curve=[10.0] * 20, scratch_eval=[10.0] * 4),
+        _record("scratch", 2, scratch_curve=[10.0] * 20, scratch_eval=[10.0] * 4),
+        {
+            "cell": {"scenario": "upgrade", "kind": "baselines", "algo": None, "seed": None},
+            "before": {"rba": [1.0] * 4, "rba-hold": [2.0] * 4, "oracle": [20.0] * 4},
+            "after": {"rba": [3.0] * 4, "rba-hold": [10.5] * 4, "oracle": [30.0] * 4},
+        },
+    ]
+    summary = tr.summarize(records, key, ["upgrade"], ["ppo"])["upgrade"]
+    ppo = summary["algos"]["ppo"]
+    recovery = ppo["recovery"]
+    assert recovery["target"] == pytest.approx(9.0) and recovery["budget_steps"] == 1000
+    assert recovery["continued"]["per_run"] == [15 * 50, None] and recovery["continued"]["reached"] == 1
+    assert recovery["scratch"]["per_run"] == [500, 500]  # the first full window
+    # The run that never reaches the target counts as the budget: IQM of [750, 1000] is their mean.
+    assert recovery["continued"]["iqm"]["point"] == pytest.approx(875.0)
+    assert recovery["continued"]["iqm"]["low"] == 750.0 and recovery["continued"]["iqm"]["high"] == 1000.0
+    assert ppo["strategies"]["continued"]["iqm"]["point"] == pytest.approx(10.5)
+    assert ppo["improvement"]["continued > frozen"]["point"] == 1.0
+    assert ppo["improvement"]["continued > rba-hold"]["point"] == 0.5  # 10 and 11 against 10.5
+    assert tr.recovery_target(-10.0) == pytest.approx(-11.0)  # within 10 % of a negative score
+    assert summary["baselines"]["after"]["oracle"] == 30.0
+
+
+def test_transfer_keeps_the_runs_of_its_earlier_format(tmp_path, capsys):
+    """A --out holding the earlier sorting-line-transfer's transfer.json (a list of runs) is left alone."""
+    from sorting_line_gym.training import transfer
+
+    earlier = tmp_path / "transfer.json"
+    earlier.write_text('{"runs": [], "baselines": {}}\n')
+    assert transfer.main([*SMOKE, "--out", str(tmp_path)]) == 2
+    assert "holds the runs of the earlier sorting-line-transfer" in capsys.readouterr().err
+    assert earlier.read_text() == '{"runs": [], "baselines": {}}\n' and not (tmp_path / "cells").exists()

@@ -26,6 +26,7 @@ Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfe
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 from pathlib import Path
@@ -162,6 +163,14 @@ def main(argv: list[str] | None = None) -> int:
     args = options(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     key = args.settings.key()
+    earlier = args.out / "transfer.json"
+    if earlier.is_file() and "runs" in json.loads(earlier.read_text()):
+        print(
+            f"sorting-line-transfer: {earlier} holds the runs of the earlier sorting-line-transfer (before cells): "
+            "use another --out, so that they are kept",
+            file=sys.stderr,
+        )
+        return 2
     try:
         store = CellStore(args.out, key)
     except ConfigurationMismatch as e:
