@@ -341,7 +341,7 @@ def measure_in_child(key: str, args) -> tuple[str, int, float]:
     return label, int(per_call), float(rate)
 
 
-def main() -> int:
+def _args():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--single", type=int, default=4000, help="steps per timed run for (a) and (b) (default 4000)")
     parser.add_argument("--vector", type=int, default=2000, help="round trips per timed run for (c) (default 2000)")
@@ -360,16 +360,11 @@ def main() -> int:
         parser.error(f"--lines {args.lines}: each must be in 1 ..= 64")
     if not 0 <= args.domain <= 232:
         parser.error(f"--domain {args.domain} is out of range: allowed 0 ..= 232")
+    return args
 
-    h.run_isolated(__file__, "SORTING_LINE_BRIDGE_BENCH_IN_NETNS")
-    os.environ["ROS_DOMAIN_ID"] = str(args.domain)
-    env = h.ros_environment()
-    if args.subject:
-        measure_here(args.subject, args.single, args.vector)
-        return 0
-    progress(f"node {node_binary()}; python {sys.executable}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
-    before = h.machine_conditions()
 
+def _rounds(args) -> list[Row]:
+    """The interleaved rounds: every subject timed once per round, in a child process."""
     keys = ["raw", "direct", "make"] + [f"{tag}_{lines}" for tag in ("ep50", "noend") for lines in args.lines]
     rows = {key: Row(key) for key in keys}
     for r in range(args.rounds):
@@ -379,9 +374,10 @@ def main() -> int:
             row.label, row.per_call, rate = measure_in_child(key, args)
             row.rates.append(rate)
             progress(f"  {row.label}: {rate:,.0f} env-steps/s")
-    ordered = list(rows.values())
-    after = h.machine_conditions()
+    return list(rows.values())
 
+
+def _report(ordered: list[Row], args, before: str, after: str) -> None:
     by_key = {s.key: s for s in ordered}
     print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "
           f"steps single, {args.vector} round trips vector); {os.cpu_count()} CPUs; {before} before, {after} after")
@@ -417,6 +413,22 @@ def main() -> int:
     for key in ("direct", "make"):
         ratio, _ = paired_ratio(by_key[key], by_key["raw"])
         print(f"  {by_key[key].label[4:]} / raw lock-step loop (a): {ratio:.2f}")
+
+
+def main() -> int:
+    args = _args()
+    h.run_isolated(__file__, "SORTING_LINE_BRIDGE_BENCH_IN_NETNS")
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain)
+    env = h.ros_environment()
+    if args.subject:
+        measure_here(args.subject, args.single, args.vector)
+        return 0
+    progress(f"node {node_binary()}; python {sys.executable}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
+    before = h.machine_conditions()
+    ordered = _rounds(args)
+    after = h.machine_conditions()
+    _report(ordered, args, before, after)
+    by_key = {s.key: s for s in ordered}
     if args.plot:
         args.plot.parent.mkdir(parents=True, exist_ok=True)
         plot(

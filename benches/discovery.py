@@ -78,7 +78,7 @@ def participant_ids(domain: int) -> dict[int, list[int]]:
     return {p: sorted(v) for p, v in ids.items()}
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--nodes", type=int, default=16)
     ap.add_argument("--clients", type=int, default=1)
@@ -86,41 +86,25 @@ def main() -> None:
     ap.add_argument("--wait", type=float, default=8.0, help="seconds each client waits before counting")
     ap.add_argument("--domain", type=int, default=93)
     ap.add_argument("--env", action="append", default=[], help="KEY=VALUE for the clients (repeatable)")
-    args = ap.parse_args()
-    h.run_isolated(__file__)
-    os.environ["ROS_DOMAIN_ID"] = str(args.domain)
-    h.ros_environment()
-    client_env = dict(os.environ, **dict(kv.split("=", 1) for kv in args.env))
-    logs = Path(tempfile.mkdtemp(prefix="discovery_"))
-    names = [f"/probe/n{i}" for i in range(args.nodes)]
-    topics = ",".join(names)
-    nodes, clients = [], []
+    return ap
 
-    def start_nodes():
-        for i, ns in enumerate(names):
-            log = open(logs / f"node{i}.log", "wb")
-            nodes.append(subprocess.Popen([str(h.node_binary()), "node", "--ros-args", "-r", f"__ns:={ns}"],
-                                          stdout=log, stderr=subprocess.STDOUT))
-            time.sleep(0.05)
 
-    def start_clients():
-        for _ in range(args.clients):
-            clients.append(subprocess.Popen([sys.executable, "-c", CLIENT, str(args.wait), topics],
-                                            stdout=subprocess.PIPE, text=True, env=client_env))
-            time.sleep(0.05)
+def _start_nodes(names: list[str], logs: Path, nodes: list) -> None:
+    for i, ns in enumerate(names):
+        log = open(logs / f"node{i}.log", "wb")
+        argv = [str(h.node_binary()), "node", "--ros-args", "-r", f"__ns:={ns}"]
+        nodes.append(subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT))
+        time.sleep(0.05)
 
-    t0 = time.monotonic()
-    (start_nodes, start_clients)[args.order == "clients-first"]()
-    (start_clients, start_nodes)[args.order == "clients-first"]()
-    time.sleep(args.wait / 2)  # every process has its participant by now
-    ids = participant_ids(args.domain)
-    results = [json.loads(c.communicate(timeout=args.wait + 30)[0]) for c in clients]
-    for n in nodes:
-        n.terminate()
-    for n in nodes:
-        n.wait(10)
-    print(f"{args.nodes} nodes, {args.clients} clients ({args.order}), wait {args.wait:g} s, domain {args.domain}; "
-          f"{h.machine_conditions()}; took {time.monotonic() - t0:.1f} s")
+
+def _start_clients(args, topics: str, client_env: dict, clients: list) -> None:
+    for _ in range(args.clients):
+        argv = [sys.executable, "-c", CLIENT, str(args.wait), topics]
+        clients.append(subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, env=client_env))
+        time.sleep(0.05)
+
+
+def _report(names: list[str], nodes: list, clients: list, results: list, ids: dict) -> None:
     print("node participant ids:  ", [ids.get(n.pid, ["?"])[0] for n in nodes])
     print("client participant ids:", [ids.get(c.pid, ["?"])[0] for c in clients])
     total = 0
@@ -130,10 +114,41 @@ def main() -> None:
         cid = ids.get(c.pid, ["?"])[0]
         slowest = max((v["after"] for v in seen.values() if v["after"] is not None), default=None)
         detail = {ids.get(nodes[i].pid, ["?"])[0]: seen[names[i]]["seen"] for i in missing}
-        print(f"client id {cid}: sees {len(names) - len(missing)}/{len(names)} nodes completely (slowest after "
-              f"{slowest} s); incomplete (node id: [state writer, command reader, reset service]): {detail}")
+        print(
+            f"client id {cid}: sees {len(names) - len(missing)}/{len(names)} nodes completely (slowest after "
+            f"{slowest} s); incomplete (node id: [state writer, command reader, reset service]): {detail}"
+        )
     print(f"pairs discovered: {total}/{len(names) * len(clients)}")
 
+
+def main() -> None:
+    args = _parser().parse_args()
+    h.run_isolated(__file__)
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain)
+    h.ros_environment()
+    client_env = dict(os.environ, **dict(kv.split("=", 1) for kv in args.env))
+    logs = Path(tempfile.mkdtemp(prefix="discovery_"))
+    names = [f"/probe/n{i}" for i in range(args.nodes)]
+    nodes, clients = [], []
+    t0 = time.monotonic()
+    start = [
+        lambda: _start_nodes(names, logs, nodes),
+        lambda: _start_clients(args, ",".join(names), client_env, clients),
+    ]
+    for step in reversed(start) if args.order == "clients-first" else start:
+        step()
+    time.sleep(args.wait / 2)  # every process has its participant by now
+    ids = participant_ids(args.domain)
+    results = [json.loads(c.communicate(timeout=args.wait + 30)[0]) for c in clients]
+    for n in nodes:
+        n.terminate()
+    for n in nodes:
+        n.wait(10)
+    print(
+        f"{args.nodes} nodes, {args.clients} clients ({args.order}), wait {args.wait:g} s, domain {args.domain}; "
+        f"{h.machine_conditions()}; took {time.monotonic() - t0:.1f} s"
+    )
+    _report(names, nodes, clients, results, ids)
 
 if __name__ == "__main__":
     main()

@@ -198,7 +198,7 @@ def plot(rows: list[dict], path: Path) -> None:
         fig.savefig(path.with_suffix(".svg"))
 
 
-def main() -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--role", help=argparse.SUPPRESS)
@@ -214,38 +214,42 @@ def main() -> int:
     p.add_argument("--attach", nargs="+", metavar="NS",
                    help="measure over running nodes of these namespaces, 16 lines each, in this ROS environment, "
                         "instead of making network namespaces (see below)")
-    args = p.parse_args()
-    if args.role:
-        print(json.dumps({"measure": measure, "soak": soak}[args.role](json.loads(args.cfg))))
-        return 0
+    return p
 
+
+def _runner(args):
+    """run(count, role, cfg): a role's process over ``count`` nodes, --attach's or network namespaces'."""
     import netns_hosts
-    from node_lockstep import loadavg
 
     if args.attach:
         most = max(args.hosts + ([args.soak_hosts] if args.soak_ticks > 0 else []))
         if most > len(args.attach):
             sys.exit(f"multihost.py: --hosts/--soak-hosts ask for {most} nodes, --attach names {len(args.attach)}")
-        def run(count, role, cfg):
-            return on_attached(count, role, cfg, args.attach)
-    else:
-        if netns_hosts.problem():
-            sys.exit(f"multihost.py: {netns_hosts.problem()}")
-        args.logs.mkdir(parents=True, exist_ok=True)
-        def run(count, role, cfg):
-            return on_hosts(count, role, cfg, args.logs)
-    print(f"load before: {loadavg()}", flush=True)
+        return lambda count, role, cfg: on_attached(count, role, cfg, args.attach)
+    if netns_hosts.problem():
+        sys.exit(f"multihost.py: {netns_hosts.problem()}")
+    args.logs.mkdir(parents=True, exist_ok=True)
+    return lambda count, role, cfg: on_hosts(count, role, cfg, args.logs)
+
+
+def _scaling(run, args) -> list[dict]:
+    """Each host count measured once per round; each figure the median of its rounds (the rounds
+    swing with the machine's load)."""
     runs: dict[int, list[dict]] = {k: [] for k in args.hosts}
     for round_ in range(args.rounds):
         for k in args.hosts:
             row = run(k, "measure", {"round_trips": args.round_trips})
             runs[k].append(row)
             print(f"round {round_ + 1}, {k} host(s): {row}", file=sys.stderr, flush=True)
-    rows = []  # each figure the median of its rounds (the rounds swing with the machine's load)
+    rows = []
     for k in args.hosts:
         row = {key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0] if key not in ("hosts", "lines")}
         row.setdefault("node_cpu_ms", None)  # not measured for --attach
         rows.append(dict(row, hosts=k, lines=runs[k][0]["lines"], rounds=[r["p50_ms"] for r in runs[k]]))
+    return rows
+
+
+def _print_scaling(rows: list[dict]) -> None:
     print(
         "\n| hosts | lines | round trips/s | line-ticks/s | p50 ms | p99 ms | trainer CPU ms per round trip |"
         " each node's CPU ms per round trip | p50 of each round (ms) |"
@@ -262,13 +266,29 @@ def main() -> int:
     if 1 in by and max(by) > 1:
         ratio = by[max(by)]["p50_ms"] / by[1]["p50_ms"]
         print(f"\n{max(by)} hosts / 1 host, p50 round trip: {ratio:.2f}x (target <= 1.5x)")
+
+
+def main() -> int:
+    args = _parser().parse_args()
+    if args.role:
+        print(json.dumps({"measure": measure, "soak": soak}[args.role](json.loads(args.cfg))))
+        return 0
+
+    from node_lockstep import loadavg
+
+    run = _runner(args)
+    print(f"load before: {loadavg()}", flush=True)
+    rows = _scaling(run, args)
+    _print_scaling(rows)
     result = {"scaling": rows, "load_after_scaling": loadavg()}
     ok = True
     if args.soak_ticks > 0:
         s = run(args.soak_hosts, "soak", {"ticks": args.soak_ticks})
-        print(f"\nsoak: {s['ticks']:,} line-ticks over {s['hosts']} hosts ({s['lines']} lines): lost {s['lost']}, "
-              f"misaligned {s['misaligned']}, values compared with the library {s['values_compared']:,}, "
-              f"mismatched {s['mismatched']}; {s['line_ticks_per_s']:,.0f} line-ticks/s")
+        print(
+            f"\nsoak: {s['ticks']:,} line-ticks over {s['hosts']} hosts ({s['lines']} lines): lost {s['lost']}, "
+            f"misaligned {s['misaligned']}, values compared with the library {s['values_compared']:,}, "
+            f"mismatched {s['mismatched']}; {s['line_ticks_per_s']:,.0f} line-ticks/s"
+        )
         result["soak"] = s
         ok = s["ok"]
     print(f"load after: {loadavg()}", flush=True)
@@ -277,7 +297,6 @@ def main() -> int:
     if args.plot:
         plot(rows, args.plot)
     return 0 if ok else 1
-
 
 if __name__ == "__main__":
     sys.exit(main())

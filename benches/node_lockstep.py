@@ -48,6 +48,14 @@ import ros_harness as h  # noqa: E402
 
 REEXEC_MARK = "SORTING_LINE_BENCH_IN_NETNS"
 PATTERNS = ["spin-block", "spin-5ms", "spin-poll", "waitset"]
+#: The waiting patterns --patterns compares on one line: (pattern, lean entities).
+LEAN_PATTERNS = [
+    ("spin-block", True),
+    ("spin-5ms", True),
+    ("spin-poll", True),
+    ("spin-block", False),
+    ("waitset", True),
+]
 TARGET_TICKS_1 = 4000.0
 TARGET_RSS_16_MB = 50.0
 TARGET_IDLE_CPU = 1.0  # percent: "near 0"
@@ -350,94 +358,137 @@ def loadavg() -> str:
         return "?"
 
 
-def main() -> int:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("-n", "--ticks", type=int, default=5000, help="round trips per run (default 5000)")
     parser.add_argument("--runs", type=int, default=3, help="runs per configuration; the median is reported")
     parser.add_argument("--lines", type=int, nargs="+", default=[1, 16], help="line counts (default 1 16)")
-    parser.add_argument("--pattern", nargs="+", default=["spin-block"], choices=PATTERNS,
-                        help="how the client waits for the states; several give a row each (default spin-block)")
-    parser.add_argument("--patterns", action="store_true",
-                        help="also compare every waiting pattern on one line (N/2 round trips per run)")
+    parser.add_argument(
+        "--pattern",
+        nargs="+",
+        default=["spin-block"],
+        choices=PATTERNS,
+        help="how the client waits for the states; several give a row each (default spin-block)",
+    )
+    parser.add_argument(
+        "--patterns",
+        action="store_true",
+        help="also compare every waiting pattern on one line (N/2 round trips per run)",
+    )
     parser.add_argument("--idle", type=float, default=5.0, help="seconds of idle-CPU sampling (0: skip)")
-    args = parser.parse_args()
+    return parser
 
-    h.run_isolated(__file__, REEXEC_MARK)
-    env = h.ros_environment(default_domain="88")
-    h.node_binary()
-    progress(f"node {h.node_binary()}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
-    load_before, cpu_before = loadavg(), cpu_times()
 
+def _measure_all(args) -> tuple[list[dict], list[dict]]:
+    """(a result per --pattern and --lines, a result per waiting pattern with --patterns)."""
     session = h.RosSession()
     results, pattern_results = [], []
     with tempfile.TemporaryDirectory(prefix="sl_bench_") as tmp:
         log_dir = Path(tmp)
         try:
             if args.patterns:
-                for pattern, lean in [("spin-block", True), ("spin-5ms", True), ("spin-poll", True),
-                                      ("spin-block", False), ("waitset", True)]:
-                    progress(f"pattern {pattern}{'' if lean else ' (default entities)'}: 1 line, "
-                             f"{args.runs} x {max(1, args.ticks // 2)} round trips")
-                    pattern_results.append(measure(session, 1, max(1, args.ticks // 2), args.runs, pattern, 0,
-                                                   log_dir, f"p_{pattern.replace('-', '_')}_{int(lean)}", lean))
+                n = max(1, args.ticks // 2)
+                for pattern, lean in LEAN_PATTERNS:
+                    entities = "" if lean else " (default entities)"
+                    progress(f"pattern {pattern}{entities}: 1 line, {args.runs} x {n} round trips")
+                    name = f"p_{pattern.replace('-', '_')}_{int(lean)}"
+                    pattern_results.append(measure(session, 1, n, args.runs, pattern, 0, log_dir, name, lean))
             for pattern in args.pattern:
                 for lines in args.lines:
                     progress(f"{lines} line(s): {args.runs} x {args.ticks} round trips, pattern {pattern}")
-                    results.append(measure(session, lines, args.ticks, args.runs, pattern, args.idle, log_dir,
-                                           f"l{lines}_{pattern.replace('-', '_')}"))
+                    name = f"l{lines}_{pattern.replace('-', '_')}"
+                    results.append(measure(session, lines, args.ticks, args.runs, pattern, args.idle, log_dir, name))
         finally:
             session.shutdown()
+    return results, pattern_results
 
-    print(f"\nsorting_line node ({h.node_binary()}), lock-step, basic lines, one rclpy client; "
-          f"N = {args.ticks} round trips per run, median of {args.runs} runs; {os.cpu_count()} CPUs; "
-          f"load average {load_before} before, {loadavg()} after; CPU steal (hypervisor) during the run "
-          f"{steal_percent(cpu_before, cpu_times()):.0f} %")
-    header = (f"{'pattern':<10} | {'lines':>5} | {'round trips/s':>13} | {'line-ticks/s':>12} | {'runs (rt/s)':>23} | "
-              f"{'p50 ms':>6} | {'p99 ms':>6} | {'RSS MB start/end':>16} | {'idle CPU %':>10} | {'steal %':>7}")
+
+def _print_table(results: list[dict]) -> None:
+    header = (
+        f"{'pattern':<10} | {'lines':>5} | {'round trips/s':>13} | {'line-ticks/s':>12} | {'runs (rt/s)':>23} | "
+        f"{'p50 ms':>6} | {'p99 ms':>6} | {'RSS MB start/end':>16} | {'idle CPU %':>10} | {'steal %':>7}"
+    )
     print(header)
     print("-" * len(header))
     for r in results:
         runs = "/".join(f"{x:,.0f}" for x in r["runs"])
         idle = f"{r['idle_cpu']:.2f}" if r["idle_cpu"] is not None else "-"
-        print(f"{r['pattern']:<10} | {r['lines']:>5} | {r['rt_s']:>13,.0f} | {r['line_ticks_s']:>12,.0f} | "
-              f"{runs:>23} | {r['p50_ms']:>6.3f} | {r['p99_ms']:>6.3f} | "
-              f"{r['rss_start_mb']:>7.1f} / {r['rss_mb']:>6.1f} | {idle:>10} | {r['steal']:>7.0f}")
+        print(
+            f"{r['pattern']:<10} | {r['lines']:>5} | {r['rt_s']:>13,.0f} | {r['line_ticks_s']:>12,.0f} | "
+            f"{runs:>23} | {r['p50_ms']:>6.3f} | {r['p99_ms']:>6.3f} | "
+            f"{r['rss_start_mb']:>7.1f} / {r['rss_mb']:>6.1f} | {idle:>10} | {r['steal']:>7.0f}"
+        )
 
+
+def _print_targets(results: list[dict], idle_s: float) -> None:
     print("\ntargets")
     for r in results:
         tag = f"{r['pattern']}, {r['lines']} line(s)"
         if r["lines"] == 1:
             ok = r["line_ticks_s"] >= TARGET_TICKS_1
-            print(f"  {tag}: {r['line_ticks_s']:,.0f} ticks/s vs >= {TARGET_TICKS_1:,.0f} -> "
-                  f"{r['line_ticks_s'] / TARGET_TICKS_1:.2f}x of the target {'OK' if ok else 'MISSED'}")
+            print(
+                f"  {tag}: {r['line_ticks_s']:,.0f} ticks/s vs >= {TARGET_TICKS_1:,.0f} -> "
+                f"{r['line_ticks_s'] / TARGET_TICKS_1:.2f}x of the target {'OK' if ok else 'MISSED'}"
+            )
         if r["lines"] == 16:
             ok = r["rss_mb"] < TARGET_RSS_16_MB
-            print(f"  {tag}: RSS {r['rss_mb']:.1f} MB (peak {r['hwm_mb']:.1f}) vs < {TARGET_RSS_16_MB:.0f} MB -> "
-                  f"{r['rss_mb'] / TARGET_RSS_16_MB:.2f} of the budget {'OK' if ok else 'MISSED'}")
+            print(
+                f"  {tag}: RSS {r['rss_mb']:.1f} MB (peak {r['hwm_mb']:.1f}) vs < {TARGET_RSS_16_MB:.0f} MB -> "
+                f"{r['rss_mb'] / TARGET_RSS_16_MB:.2f} of the budget {'OK' if ok else 'MISSED'}"
+            )
         if r["idle_cpu"] is not None:
             ok = r["idle_cpu"] < TARGET_IDLE_CPU
-            print(f"  {tag}: idle CPU {r['idle_cpu']:.2f} % over {args.idle:.0f} s (near 0: < {TARGET_IDLE_CPU:.0f} %) "
-                  f"{'OK' if ok else 'MISSED'}")
+            print(
+                f"  {tag}: idle CPU {r['idle_cpu']:.2f} % over {idle_s:.0f} s (near 0: < {TARGET_IDLE_CPU:.0f} %) "
+                f"{'OK' if ok else 'MISSED'}"
+            )
+    print(
+        "  (steal % = CPU time the hypervisor took from this VM during the timed runs; the numbers are only\n"
+        "   comparable at low steal.)"
+    )
+    print(
+        "  (RSS start = after connecting, end = after the runs. Under load the node's RSS follows the message\n"
+        "   rate (it plateaus; likely RustDDS's cache clean-up period of 4 s): a faster client, a higher plateau.)"
+    )
 
-    print("  (steal % = CPU time the hypervisor took from this VM during the timed runs; the numbers are only\n"
-          "   comparable at low steal.)")
-    print("  (RSS start = after connecting, end = after the runs. Under load the node's RSS follows the message\n"
-          "   rate (it plateaus; likely RustDDS's cache clean-up period of 4 s): a faster client, a higher plateau.)")
 
+def _print_patterns(pattern_results: list[dict], args) -> None:
+    print(f"\nwaiting patterns, 1 line, {max(1, args.ticks // 2)} round trips per run, median of {args.runs} runs")
+    for r in pattern_results:
+        print(
+            f"  {r['pattern']:<31} {r['rt_s']:>7,.0f} round trips/s  p50 {r['p50_ms']:.3f} ms  "
+            f"p99 {r['p99_ms']:.3f} ms  (steal {r['steal']:.0f} %)"
+        )
+    print(
+        "  spin-block: executor.spin_once() without timeout + a watchdog thread that calls executor.wake();\n"
+        "  spin-5ms:   executor.spin_once(timeout_sec=0.005) in a loop checking a flag;\n"
+        "  spin-poll:  executor.spin_once(timeout_sec=0) busy loop (burns a core);\n"
+        "  lean (all but 'default entities'): no QoS event handlers, reset clients destroyed after use;\n"
+        "  (default entities): rclpy's default event handlers and the reset clients stay in the wait set;\n"
+        "  waitset: no executor; one persistent rcl wait set + take_message (rclpy internals, as in\n"
+        "           rclpy.wait_for_message): the ceiling for a Python client, not a public-API pattern."
+    )
+
+
+def main() -> int:
+    args = _parser().parse_args()
+    h.run_isolated(__file__, REEXEC_MARK)
+    env = h.ros_environment(default_domain="88")
+    h.node_binary()
+    progress(f"node {h.node_binary()}; " + ", ".join(f"{k}={v}" for k, v in env.items()))
+    load_before, cpu_before = loadavg(), cpu_times()
+    results, pattern_results = _measure_all(args)
+    print(
+        f"\nsorting_line node ({h.node_binary()}), lock-step, basic lines, one rclpy client; "
+        f"N = {args.ticks} round trips per run, median of {args.runs} runs; {os.cpu_count()} CPUs; "
+        f"load average {load_before} before, {loadavg()} after; CPU steal (hypervisor) during the run "
+        f"{steal_percent(cpu_before, cpu_times()):.0f} %"
+    )
+    _print_table(results)
+    _print_targets(results, args.idle)
     if pattern_results:
-        print(f"\nwaiting patterns, 1 line, {max(1, args.ticks // 2)} round trips per run, median of {args.runs} runs")
-        for r in pattern_results:
-            print(f"  {r['pattern']:<31} {r['rt_s']:>7,.0f} round trips/s  p50 {r['p50_ms']:.3f} ms  "
-                  f"p99 {r['p99_ms']:.3f} ms  (steal {r['steal']:.0f} %)")
-        print("  spin-block: executor.spin_once() without timeout + a watchdog thread that calls executor.wake();\n"
-              "  spin-5ms:   executor.spin_once(timeout_sec=0.005) in a loop checking a flag;\n"
-              "  spin-poll:  executor.spin_once(timeout_sec=0) busy loop (burns a core);\n"
-              "  lean (all but 'default entities'): no QoS event handlers, reset clients destroyed after use;\n"
-              "  (default entities): rclpy's default event handlers and the reset clients stay in the wait set;\n"
-              "  waitset: no executor; one persistent rcl wait set + take_message (rclpy internals, as in\n"
-              "           rclpy.wait_for_message): the ceiling for a Python client, not a public-API pattern.")
+        _print_patterns(pattern_results, args)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

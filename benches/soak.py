@@ -167,106 +167,165 @@ class SoakResult:
         return self.lost == 0 and self.misaligned == 0 and self.mismatched == 0 and self.verified > 0
 
 
-def run_soak(ticks: int, lines: int = 16, setup: str = "A", variant: str = "basic", seed: int = 7,
-             window: int = 50_000, verify_episodes: int = 20, step_timeout: float = 5.0,
-             show_progress: bool = True, namespace=None, node: str = "spawn") -> SoakResult:
+class _Ledgers:
+    """Every line's ledger and seed mirror: what the soak expects of each line, checked step by step."""
+
+    def __init__(self, env, setup: str, variant: str, verify_episodes: int):
+        self.env, self.setup, self.variant, self.verify_episodes = env, setup, variant, verify_episodes
+        self.lines = env.num_envs
+
+    def start(self, run_seed: int) -> None:
+        """reset(seed) seeds line k with run_seed + k; later resets come from the mirrored generators."""
+        import numpy as np
+
+        obs, _ = self.env.reset(seed=run_seed)
+        self.mirrors = [np.random.default_rng(run_seed + k) for k in range(self.lines)]
+        self.ledgers = [LineLedger(self.setup, self.variant, run_seed + k) for k in range(self.lines)]
+        for k in range(self.lines):
+            self.ledgers[k].seen.append(("reset", observation_of(self.variant, obs[k])))
+            self.ledgers[k].tokens.append(f"r{run_seed + k}")
+
+    def account(self, result: SoakResult, actions, obs, rewards, truncated, infos) -> None:
+        """Checks one round trip of every line against its ledger; counts into ``result``."""
+        from sorting_line_gym.envs.env import SEED_BOUND
+
+        for k, ledger in enumerate(self.ledgers):
+            final = truncated[k]
+            observation = observation_of(self.variant, infos["final_obs"][k] if final else obs[k])
+            step = (actions[k], infos["seed"][k], infos["step"][k], rewards[k], infos["cumulative_reward"][k])
+            result.misaligned += not ledger.expect_step(*step, observation)
+            if final:
+                if ledger.step != EPISODE_STEPS:
+                    result.misaligned += 1  # an episode must end exactly at its last step
+                ledger.expect_reset(int(self.mirrors[k].integers(0, SEED_BOUND)), observation_of(self.variant, obs[k]))
+                result.resets += 1
+                if ledger.episodes >= self.verify_episodes:
+                    self.verify(result, ledger)
+
+    def verify(self, result: SoakResult, ledger: LineLedger) -> None:
+        compared, bad = ledger.verify()
+        result.verified += compared
+        result.mismatched += bad
+
+
+class _Window:
+    """The measurement window: ticks and CPU since it opened, closed into ``result.windows``."""
+
+    def __init__(self, node_pid: int):
+        from node_lockstep import cpu_times
+
+        self.node_pid = node_pid
+        self.t0 = self.opened = time.perf_counter()
+        self.ticks, self.cpu = 0, cpu_times()
+
+    def close(self, result: SoakResult) -> None:
+        from node_lockstep import cpu_times, loadavg, steal_percent
+
+        now = time.perf_counter()
+        result.windows.append(
+            {
+                "ticks": result.ticks,
+                "seconds": round(now - self.t0, 3),
+                "ticks_per_s": round(self.ticks / (now - self.opened), 1),
+                "rss_node_mb": round(rss_mb(self.node_pid), 2),
+                "rss_bridge_mb": round(rss_mb(os.getpid()), 2),
+                "load": loadavg(),
+                "steal": round(steal_percent(self.cpu, cpu_times()), 1),
+            }
+        )
+        self.opened, self.ticks, self.cpu = now, 0, cpu_times()
+
+
+def _soak_env(lines: int, setup: str, variant: str, step_timeout: float, namespace, node: str):
+    from sorting_line_gym import SortingLineVectorEnv
+
+    return SortingLineVectorEnv(
+        num_envs=lines,
+        setup=setup,
+        variant=variant,
+        max_episode_steps=EPISODE_STEPS,
+        step_timeout=step_timeout,
+        namespace=namespace,
+        node=node,
+    )
+
+
+def _progress_bar(ticks: int, show: bool):
+    if not show:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=ticks, unit="tick", unit_scale=True, file=sys.stderr, mininterval=2.0)
+
+
+def _drive(env, expected: _Ledgers, result: SoakResult, measured: _Window, bar, ticks: int, window: int, seed: int):
+    """Steps every line with seeded random actions until ``ticks`` line-ticks, checking each step;
+    a lost round trip restarts the ledgers on new, known seeds."""
+    import numpy as np
+
+    from sorting_line_gym import BridgeTimeout
+
+    lines, n_actions = env.num_envs, int(env.single_action_space.n)
+    actions_rng = np.random.default_rng(seed + 1_000_003)
+    while result.ticks < ticks:
+        actions = actions_rng.integers(0, n_actions, size=lines)
+        try:
+            obs, rewards, _, truncated, infos = env.step(actions)
+        except BridgeTimeout as e:
+            result.lost += lines
+            progress(f"soak: LOST a round trip at line-tick {result.ticks}: {e}")
+            seed += 10_000  # new, known seeds: the ledgers restart cleanly
+            expected.start(seed)
+            continue
+        result.round_trips += 1
+        result.ticks += lines
+        measured.ticks += lines
+        expected.account(result, actions, obs, rewards, truncated, infos)
+        if bar is not None:
+            bar.update(lines)
+        if measured.ticks >= window or result.ticks >= ticks:
+            measured.close(result)
+
+
+def run_soak(
+    ticks: int,
+    lines: int = 16,
+    setup: str = "A",
+    variant: str = "basic",
+    seed: int = 7,
+    window: int = 50_000,
+    verify_episodes: int = 20,
+    step_timeout: float = 5.0,
+    show_progress: bool = True,
+    namespace=None,
+    node: str = "spawn",
+) -> SoakResult:
     """Runs the soak in this process (rclpy must be importable; the caller ensures isolation).
     ``namespace`` and ``node`` are the vector env's (a list of node namespaces with ``node="attach"``
     soaks lines on several hosts: benches/multihost.py); the node's RSS is reported only for a node
     the env spawned."""
-    import numpy as np
-
     from node_lockstep import cpu_times, loadavg, steal_percent
-    from sorting_line_gym import BridgeTimeout, SortingLineVectorEnv
-    from sorting_line_gym.envs.env import SEED_BOUND
 
-    result = SoakResult(
-        load_before=loadavg(),
-        config=dict(
-            ticks=ticks,
-            lines=lines,
-            setup=setup,
-            variant=variant,
-            seed=seed,
-            window=window,
-            verify_episodes=verify_episodes,
-            nodes=1 if isinstance(namespace, (str, type(None))) else len(namespace),
-        ),
-    )
+    nodes = 1 if isinstance(namespace, (str, type(None))) else len(namespace)
+    config = dict(ticks=ticks, lines=lines, setup=setup, variant=variant, seed=seed, window=window)
+    result = SoakResult(load_before=loadavg(), config=dict(config, verify_episodes=verify_episodes, nodes=nodes))
     cpu_before = cpu_times()
-    env = SortingLineVectorEnv(num_envs=lines, setup=setup, variant=variant, max_episode_steps=EPISODE_STEPS,
-                               step_timeout=step_timeout, namespace=namespace, node=node)
-    n_actions = int(env.single_action_space.n)
-    actions_rng = np.random.default_rng(seed + 1_000_003)
+    env = _soak_env(lines, setup, variant, step_timeout, namespace, node)
     bar = None
     try:
-        def start(run_seed: int):
-            """reset(seed) seeds line k with run_seed + k; later resets come from the mirrored generators."""
-            obs, _ = env.reset(seed=run_seed)
-            mirrors = [np.random.default_rng(run_seed + k) for k in range(lines)]
-            ledgers = [LineLedger(setup, variant, run_seed + k) for k in range(lines)]
-            for k in range(lines):
-                ledgers[k].seen.append(("reset", observation_of(variant, obs[k])))
-                ledgers[k].tokens.append(f"r{run_seed + k}")
-            return mirrors, ledgers
-
-        mirrors, ledgers = start(seed)
+        expected = _Ledgers(env, setup, variant, verify_episodes)
+        expected.start(seed)
         # The node the env spawned at its first reset (none when it attached to others' nodes).
         spawned = getattr(env._lines.bank, "process", None)
         node_pid = spawned.process.pid if spawned is not None else -1
         result.rss_node_start, result.rss_bridge_start = rss_mb(node_pid), rss_mb(os.getpid())
-        if show_progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=ticks, unit="tick", unit_scale=True, file=sys.stderr, mininterval=2.0)
-        t0 = window_t0 = time.perf_counter()
-        window_ticks, window_cpu = 0, cpu_times()
-        while result.ticks < ticks:
-            actions = actions_rng.integers(0, n_actions, size=lines)
-            try:
-                obs, rewards, _, truncated, infos = env.step(actions)
-            except BridgeTimeout as e:
-                result.lost += lines
-                progress(f"soak: LOST a round trip at line-tick {result.ticks}: {e}")
-                seed += 10_000  # new, known seeds: the ledgers restart cleanly
-                mirrors, ledgers = start(seed)
-                continue
-            result.round_trips += 1
-            result.ticks += lines
-            window_ticks += lines
-            for k in range(lines):
-                final = truncated[k]
-                observation = infos["final_obs"][k] if final else obs[k]
-                aligned = ledgers[k].expect_step(actions[k], infos["seed"][k], infos["step"][k], rewards[k],
-                                                 infos["cumulative_reward"][k], observation_of(variant, observation))
-                result.misaligned += not aligned
-                if final:
-                    if ledgers[k].step != EPISODE_STEPS:
-                        result.misaligned += 1  # an episode must end exactly at its last step
-                    next_seed = int(mirrors[k].integers(0, SEED_BOUND))
-                    ledgers[k].expect_reset(next_seed, observation_of(variant, obs[k]))
-                    result.resets += 1
-                    if ledgers[k].episodes >= verify_episodes:
-                        compared, bad = ledgers[k].verify()
-                        result.verified += compared
-                        result.mismatched += bad
-            if bar is not None:
-                bar.update(lines)
-            if window_ticks >= window or result.ticks >= ticks:
-                now = time.perf_counter()
-                result.windows.append({
-                    "ticks": result.ticks, "seconds": round(now - t0, 3),
-                    "ticks_per_s": round(window_ticks / (now - window_t0), 1),
-                    "rss_node_mb": round(rss_mb(node_pid), 2), "rss_bridge_mb": round(rss_mb(os.getpid()), 2),
-                    "load": loadavg(), "steal": round(steal_percent(window_cpu, cpu_times()), 1),
-                })
-                window_t0, window_ticks, window_cpu = now, 0, cpu_times()
-        result.seconds = time.perf_counter() - t0
+        bar = _progress_bar(ticks, show_progress)
+        measured = _Window(node_pid)
+        _drive(env, expected, result, measured, bar, ticks, window, seed)
+        result.seconds = time.perf_counter() - measured.t0
         result.rss_node_end, result.rss_bridge_end = rss_mb(node_pid), rss_mb(os.getpid())
-        for ledger in ledgers:  # what is left, including episodes still running
-            compared, bad = ledger.verify()
-            result.verified += compared
-            result.mismatched += bad
+        for ledger in expected.ledgers:  # what is left, including episodes still running
+            expected.verify(result, ledger)
     finally:
         if bar is not None:
             bar.close()

@@ -103,7 +103,7 @@ def time_ours(
 FULL_STUDY = {"cells_per_algo": 8 * 5, "one_line_cells": {"ppo": 5, "dqn": 5}, "timesteps": 100_000, "jobs": 2}
 
 
-def main() -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument(
         "--reference",
@@ -125,14 +125,11 @@ def main() -> int:
     p.add_argument(
         "--rounds", type=int, default=1, help="alternate reference and ours this many times; medians reported"
     )
-    args = p.parse_args()
-    if args.reference is not None and not (args.reference / "src" / "env_1_simple.py").is_file():
-        sys.exit(
-            f"train_timing.py: {args.reference} does not look like the reference checkout (no src/env_1_simple.py)"
-        )
-    h.run_isolated(__file__, "SORTING_LINE_TRAIN_TIMING_IN_NETNS")
-    h.ros_environment("97")
+    return p
 
+
+def _time_all(args) -> dict[tuple[str, str], list[float]]:
+    """Training seconds by (algorithm, side), one per round: the reference's and ours on each --n-envs."""
     times: dict[tuple[str, str], list[float]] = {}
     with tempfile.TemporaryDirectory(prefix="train_timing_") as tmp:
         tmp = Path(tmp)
@@ -152,20 +149,18 @@ def main() -> int:
                     progress(
                         f"round {r + 1}/{args.rounds}: {algo} through ROS on {n} line(s) ({h.machine_conditions()})"
                     )
-                    wall = time_ours(
-                        algo,
-                        args.setup,
-                        args.variant,
-                        args.timesteps,
-                        args.torch_threads,
-                        tmp / "tb",
-                        tmp / f"models_n{n}",
-                        n,
-                    )
+                    how = (args.setup, args.variant, args.timesteps, args.torch_threads, tmp / "tb")
+                    wall = time_ours(algo, *how, tmp / f"models_n{n}", n)
                     times.setdefault((algo, f"ros x{n}"), []).append(wall)
                     progress(f"  through ROS, {n} line(s): {wall:.1f} s")
-    print(f"\n{args.timesteps} training steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
-          f"{args.rounds} round(s), medians ({h.machine_conditions()}):")
+    return times
+
+
+def _print_table(args, times: dict[tuple[str, str], list[float]]) -> None:
+    print(
+        f"\n{args.timesteps} training steps, setup {args.setup} {args.variant}, torch threads {args.torch_threads}, "
+        f"{args.rounds} round(s), medians ({h.machine_conditions()}):"
+    )
     print("| algorithm | trained on | wall s | steps/s | vs reference |")
     print("|---|---|---|---|---|")
     for algo in args.algo:
@@ -175,12 +170,10 @@ def main() -> int:
             label = "reference in-process env" if side == "reference" else f"ROS, {side[5:]} line(s) of one node"
             ratio = f"{wall / ref:.2f}x" if ref and side != "reference" else ""
             print(f"| {algo} | {label} | {wall:.1f} | {args.timesteps / wall:.0f} | {ratio} |")
-    if args.reference is not None and "ppo" in args.algo and 1 in args.n_envs:
-        ratio = statistics.median(times[("ppo", "ros x1")]) / statistics.median(times[("ppo", "reference")])
-        print(
-            f"PPO on one line, ours/reference: {ratio:.2f}x "
-            f"(target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})"
-        )
+
+
+def _print_projection(args, times: dict[tuple[str, str], list[float]]) -> None:
+    """The full study's training time at the measured rates, when they were all measured."""
     n = max(args.n_envs)
     if (
         all((a, f"ros x{n}") in times for a in ("ppo", "dqn", "a2c"))
@@ -199,8 +192,26 @@ def main() -> int:
             f"measured one training at a time, so two at once on "
             f"2 cores may be slower; evaluations add about 20 s per cell)"
         )
-    return 0
 
+
+def main() -> int:
+    args = _parser().parse_args()
+    if args.reference is not None and not (args.reference / "src" / "env_1_simple.py").is_file():
+        sys.exit(
+            f"train_timing.py: {args.reference} does not look like the reference checkout (no src/env_1_simple.py)"
+        )
+    h.run_isolated(__file__, "SORTING_LINE_TRAIN_TIMING_IN_NETNS")
+    h.ros_environment("97")
+    times = _time_all(args)
+    _print_table(args, times)
+    if args.reference is not None and "ppo" in args.algo and 1 in args.n_envs:
+        ratio = statistics.median(times[("ppo", "ros x1")]) / statistics.median(times[("ppo", "reference")])
+        print(
+            f"PPO on one line, ours/reference: {ratio:.2f}x "
+            f"(target <= {TARGET_RATIO}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})"
+        )
+    _print_projection(args, times)
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

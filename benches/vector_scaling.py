@@ -148,26 +148,9 @@ def measure_in_child(key: str, domain: int, args) -> dict:
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--steps", type=int, default=300, help="timed vector steps per subject (default 300)")
-    ap.add_argument("--raw-steps", type=int, default=3000, help="timed round trips of the raw loop (default 3000)")
-    ap.add_argument("--domain", type=int, default=150, help="first ROS_DOMAIN_ID; one per subject (default 150)")
-    ap.add_argument("--subject", help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.steps < 1 or args.raw_steps < 1:
-        ap.error("--steps and --raw-steps must be >= 1")
-    domains = len(SUBJECTS) + len(RAW_AGAIN_AFTER) + 1
-    if not 0 <= args.domain <= 232 - domains:
-        ap.error(f"--domain {args.domain} is out of range: allowed 0 ..= {232 - domains}")
-    h.run_isolated(__file__, "SORTING_LINE_SCALING_BENCH_IN_NETNS")
-    if args.subject:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain)
-        h.ros_environment()
-        os.environ.setdefault("SORTING_LINE_BIN", str(h.node_binary()))
-        print(json.dumps(measure_here(args.subject, args.steps, args.raw_steps)), flush=True)
-        return 0
-    before = h.machine_conditions()
+def _measure_all(args) -> tuple[dict, list[float]]:
+    """Every subject once, each in a child process on a domain of its own; the raw loop again after
+    the subjects in RAW_AGAIN_AFTER: (results by subject, the raw loop's rates)."""
     results, raws = {}, []
     for i, key in enumerate(SUBJECTS):
         results[key] = r = measure_in_child(key, args.domain + i, args)
@@ -178,13 +161,10 @@ def main() -> int:
         if key in RAW_AGAIN_AFTER:
             raws.append(measure_in_child("raw", args.domain + len(SUBJECTS) + len(raws), args)["rate"])
             progress(f"  raw again: {raws[-1]:,.0f} round trips/s")
-    after = h.machine_conditions()
-    raw = statistics.median(raws)
-    results["raw"]["rate"] = raw
-    print(
-        f"\nsorting_line_gym, many envs on one host ({args.steps} vector steps per subject, 50-step episodes; "
-        f"raw loop {args.raw_steps} round trips); {os.cpu_count()} CPUs; {before} before, {after} after"
-    )
+    return results, raws
+
+
+def _print_table(results: dict, raw: float, raws: list[float]) -> None:
     header = (
         f"{'subject':<48} | {'env-steps/s':>11} | {'/ raw':>6} | {'start-up s':>10} | {'RSS MB':>7} | {'MB/env':>6}"
     )
@@ -205,6 +185,10 @@ def main() -> int:
         per_env = f"{(r['rss_mb'] - base) / (int(n) - 1):>6.1f}" if kind == "sync" and int(n) > 1 else f"{'':>6}"
         print(f"{names[kind] + f', {n} envs':<48} | {r['rate']:>11,.0f} | {r['rate'] / raw:>6.2f} | "
               f"{r['start_s']:>10.2f} | {r['rss_mb']:>7.0f} | {per_env}")
+
+
+def _print_targets(results: dict, raw: float) -> None:
+    base = results["sync_1"]["rss_mb"]
     s64 = results["sync_64"]
     mb = (s64["rss_mb"] - base) / 63
     print("\ntargets (SyncVectorEnv of 64, node='shared')")
@@ -219,8 +203,39 @@ def main() -> int:
     share = s64["rate"] / raw
     print(f"  {s64['rate']:,.0f} env-steps/s = {share:.0%} of the raw loop's round trips/s (target >= "
           f"{TARGET_RAW_SHARE:.0%}) {'OK' if share >= TARGET_RAW_SHARE else 'MISSED'}")
-    return 0
 
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--steps", type=int, default=300, help="timed vector steps per subject (default 300)")
+    ap.add_argument("--raw-steps", type=int, default=3000, help="timed round trips of the raw loop (default 3000)")
+    ap.add_argument("--domain", type=int, default=150, help="first ROS_DOMAIN_ID; one per subject (default 150)")
+    ap.add_argument("--subject", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.steps < 1 or args.raw_steps < 1:
+        ap.error("--steps and --raw-steps must be >= 1")
+    domains = len(SUBJECTS) + len(RAW_AGAIN_AFTER) + 1
+    if not 0 <= args.domain <= 232 - domains:
+        ap.error(f"--domain {args.domain} is out of range: allowed 0 ..= {232 - domains}")
+    h.run_isolated(__file__, "SORTING_LINE_SCALING_BENCH_IN_NETNS")
+    if args.subject:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain)
+        h.ros_environment()
+        os.environ.setdefault("SORTING_LINE_BIN", str(h.node_binary()))
+        print(json.dumps(measure_here(args.subject, args.steps, args.raw_steps)), flush=True)
+        return 0
+    before = h.machine_conditions()
+    results, raws = _measure_all(args)
+    after = h.machine_conditions()
+    raw = statistics.median(raws)
+    results["raw"]["rate"] = raw
+    print(
+        f"\nsorting_line_gym, many envs on one host ({args.steps} vector steps per subject, 50-step episodes; "
+        f"raw loop {args.raw_steps} round trips); {os.cpu_count()} CPUs; {before} before, {after} after"
+    )
+    _print_table(results, raw, raws)
+    _print_targets(results, raw)
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())
