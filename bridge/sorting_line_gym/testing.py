@@ -42,6 +42,8 @@ from pathlib import Path
 
 import pytest
 
+from .workarounds.late_matching import retried_handshake
+
 #: Domains a session's tests take in turn, from the first (``--sorting-line-domain``).
 DOMAINS_PER_SESSION = 20
 #: Node start-up (a busy CI machine) and the longest wait for the line's first answer.
@@ -181,15 +183,14 @@ class LineNode:
         (a state with ``truncated`` or ``terminated``); returns the episode's states. A reset
         whose first tick nobody answers within a few seconds (a controller still discovering the
         node) is repeated, up to ``attempts`` times (a seeded reset repeated is the same episode)."""
-        for attempt in range(1, attempts + 1):
+
+        def first_answer(limit: float) -> int:
             episode = self.reset(seed).episode
-            try:
-                self._until_state(lambda s, e=episode: s.episode == e and s.step >= 1, FIRST_ANSWER_TIMEOUT,
-                                  f"the first answer to episode {episode} of {self.namespace}")
-                break
-            except TimeoutError:
-                if attempt == attempts:
-                    raise
+            self._until_state(lambda s: s.episode == episode and s.step >= 1, limit,
+                              f"the first answer to episode {episode} of {self.namespace}")
+            return episode
+
+        episode = retried_handshake(first_answer, [FIRST_ANSWER_TIMEOUT] * attempts, TimeoutError)
         self._until_state(lambda s: s.episode == episode and (s.truncated or s.terminated), timeout,
                           f"the end of episode {episode} of {self.namespace}")
         return [s for s in self.states if s.episode == episode]

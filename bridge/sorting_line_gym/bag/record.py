@@ -26,6 +26,7 @@ ends the recording with exit code 3, a message, and the bag as far as it got (re
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 import time
@@ -33,6 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..workarounds.late_matching import retried_handshake
 from .bagfile import META_KEY, BagError, LineInfo
 from .losses import LossCounter, describe_losses
 from .rosnode import ToolNode
@@ -63,6 +65,19 @@ class RecordResult:
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
         return (f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB in {self.files} "
                 f"file(s) ({per_topic})\n{describe_losses(self.losses)}")
+
+
+def _ask(tool, client, service: str, timeout: float):
+    """One GetParameters call of ``client``, its reply within ``timeout`` (TimeoutError else)."""
+    from rcl_interfaces.srv import GetParameters
+
+    future = client.call_async(GetParameters.Request(names=list(NODE_PARAMETERS)))
+    try:
+        tool.until(future.done, timeout, f"a reply from {service}")
+    except TimeoutError:
+        client.remove_pending_request(future)
+        raise
+    return future.result()
 
 
 def _parameter_value(v):
@@ -99,19 +114,13 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
         values = None
         try:
             tool.until(client.service_is_ready, timeout, f"service {service}")
-            for attempt in range(1, 4):
-                future = client.call_async(GetParameters.Request(names=list(NODE_PARAMETERS)))
-                try:
-                    tool.until(future.done, 2.0, f"a reply from {service} (attempt {attempt}/3)")
-                except TimeoutError:
-                    client.remove_pending_request(future)
-                    continue
-                values = [_parameter_value(v) for v in future.result().values]
-                values = [
-                    "" if v is None and n in OPTIONAL_PARAMETERS else v
-                    for n, v in zip(NODE_PARAMETERS, values, strict=False)
-                ]
-                break
+            # A reply can be lost while the node still matches our reply reader (late_matching).
+            reply = retried_handshake(functools.partial(_ask, tool, client, service), (2.0, 2.0, 2.0), TimeoutError)
+            values = [_parameter_value(v) for v in reply.values]
+            values = [
+                "" if v is None and n in OPTIONAL_PARAMETERS else v
+                for n, v in zip(NODE_PARAMETERS, values, strict=False)
+            ]
         except TimeoutError:
             pass
         finally:

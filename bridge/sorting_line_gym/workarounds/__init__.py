@@ -48,8 +48,13 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     harness; retrying after 0.2, 0.4, 0.8, ... s instead of 2 s brought 64 shared envs' start-up
     from about 25 s to 11.5 s (load 12). Seen in: rclpy 7.1 / Fast DDS 2.14 against RustDDS.
     Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's,
-    and the bag replayer's. Delete when: a service client can tell that the server matched its
-    reply reader (or the node tolerates no handshake), and no test sees a lost first reply.
+    the bag replayer's, the recorder's parameter query and the pytest plugin's first answer of a
+    controller (a controller that is still discovering the node misses its first tick the same
+    way). ``bag.check_closed`` repeats a reset whose first tick got no answer in its own loop, as
+    it restarts the node when the reset had no seed; the tests' harness (tests/python/line_client.py,
+    bag_golden.py) repeats resets only when /diagnostics shows they did not happen. Delete when: a
+    service client can tell that the server matched its reply reader, and no test sees a lost
+    first reply.
 
 ``orphaned_processes`` -- what a process starts is not told when it dies.
     Defect: Linux leaves a dead process's children running, a SIGKILLed Python runs no cleanup,
@@ -60,11 +65,11 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     orphaned-worker test in test_vectorizers failed on the old code ("outlived its killed parent
     by 30 s") and passes in 2 s, over fork, forkserver and spawn. Workaround: the kernel's
     parent-death signal: ``with_parent_death_signal`` (the one ``setpriv --pdeathsig`` launcher,
-    for node processes, line servers' nodes and the tests' processes),
+    for node processes, line servers' nodes, the checked controller and the tests' processes),
     ``die_with_multiprocessing_parent`` (an env in a multiprocessing worker), ``die_with_parent``
-    (the benchmark's pool, SIGKILL). Delete when: never for the node processes (the kernel's
-    behaviour is by design); for workers, when the vectorizers detect a dead parent themselves
-    (the orphaned-worker test passes without it).
+    (``reports.cell_pool``'s workers of the benchmark and the transfer study, SIGKILL). Delete
+    when: never for the node processes (the kernel's behaviour is by design); for workers, when
+    the vectorizers detect a dead parent themselves (the orphaned-worker test passes without it).
 
 Kept elsewhere, because they are not Python of the bridge:
 - launch_scripts/test.sh runs ``fastdds shm clean`` before and after the tests: processes killed

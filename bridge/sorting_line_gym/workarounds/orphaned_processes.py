@@ -6,7 +6,8 @@ Gymnasium's AsyncVectorEnv) waits on its command pipe, whose write ends, with th
 method, every sibling holds open too, so no EOF ever comes when the parent dies. The kernel's
 parent-death signal (``PR_SET_PDEATHSIG``) covers both: :func:`with_parent_death_signal` for the
 node processes (and test processes) we start, :func:`die_with_multiprocessing_parent` for an env
-in a multiprocessing worker, :func:`die_with_parent` for a pool that picks its own signal.
+in a multiprocessing worker, :func:`die_with_parent` for a pool that picks its own signal
+(``reports.cell_pool``).
 
 Standard library only: ``line/`` (no ROS) uses it, and so do the tests' harness and the benchmarks.
 """
