@@ -253,12 +253,30 @@ def check_realtime_run(agent: RuleBasedAgent, states: dict[int, tuple[float, obj
     return {"matched": matched, "late": late, "late_report": late_report, "problems": problems}
 
 
+
+
+def measurable_ticks(items, states: dict, period: int) -> tuple[list[int], int]:
+    """The ticks of the received ``items`` whose next state arrived (while the controller still
+    ran) and is the next step of the same episode; and how many ticks were followed by an
+    automatic restart (step 0)."""
+    window = sorted({stamp_ns(m.header.stamp) for _, m in items})
+    ticks = [
+        t
+        for t in window
+        if t + period in states
+        and states[t + period][1].episode == states[t][1].episode
+        and states[t + period][1].step == states[t][1].step + 1
+    ]
+    restarts = sum(1 for t in window if t + period in states and states[t + period][1].step == 0)
+    return ticks, restarts
+
+
 @pytest.mark.parametrize("agent_name", ["rba", "rba-hold"])
 def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_controller, client_factory, probe,
                                           namespace):
     ns = namespace(agent_name)
-    node = start_node("--mode", "realtime", "--rate", str(RATE_HZ), "--variant", "advanced", *h.SETUP_FLAGS["B"],
-                      "--seed", "7", *ns_args(ns))
+    realtime = ["--mode", "realtime", "--rate", str(RATE_HZ), "--variant", "advanced", *h.SETUP_FLAGS["B"]]
+    node = start_node(*realtime, "--seed", "7", *ns_args(ns))
     rec = line_recorders(probe, ns)
     c = client_factory(ns, "advanced", node_proc=node, topics=["state"])
     c.wait_connected()
@@ -281,13 +299,8 @@ def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_co
     assert summary and " decisions" in summary[0], f"no summary on exit\n{ctl.describe()}"
 
     states = rec["state"].by_stamp()
-    # The measured ticks: those whose next state arrived while the controller was still running.
-    window = sorted({stamp_ns(m.header.stamp) for _, m in rec["state"].items[start:start + MEASURED_TICKS + 1]})
     period = NS_PER_S  # --tick-period default 1 s of simulated time
-    ticks = [t for t in window if t + period in states
-             and states[t + period][1].episode == states[t][1].episode
-             and states[t + period][1].step == states[t][1].step + 1]
-    restarts = sum(1 for t in window if t + period in states and states[t + period][1].step == 0)
+    ticks, restarts = measurable_ticks(rec["state"].items[start : start + MEASURED_TICKS + 1], states, period)
     assert len(ticks) >= MEASURED_TICKS - 3, f"only {len(ticks)} measurable ticks\n{context()}"
 
     agent = RuleBasedAgent("B", "advanced", hold=agent_name == "rba-hold")

@@ -231,6 +231,22 @@ def make_env(schedule_file, **kwargs):
                           max_episode_steps=ENV_EPISODE_STEPS, **kwargs)
 
 
+def env_rows_of_the_trace(schedule, tokens: list[str], seed: int) -> list[tuple]:
+    """What the env should have returned, from `sorting_line trace`: ("reset", observation) and
+    ("step", observation, reward, mode) rows (an unknown ratio category reads 0.5)."""
+    expected = []
+    for entry in trace(schedule, tokens, seed=seed)[1:]:
+        category = entry["category_reading"]
+        category = 0.5 if category == 3 else float(category)
+        if "reset" in entry:
+            expected.append(("reset", [entry["reset"]["observation"]["quantity"], category]))
+        else:
+            s = entry["step"]
+            mode = h.MODES[s["action"]["mode"]]
+            expected.append(("step", [s["observation"]["quantity"], category], s["reward"], mode))
+    return expected
+
+
 def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
     import numpy as np
 
@@ -267,19 +283,12 @@ def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
     finally:
         env.close()
 
-    expected = []
-    for entry in trace(schedule, tokens, seed=seeds[0])[1:]:
-        category = entry["category_reading"]
-        category = 0.5 if category == 3 else float(category)
-        if "reset" in entry:
-            expected.append(("reset", [entry["reset"]["observation"]["quantity"], category]))
-        else:
-            s = entry["step"]
-            expected.append(("step", [s["observation"]["quantity"], category], s["reward"],
-                             h.MODES[s["action"]["mode"]]))
+    expected = env_rows_of_the_trace(schedule, tokens, seeds[0])
+
     # float32 observations: compare the readings (two decimals) at float32 precision.
     def as32(rows):
         return [tuple(np.float32(v).item() if isinstance(v, float) else v for v in r[1]) for r in rows]
+
     assert as32(got) == as32(expected)
     assert [r[2:] for r in got] == [r[2:] for r in expected]
 

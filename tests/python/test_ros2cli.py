@@ -152,11 +152,9 @@ def test_interface_show(ros2):
 # Topics: echo, hz, type hashes
 
 
-def test_echo_once_every_topic(ros2, rt_line):
-    """`ros2 topic echo --once` of each published topic, all at once (they are independent)."""
-    topics = [rt_line.name(rel) for rel in ["state", "input", "belt/occupancy", "sensors/ratio"]]
-    topics += ["/clock", "/diagnostics"]
-    poll(ros2, ["topic", "list"], lambda out: all(t in out.split() for t in topics), "every published topic")
+def echo_once_each(ros2, topics: list[str]) -> dict[str, dict]:
+    """`ros2 topic echo --once` of each topic, all at once (they are independent): topic -> its
+    first message as YAML; fails naming every topic without one."""
     procs = {t: subprocess.Popen(ros2.argv("topic", "echo", "--once", t), stdout=subprocess.PIPE,
                                  stderr=subprocess.PIPE, text=True, env=ros2.env, stdin=subprocess.DEVNULL)
              for t in topics}
@@ -178,10 +176,18 @@ def test_echo_once_every_topic(ros2, rt_line):
             continue
         results[topic] = docs[0]
     assert not problems, "\n\n".join(problems)
+    return results
 
+
+def test_echo_once_every_topic(ros2, rt_line):
+    """`ros2 topic echo --once` of each published topic, all at once (they are independent)."""
+    topics = [rt_line.name(rel) for rel in ["state", "input", "belt/occupancy", "sensors/ratio"]]
+    topics += ["/clock", "/diagnostics"]
+    poll(ros2, ["topic", "list"], lambda out: all(t in out.split() for t in topics), "every published topic")
+    results = echo_once_each(ros2, topics)
     state = results[rt_line.name("state")]
-    assert set(state) >= {"header", "episode", "step", "seed", "speed", "mode", "occupancy", "reward", "purity",
-                          "container_a", "terminated", "truncated"}, state
+    keys = "header episode step seed speed mode occupancy reward purity container_a terminated truncated"
+    assert set(state) >= set(keys.split()), state
     assert state["seed"] == 5 and state["speed"] == 0.6, state  # nobody commands this line
     assert state["step"] == state["header"]["stamp"]["sec"], state  # first episode: tick k = step k, 1 s a tick
     assert 0.0 <= state["occupancy"] <= 1.0 and state["mode"] in (0, 1, 2), state
@@ -465,6 +471,19 @@ def test_the_daemon_stops_listing_a_stopped_node_at_once(ros2, start_node, names
 # ros2 launch
 
 
+def stop_launch(launch: subprocess.Popen) -> int | str:
+    """SIGINT to a `ros2 launch` started in a session of its own; its exit code ("killed after
+    15 s" if it did not exit)."""
+    if launch.poll() is None:
+        os.killpg(launch.pid, signal.SIGINT)
+    try:
+        return launch.wait(timeout=15)
+    except subprocess.TimeoutExpired:
+        os.killpg(launch.pid, signal.SIGKILL)
+        launch.wait(timeout=5)
+        return "killed after 15 s"
+
+
 def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, namespace):
     ns = namespace("launch")
     params = tmp_path / "line.yaml"
@@ -491,14 +510,7 @@ def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, n
         state = yaml_docs(ros2.run("topic", "echo", "--once", f"{ns}/line_1/state", timeout=30).stdout)[0]
         assert state["seed"] == 8 and 0 <= state["step"] <= 9, state
     finally:
-        if launch.poll() is None:
-            os.killpg(launch.pid, signal.SIGINT)
-        try:
-            code = launch.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(launch.pid, signal.SIGKILL)
-            launch.wait(timeout=5)
-            code = "killed after 15 s"
+        code = stop_launch(launch)
     log = log_path.read_text(errors="replace")
     assert code == 0, f"ros2 launch exited with {code} after SIGINT:\n{log}"
     assert "shut down cleanly" in log and "process has finished cleanly" in log, log

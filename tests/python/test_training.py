@@ -42,30 +42,15 @@ def script(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
+def eval_flags(agent: str, setup: str, variant: str, episodes: int) -> list[str]:
+    """The flags `sorting_line eval` and sorting-line-eval share for one evaluation, with --json."""
+    return ["--agent", agent, "--setup", setup, "--variant", variant, "--episodes", str(episodes), "--json"]
+
+
 def library_eval(agent: str, setup: str, variant: str, episodes: int, seed: int = 42, gap: bool = False) -> dict:
-    out = subprocess.run(
-        [
-            str(h.node_binary()),
-            "eval",
-            "--agent",
-            agent,
-            "--setup",
-            setup,
-            "--variant",
-            variant,
-            "--episodes",
-            str(episodes),
-            "--seed",
-            str(seed),
-            "--json",
-            *(["--gap"] if gap else []),
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=60,
-    ).stdout
-    return json.loads(out)
+    argv = [str(h.node_binary()), "eval", *eval_flags(agent, setup, variant, episodes), "--seed", str(seed)]
+    argv += ["--gap"] if gap else []
+    return json.loads(subprocess.run(argv, capture_output=True, text=True, check=True, timeout=60).stdout)
 
 
 def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
@@ -82,20 +67,7 @@ def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
 def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, capsys):
     from sorting_line_gym.reports import evaluate
 
-    argv = [
-        "--agent",
-        agent,
-        "--setup",
-        setup,
-        "--variant",
-        variant,
-        "--episodes",
-        "3",
-        "--json",
-        "--out",
-        str(tmp_path),
-    ]
-    assert evaluate.main(argv) == 0
+    assert evaluate.main([*eval_flags(agent, setup, variant, 3), "--out", str(tmp_path)]) == 0
     ours = json.loads(capsys.readouterr().out)
     theirs = library_eval(agent, setup, variant, 3)
     assert ours["per_episode"] == theirs["per_episode"]
@@ -413,11 +385,10 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
     import time
 
     env = dict(os.environ, **h.ros_environment())
-    bench = subprocess.Popen(
-        [script("sorting-line-benchmark"), "--setups", "A", "--variants", "basic", "--agents", "ppo",
-         "--train-seeds", "42", "43", "--timesteps", "200000", "--jobs", "2", "--out", str(tmp_path / "bench")],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-    )
+    flags = "--setups A --variants basic --agents ppo --train-seeds 42 43 --timesteps 200000 --jobs 2".split()
+    argv = [script("sorting-line-benchmark"), *flags, "--out", str(tmp_path / "bench")]
+    pipes = dict(stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
+    bench = subprocess.Popen(argv, env=env, text=True, **pipes)
     workers: list[int] = []
     try:
         deadline = time.monotonic() + 90
