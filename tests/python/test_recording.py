@@ -121,7 +121,7 @@ def test_split_and_compressed_bags_round_trip_through_info_and_replay(name, opti
     assert [f["path"] for f in info["files"]] == files == [f"{name}_{k}.mcap" for k in range(len(files))]
     assert sum(f["message_count"] for f in info["files"]) == info["message_count"] == len(golden.messages)
     if options.max_bag_size:
-        assert len(files) >= 3 and all((out / f).stat().st_size < 2 * options.max_bag_size for f in files)
+        assert len(files) >= 3 and all((out / f).stat().st_size < 1.1 * options.max_bag_size for f in files)
     compressions = set()
     for f in files:
         with open(out / f, "rb") as stream:

@@ -68,8 +68,11 @@ RESERVE_BYTES = 512 * 1024
 #: message-index offset.
 SUMMARY_BYTES_PER_CHUNK = 120
 SUMMARY_BYTES_PER_CHANNEL = 10
-#: An MCAP message record's bytes besides the message (opcode, length, channel, sequence, times).
-MESSAGE_RECORD_BYTES = 31
+#: An MCAP message's bytes besides its data: its record (opcode, length, channel, sequence, times)
+#: and its entry in the chunk's message index (time, offset).
+MESSAGE_RECORD_BYTES = 31 + 16
+#: An MCAP record's opcode, length and a few small fields.
+RECORD_BYTES = 16
 
 
 class BagWriteError(BagError):
@@ -202,31 +205,33 @@ class _McapFile:
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.chunks = 0
+        self.summary_bytes = 0  # what the summary will take besides the chunk indexes
         self._packed = 0  # chunk indexes packed so far
         self.finished = False
-        # Bytes of messages in the chunk in progress; of closed chunks before and after compression.
-        self.unflushed = self.raw_bytes = self.disk_bytes = 0
+        # Bytes of messages in the chunk in progress; of closed chunks after and before compression.
+        self.unflushed = self.compressed = self.uncompressed = 0
 
     def add_topic(self, topic: str, msgtype: str, qos: str) -> None:
         if msgtype not in self.schemas:
             msgdef, _ = typestore().generate_msgdef(msgtype, ros_version=2)
             self.schemas[msgtype] = self.writer.register_schema(msgtype, "ros2msg", msgdef.encode())
+            self.summary_bytes += len(msgdef) + len(msgtype) + RECORD_BYTES
         self.channels[topic] = self.writer.register_channel(topic, "cdr", self.schemas[msgtype],
                                                             {"offered_qos_profiles": qos})
+        self.summary_bytes += len(topic) + len(qos) + 3 * RECORD_BYTES
+        self.unflushed = self.summary_bytes  # schemas and channels go in the first chunk, and again in the summary
 
     def write(self, topic: str, log_time: int, data) -> None:
         before = self.stream.tell()
         self.unflushed += len(data) + MESSAGE_RECORD_BYTES
         self.writer.add_message(self.channels[topic], log_time=log_time, data=bytes(data), publish_time=log_time)
         if self.stream.tell() != before:  # the writer closed a chunk by size
-            self._chunk_closed(before)
+            self._chunk_closed()
         s = self.stats
         s.count += 1
         s.start, s.end = min(s.start, log_time), max(s.end, log_time)
 
-    def _chunk_closed(self, before: int) -> None:
-        self.raw_bytes += self.unflushed
-        self.disk_bytes += self.stream.tell() - before
+    def _chunk_closed(self) -> None:
         self.unflushed = 0
         self.chunks += 1
         # The mcap writer keeps each chunk's index, with a dict of every channel's message-index
@@ -235,18 +240,20 @@ class _McapFile:
         indexes = self.writer._Writer__chunk_indices
         for index in indexes[self._packed:]:
             index.message_index_offsets = _PackedOffsets(index.message_index_offsets)
+            self.compressed += index.compressed_size
+            self.uncompressed += index.uncompressed_size
         self._packed = len(indexes)
 
     def size(self) -> int:
         """The file's size once the chunk in progress is written (compressed as the chunks so far were)."""
-        ratio = self.disk_bytes / self.raw_bytes if self.raw_bytes else 1.0
-        return self.stream.tell() + int(self.unflushed * ratio)
+        ratio = self.compressed / self.uncompressed if self.uncompressed else 1.0
+        summary = self.summary_bytes + (self.chunks + 1) * (SUMMARY_BYTES_PER_CHUNK + 10 * len(self.channels))
+        return self.stream.tell() + int(self.unflushed * ratio) + summary
 
     def flush(self) -> None:
-        before = self.stream.tell()
         self.writer.flush()
         if self.unflushed:
-            self._chunk_closed(before)
+            self._chunk_closed()
         self.stream.commit()
 
     def finish(self) -> None:
