@@ -250,3 +250,24 @@ def test_a_recording_says_it_missed_nothing(ros, start_node, namespace, tmp_path
 
     assert main(["info", str(out)]) == 0
     assert "messages missed: none" in capsys.readouterr().out
+
+
+def test_a_bag_being_recorded_is_named_so_and_reindex_leaves_it_alone(tmp_path):
+    """No ROS: a writer of this process, mid-recording (its metadata.yaml names this live pid)."""
+    from sorting_line_gym.bag import BagError
+    from sorting_line_gym.bag.recovery import reindex
+    from sorting_line_gym.bag.writer import BagWriter
+
+    golden = open_bag(DATA / "basic_d")
+    writer = BagWriter(tmp_path / "live", golden.custom)
+    for topic, msgtype in golden.types.items():
+        writer.add_topic(topic, msgtype)
+    for m in golden.messages[:100]:
+        writer.write(m.topic, m.log_time, m.data)
+    writer.flush()
+    with pytest.raises(BagError, match=f"it is still being recorded: its recorder \\(pid {os.getpid()}\\)"):
+        open_bag(tmp_path / "live")
+    with pytest.raises(BagError, match="is being recorded"):
+        reindex(tmp_path / "live")
+    writer.close()
+    assert len(open_bag(tmp_path / "live").messages) == 100

@@ -134,11 +134,14 @@ def reindex(path: str | Path) -> ReindexResult:
     files = mcap_files(path)
     if not files:
         raise BagError(f"{path}: no .mcap files to reindex")
+    old = _metadata(path)
+    if _live_recorder(old):  # recovering a file under a live writer would take it from under it
+        raise BagError(f"{path} is being recorded: its recorder{_live_recorder(old).split('recorder', 1)[1]}; "
+                       "reindex it once that has ended (or was killed)")
     result = ReindexResult(path)
     for f in files:
         if not has_footer(f):
             result.recovered[f.name] = _recover(f)
-    old = _metadata(path)
     custom: dict[str, str] = {}
     topics: dict[str, TopicStats] = {}
     for f in files:
