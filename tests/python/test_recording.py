@@ -149,16 +149,25 @@ def test_reading_tools_say_how_to_recover_a_cut_bag(tmp_path, capsys):
     bare = tmp_path / "bare"
     shutil.copytree(cut, bare)
     (bare / "metadata.yaml").unlink()
+    unlisted = tmp_path / "unlisted"  # killed right after starting a split file, before metadata.yaml said so
+    rewrite_bag(DATA / "basic_d", unlisted, options=WriteOptions(max_bag_size=48 * 1024))
+    meta = yaml.safe_load((unlisted / "metadata.yaml").read_text())
+    last_file = meta["rosbag2_bagfile_information"]["relative_file_paths"].pop()
+    meta["rosbag2_bagfile_information"]["files"].pop()
+    (unlisted / "metadata.yaml").write_text(yaml.safe_dump(meta))
     for args, message in [(("info", cut), f"`sorting-line-bag reindex {cut}` recovers"),
                           (("replay", cut), "without the MCAP summary and footer"),
                           (("play", cut, "--no-wait"), f"`sorting-line-bag reindex {cut}`"),
-                          (("info", bare), f"`sorting-line-bag reindex {bare}` rebuilds metadata.yaml")]:
+                          (("info", bare), f"`sorting-line-bag reindex {bare}` rebuilds metadata.yaml"),
+                          (("info", unlisted), f"metadata.yaml does not list {last_file}")]:
         code = main([str(a) for a in args])
         err = capsys.readouterr().err
         assert (code, message in err) == (2, True), f"{args}: exit {code}, stderr {err!r}"
     for path in (cut, bare):
         assert main(["reindex", str(path)]) == 0, capsys.readouterr()
         assert 0 < len(open_bag(path).messages) < len(open_bag(DATA / "basic_d").messages)
+    assert main(["reindex", str(unlisted)]) == 0, capsys.readouterr()
+    assert len(open_bag(unlisted).messages) == len(open_bag(DATA / "basic_d").messages)
     assert main(["reindex", str(tmp_path / "nothing")]) == 2
 
 
