@@ -43,6 +43,15 @@ step "Python lint (ruff.toml)"
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 
+step "The simulation library alone (no ros feature: no DDS dependency)"
+# About 1 CPU-minute: the release build shares the target dir, so only this crate and the few
+# dependencies whose features the DDS stack widens (rand, rand_chacha, serde_json) compile again.
+cargo build --release --locked --no-default-features
+cargo test --release --locked --no-default-features --lib --tests
+# Both put the binary without the `node` command at target/release/sorting_line: this relinks the
+# full one from the cache (seconds), which the ROS tests below run.
+cargo build --release --locked
+
 [[ $RUST_ONLY == 1 ]] && exit 0
 
 step "Ray RLlib for the RLlib tests"

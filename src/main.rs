@@ -1,5 +1,6 @@
 //! The `sorting_line` command line: `eval`, `oracle`, `table`, `policy`, `trace` and `vocabulary`
-//! run the simulation library offline, `node` runs the line as a ROS 2 node.
+//! run the simulation library offline, `node` runs the line as a ROS 2 node (the `ros` feature,
+//! on by default; without it the command does not exist).
 
 use std::io::{self, IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -9,6 +10,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
+#[cfg(feature = "ros")]
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::evolution::{category_code, At, Schedule};
@@ -35,6 +37,7 @@ enum Command {
     /// controller outside this library, e.g. the Python one, decides with).
     Policy(PolicyArgs),
     /// Run the line as a ROS 2 node.
+    #[cfg(feature = "ros")]
     Node(NodeArgs),
     /// Print the library's trajectory for a seed and an action list, one JSON object per step
     /// (the reference other paths are compared with).
@@ -150,17 +153,22 @@ struct TableArgs {
 fn main() -> ExitCode {
     // The DDS stack's own log (RUST_LOG=rustdds=debug, to stderr) only when asked for: without it
     // env_logger would still print rustdds' error lines, some of them routine.
+    #[cfg(feature = "ros")]
     if std::env::var_os("RUST_LOG").is_some() {
         env_logger::Builder::from_default_env().format_timestamp_micros().init();
     }
     // `--ros-args ... [--]` belongs to ROS, not to clap: split it off first.
+    #[cfg(feature = "ros")]
     let (args, ros_args) = sorting_line::ros::options::split_ros_args(std::env::args().collect());
+    #[cfg(not(feature = "ros"))]
+    let args = std::env::args();
     let cli = Cli::parse_from(args);
     let result = match cli.command {
         Command::Eval(args) => run_eval(args),
         Command::Oracle(args) => run_oracle(args),
         Command::Table(args) => run_table(args),
         Command::Policy(args) => run_policy(args),
+        #[cfg(feature = "ros")]
         Command::Node(args) => sorting_line::ros::run(args, ros_args),
         Command::Trace(args) => run_trace(args),
         Command::Vocabulary => run_vocabulary(),
