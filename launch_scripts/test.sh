@@ -40,6 +40,16 @@ fi
 step "Python lint (ruff.toml)"
 .venv/bin/ruff check --no-cache . || { echo "test.sh: fix what \`.venv/bin/ruff check\` reports above (\`--fix\` fixes the ones marked [*])" >&2; exit 1; }
 
+step "Rust lints (clippy, warnings are errors; with and without the ros feature)"
+# About 2 CPU-minutes: a metadata-only check of every dependency (clippy cannot reuse the release
+# build), then seconds for the crate without the ros feature.
+if cargo clippy --version >/dev/null 2>&1; then
+  cargo clippy --locked --all-targets -- -D warnings
+  cargo clippy --locked --all-targets --no-default-features -- -D warnings
+else
+  echo "test.sh: clippy is not installed (rustup component add clippy): lints not checked"
+fi
+
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 

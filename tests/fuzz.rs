@@ -115,7 +115,7 @@ fn stamp_kind() -> impl Strategy<Value = StampKind> {
 fn junk() -> impl Strategy<Value = Junk> {
     let stranger = prop::bool::weighted(0.3);
     prop_oneof![
-        (stranger.clone(), stamp_kind(), speed_value()).prop_map(|(stranger, stamp, speed)| Junk::Speed {
+        (stranger, stamp_kind(), speed_value()).prop_map(|(stranger, stamp, speed)| Junk::Speed {
             stranger,
             stamp,
             speed
@@ -155,18 +155,26 @@ fn stamp_of(kind: StampKind, line: &HostedLine) -> Time {
     }
 }
 
+/// A command as the oracle sees it: who sent it, its stamp, which topic, and whether its value
+/// is one the line knows.
+#[derive(Clone, Copy)]
+struct Sent {
+    from: Client,
+    stamp: Time,
+    is_speed: bool,
+    valid: bool,
+}
+
 /// The oracle: what the protocol must answer to a command, from the documented rules alone.
 /// `None` = it must be accepted (such junk is not sent: it would be a good command).
 fn expected(
     line: &HostedLine,
     advanced: bool,
     lockstep: bool,
-    from: Client,
-    stamp: Time,
-    is_speed: bool,
-    valid: bool,
+    sent: Sent,
     pending: bool,
 ) -> Option<&'static [Rejection]> {
+    let Sent { from, stamp, is_speed, valid } = sent;
     if line.owner().is_some_and(|o| o != from) {
         return Some(&[Rejection::NotOwner]);
     }
@@ -225,7 +233,7 @@ fn send_junk(
         }
     };
     let pending = if is_speed { pending.0 } else { pending.1 };
-    let Some(allowed) = expected(noisy, advanced, lockstep, from, stamp, is_speed, valid, pending) else {
+    let Some(allowed) = expected(noisy, advanced, lockstep, Sent { from, stamp, is_speed, valid }, pending) else {
         tally.skipped += 1;
         return Ok(());
     };
@@ -512,7 +520,13 @@ fn fuzz_batch_commands() {
                             Command::Mode(mode) => (false, mode < 3),
                         };
                         let waiting = if is_speed { pending[k].0 } else { pending[k].1 };
-                        let allowed = expected(&noisy[k], advanced, true, from, entry.stamp, is_speed, valid, waiting);
+                        let allowed = expected(
+                            &noisy[k],
+                            advanced,
+                            true,
+                            Sent { from, stamp: entry.stamp, is_speed, valid },
+                            waiting,
+                        );
                         let got = noisy[k].command_from(from, entry.stamp, command);
                         tallies[k].commands += 1;
                         match (allowed, got) {

@@ -200,9 +200,9 @@ fn publisher<M: Message + Serialize + Typed>(node: &mut Node, absolute: &str) ->
     node.create_publisher(&topic, Some(qos)).map_err(|e| format!("cannot publish {absolute}: {e:?}"))
 }
 
-fn subscription<M: Message + Typed + 'static>(node: &mut Node, absolute: &str) -> Result<Subscription<M>, String>
+fn subscription<M>(node: &mut Node, absolute: &str) -> Result<Subscription<M>, String>
 where
-    M: for<'de> serde::Deserialize<'de>,
+    M: Message + Typed + for<'de> serde::Deserialize<'de> + 'static,
 {
     let qos = default_profile();
     let topic = node

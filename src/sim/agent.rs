@@ -85,13 +85,15 @@ impl fmt::Display for AgentSpec {
     }
 }
 
-/// A ready-to-act agent.
+/// A ready-to-act agent. The random agent's generator is boxed: its state would otherwise be most
+/// of every agent's size (clippy's large_enum_variant), and a draw costs far more than the
+/// indirection.
 #[derive(Clone, Debug)]
 pub enum Agent {
     Rba(RbaTable),
     RbaHold(RbaTable),
     Bayes(BayesAgent),
-    Random { rng: SimRng, variant: Variant },
+    Random { rng: Box<SimRng>, variant: Variant },
     Constant { speed_index: usize, mode: ModeChoice },
 }
 
@@ -102,7 +104,7 @@ impl Agent {
             AgentSpec::Rba => Agent::Rba(RbaTable::build(config)),
             AgentSpec::RbaHold => Agent::RbaHold(RbaTable::build(config)),
             AgentSpec::Bayes => Agent::Bayes(BayesAgent::new(config)?),
-            AgentSpec::Random => Agent::Random { rng: stream(seed, Stream::Agent), variant: config.variant },
+            AgentSpec::Random => Agent::Random { rng: Box::new(stream(seed, Stream::Agent)), variant: config.variant },
             AgentSpec::Constant { mode, .. }
                 if config.variant == Variant::Basic && mode != ModeChoice::Fixed(SortMode::Basic) =>
             {
@@ -116,7 +118,7 @@ impl Agent {
     /// agent) and the Bayes agent's step count and belief.
     pub fn reseed(&mut self, seed: u64) {
         match self {
-            Agent::Random { rng, .. } => *rng = stream(seed, Stream::Agent),
+            Agent::Random { rng, .. } => **rng = stream(seed, Stream::Agent),
             Agent::Bayes(agent) => agent.restart(),
             _ => {}
         }

@@ -75,16 +75,16 @@ impl RbaTable {
             for category in CATEGORIES {
                 // Posterior weight of each true total given the reading (and category).
                 let mut weights: Vec<(usize, Category, f64)> = Vec::new();
-                for total in 0..=MAX_TOTAL {
+                for (total, by_category) in joint.iter().enumerate() {
                     let lik = likelihood(reading, total, config.obs_noise);
                     if lik == 0.0 {
                         continue;
                     }
                     match config.variant {
-                        Variant::Advanced => weights.push((total, category, joint[total][category.index()] * lik)),
+                        Variant::Advanced => weights.push((total, category, by_category[category.index()] * lik)),
                         Variant::Basic => {
                             for c in CATEGORIES {
-                                weights.push((total, c, joint[total][c.index()] * lik));
+                                weights.push((total, c, by_category[c.index()] * lik));
                             }
                         }
                     }
