@@ -47,6 +47,7 @@ from typing import Any
 
 from sorting_line_gym.line import vocabulary
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
+from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
@@ -177,8 +178,6 @@ class NodeProcess:
     """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
 
     def __init__(self, args: Iterable[str], log_path: Path, env: dict[str, str] | None = None):
-        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
-
         self.args = [str(a) for a in args]
         self.log_path = Path(log_path)
         self.argv = [str(node_binary()), "node", *self.args]
@@ -250,8 +249,6 @@ class ScriptProcess:
         self.label = label or name
         self.log_path = Path(log_path)
         self.argv = [str(script), *[str(a) for a in args]]
-        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
-
         self._log = open(self.log_path, "wb")
         env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(

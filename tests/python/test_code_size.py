@@ -28,17 +28,8 @@ OVER_60_LINES = {
     "tests/python/line_client.py::LineClient.reset",
     "tests/python/test_controller.py::check_realtime_run",
     "tests/python/test_controller.py::test_controller_drives_a_lockstep_episode_exactly",
-    "tests/python/test_discovery_range.py::test_discovery_range_and_static_peers_across_a_veth_pair",
-    "tests/python/test_evolving.py::test_a_recorded_evolving_run_replays_exactly",
-    "tests/python/test_evolving.py::test_evolving_node_follows_its_schedule_like_trace",
     "tests/python/test_multihost.py::test_one_vector_env_over_three_hosts_faults_and_recovery",
-    "tests/python/test_node.py::test_bad_command_flood_leaves_the_state_stream_identical",
-    "tests/python/test_node.py::test_every_topic_and_the_reset_service",
-    "tests/python/test_node_lines.py::test_malformed_batch_requests_are_rejected_counted_and_change_nothing",
-    "tests/python/test_node.py::test_started_like_launch_ros",
     "tests/python/test_rllib.py::test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker",
-    "tests/python/test_simulation_interfaces.py::test_simulate_steps_action_feedback_refusal_and_cancel",
-    "tests/python/test_simulation_interfaces.py::test_standard_services_drive_the_line_as_trace_does",
 }
 
 

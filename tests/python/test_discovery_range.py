@@ -64,18 +64,34 @@ def ros_env(**values: str) -> dict[str, str]:
 
 
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"two hosts: {netns_hosts.problem()}")
+def start_nodes_on_a(hosts, names: dict[str, str], tmp_path) -> dict[str, subprocess.Popen]:
+    """The node on host a three times: default discovery range, LOCALHOST, ROS_LOCALHOST_ONLY=1."""
+    nodes = {}
+    node_envs = {"default": ros_env(), "localhost": ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"),
+                 "legacy": ros_env(ROS_LOCALHOST_ONLY="1")}
+    for key, env in node_envs.items():
+        log = open(tmp_path / f"{key}.log", "wb")
+        argv = [str(h.node_binary()), "node", "--ros-args", "-r", f"__node:={names[key]}"]
+        nodes[key] = hosts.popen("a", argv, env=env, stdout=log, stderr=subprocess.STDOUT)
+    return nodes
+
+
+def stop_with_sigint(nodes: dict[str, subprocess.Popen]) -> dict[str, int | str]:
+    """SIGINT to every node; each one's exit code (or how it had exited before)."""
+    codes = {}
+    for key, p in nodes.items():
+        running = p.poll() is None
+        p.send_signal(signal.SIGINT)
+        codes[key] = p.wait(timeout=10) if running else f"exited early with {p.returncode}"
+    return codes
+
+
 def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
     tag = f"{os.getpid()}"
     names = {"default": f"sl_default_{tag}", "localhost": f"sl_localhost_{tag}",
              "legacy": f"sl_localhost_only_{tag}", "reference": f"rclpy_default_{tag}"}
     with netns_hosts.TwoHosts() as hosts:
-        nodes = {}
-        node_envs = {"default": ros_env(), "localhost": ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"),
-                     "legacy": ros_env(ROS_LOCALHOST_ONLY="1")}
-        for key, env in node_envs.items():
-            log = open(tmp_path / f"{key}.log", "wb")
-            nodes[key] = hosts.popen("a", [str(h.node_binary()), "node", "--ros-args", "-r",
-                                           f"__node:={names[key]}"], env=env, stdout=log, stderr=subprocess.STDOUT)
+        nodes = start_nodes_on_a(hosts, names, tmp_path)
         hosts.popen("a", [sys.executable, "-c", REFERENCE, names["reference"], "30"], env=ros_env())
 
         def probe(env: dict[str, str], want: list[str]) -> subprocess.Popen:
@@ -95,11 +111,7 @@ def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
             out, err = p.communicate(timeout=40)
             assert p.returncode == 0, f"probe ({what}) failed:\n{out}\n{err}"
             seen[what] = json.loads(out.strip().splitlines()[-1])
-        codes = {}
-        for key, p in nodes.items():
-            running = p.poll() is None
-            p.send_signal(signal.SIGINT)
-            codes[key] = p.wait(timeout=10) if running else f"exited early with {p.returncode}"
+        codes = stop_with_sigint(nodes)
     logs = {key: (tmp_path / f"{key}.log").read_text(errors="replace") for key in nodes}
     report = f"seen from the other host (s until first seen): {json.dumps(seen, indent=1)}\nnode logs: {logs}"
 

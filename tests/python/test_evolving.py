@@ -78,74 +78,26 @@ def test_bad_schedule_fails_at_start_naming_the_event(tmp_path):
     assert code != 0 and "evolution_file" in err and "cannot read it" in err, err
 
 
-def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, client_factory, probe, namespace, ros):
-    from rcl_interfaces.msg import ParameterEvent
-    from rcl_interfaces.srv import GetParameters
-    from sorting_line_interfaces.msg import EvolutionEvent, LineCommands, MaterialRatio
+def step_line(c, batch, action: int, via_batch: bool = False):
+    """Answers the tick ``c`` waits at with ``action`` (through batch/cmd, or the line's topics,
+    the mode only once the node subscribes it); the next state."""
+    from sorting_line_interfaces.msg import LineCommands
 
-    schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("evo"))
-    events: list = []
-    probe.create_subscription(EvolutionEvent, f"{ns}/events/evolution", events.append, 10)
-    ratios: list = []
-    ratio_sub = probe.create_subscription(MaterialRatio, f"{ns}/sensors/ratio", ratios.append, 10)
-    param_events: list = []
-    probe.create_subscription(ParameterEvent, "/parameter_events",
-                              lambda m: param_events.append(m) if m.node == f"{ns}/sorting_line" else None, 100)
-    batch = probe.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
-    c.wait_connected()
-    ros.spin_until(lambda: batch.get_subscription_count() >= 1, 10, "batch/cmd to match", c.context)
-    ros.spin_until(lambda: probe.count_publishers(f"{ns}/events/evolution") >= 1, 10, "events/evolution publisher")
+    speed, mode = h.decode_action("advanced", action)
+    if via_batch:
+        t = c.stamp
+        batch.publish(LineCommands(stamp_sec=[t // NS_PER_S], stamp_nanosec=[t % NS_PER_S], speeds=[speed],
+                                   modes=[mode]))
+    else:
+        if c.mode_pub.get_subscription_count() >= 1:
+            c.send_mode(mode)
+        c.send_speed(speed)
+    state = c.wait_state(c.stamp + c.period_ns)
+    c.stamp += c.period_ns
+    return state
 
-    def hardware():
-        return (probe.count_publishers(f"{ns}/sensors/ratio"), probe.count_subscribers(f"{ns}/cmd/sort_mode"))
 
-    def step(action: int, via_batch: bool = False):
-        speed, mode = h.decode_action("advanced", action)
-        if via_batch:
-            t = c.stamp
-            batch.publish(LineCommands(stamp_sec=[t // NS_PER_S], stamp_nanosec=[t % NS_PER_S], speeds=[speed],
-                                       modes=[mode]))
-        else:
-            if c.mode_pub.get_subscription_count() >= 1:
-                c.send_mode(mode)
-            c.send_speed(speed)
-        state = c.wait_state(c.stamp + c.period_ns)
-        c.stamp += c.period_ns
-        return state
-
-    def reset(seed=None):
-        c.reset(seed=seed)
-        return c.wait_state(c.stamp)
-
-    states = [reset(SEED)]
-    assert hardware() == (0, 0), "basic hardware at episode 1: no ratio sensor, no sort modes"
-    for i, action in enumerate(EPISODE_1):
-        states.append(step(action, via_batch=i == BATCH_STEP))
-    assert hardware() == (0, 0)
-    states.append(reset())
-    # Episode 2 fits the ratio sensor: its publisher appears. The node announces it before the
-    # reset's state goes out, but the probe is another participant than the client that got the
-    # state, and its discovery thread may run later (it lagged in about 1 run of 10, with the
-    # binaries before and after 2026-11-23's rustdds patches alike): so wait a moment for it.
-    ros.spin_until(lambda: hardware()[0] == 1, 5, f"the probe to see {ns}/sensors/ratio's publisher")
-    ros.spin_until(lambda: ratio_sub.get_publisher_count() >= 1, 10, f"{ns}/sensors/ratio to match", c.context)
-    for tick, action in enumerate(EPISODE_2, start=len(EPISODE_1)):
-        if tick == UPGRADE_TICK:
-            # The machine upgrade is due at this tick: cmd/sort_mode is subscribed before the
-            # client has to command the upgraded step.
-            ros.spin_until(lambda: hardware()[1] == 1, 5, f"the probe to see {ns}/cmd/sort_mode's subscriber")
-            ros.spin_until(lambda: c.mode_pub.get_subscription_count() >= 1, 10, "cmd/sort_mode to match", c.context)
-        elif tick < UPGRADE_TICK:
-            assert hardware()[1] == 0, f"tick {tick}: {hardware()}"
-        states.append(step(action))
-
-    ros.spin_until(lambda: ratios, 5, f"a message on {ns}/sensors/ratio", c.context)
-    episode_2 = stamp_ns(states[len(EPISODE_1) + 1].header.stamp)
-    assert all(stamp_ns(m.header.stamp) >= episode_2 for m in ratios), "no ratio readings before the sensor upgrade"
-
-    # The node's trajectory is the library's.
-    tokens = [f"r{SEED}", *EPISODE_1, "r", *EPISODE_2]
-    expected = trace(schedule, tokens)[1:]  # [0] is the line as built (episode 0)
+def check_states_follow_the_trace(expected: list[dict], states: list) -> None:
     assert len(expected) == len(states)
     for k, (entry, state) in enumerate(zip(expected, states, strict=False)):
         if "reset" in entry:
@@ -156,7 +108,9 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
         else:
             assert h.state_step_view(state) == step_view(entry), f"record {k}, tick {entry['tick']}"
 
-    # events/evolution: one message per reset, and one per tick with events, the trace's events.
+
+def check_evolution_events(ros, events: list, expected: list[dict], states: list) -> None:
+    """events/evolution: one message per reset, and one per tick with events, the trace's events."""
     ros.spin_until(lambda: len(events) >= 4, 5, "the events/evolution messages")
     applied = [(e["reset"]["episode"] if "reset" in e else None, e["tick"], [x["index"] for x in e["evolution"]])
                for e in expected if e["evolution"]]
@@ -178,7 +132,11 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     fault = next(m for m in events if list(m.event_indices) == [2])
     assert (fault.input_fault, fault.input_fault_ticks, list(fault.values)) == ("dropped", 2, ["dropped 2"])
 
-    # /parameter_events: obs_noise and threshold moved at tick 4; the services give the new values.
+
+def check_parameters_moved(ros, probe, ns: str, param_events: list, schedule, context) -> None:
+    """/parameter_events: obs_noise and threshold moved at tick 4; the services give the new values."""
+    from rcl_interfaces.srv import GetParameters
+
     def changed(name):
         return [p.value.double_value for m in param_events for p in m.changed_parameters if p.name == name]
 
@@ -186,11 +144,13 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     assert (changed("obs_noise"), changed("threshold")) == ([0.2], [0.8])
     get = probe.create_client(GetParameters, f"{ns}/sorting_line/get_parameters")
     reply = ros.call_service(get, GetParameters.Request(names=["obs_noise", "threshold", "evolution_file"]),
-                             "get_parameters", context=c.context)
+                             "get_parameters", context=context)
     assert [v.double_value for v in reply.values[:2]] == [0.2, 0.8]
     assert reply.values[2].string_value == str(schedule)
 
-    # /diagnostics: the refused mode is counted, and the evolution state shown.
+
+def check_diagnostics_show_the_evolution(ros, c, node, schedule) -> None:
+    """/diagnostics: the refused mode is counted, and the evolution state shown; the node's log says so."""
     want = {"rejected_sort_modes_off": "1", "sort_modes": "true", "ratio_sensor": "true", "obs_noise": "0.2",
             "threshold": "0.8", "evolution_events_applied": "5", "evolution_events_total": "5",
             "evolution_file": str(schedule)}
@@ -202,6 +162,64 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
                    lambda: str(c.diagnostics[-1][1] if c.diagnostics else None))
     assert "rejected sort mode 2" in node.log() and "[sort_modes_off]" in node.log(), node.log_tail()
     assert "sensors/ratio appears" in node.log() and "cmd/sort_mode appears" in node.log(), node.log_tail()
+
+
+def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, client_factory, probe, namespace, ros):
+    from rcl_interfaces.msg import ParameterEvent
+    from sorting_line_interfaces.msg import EvolutionEvent, LineCommands, MaterialRatio
+
+    schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("evo"))
+    events: list = []
+    probe.create_subscription(EvolutionEvent, f"{ns}/events/evolution", events.append, 10)
+    ratios: list = []
+    ratio_sub = probe.create_subscription(MaterialRatio, f"{ns}/sensors/ratio", ratios.append, 10)
+    param_events: list = []
+    probe.create_subscription(ParameterEvent, "/parameter_events",
+                              lambda m: param_events.append(m) if m.node == f"{ns}/sorting_line" else None, 100)
+    batch = probe.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
+    c.wait_connected()
+    ros.spin_until(lambda: batch.get_subscription_count() >= 1, 10, "batch/cmd to match", c.context)
+    ros.spin_until(lambda: probe.count_publishers(f"{ns}/events/evolution") >= 1, 10, "events/evolution publisher")
+
+    def hardware():
+        return (probe.count_publishers(f"{ns}/sensors/ratio"), probe.count_subscribers(f"{ns}/cmd/sort_mode"))
+
+    def reset(seed=None):
+        c.reset(seed=seed)
+        return c.wait_state(c.stamp)
+
+    states = [reset(SEED)]
+    assert hardware() == (0, 0), "basic hardware at episode 1: no ratio sensor, no sort modes"
+    for i, action in enumerate(EPISODE_1):
+        states.append(step_line(c, batch, action, via_batch=i == BATCH_STEP))
+    assert hardware() == (0, 0)
+    states.append(reset())
+    # Episode 2 fits the ratio sensor: its publisher appears. The node announces it before the
+    # reset's state goes out, but the probe is another participant than the client that got the
+    # state, and its discovery thread may run later (it lagged in about 1 run of 10, with the
+    # binaries before and after 2026-11-23's rustdds patches alike): so wait a moment for it.
+    ros.spin_until(lambda: hardware()[0] == 1, 5, f"the probe to see {ns}/sensors/ratio's publisher")
+    ros.spin_until(lambda: ratio_sub.get_publisher_count() >= 1, 10, f"{ns}/sensors/ratio to match", c.context)
+    for tick, action in enumerate(EPISODE_2, start=len(EPISODE_1)):
+        if tick == UPGRADE_TICK:
+            # The machine upgrade is due at this tick: cmd/sort_mode is subscribed before the
+            # client has to command the upgraded step.
+            ros.spin_until(lambda: hardware()[1] == 1, 5, f"the probe to see {ns}/cmd/sort_mode's subscriber")
+            ros.spin_until(lambda: c.mode_pub.get_subscription_count() >= 1, 10, "cmd/sort_mode to match", c.context)
+        elif tick < UPGRADE_TICK:
+            assert hardware()[1] == 0, f"tick {tick}: {hardware()}"
+        states.append(step_line(c, batch, action))
+
+    ros.spin_until(lambda: ratios, 5, f"a message on {ns}/sensors/ratio", c.context)
+    episode_2 = stamp_ns(states[len(EPISODE_1) + 1].header.stamp)
+    assert all(stamp_ns(m.header.stamp) >= episode_2 for m in ratios), "no ratio readings before the sensor upgrade"
+
+    # The node's trajectory is the library's.
+    expected = trace(schedule, [f"r{SEED}", *EPISODE_1, "r", *EPISODE_2])[1:]  # [0] is the line as built (episode 0)
+    check_states_follow_the_trace(expected, states)
+    check_evolution_events(ros, events, expected, states)
+    check_parameters_moved(ros, probe, ns, param_events, schedule, c.context)
+    check_diagnostics_show_the_evolution(ros, c, node, schedule)
 
 
 # --------------------------------------------------------------------------------------------
@@ -325,6 +343,29 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
 # Bags: record an evolving run, replay it exactly
 
 
+def check_a_tampered_event_is_named(out, tmp_path) -> None:
+    """A copy of the bag at ``out`` whose announcement of tick 4 says threshold 0.75 replays with
+    that difference named (topic, field, recorded and replayed values)."""
+    import dataclasses
+
+    from sorting_line_gym.bag import rewrite_bag
+    from sorting_line_gym.bag.replay import replay
+    from sorting_line_gym.bag.schema import typestore
+
+    store = typestore()
+
+    def edit(m):
+        if m.topic.endswith("/events/evolution") and m.plain["tick"] == 4 and not m.plain["at_reset"]:
+            return dataclasses.replace(store.deserialize_cdr(m.data, m.msgtype), threshold=0.75)
+        return None
+
+    assert rewrite_bag(out, tmp_path / "tampered", edit) == 1
+    tampered = replay(tmp_path / "tampered")
+    assert not tampered.identical
+    assert (tampered.difference.topic, tampered.difference.field, tampered.difference.recorded,
+            tampered.difference.replayed) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
+
+
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
     from bag_golden import BagProcess, wait_for_command_writers
     from sorting_line_gym.bag import open_bag
@@ -368,23 +409,7 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     )
 
     # The events are compared: a recorded announcement with another threshold is named.
-    import dataclasses
-
-    from sorting_line_gym.bag import rewrite_bag
-    from sorting_line_gym.bag.schema import typestore
-
-    store = typestore()
-
-    def edit(m):
-        if m.topic.endswith("/events/evolution") and m.plain["tick"] == 4 and not m.plain["at_reset"]:
-            return dataclasses.replace(store.deserialize_cdr(m.data, m.msgtype), threshold=0.75)
-        return None
-
-    assert rewrite_bag(out, tmp_path / "tampered", edit) == 1
-    tampered = replay(tmp_path / "tampered")
-    assert not tampered.identical
-    assert (tampered.difference.topic, tampered.difference.field, tampered.difference.recorded,
-            tampered.difference.replayed) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
+    check_a_tampered_event_is_named(out, tmp_path)
 
 
 def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, start_node, client_factory, namespace, ros):

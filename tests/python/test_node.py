@@ -203,6 +203,21 @@ def test_bad_start_arguments_exit_2_naming_value_and_range(args, env, expected, 
 # Topics, service, clock, diagnostics
 
 
+def check_line_counters(diag, ns: str, setup: str, variant: str, steps: int, final: int, context) -> None:
+    """/diagnostics: the counters of line ``ns`` after one episode of ``steps`` answered ticks
+    (seed 11), the last at ``final``."""
+    accepted = steps * (2 if variant == "advanced" else 1)
+    values = wait_diagnostics(diag, ns, {"ticks": str(steps), "sim_time": show_ns(final)}, context=context)
+    want = {"episodes": "1", "commands_accepted": str(accepted), "commands_rejected": "0", "seed": "11",
+            "episode": "1", "step": str(steps), "variant": variant,
+            "input": "seasonal" if setup in "BD" else "random", "mode": "lockstep",
+            **{f"rejected_{r}": "0" for r in REASONS}}
+    assert {k: values.get(k) for k in want} == want
+    assert float(values["tick_rate"]) >= 0.0
+    status = next(s for a in reversed(diag.msgs) for s in a.status if s.hardware_id == ns)
+    assert status.name == f"sorting_line: {ns}"
+
+
 @pytest.mark.parametrize("variant,setup", [("basic", "D"), ("advanced", "B")])
 def test_every_topic_and_the_reset_service(variant, setup, ros, start_node, client_factory, probe, namespace):
     ns = namespace()
@@ -247,17 +262,7 @@ def test_every_topic_and_the_reset_service(variant, setup, ros, start_node, clie
     assert values == sorted(set(values)), f"/clock not strictly increasing: {values}"
     assert set(stamps[1:]) <= set(values) <= set(stamps), f"/clock {values} vs ticks {stamps}"
 
-    # /diagnostics: counters of this line.
-    accepted = len(actions) * (2 if variant == "advanced" else 1)
-    values = wait_diagnostics(diag, ns, {"ticks": str(len(actions)), "sim_time": show_ns(final)}, context=c.context)
-    want = {"episodes": "1", "commands_accepted": str(accepted), "commands_rejected": "0", "seed": "11",
-            "episode": "1", "step": str(len(actions)), "variant": variant,
-            "input": "seasonal" if setup in "BD" else "random", "mode": "lockstep",
-            **{f"rejected_{r}": "0" for r in REASONS}}
-    assert {k: values.get(k) for k in want} == want
-    assert float(values["tick_rate"]) >= 0.0
-    status = next(s for a in reversed(diag.msgs) for s in a.status if s.hardware_id == ns)
-    assert status.name == f"sorting_line: {ns}"
+    check_line_counters(diag, ns, setup, variant, len(actions), final, c.context)
 
     # The graph: which endpoints the node itself has, with their types.
     check_line_endpoints(probe, ns, variant, node_name="sorting_line", node_ns=ns)
@@ -316,26 +321,16 @@ def test_lockstep_publishes_exactly_one_state_per_answered_tick(variant, ros, st
     assert [s.step for s in states] == list(range(len(states)))
 
 
-def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_path):
+def check_fixed_parameters_of_plant_sorter(ros, probe, context) -> None:
+    """/plant/sorter's parameters through the ROS parameter services: their values (the params
+    file's, the -p flags', the defaults), and a set request refused with a reason (fixed for the run)."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import GetParameters, SetParameters
 
-    params = tmp_path / "f.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    variant: advanced\n    max_steps: 30\n")
-    node = start_node("--ros-args", "-r", "__ns:=/plant", "-r", "__node:=sorter", "-p", "seed:=3",
-                      "-p", "threshold:=0.75", "--params-file", str(params))
-    c = client_factory("/plant", "advanced", node_proc=node)
-    c.wait_connected()
-    response = c.reset()  # no seed: the streams of the node's seed carry on
-    assert (response.seed, response.episode) == (3, 1), response
-    assert c.wait_state(c.stamp).seed == 3
-
-    # Parameters through the ROS parameter services of /plant/sorter.
     get = probe.create_client(GetParameters, "/plant/sorter/get_parameters")
-    names = ["variant", "max_steps", "seed", "threshold", "mode", "lines", "input", "obs_noise", "action_penalty",
-             "tick_period"]
+    names = "variant max_steps seed threshold mode lines input obs_noise action_penalty tick_period".split()
     reply = ros.call_service(get, GetParameters.Request(names=names), "/plant/sorter/get_parameters",
-                             context=c.context)
+                             context=context)
 
     def value(v):
         return {ParameterType.PARAMETER_BOOL: v.bool_value, ParameterType.PARAMETER_INTEGER: v.integer_value,
@@ -349,8 +344,22 @@ def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_pat
     set_client = probe.create_client(SetParameters, "/plant/sorter/set_parameters")
     request = SetParameters.Request(parameters=[Parameter(
         name="threshold", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.9))])
-    result = ros.call_service(set_client, request, "/plant/sorter/set_parameters", context=c.context).results[0]
+    result = ros.call_service(set_client, request, "/plant/sorter/set_parameters", context=context).results[0]
     assert not result.successful and "fixed" in result.reason, result
+
+
+def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_path):
+    params = tmp_path / "f.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    variant: advanced\n    max_steps: 30\n")
+    node = start_node("--ros-args", "-r", "__ns:=/plant", "-r", "__node:=sorter", "-p", "seed:=3",
+                      "-p", "threshold:=0.75", "--params-file", str(params))
+    c = client_factory("/plant", "advanced", node_proc=node)
+    c.wait_connected()
+    response = c.reset()  # no seed: the streams of the node's seed carry on
+    assert (response.seed, response.episode) == (3, 1), response
+    assert c.wait_state(c.stamp).seed == 3
+
+    check_fixed_parameters_of_plant_sorter(ros, probe, c.context)
 
     # The namespace and the node name.
     assert ("sorter", "/plant") in probe.get_node_names_and_namespaces()
@@ -386,6 +395,40 @@ def test_a_setup_is_a_preset_that_explicit_values_override(ros, start_node, clie
 # Bad commands
 
 
+def answer_one_tick_amid_bad_commands(noisy, diag, ns_noisy: str, expected: dict, k: int, speed: float, mode: int):
+    """Answers the tick ``noisy`` waits at with (speed, mode), each surrounded by bad commands of
+    every kind, counted into ``expected`` by reason; then re-sends them, stale."""
+    p = noisy.period_ns
+    t = noisy.stamp
+    # Per topic, samples arrive in order, so everything before the clean command of a topic is
+    # judged while the line still waits at t.
+    for bad_mode, stamp in [(7, t), (3, t), (255, t), (mode, t - p), (mode, t + p)]:
+        noisy.send_mode(bad_mode, stamp)
+    expected["unknown_mode"] += 3
+    expected["stale"] += 1
+    expected["unknown_tick"] += 1
+    noisy.send_mode(mode, t)
+    if k == 3:
+        # A second sort mode for the same tick is a duplicate only while the tick still waits
+        # for its speed: hold the speed back until /diagnostics shows the duplicate counted.
+        noisy.send_mode((mode + 1) % 3, t)
+        expected["duplicate"] += 1
+        wait_diagnostics(diag, ns_noisy, {"rejected_duplicate": "1"}, context=noisy.context)
+    for bad_speed, stamp in [(math.nan, t), (math.inf, t), (-math.inf, t), (0.55, t), (-1.0, t), (0.0, t),
+                             (1.1, t), (speed, t - p), (speed, t + p), (speed, t + p // 2), (speed, 0)]:
+        noisy.send_speed(bad_speed, stamp)
+    expected["invalid_speed"] += 7
+    expected["stale"] += 2  # t - p and tick 0 (the line is past both)
+    expected["unknown_tick"] += 2
+    noisy.send_speed(speed, t)
+    noisy.wait_state(t + p)
+    noisy.stamp = t + p
+    # Re-sending the answered tick's commands: stale now.
+    noisy.send_speed(speed, t)
+    noisy.send_mode(mode, t)
+    expected["stale"] += 2
+
+
 def test_bad_command_flood_leaves_the_state_stream_identical(ros, start_node, client_factory, probe, namespace):
     variant, setup, seed = "advanced", "B", 21
     ns_clean, ns_noisy = namespace("clean"), namespace("noisy")
@@ -405,36 +448,8 @@ def test_bad_command_flood_leaves_the_state_stream_identical(ros, start_node, cl
     expected = dict.fromkeys(REASONS, 0)
     flood_started = time.monotonic()
     noisy.reset(seed)
-    p = noisy.period_ns
     for k, (speed, mode) in enumerate(actions):
-        t = noisy.stamp
-        # Per topic, samples arrive in order, so everything before the clean command of a topic is
-        # judged while the line still waits at t.
-        for bad_mode, stamp in [(7, t), (3, t), (255, t), (mode, t - p), (mode, t + p)]:
-            noisy.send_mode(bad_mode, stamp)
-        expected["unknown_mode"] += 3
-        expected["stale"] += 1
-        expected["unknown_tick"] += 1
-        noisy.send_mode(mode, t)
-        if k == 3:
-            # A second sort mode for the same tick is a duplicate only while the tick still waits
-            # for its speed: hold the speed back until /diagnostics shows the duplicate counted.
-            noisy.send_mode((mode + 1) % 3, t)
-            expected["duplicate"] += 1
-            wait_diagnostics(diag, ns_noisy, {"rejected_duplicate": "1"}, context=noisy.context)
-        for bad_speed, stamp in [(math.nan, t), (math.inf, t), (-math.inf, t), (0.55, t), (-1.0, t), (0.0, t),
-                                 (1.1, t), (speed, t - p), (speed, t + p), (speed, t + p // 2), (speed, 0)]:
-            noisy.send_speed(bad_speed, stamp)
-        expected["invalid_speed"] += 7
-        expected["stale"] += 2  # t - p and tick 0 (the line is past both)
-        expected["unknown_tick"] += 2
-        noisy.send_speed(speed, t)
-        noisy.wait_state(t + p)
-        noisy.stamp = t + p
-        # Re-sending the answered tick's commands: stale now.
-        noisy.send_speed(speed, t)
-        noisy.send_mode(mode, t)
-        expected["stale"] += 2
+        answer_one_tick_amid_bad_commands(noisy, diag, ns_noisy, expected, k, speed, mode)
 
     for topic in ["state", "input", "belt/occupancy", "sensors/ratio"]:
         assert [h.msg_to_dict(m) for m in noisy.since_reset(topic)] == [

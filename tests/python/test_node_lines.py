@@ -5,6 +5,7 @@ namespace."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -95,12 +96,54 @@ def test_four_lines_are_independent_and_seeded_seed_plus_k(ros, start_node, clie
         assert (values["seed"], values["episodes"], values["commands_rejected"]) == (str(seed + k), "1", "0")
 
 
+def batch_stamps(batch) -> list[int]:
+    """Each line's stamp (ns) of a batch of states or commands."""
+    return [s * NS_PER_S + n for s, n in zip(batch.stamp_sec, batch.stamp_nanosec, strict=False)]
+
+
+def stamp_fields(stamps_ns: list[int]) -> dict[str, list[int]]:
+    """A batch message's stamp fields for each line's stamp (ns)."""
+    return {"stamp_sec": [t // NS_PER_S for t in stamps_ns], "stamp_nanosec": [t % NS_PER_S for t in stamps_ns]}
+
+
+def check_refused_resets(reset, stamps: list[int]) -> None:
+    """batch/reset requests that are malformed answer success=false naming why, and reset nothing."""
+    for request, reason in [(([0, 1], [True], [1, 2]), "same length"), (([2], [False], [0]), "out of range"),
+                            (([1, 1], [False, False], [0, 0]), "repeated")]:
+        refused = reset(*request)
+        assert not refused.success and reason in refused.message, refused
+        assert batch_stamps(refused.states) == stamps
+
+
+def assert_batches_follow_the_trace(setup: str, variant: str, seed: int, plan: list[list[int]], after: list) -> None:
+    """Line k of each batch state in ``after`` is the library's step for line k's actions
+    ``plan[k]`` after a reset with seed k + 1 (the node's seed + k)."""
+    for k in range(len(plan)):
+        trace = h.run_trace(setup, variant, seed + k, [f"r{k + 1}", *plan[k]])
+        for entry, batch in zip(trace[2:], after, strict=True):
+            want = h.trace_step_view(entry)
+            got = {key: getattr(batch, key)[k] for key in want if hasattr(batch, key)}
+            assert got == {key: want[key] for key in got}, f"line {k}"
+
+
+@contextlib.contextmanager
+def another_participant():
+    """An rclpy node in a context of its own: another DDS participant, as another client's."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        yield rclpy.create_node(f"other_client_{os.getpid()}", context=context)
+    finally:
+        rclpy.shutdown(context=context)
+
+
 def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, start_node, probe, namespace):
     """batch/reset and batch/cmd from rclpy: a refused reset answers success=false naming why and
     resets nothing; malformed lists, bad entries, stale and future stamps and another client's
     batch are rejected, counted per reason and line on /diagnostics, and the lines then follow the
     library's trajectory of the valid commands alone."""
-    import rclpy
     from sorting_line_interfaces.msg import LineCommands, LineStates
     from sorting_line_interfaces.srv import ResetLines
 
@@ -118,64 +161,42 @@ def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, s
 
     first = reset([0, 1], [True, True], [1, 2])
     assert first.success and list(first.states.seed) == [1, 2], first
-    stamps = [s * NS_PER_S + n for s, n in zip(first.states.stamp_sec, first.states.stamp_nanosec, strict=False)]
-    for request, reason in [(([0, 1], [True], [1, 2]), "same length"), (([2], [False], [0]), "out of range"),
-                            (([1, 1], [False, False], [0, 0]), "repeated")]:
-        refused = reset(*request)
-        assert not refused.success and reason in refused.message, refused
-        assert [
-            s * NS_PER_S + n for s, n in zip(refused.states.stamp_sec, refused.states.stamp_nanosec, strict=False)
-        ] == stamps
+    stamps = batch_stamps(first.states)
+    check_refused_resets(reset, stamps)
 
     ros.spin_until(lambda: commands.get_subscription_count() > 0, 10.0, f"{ns}/batch/cmd to match")
 
     def send(stamps_ns, speeds, modes, publisher=commands):
-        publisher.publish(LineCommands(stamp_sec=[t // NS_PER_S for t in stamps_ns],
-                                       stamp_nanosec=[t % NS_PER_S for t in stamps_ns], speeds=speeds, modes=modes))
+        publisher.publish(LineCommands(**stamp_fields(stamps_ns), speeds=speeds, modes=modes))
 
     def step(actions):
         """Sends the valid batch for `actions` and returns the batch state of the next tick."""
         speeds, modes = zip(*(h.decode_action(variant, a) for a in actions), strict=False)
         want = [t + NS_PER_S for t in stamps]
         send(stamps, list(speeds), list(modes))
-        got = states.wait_for(
-            lambda m: [s * NS_PER_S + n for s, n in zip(m.stamp_sec, m.stamp_nanosec, strict=False)] == want,
-            10.0,
-            f"batch/state at {want}",
-        )
+        got = states.wait_for(lambda m: batch_stamps(m) == want, 10.0, f"batch/state at {want}")
         stamps[:] = want
         return got
 
-    period = NS_PER_S
     send(stamps, [0.5], [1, 1])  # one speed for two lines
     send(stamps, [0.5, 0.5], [1])  # one mode for two lines
     send(stamps, [math.nan, 0.55], [7, 9])  # unknown modes, off-grid speeds
-    send([t - period for t in stamps], [0.5, 0.5], [1, 1])  # stale: the reset left that tick
-    send([t + period for t in stamps], [0.5, 0.5], [1, 1])  # a tick that does not exist yet
+    send([t - NS_PER_S for t in stamps], [0.5, 0.5], [1, 1])  # stale: the reset left that tick
+    send([t + NS_PER_S for t in stamps], [0.5, 0.5], [1, 1])  # a tick that does not exist yet
     plan = [[4, 20], [13, 2]]
     after = [step([plan[0][0], plan[1][0]])]  # this client now owns both lines' episodes
 
     # Another client (its own rclpy context, so another DDS participant) is refused.
-    other_context = rclpy.Context()
-    rclpy.init(context=other_context)
-    try:
-        other = rclpy.create_node(f"other_client_{os.getpid()}", context=other_context)
+    with another_participant() as other:
         other_pub = other.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
         ros.spin_until(lambda: other_pub.get_subscription_count() > 0, 10.0, "the other client's batch/cmd to match")
         send(stamps, [0.1, 0.1], [0, 0], publisher=other_pub)
         wait_diagnostics(diag, f"{ns}/line_1", {"rejected_not_owner": "2"})
-    finally:
-        rclpy.shutdown(context=other_context)
     after.append(step([plan[0][1], plan[1][1]]))
 
-    for k in range(2):
-        trace = h.run_trace(setup, variant, seed + k, [f"r{k + 1}", *plan[k]])
-        for entry, batch in zip(trace[2:], after, strict=True):
-            want = h.trace_step_view(entry)
-            got = {key: getattr(batch, key)[k] for key in want if hasattr(batch, key)}
-            assert got == {key: want[key] for key in got}, f"line {k}"
-    want = {"ticks": "2", "rejected_malformed": "5", "rejected_unknown_mode": "1", "rejected_invalid_speed": "1",
-            "rejected_stale": "2", "rejected_unknown_tick": "2", "rejected_not_owner": "2"}
+    assert_batches_follow_the_trace(setup, variant, seed, plan, after)
+    want = dict(ticks="2", rejected_malformed="5", rejected_unknown_mode="1", rejected_invalid_speed="1")
+    want.update(rejected_stale="2", rejected_unknown_tick="2", rejected_not_owner="2")
     wait_diagnostics(diag, f"{ns}/line_0", want)
     wait_diagnostics(diag, f"{ns}/line_1", {**want, "rejected_malformed": "0"})
 

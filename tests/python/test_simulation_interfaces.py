@@ -136,19 +136,21 @@ def simulator(ros, start_node, namespace):
     sim.destroy()
 
 
-def test_standard_services_drive_the_line_as_trace_does(simulator):
-    sim = simulator
-    held = START_SPEED_INDEX
+def wait_diag(sim, hardware_id: str, want: dict[str, str]) -> dict[str, str]:
+    """The first /diagnostics status of `hardware_id` (1 Hz) with the values `want`."""
 
-    def diag(hardware_id, want):
-        """The first /diagnostics status of `hardware_id` (1 Hz) with the values `want`."""
-        def matches(array):
-            values = h.diagnostic_values(array, hardware_id)
-            return values is not None and all(values.get(k) == v for k, v in want.items())
-        array = sim.diag.wait_for(matches, 5.0, f"{hardware_id} with {want}",
-                                  lambda: str(h.diagnostic_values(sim.diag.msgs[-1], hardware_id)))
-        return h.diagnostic_values(array, hardware_id)
+    def matches(array):
+        values = h.diagnostic_values(array, hardware_id)
+        return values is not None and all(values.get(k) == v for k, v in want.items())
 
+    array = sim.diag.wait_for(matches, 5.0, f"{hardware_id} with {want}",
+                              lambda: str(h.diagnostic_values(sim.diag.msgs[-1], hardware_id)))
+    return h.diagnostic_values(array, hardware_id)
+
+
+def check_stepping_and_state_resets(sim, held: int) -> None:
+    """Features, PAUSED at start, StepSimulation over an episode's end, reset of the state only,
+    and an unsupported scope."""
     assert sim.call("get_simulator_features").features.features.tolist() == FEATURES
     assert sim.state() == PAUSED, "--mode lockstep starts PAUSED"
     code, message = sim.set_state(PAUSED)
@@ -178,6 +180,10 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     code, message = sim.result("reset_simulation", scope=SCOPE_SPAWNED)
     assert code == FEATURE_UNSUPPORTED and "SPAWNED" in message, message
 
+
+def check_full_reset_and_playing(sim, held: int) -> None:
+    """A reset of state and time (the stamps start at 0 again), then PLAYING in realtime with
+    StepSimulation refused, and PAUSED stops the ticks."""
     # SCOPE_DEFAULT (= ALL): state and time; the stamps start again at 0.
     count = len(sim.states.msgs)
     assert sim.result("reset_simulation", scope=SCOPE_DEFAULT) == (OK, "")
@@ -200,7 +206,9 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     assert_trajectory(played, tokens, f"{len(played)} ticks PLAYING")
     assert [stamp_ns(s.header.stamp) for s in played] == [k * h.NS_PER_S for k in range(1, len(played) + 1)]
 
-    # STOPPED: reset (time and state), no ticks, commands rejected and counted; PAUSED starts it again.
+
+def check_stopped(sim) -> None:
+    """STOPPED: reset (time and state), no ticks, commands rejected and counted; PAUSED starts it again."""
     count = len(sim.states.msgs)
     assert sim.set_state(STOPPED) == (OK, "")
     assert sim.state() == STOPPED
@@ -211,17 +219,13 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     assert code == INCORRECT_STATE and "STOPPED" in message, message
     sim.ros.spin_until(lambda: sim.speed_pub.get_subscription_count() >= 1, 5.0, "cmd/speed to match", sim.context)
     sim.speed_pub.publish(sim.SpeedCommand(speed=0.3))  # stamp 0: the stopped line's tick
-    diag(sim.ns, {"rejected_stopped": "1"})
+    wait_diag(sim, sim.ns, {"rejected_stopped": "1"})
     assert sim.set_state(PAUSED) == (OK, "") and sim.state() == PAUSED
     assert len(sim.states.msgs) == count + 1, "a stopped line does not tick"
 
-    # Unknown or unsupported states.
-    for target in (NO_WORLD, 9):
-        code, message = sim.set_state(target)
-        assert code == FEATURE_UNSUPPORTED and message.startswith(f"state {target} "), message
-    assert sim.result("step_simulation", steps=0) == (OK, "")
 
-    # A step in progress: every other change is refused until it has replied.
+def check_refused_while_stepping(sim) -> None:
+    """A step in progress: every other change is refused until it has replied."""
     from simulation_interfaces.msg import SimulationState
 
     big = sim.clients["step_simulation"].call_async(sim.types["step_simulation"].Request(steps=5000))
@@ -234,11 +238,27 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
         assert "StepSimulation of 5000 steps is in progress" in reply.result.error_message, reply
     assert sim.ros.wait_future(big, 30.0, "5000 steps", sim.context, abort=sim.gone).result.result == OK
 
+
+def test_standard_services_drive_the_line_as_trace_does(simulator):
+    sim = simulator
+    held = START_SPEED_INDEX
+    check_stepping_and_state_resets(sim, held)
+    check_full_reset_and_playing(sim, held)
+    check_stopped(sim)
+
+    # Unknown or unsupported states.
+    for target in (NO_WORLD, 9):
+        code, message = sim.set_state(target)
+        assert code == FEATURE_UNSUPPORTED and message.startswith(f"state {target} "), message
+    assert sim.result("step_simulation", steps=0) == (OK, "")
+
+    check_refused_while_stepping(sim)
+
     # /diagnostics counts the refusals per result code, and the stopped line's rejected command.
-    diag(sim.fqn, {"simulation_state": "PAUSED", "refused_incorrect_state": "4", "refused_feature_unsupported": "3",
-                   "refused_already_in_target_state": "1", "requests_refused": "8", "step_in_progress": "none",
-                   "steps_stepped": str(50 + 3 + 50 + 5000)})
-    diag(sim.ns, {"rejected_stopped": "1", "mode": "lockstep", "commands_rejected": "1"})
+    refused = dict(refused_incorrect_state="4", refused_feature_unsupported="3", refused_already_in_target_state="1")
+    done = dict(requests_refused="8", step_in_progress="none", steps_stepped=str(50 + 3 + 50 + 5000))
+    wait_diag(sim, sim.fqn, {"simulation_state": "PAUSED", **refused, **done})
+    wait_diag(sim, sim.ns, {"rejected_stopped": "1", "mode": "lockstep", "commands_rejected": "1"})
 
     # QUITTING: replies, then the node leaves as on SIGINT (exit code 0).
     assert sim.set_state(QUITTING) == (OK, "")
@@ -248,25 +268,33 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     assert "simulation QUITTING" in sim.proc.log()
 
 
-def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
-    """SimulateSteps: N steps with feedback, the same trajectory as StepSimulation; refused (aborted,
-    the reason in the result) while PLAYING; canceled after the step in progress."""
-    from action_msgs.msg import GoalStatus
+def matched_simulate_steps_client(sim):
+    """An action client of the node's simulate_steps, once the node has matched it: the server is
+    ready, a /diagnostics array came after the client's endpoints existed (the node was discovering
+    them meanwhile: a reply written before it matched our reader would be lost, ros_harness), and
+    the volatile feedback has a reader before the first goal."""
     from rclpy.action import ActionClient
     from simulation_interfaces.action import SimulateSteps
 
-    sim = simulator
     client = ActionClient(sim.node, SimulateSteps, f"{sim.fqn}/simulate_steps")
     created = len(sim.diag.msgs)
     sim.ros.spin_until(client.server_is_ready, 10.0, "the simulate_steps action server", sim.context, abort=sim.gone)
     sim.ros.spin_until(lambda: sim.states.sub.get_publisher_count() >= 1, 10.0, "state to match", sim.context)
-    # A /diagnostics array sent after the client's endpoints existed: the node has been discovering
-    # them meanwhile (a reply written before it matched our reader would be lost: ros_harness).
     sim.ros.spin_until(lambda: len(sim.diag.msgs) > created + 1, 10.0, "/diagnostics after the action client",
                        sim.context, abort=sim.gone)
-    # Feedback is volatile: the client's feedback reader must be matched before the first goal.
     feedback_topic = f"{sim.fqn}/simulate_steps/_action/feedback"
     sim.ros.spin_until(lambda: sim.node.count_publishers(feedback_topic) >= 1, 10.0, feedback_topic, sim.context)
+    return client
+
+
+def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
+    """SimulateSteps: N steps with feedback, the same trajectory as StepSimulation; refused (aborted,
+    the reason in the result) while PLAYING; canceled after the step in progress."""
+    from action_msgs.msg import GoalStatus
+    from simulation_interfaces.action import SimulateSteps
+
+    sim = simulator
+    client = matched_simulate_steps_client(sim)
 
     def run(steps: int, feedback: list, timeout: float = 10.0):
         goal = sim.ros.wait_future(
