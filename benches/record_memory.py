@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT / "bridge"))
 sys.path.insert(0, str(ROOT / "benches"))
 
 import ros_harness as h  # noqa: E402
+from node_lockstep import cpu_seconds  # noqa: E402
 from soak import rss_mb  # noqa: E402
 
 LINE_TOPICS = ("input", "belt/occupancy", "state", "events/reset")
@@ -137,6 +138,7 @@ def main() -> int:
         started, samples = time.monotonic(), []
         statuses.clear()  # the window starts once the recorder records
         _sample(recorder, started, samples)
+        cpu_start = cpu_seconds(recorder.pid)
         next_sample, minute = started + args.every, None
         while (now := time.monotonic()) < started + 60 * args.minutes:
             session.spin_for(0.5)
@@ -147,6 +149,7 @@ def main() -> int:
                 _sample(recorder, started, samples)
         _sample(recorder, started, samples)
         end_rss = samples[-1][1]
+        cpu = cpu_seconds(recorder.pid) - cpu_start
         # The reports up to now: the recorder stops listening after SIGINT (and its drain).
         statuses = {ns: list(values) for ns, values in statuses.items()}
         recorder.send_signal(signal.SIGINT)
@@ -169,6 +172,8 @@ def main() -> int:
           f"recorder stored {figures['received']:,}: missing {figures['missing']:,}")
     if figures["not_compared"]:
         print(f"  not compared: {figures['not_compared']}")
+    print(f"  recorder CPU: {cpu:.1f} s over {seconds:.0f} s ({100 * cpu / seconds:.0f} % of a core), "
+          f"{1e6 * cpu / max(1, figures['messages']):.0f} us per message stored")
     print(f"  bag: {size / 1e6:.1f} MB in {len(list(out.glob('*.mcap')))} file(s), "
           f"{size / max(1, figures['messages']):.1f} bytes per message")
     summary = log.read_text(errors="replace").strip().splitlines()
