@@ -316,8 +316,8 @@ def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
     from sorting_line_gym.reports import benchmark
 
     out = tmp_path / "bench"
-    argv = ["--setups", "D", "--variants", "basic", "--agents", "rba-hold", "dqn", "--train-seeds", "42", "43",
-            "--timesteps", "200", "--n-envs", "2", "--check-n-envs", "--heldout-episodes", "3", "--out", str(out)]
+    flags = "--setups D --variants basic --agents rba-hold dqn --train-seeds 42 43 --timesteps 200 --n-envs 2"
+    argv = [*flags.split(), "--check-n-envs", "--heldout-episodes", "3", "--out", str(out)]
     assert benchmark.main(argv) == 0
     assert "5 cells, 0 already done, 5 to run" in capsys.readouterr().err
     report = json.loads((out / "table.json").read_text())
