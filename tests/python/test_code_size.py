@@ -27,9 +27,6 @@ OVER_60_LINES = {
     "bridge/sorting_line_gym/bag/cli.py::_parser",
     "bridge/sorting_line_gym/bag/cli.py::main",
     "tests/python/line_client.py::LineClient.reset",
-    "tests/python/test_controller.py::check_realtime_run",
-    "tests/python/test_controller.py::test_controller_drives_a_lockstep_episode_exactly",
-    "tests/python/test_multihost.py::test_one_vector_env_over_three_hosts_faults_and_recovery",
     "tests/python/test_rllib.py::test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker",
 }
 

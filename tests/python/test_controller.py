@@ -171,8 +171,61 @@ def controller_args(ns: str, agent: str, setup: str = "B", variant: str = "advan
 # Realtime
 
 
-def check_realtime_run(agent: RuleBasedAgent, states: dict[int, tuple[float, object]], decisions: dict[int, dict],
-                       commands: dict[str, dict[int, tuple[float, object]]], ticks: list[int], period_ns: int) -> dict:
+#: Messages of a topic by stamp (ns): (when this process received it, the message).
+Received = dict[int, tuple[float, object]]
+
+
+def what_was_applied(where: str, applied: tuple, want: tuple, held: tuple, d: dict | None, received: float) -> str:
+    """A tick whose application differs from the decision, for the report: what was applied, sent
+    and held, and (when the controller answered) its publish time relative to the moment state
+    t+1 arrived here (``received``) and its readings-to-command latency."""
+    if d is None:
+        return f"{where}: not answered; applied {applied}, held {held}"
+    return (f"{where}: applied {applied}, sent {want}, held {held}; published "
+            f"{(d['published_monotonic'] - received) * 1e3:+.1f} ms relative to state t+1 arriving here, "
+            f"{d['latency_ms']:.1f} ms after its first reading")
+
+
+def decision_problems(agent, d: dict, observed: tuple, want: tuple, commands: dict, t: int, where: str) -> list[str]:
+    """What is wrong with the controller's logged decision ``d`` for tick t: the readings it logged
+    against the node's ``observed`` (quantity, category, speed index), its choice against
+    ``want``, and the commands heard on cmd/speed and cmd/sort_mode against the log."""
+    problems = []
+    q, cat, cur = observed
+    readings = (d["quantity"], d["category"]) + ((d["current_speed_index"],) if agent.hold else ())
+    if readings != (q, cat) + ((cur,) if agent.hold else ()):
+        problems.append(f"{where}: the controller read {readings}")
+    if (d["speed_index"], d["mode"]) != want:
+        problems.append(f"{where}: the controller decided {(d['speed_index'], d['mode'])}, "
+                        f"RuleBasedAgent.act says {want}")
+    heard_speed, heard_mode = commands["cmd/speed"].get(t), commands["cmd/sort_mode"].get(t)
+    if heard_speed is not None and speed_index(heard_speed[1].speed) != d["speed_index"]:
+        problems.append(f"{where}: cmd/speed said {heard_speed[1].speed}, the log {d['speed_index']}")
+    if heard_mode is not None and heard_mode[1].mode != d["mode"]:
+        problems.append(f"{where}: cmd/sort_mode said {heard_mode[1].mode}, the log {d['mode']}")
+    return problems
+
+
+def held_or_sent(applied: tuple, held: tuple, newest_applied: list, sent_ticks: list[int], decisions: dict, t: int):
+    """Whether speed and mode ``applied`` at t+1 are each either ``held`` (state t's) or the
+    command of some tick s with k <= s <= t (k: ``newest_applied``, moved to the earliest fitting
+    s): see :func:`check_realtime_run`."""
+    explained = True
+    for i, (x, field) in enumerate(zip(applied, ("speed_index", "mode"), strict=False)):
+        if x == held[i]:
+            continue  # nothing new arrived (or the same value did)
+        lo = newest_applied[i] if newest_applied[i] is not None else -1
+        fits = [u for u in sent_ticks if lo <= u <= t and decisions[u][field] == x]
+        if fits:
+            newest_applied[i] = fits[0]
+        else:
+            explained = False
+    return explained
+
+
+def check_realtime_run(
+    agent: RuleBasedAgent, states: Received, decisions: dict[int, dict], commands: dict[str, Received], ticks, period_ns
+) -> dict:
     """Checks every measured tick t (states t and t+1 of one episode recorded); returns counts and
     what it found.
 
@@ -212,47 +265,21 @@ def check_realtime_run(agent: RuleBasedAgent, states: dict[int, tuple[float, obj
         # 1. the decision
         d = decisions.get(t)
         if d is not None:
-            readings = (d["quantity"], d["category"]) + ((d["current_speed_index"],) if agent.hold else ())
-            if readings != (q, cat) + ((cur,) if agent.hold else ()):
-                problems.append(f"{where}: the controller read {readings}")
-            if (d["speed_index"], d["mode"]) != want:
-                problems.append(f"{where}: the controller decided {(d['speed_index'], d['mode'])}, "
-                                f"RuleBasedAgent.act says {want}")
-            heard_speed, heard_mode = commands["cmd/speed"].get(t), commands["cmd/sort_mode"].get(t)
-            if heard_speed is not None and speed_index(heard_speed[1].speed) != d["speed_index"]:
-                problems.append(f"{where}: cmd/speed said {heard_speed[1].speed}, the log {d['speed_index']}")
-            if heard_mode is not None and heard_mode[1].mode != d["mode"]:
-                problems.append(f"{where}: cmd/sort_mode said {heard_mode[1].mode}, the log {d['mode']}")
+            problems += decision_problems(agent, d, (q, cat, cur), want, commands, t, where)
         # 2. the application
         applied = (s1.speed_index, s1.mode)
-        explained = True
         held = (s0.speed_index, s0.mode)
-        for i, (x, field) in enumerate(zip(applied, ("speed_index", "mode"), strict=False)):
-            if x == held[i]:
-                continue  # nothing new arrived (or the same value did)
-            lo = newest_applied[i] if newest_applied[i] is not None else -1
-            fits = [u for u in sent_ticks if lo <= u <= t and decisions[u][field] == x]
-            if fits:
-                newest_applied[i] = fits[0]
-            else:
-                explained = False
+        explained = held_or_sent(applied, held, newest_applied, sent_ticks, decisions, t)
         if d is not None and applied == want:
             matched += 1
             continue
-        if d is None:
-            report = f"{where}: not answered; applied {applied}, held {held}"
-        else:
-            report = (f"{where}: applied {applied}, sent {want}, held {held}; published "
-                      f"{(d['published_monotonic'] - recv1) * 1e3:+.1f} ms relative to state t+1 arriving here, "
-                      f"{d['latency_ms']:.1f} ms after its first reading")
+        report = what_was_applied(where, applied, want, held, d, recv1)
         if explained:
             late.append(t)
             late_report.append(report)
         else:
             problems.append(f"{report}: neither the command for this tick nor one the node could hold")
     return {"matched": matched, "late": late, "late_report": late_report, "problems": problems}
-
-
 
 
 def measurable_ticks(items, states: dict, period: int) -> tuple[list[int], int]:
@@ -352,50 +379,31 @@ def test_late_detection_accepts_held_and_late_commands_only():
 # Lock-step
 
 
-@pytest.mark.parametrize("agent_name", ["rba", "rba-hold"])
-def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_node, start_controller, client_factory,
-                                                     probe, namespace):
-    ns = namespace(agent_name)
-    seed = 42
-    node = start_node("--variant", "advanced", *h.SETUP_FLAGS["B"], *ns_args(ns))
-    rec = line_recorders(probe, ns)
-    c = client_factory(ns, "advanced", node_proc=node)
-    c.wait_connected()
-    ctl = start_controller(agent_name, controller_args(ns, agent_name))
-
-    context, abort = watch(c, ctl)
-
-    ros.spin_until(lambda: "connected:" in ctl.log(), 30.0, "the controller to log 'connected'", context, abort=abort)
-    # The controller answers the reset's tick, and each answer makes the node step once. Its first
-    # tick can be lost while the node is still matching the controller's endpoints: then nothing
-    # moves, and a new seeded reset (the same episode again) is the remedy.
+def reset_until_answered(ros, c, rec, seed: int, context, abort) -> int:
+    """Resets the line with ``seed`` until the controller answers the reset's tick (up to 3 times);
+    the episode. Its first tick can be lost while the node is still matching the controller's
+    endpoints: then nothing moves, and a new seeded reset (the same episode again) is the remedy."""
     for attempt in range(1, 4):
-        response = c.reset(seed)
-        episode = response.episode
+        episode = c.reset(seed).episode
 
-        def steps_seen():
+        def steps_seen(episode=episode):
             return max((s.step for _, s in rec["state"].items if s.episode == episode), default=0)
 
         try:
-            ros.spin_until(lambda: steps_seen() >= 1, 3.0, f"{ns}: the controller's first step", context, abort=abort)
-            break
+            ros.spin_until(lambda: steps_seen() >= 1, 3.0, f"{c.ns}: the controller's first step", context, abort=abort)
+            return episode
         except h.WaitTimeout:
             print(f"attempt {attempt}: the controller did not answer the reset's tick; resetting again")
-    else:
-        pytest.fail(f"the controller never answered a reset's tick\n{context()}")
-    ros.spin_until(lambda: steps_seen() >= 50, 20.0, f"{ns}: 50 steps driven by the controller", context, abort=abort)
-    ros.spin_for(0.2)  # the answer to the last (truncated) tick, which the node refuses
-    assert ctl.stop() == 0, ctl.describe()
+    pytest.fail(f"the controller never answered a reset's tick\n{context()}")
 
-    # (From the deep recorder: the lock-step line runs as fast as the round trip allows.)
-    states = sorted((s for _, s in rec["state"].items if s.episode == episode), key=lambda s: s.step)
-    assert [s.step for s in states] == list(range(51)), f"states of episode {episode}: {[s.step for s in states]}"
-    assert states[-1].truncated and not any(s.truncated for s in states[:-1])
-    # What the controller decided: its decision log (this process may discover the controller's
-    # command writers only after the first ticks); what it heard of them must agree.
+
+def check_decisions_and_commands(states: list, agent, ctl, rec) -> list[int]:
+    """Each step of ``states``: the controller's logged decision is what ``agent`` decides, the
+    commands heard agree with it, and the node applied it; returns the actions applied. (The
+    decision log is what the controller decided: this process may discover the controller's
+    command writers only after the first ticks.)"""
     decisions = ctl.decisions()
     speeds, modes = rec["cmd/speed"].by_stamp(), rec["cmd/sort_mode"].by_stamp()
-    agent = RuleBasedAgent("B", "advanced", hold=agent_name == "rba-hold")
     assert states[0].speed_index == START_SPEED_INDEX and states[0].mode == 0
     actions = []
     for s0, s1 in zip(states, states[1:], strict=False):
@@ -415,7 +423,12 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
         applied = (s1.speed_index, s1.mode)
         assert applied == want, f"{where}: node applied {applied}, the agent chose {want}"
         actions.append(applied[0] * 3 + applied[1])
+    return actions
 
+
+def check_the_library_plays_the_same_episode(agent_name: str, seed: int, states: list, actions: list[int]) -> None:
+    """The states are `sorting_line trace`'s for the actions, and the Rust agent, offline, plays the
+    same episode."""
     trace = h.run_trace("B", "advanced", seed, actions)
     start, first = h.state_reset_view(states[0]), h.trace_reset_view(trace[0])
     start["episode"] = first["episode"]  # the node's episode counter counts its earlier resets
@@ -432,6 +445,39 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
     offline = json.loads(r.stdout)["per_episode"][0]
     assert offline["reward"] == pytest.approx(states[-1].cumulative_reward, abs=1e-9)
     assert offline["speed_changes"] == states[-1].speed_changes
+
+
+@pytest.mark.parametrize("agent_name", ["rba", "rba-hold"])
+def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_node, start_controller, client_factory,
+                                                     probe, namespace):
+    ns = namespace(agent_name)
+    seed = 42
+    node = start_node("--variant", "advanced", *h.SETUP_FLAGS["B"], *ns_args(ns))
+    rec = line_recorders(probe, ns)
+    c = client_factory(ns, "advanced", node_proc=node)
+    c.wait_connected()
+    ctl = start_controller(agent_name, controller_args(ns, agent_name))
+
+    context, abort = watch(c, ctl)
+
+    ros.spin_until(lambda: "connected:" in ctl.log(), 30.0, "the controller to log 'connected'", context, abort=abort)
+    # The controller answers the reset's tick, and each answer makes the node step once.
+    episode = reset_until_answered(ros, c, rec, seed, context, abort)
+
+    def steps_seen():
+        return max((s.step for _, s in rec["state"].items if s.episode == episode), default=0)
+
+    ros.spin_until(lambda: steps_seen() >= 50, 20.0, f"{ns}: 50 steps driven by the controller", context, abort=abort)
+    ros.spin_for(0.2)  # the answer to the last (truncated) tick, which the node refuses
+    assert ctl.stop() == 0, ctl.describe()
+
+    # (From the deep recorder: the lock-step line runs as fast as the round trip allows.)
+    states = sorted((s for _, s in rec["state"].items if s.episode == episode), key=lambda s: s.step)
+    assert [s.step for s in states] == list(range(51)), f"states of episode {episode}: {[s.step for s in states]}"
+    assert states[-1].truncated and not any(s.truncated for s in states[:-1])
+    agent = RuleBasedAgent("B", "advanced", hold=agent_name == "rba-hold")
+    actions = check_decisions_and_commands(states, agent, ctl, rec)
+    check_the_library_plays_the_same_episode(agent_name, seed, states, actions)
 
 
 # --------------------------------------------------------------------------------------------

@@ -241,6 +241,59 @@ def check_lines(lines: list[dict], seed: int, actions: list[list[int]], where: s
         assert_line_matches_trace(line, seed + k, [row[k] for row in actions], f"{where}, line {k}", float32_rewards)
 
 
+
+
+def start_trainer(hosts, tmp_path, env: dict, cfg: dict) -> Conversation:
+    """The trainer script on the trainer host, for the scenario of ``cfg``; its log in tmp_path."""
+    script = tmp_path / "trainer.py"
+    script.write_text(TRAINER)
+    log = tmp_path / f"trainer_{cfg['scenario']}.log"
+    proc = hosts.popen("trainer", [sys.executable, str(script), json.dumps(cfg)], env=env, text=True,
+                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=open(log, "w"))
+    return Conversation(proc, log)
+
+
+def stop_with_sigint(p: subprocess.Popen) -> int:
+    p.send_signal(signal.SIGINT)
+    return p.wait(timeout=10)
+
+
+def check_faults_and_recovery(trainer, hosts, nodes: dict, node_envs: dict, tmp_path, actions: list) -> None:
+    """h2's link down (a step fails naming h2's node and lines, within step_timeout; h1 and h3 go on),
+    then back; h3's node killed (the same), then replaced by a new node on h3 that the trainer uses."""
+    t = trainer("faults", 600, new_node="/h3/plant2")
+    t.expect("stepping")
+    hosts.unplug("h2")
+    t.go()
+    failure = t.expect("unplugged")["failure"]
+    first, last = LINES, 2 * LINES - 1
+    assert failure["error"], f"a step with h2 unplugged did not fail: {failure}"
+    assert failure["kind"] == "BridgeTimeout", failure
+    assert "/h2/plant" in failure["error"] and f"lines {first}..{last}" in failure["error"], failure
+    assert "/h1/plant" not in failure["error"] and "/h3/plant" not in failure["error"], (
+        f"the error names nodes that answered: {failure}")
+    # The wait is bounded by step_timeout (plus its own 50 ms slices): a loose bound, as the
+    # machine is shared; it tells a bounded wait from a hang.
+    assert failure["seconds"] < STEP_TIMEOUT + 3.0, failure
+    others = t.expect("others")["lines"]
+    check_lines(others, 600 + 100, actions[:5], "h1 + h3 while h2 is unplugged")
+    hosts.plug("h2")
+    t.go()
+    check_lines(t.expect("replugged")["lines"], 600 + 200, actions[:5], "h1 + h2 + h3 after h2 is back")
+    nodes["h3"].send_signal(signal.SIGKILL)
+    nodes["h3"].wait(timeout=10)
+    t.go()
+    failure = t.expect("killed")["failure"]
+    assert failure["kind"] == "BridgeTimeout" and "/h3/plant" in failure["error"], failure
+    assert f"lines {2 * LINES}..{3 * LINES - 1}" in failure["error"], failure
+    assert "/h1/plant" not in failure["error"] and "/h2/plant" not in failure["error"], failure
+    assert failure["seconds"] < STEP_TIMEOUT + 3.0, failure
+    nodes["h3b"] = start_node(hosts, tmp_path, "h3", "/h3/plant2", node_envs["h3"])
+    t.go()
+    check_lines(t.expect("new_node")["lines"], 600 + 300, actions[:5], "h1 + h2 + a new node on h3")
+    assert t.proc.wait(timeout=30) == 0, t.tail()
+
+
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
 def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
     namespaces = [f"/{host}/plant" for host in NODES]
@@ -260,16 +313,11 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
             for host, ns in zip(NODES, namespaces, strict=False)
         }
         trainer_env = discovery_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS=h3_addr)
-        script = tmp_path / "trainer.py"
-        script.write_text(TRAINER)
+        base = dict(namespaces=namespaces, lines=LINES, setup=SETUP, variant=VARIANT, episode=EPISODE, actions=actions)
 
         def trainer(scenario: str, seed: int, **extra) -> Conversation:
-            cfg = dict(scenario=scenario, namespaces=namespaces, lines=LINES, setup=SETUP, variant=VARIANT,
-                       episode=EPISODE, step_timeout=STEP_TIMEOUT, seed=seed, actions=actions, **extra)
-            log = tmp_path / f"trainer_{scenario}.log"
-            proc = hosts.popen("trainer", [sys.executable, str(script), json.dumps(cfg)], env=trainer_env, text=True,
-                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=open(log, "w"))
-            return Conversation(proc, log)
+            cfg = dict(base, scenario=scenario, step_timeout=STEP_TIMEOUT, seed=seed, **extra)
+            return start_trainer(hosts, tmp_path, trainer_env, cfg)
 
         # 1. Trajectories across the three hosts, through two autoresets.
         t = trainer("trajectories", 500)
@@ -280,44 +328,9 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
         assert t.proc.wait(timeout=30) == 0, t.tail()
 
         # 2. Faults: h2's link down, then back; h3's node killed, then replaced.
-        t = trainer("faults", 600, new_node="/h3/plant2")
-        t.expect("stepping")
-        hosts.unplug("h2")
-        t.go()
-        failure = t.expect("unplugged")["failure"]
-        first, last = LINES, 2 * LINES - 1
-        assert failure["error"], f"a step with h2 unplugged did not fail: {failure}"
-        assert failure["kind"] == "BridgeTimeout", failure
-        assert "/h2/plant" in failure["error"] and f"lines {first}..{last}" in failure["error"], failure
-        assert "/h1/plant" not in failure["error"] and "/h3/plant" not in failure["error"], (
-            f"the error names nodes that answered: {failure}")
-        # The wait is bounded by step_timeout (plus its own 50 ms slices): a loose bound, as the
-        # machine is shared; it tells a bounded wait from a hang.
-        assert failure["seconds"] < STEP_TIMEOUT + 3.0, failure
-        others = t.expect("others")["lines"]
-        check_lines(others, 600 + 100, actions[:5], "h1 + h3 while h2 is unplugged")
-        hosts.plug("h2")
-        t.go()
-        check_lines(t.expect("replugged")["lines"], 600 + 200, actions[:5], "h1 + h2 + h3 after h2 is back")
-        nodes["h3"].send_signal(signal.SIGKILL)
-        nodes["h3"].wait(timeout=10)
-        t.go()
-        failure = t.expect("killed")["failure"]
-        assert failure["kind"] == "BridgeTimeout" and "/h3/plant" in failure["error"], failure
-        assert f"lines {2 * LINES}..{3 * LINES - 1}" in failure["error"], failure
-        assert "/h1/plant" not in failure["error"] and "/h2/plant" not in failure["error"], failure
-        assert failure["seconds"] < STEP_TIMEOUT + 3.0, failure
-        nodes["h3b"] = start_node(hosts, tmp_path, "h3", "/h3/plant2", node_envs["h3"])
-        t.go()
-        check_lines(t.expect("new_node")["lines"], 600 + 300, actions[:5], "h1 + h2 + a new node on h3")
-        assert t.proc.wait(timeout=30) == 0, t.tail()
+        check_faults_and_recovery(trainer, hosts, nodes, node_envs, tmp_path, actions)
 
-        codes = {}
-        for host, p in nodes.items():
-            if host == "h3":
-                continue  # killed above
-            p.send_signal(signal.SIGINT)
-            codes[host] = p.wait(timeout=10)
+        codes = {host: stop_with_sigint(p) for host, p in nodes.items() if host != "h3"}  # h3's was killed above
         assert codes == {host: 0 for host in codes}, f"node exit codes after SIGINT: {codes}"
 
 
