@@ -4,6 +4,7 @@ reply. Built on ros_harness's session and recorders."""
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from collections import defaultdict
@@ -156,6 +157,29 @@ class LineClient:
 
     # ---- the service
 
+    def _until(self, done, timeout: float, what: str):
+        """Spins until ``done()`` is truthy (its value), failing after ``timeout`` or when the node is gone."""
+        return self.session.spin_until(done, timeout, what, self.context, abort=self.node_gone)
+
+    def _reset_evidence(self, events_before: int, episodes_before, called: float) -> str | None:
+        """Whether a reset called at ``called`` (monotonic) without a reply happened: "event" (its
+        events/reset arrived), "diag-reset" or "diag-same" (a /diagnostics status received well
+        after the call counts another or the same number of episodes), None (no evidence yet)."""
+        if len(self.msgs["events/reset"]) > events_before:
+            return "event"
+        late = [v for t, v in self.diagnostics if t > called + 1.5]
+        if late:
+            return "diag-reset" if late[-1].get("episodes") != episodes_before else "diag-same"
+        return None
+
+    def _rebuilt_reset_response(self, event):
+        """The reply of a reset whose reply was lost, from its events/reset and the new tick's state."""
+        state = self.wait_state(stamp_ns(event.header.stamp))
+        return self._ResetLine.Response(
+            success=True, seed=event.seed, episode=event.episode, stamp=event.header.stamp,
+            quantity=state.observation_quantity, category=state.observation_category,
+            message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}")
+
     def reset(self, seed: int | None = None, timeout: float = 10.0, wait_tick: bool = True):
         """Calls `reset` and returns its response; waits for the new tick's state.
 
@@ -166,8 +190,7 @@ class LineClient:
         events/reset and the state of the new tick (`response.message` says so)."""
         what = f"{self.name('reset')} (seed {seed})"
         request = self._ResetLine.Request(has_seed=seed is not None, seed=seed or 0)
-        self.session.spin_until(self.reset_client.service_is_ready, timeout, f"service {what} to be available",
-                                self.context, abort=self.node_gone)
+        self._until(self.reset_client.service_is_ready, timeout, f"service {what} to be available")
         response = None
         for attempt in range(1, 4):
             events_before = len(self.msgs["events/reset"])
@@ -181,16 +204,8 @@ class LineClient:
             except WaitTimeout:
                 pass
             # No reply. Did the reset happen? Look for evidence before calling again.
-            def evidence():
-                if len(self.msgs["events/reset"]) > events_before:
-                    return "event"
-                late = [v for t, v in self.diagnostics if t > called + 1.5]
-                if late:
-                    return "diag-reset" if late[-1].get("episodes") != episodes_before else "diag-same"
-                return None
-
-            found = self.session.spin_until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics",
-                                            self.context, abort=self.node_gone)
+            evidence = functools.partial(self._reset_evidence, events_before, episodes_before, called)
+            found = self._until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics")
             if future.done():
                 response = future.result()
                 break
@@ -198,12 +213,7 @@ class LineClient:
             print(f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
                   file=sys.stderr)
             if found == "event":
-                event = self.msgs["events/reset"][events_before]
-                state = self.wait_state(stamp_ns(event.header.stamp))
-                response = self._ResetLine.Response(
-                    success=True, seed=event.seed, episode=event.episode, stamp=event.header.stamp,
-                    quantity=state.observation_quantity, category=state.observation_category,
-                    message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}")
+                response = self._rebuilt_reset_response(self.msgs["events/reset"][events_before])
                 break
             if found == "diag-reset":
                 raise WaitTimeout(f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
