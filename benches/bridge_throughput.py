@@ -223,7 +223,7 @@ def raw_subject(n: int, log_dir: Path) -> Subject:
 def direct_subject(n: int) -> Subject:
     from sorting_line_gym import SortingLineEnv
 
-    env = SortingLineEnv(setup="A", variant="basic", max_episode_steps=1_000_000)
+    env = SortingLineEnv(setup="A", variant="basic", max_episode_steps=1_000_000, node="spawn")
     env.reset(seed=1)
 
     def one(i):
@@ -237,7 +237,7 @@ def direct_subject(n: int) -> Subject:
 def make_subject(n: int) -> Subject:
     import gymnasium
 
-    env = gymnasium.make("sorting_line_gym:SortingLine-v0", setup="A")
+    env = gymnasium.make("sorting_line_gym:SortingLine-v0", setup="A", node="spawn")
     env.reset(seed=1)
 
     def one(i):

@@ -291,7 +291,7 @@ def test_one_seed_reproduces_a_multi_episode_run(variant, make_env):
 
 
 def test_killed_node_fails_the_next_step_then_a_new_env_works(make_env):
-    env = make_env(BASIC, setup="A", step_timeout=2.0)
+    env = make_env(BASIC, setup="A", step_timeout=2.0, node="spawn")
     namespace = env.unwrapped.namespace
     env.reset(seed=1)
     for _ in range(5):

@@ -150,14 +150,14 @@ def test_node_killed_under_an_attached_vector_env_times_out_then_a_new_node_reco
 
 
 def test_spawned_node_log_is_deleted_after_a_clean_stop_and_kept_after_a_failure():
-    env = SortingLineEnv(setup="A")
+    env = SortingLineEnv(setup="A", node="spawn")
     env.reset(seed=1)
     log = Path(env.bank.process.log_path)
     assert log.exists()
     env.close()
     assert not log.exists(), f"{log}: the log of a cleanly stopped node was left behind"
 
-    env = SortingLineEnv(setup="A", step_timeout=2.0)
+    env = SortingLineEnv(setup="A", step_timeout=2.0, node="spawn")
     env.reset(seed=1)
     log = Path(env.bank.process.log_path)
     env.bank.process.process.kill()

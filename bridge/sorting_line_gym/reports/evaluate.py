@@ -158,8 +158,9 @@ def evaluate(
         raise ValueError(f"episodes = {episodes}, steps = {steps}: both must be 1 or more")
     agent = make_agent(agent_spec, setup, variant, seed)
     per_episode = []
-    env = SortingLineEnv(
-        setup=setup, variant=variant, max_episode_steps=steps, render_mode="rgb_array" if dashboard else None
+    env = SortingLineEnv(  # a node of its own, which stops with the evaluation
+        setup=setup, variant=variant, max_episode_steps=steps, render_mode="rgb_array" if dashboard else None,
+        node="spawn",
     )
     try:
         for i in range(episodes):

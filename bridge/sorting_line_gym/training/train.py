@@ -63,7 +63,10 @@ def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int)
     if n_envs == 1:
         from ..envs.env import SortingLineEnv
 
-        venv = DummyVecEnv([lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps)])
+        # node="spawn": the run owns its node, which stops with it (a stopped benchmark takes its nodes along).
+        venv = DummyVecEnv(
+            [lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps, node="spawn")]
+        )
     else:
         from ..envs.sb3_vec_env import SortingLineSB3VecEnv
 
