@@ -22,7 +22,7 @@ from sorting_line_gym import BridgeError
 from sorting_line_gym.line import line_supervisor
 from test_bridge import BASIC, assert_episode_follows_trace, fixed_actions
 
-OUTLIVE_LIMIT = 10.0  # s: what CONTRACT.md allows a line server after its last env
+OUTLIVE_LIMIT = 10.0  # s: the longest a line server may outlive its last env (the project's rule for the default)
 
 
 def server_of(env) -> tuple[dict, object]:
