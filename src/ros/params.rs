@@ -78,7 +78,7 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("rate", "0.0 <.. 100000.0 (ticks per second)"),
     ("lines", "1 ..= 64"),
     ("tick_period", "0.000001 ..= 3600.0 (seconds)"),
-    ("setup", "A, B, C or D (sets input, obs_noise and action_penalty; those given explicitly override it)"),
+    ("setup", "A, B, C or D, or empty for none (sets input, obs_noise and action_penalty; those given explicitly override it)"),
     ("use_sim_time", "true or false (ignored: this node is the clock)"),
     ("evolution_file", "a readable evolution schedule (YAML, see src/sim/evolution.rs), or empty for none"),
 ];
@@ -120,6 +120,8 @@ impl NodeParams {
         let float = || value.as_f64().filter(|v| v.is_finite()).ok_or_else(bad);
         let text = || value.as_str().ok_or_else(bad);
         match name {
+            // Empty names no setup, as the node declares it then: a `ros2 param dump` reads back.
+            "setup" if text()?.is_empty() => {}
             "setup" => {
                 let setup: Setup = text()?.parse().map_err(|_| bad())?;
                 let preset = LineConfig::for_setup(setup, self.line.variant);
