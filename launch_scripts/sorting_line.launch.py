@@ -1,11 +1,17 @@
-"""Launch the sorting line node on a machine with ROS 2 Jazzy installed.
+"""Launch the sorting line node with `ros2 launch` (ROS 2 Jazzy's launch and launch_ros).
 
-    ros2 launch launch_scripts/sorting_line.launch.py namespace:=/plant lines:=4 \
+Installed by colcon (docs/ros-package.md) as share/sorting_line/sorting_line.launch.py:
+
+    ros2 launch sorting_line sorting_line.launch.py namespace:=/plant lines:=4 \
         params_file:=my_line.yaml variant:=advanced
 
-The node binary is taken from the `sorting_line_bin` argument (default: this repository's
-target/release/sorting_line). Parameters given here override the params file, as on the command
-line; the params file may be flat or in the `/**: ros__parameters:` form.
+or from a clone, by path: `ros2 launch launch_scripts/sorting_line.launch.py ...`.
+
+The node binary is the `sorting_line_bin` argument if given; else, installed, the package's
+executable (lib/sorting_line/sorting_line, found through the ament index as `ros2 run` finds it),
+and in a clone, the clone's release build (target/release/sorting_line). Parameters given here
+override the params file, as on the command line; the params file may be flat or in the
+`/**: ros__parameters:` form (share/sorting_line/sorting_line.yaml lists them all with their defaults).
 """
 
 import os
@@ -14,8 +20,11 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
+PACKAGE = "sorting_line"
+# A clone has this file in launch_scripts/ beside Cargo.toml; an install has it in share/sorting_line/.
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DEFAULT_BIN = os.path.join(REPO, "target", "release", "sorting_line")
+IN_CLONE = os.path.isfile(os.path.join(REPO, "Cargo.toml"))
+DEFAULT_BIN = os.path.join(REPO, "target", "release", PACKAGE) if IN_CLONE else ""
 
 # Launch arguments that become node parameters when given (empty = the node's default).
 PARAMETERS = [
@@ -54,9 +63,12 @@ def _node(context):
     overrides = {name: _typed(value(name)) for name, _ in PARAMETERS if value(name)}
     if overrides:
         parameters.append(overrides)
+    binary = value("sorting_line_bin")
+    # Installed: the package's executable, which launch_ros looks up in the ament index.
+    where = {"executable": binary} if binary else {"package": PACKAGE, "executable": PACKAGE}
     return [
         Node(
-            executable=value("sorting_line_bin"),
+            **where,
             name=value("node_name"),
             namespace=value("namespace"),
             # launch_ros appends --ros-args -r __node:= -r __ns:= --params-file ...; the binary
@@ -74,7 +86,8 @@ def generate_launch_description():
         DeclareLaunchArgument("namespace", default_value="/", description="namespace of the node"),
         DeclareLaunchArgument("node_name", default_value="sorting_line"),
         DeclareLaunchArgument("params_file", default_value="", description="YAML parameter file"),
-        DeclareLaunchArgument("sorting_line_bin", default_value=DEFAULT_BIN, description="node binary"),
+        DeclareLaunchArgument("sorting_line_bin", default_value=DEFAULT_BIN,
+                              description="node binary (empty: the installed package's executable)"),
     ]
     arguments += [DeclareLaunchArgument(name, default_value="", description=text) for name, text in PARAMETERS]
     return LaunchDescription(arguments + [OpaqueFunction(function=_node)])
