@@ -25,9 +25,16 @@ bash launch_scripts/setup.sh
 # Ray RLlib for tests/python/test_rllib.py: ~1 min warm, more cold, mostly download, so
 # also in the background next to the Rust tests; the Python tests start once it is in (pip must not
 # write into the venv while they import from it).
+# The colcon workspace of tests/python/test_colcon_package.py (the node as a ROS 2 package): colcon from
+# PyPI in a cached venv of its own, then a plain `colcon build` against .venv that reuses the release
+# build's target/ (about 1 min of CPU, the interface packages' C/C++/Python generation): also in the
+# background. A failed build is recorded for the test, which then fails showing the log.
 if [[ $RUST_ONLY == 0 ]]; then
   job_start ros2cli .venv/bin/python tests/python/ros2_cli.py --build
   job_start rllib bash launch_scripts/setup.sh --rllib --no-cargo
+  SORTING_LINE_COLCON_WS="$(mktemp -d /tmp/sorting_line_colcon_ws.XXXXXX)"
+  export SORTING_LINE_COLCON_WS
+  job_start colcon .venv/bin/python tests/python/colcon_ws.py --build
 fi
 
 step "Rust formatting (rustfmt.toml)"
@@ -71,6 +78,9 @@ export SORTING_LINE_RLLIB=1
 step "ros2 CLI for the CLI tests"
 job_join ros2cli "test.sh: building the ros2 CLI venv from shared/tools/ros2cli"
 
+step "colcon workspace for the ROS 2 package test"
+job_join colcon "test.sh: tests/python/colcon_ws.py --build"
+
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
   echo "test.sh: needs unshare (util-linux) and ip (iproute2) to isolate DDS traffic" >&2
@@ -100,4 +110,5 @@ unshare -n bash -c '
   python -m pytest tests/python -q -rs -p no:cacheprovider --durations=12 "$@"
 ' test.sh "$@" || status=$?
 shm_clean
+rm -rf "$SORTING_LINE_COLCON_WS"
 exit "$status"

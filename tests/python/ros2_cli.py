@@ -36,8 +36,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 PROJECT_VENV = (ROOT / ".venv").resolve()  # (a symbolic link in a git worktree)
 # What launch_scripts/setup.sh compiled into .venv (the standard's simulation_interfaces too: no wheel has it).
-INTERFACES_MANIFESTS = [PROJECT_VENV / ".sorting_line" / f"{package}_install_manifest.txt"
-                        for package in ("sorting_line_interfaces", "simulation_interfaces")]
+INTERFACES = ("sorting_line_interfaces", "simulation_interfaces")
 BUILD_TIMEOUT = 900.0  # s; docs/ros-without-a-ros-install.md says ~45 s on a quiet machine
 
 
@@ -113,12 +112,13 @@ def build(tools: Path, log=sys.stdout) -> Path:
         return venv
 
 
-def interfaces_overlay(dest: Path) -> Path:
+def interfaces_overlay(dest: Path, packages=INTERFACES) -> Path:
     """A prefix holding links to the interface packages' installed files only (see the module doc)."""
-    missing = [m for m in INTERFACES_MANIFESTS if not m.is_file()]
+    manifests = [PROJECT_VENV / ".sorting_line" / f"{package}_install_manifest.txt" for package in packages]
+    missing = [m for m in manifests if not m.is_file()]
     if missing:
         raise RuntimeError(f"{', '.join(map(str, missing))} missing: run launch_scripts/setup.sh first")
-    for line in (line for m in INTERFACES_MANIFESTS for line in m.read_text().splitlines()):
+    for line in (line for m in manifests for line in m.read_text().splitlines()):
         src = Path(line.strip())
         if not line.strip() or not src.exists():
             continue
@@ -177,8 +177,9 @@ def _venv_env(venv: Path) -> dict[str, str]:
     return env
 
 
-def locate(overlay_dir: Path, log_dir: Path) -> tuple[Ros2Cli | None, str]:
-    """(the CLI, where it came from) or (None, why there is none). Never builds: see build()."""
+def locate(overlay_dir: Path, log_dir: Path, interfaces=INTERFACES) -> tuple[Ros2Cli | None, str]:
+    """(the CLI, where it came from) or (None, why there is none). Never builds: see build().
+    `interfaces`: the packages of .venv the CLI sees (the colcon test brings its own build of one)."""
     on_path = _ros2_on_path()
     if on_path:
         cli, origin = Ros2Cli(on_path, dict(os.environ)), f"ros2 on PATH ({on_path})"
@@ -193,7 +194,7 @@ def locate(overlay_dir: Path, log_dir: Path) -> tuple[Ros2Cli | None, str]:
                           f"network namespace with `python {Path(__file__).relative_to(ROOT)} --build` "
                           "(launch_scripts/test.sh does)")
         cli, origin = Ros2Cli(str(venv / "bin" / "ros2"), _venv_env(venv)), f"venv {venv} built from {tools}"
-    overlay = interfaces_overlay(overlay_dir)
+    overlay = interfaces_overlay(overlay_dir, interfaces)
     env = cli.env
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(overlay / "lib/python3.11/site-packages"),
                                                       env.get("PYTHONPATH")]))
