@@ -42,9 +42,20 @@ COLCON_BUILD = ["colcon", "build", "--cargo-args", "--release", "--locked"]
 PACKAGES = ("simulation_interfaces", "sorting_line", "sorting_line_interfaces")
 TIMEOUT = 1800.0  # s, for each of the venv and the build (a busy 2-core machine; ~2 min of CPU in all)
 # Variables of a ROS environment the caller may have: the build sees the underlay only.
-ROS_VARIABLES = ["PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "AMENT_PREFIX_PATH", "CMAKE_PREFIX_PATH",
-                 "COLCON_PREFIX_PATH", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "ROS_DISTRO",
-                 "ROS_VERSION", "ROS_PYTHON_VERSION", "CARGO_TARGET_DIR"]
+ROS_VARIABLES = [
+    "PYTHONPATH",
+    "PYTHONHOME",
+    "VIRTUAL_ENV",
+    "AMENT_PREFIX_PATH",
+    "CMAKE_PREFIX_PATH",
+    "COLCON_PREFIX_PATH",
+    "LD_LIBRARY_PATH",
+    "_ROS_WHEELS_BOOTSTRAP_COMPLETE",
+    "ROS_DISTRO",
+    "ROS_VERSION",
+    "ROS_PYTHON_VERSION",
+    "CARGO_TARGET_DIR",
+]
 
 
 def workspace_dir() -> Path:
@@ -75,15 +86,28 @@ def build_venv(log) -> Path:
         python = shutil.which("python3.11") or sys.executable
         env = {k: v for k, v in os.environ.items() if k not in ROS_VARIABLES}
         with open(build_log, "wb") as out:
-            for argv in ([python, "-m", "venv", str(venv)],
-                         [str(venv / "bin" / "python"), "-m", "pip", "install", "--no-input", "-q",
-                          "--disable-pip-version-check", "-r", str(REQUIREMENTS)]):
-                code = subprocess.run(argv, stdout=out, stderr=subprocess.STDOUT, env=env, timeout=TIMEOUT,
-                                      check=False).returncode
+            for argv in (
+                [python, "-m", "venv", str(venv)],
+                [
+                    str(venv / "bin" / "python"),
+                    "-m",
+                    "pip",
+                    "install",
+                    "--no-input",
+                    "-q",
+                    "--disable-pip-version-check",
+                    "-r",
+                    str(REQUIREMENTS),
+                ],
+            ):
+                code = subprocess.run(
+                    argv, stdout=out, stderr=subprocess.STDOUT, env=env, timeout=TIMEOUT, check=False
+                ).returncode
                 if code != 0:
                     tail = "\n".join(build_log.read_text(errors="replace").splitlines()[-20:])
-                    raise RuntimeError(f"making the colcon venv failed ({' '.join(argv)}: {code}); "
-                                       f"log {build_log}:\n{tail}")
+                    raise RuntimeError(
+                        f"making the colcon venv failed ({' '.join(argv)}: {code}); log {build_log}:\n{tail}"
+                    )
         (venv / ".complete").write_text(f"built in {time.monotonic() - t0:.0f} s\n")
         print(f"colcon: venv {venv} built in {time.monotonic() - t0:.0f} s", file=log, flush=True)
         return venv
@@ -120,17 +144,28 @@ def build(log=sys.stdout) -> dict:
         make_workspace(ws)
         t1 = time.monotonic()
         with open(ws / "build.log", "wb") as out:
-            code = subprocess.run([str(venv / "bin" / "colcon"), *COLCON_BUILD[1:]], cwd=ws, stdout=out,
-                                  stderr=subprocess.STDOUT, env=build_environment(venv), timeout=TIMEOUT,
-                                  stdin=subprocess.DEVNULL, check=False).returncode
+            code = subprocess.run(
+                [str(venv / "bin" / "colcon"), *COLCON_BUILD[1:]],
+                cwd=ws,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=build_environment(venv),
+                timeout=TIMEOUT,
+                stdin=subprocess.DEVNULL,
+                check=False,
+            ).returncode
         result.update(returncode=code, build_seconds=round(time.monotonic() - t1, 1))
     except (RuntimeError, OSError, subprocess.TimeoutExpired) as e:
         result.update(returncode=None, error=str(e))
     ws.mkdir(parents=True, exist_ok=True)
     (ws / "result.json").write_text(json.dumps(result, indent=1) + "\n")
     verdict = "built" if result.get("returncode") == 0 else "FAILED (tests/python/test_colcon_package.py shows why)"
-    print(f"colcon workspace {ws}: {verdict}; venv {result.get('venv_seconds', '-')} s, "
-          f"`{result['command']}` {result.get('build_seconds', '-')} s", file=log, flush=True)
+    print(
+        f"colcon workspace {ws}: {verdict}; venv {result.get('venv_seconds', '-')} s, "
+        f"`{result['command']}` {result.get('build_seconds', '-')} s",
+        file=log,
+        flush=True,
+    )
     return result
 
 

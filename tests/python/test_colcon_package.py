@@ -41,8 +41,10 @@ def workspace() -> Path:
     if result.get("returncode") != 0:
         log = Path(result["log"])
         tail = "\n".join(log.read_text(errors="replace").splitlines()[-40:]) if log.is_file() else ""
-        pytest.fail(f"`{result['command']}` in {ws} failed: {result.get('error') or result.get('returncode')}\n"
-                    f"{log}:\n{tail}", pytrace=False)
+        pytest.fail(
+            f"`{result['command']}` in {ws} failed: {result.get('error') or result.get('returncode')}\n{log}:\n{tail}",
+            pytrace=False,
+        )
     print(f"colcon workspace {ws}: venv {result['venv_seconds']} s, `{result['command']}` {result['build_seconds']} s")
     return ws
 
@@ -56,8 +58,14 @@ def ros2(workspace, tmp_path_factory):
     cli, origin = ros2_cli.locate(base / "underlay", base / "log", interfaces=("simulation_interfaces",))
     if cli is None:
         pytest.skip(origin)
-    sourced = subprocess.run(["bash", "-c", 'source "$1/install/setup.bash" && env -0', "bash", str(workspace)],
-                             env=cli.env, capture_output=True, timeout=60, stdin=subprocess.DEVNULL, check=False)
+    sourced = subprocess.run(
+        ["bash", "-c", 'source "$1/install/setup.bash" && env -0', "bash", str(workspace)],
+        env=cli.env,
+        capture_output=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+        check=False,
+    )
     assert sourced.returncode == 0, f"source install/setup.bash failed:\n{sourced.stderr.decode(errors='replace')}"
     env = dict(item.split("=", 1) for item in sourced.stdout.decode().split("\0") if "=" in item)
     env["PATH"] = os.pathsep.join([str(colcon_ws.PROJECT_VENV / "bin"), env["PATH"]])
@@ -74,8 +82,13 @@ class Started:
     def __init__(self, ros2, args: list[str], log: Path):
         self.log = log
         with open(log, "wb") as out:
-            self.proc = subprocess.Popen(["setsid", "env", "--default-signal=INT", *ros2.argv(*args)], stdout=out,
-                                         stderr=subprocess.STDOUT, env=ros2.env, stdin=subprocess.DEVNULL)
+            self.proc = subprocess.Popen(
+                ["setsid", "env", "--default-signal=INT", *ros2.argv(*args)],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=ros2.env,
+                stdin=subprocess.DEVNULL,
+            )
 
     def executables(self) -> set[str]:
         """The executables of the processes of its session (setsid: session id = its pid)."""
@@ -110,8 +123,15 @@ def installed(workspace: Path, package: str, *rel: str) -> Path:
 
 def test_plain_colcon_build_found_and_installed_all_three_packages(workspace):
     venv = colcon_ws.venv_dir()
-    listed = subprocess.run([str(venv / "bin" / "colcon"), "list", "--names-only"], cwd=workspace, capture_output=True,
-                            text=True, timeout=60, env=colcon_ws.build_environment(venv), check=False)
+    listed = subprocess.run(
+        [str(venv / "bin" / "colcon"), "list", "--names-only"],
+        cwd=workspace,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=colcon_ws.build_environment(venv),
+        check=False,
+    )
     assert sorted(listed.stdout.split()) == sorted(colcon_ws.PACKAGES), listed.stdout + listed.stderr
     for package in colcon_ws.PACKAGES:
         assert installed(workspace, package, "share", "colcon-core", "packages", package).is_file(), package
@@ -121,10 +141,12 @@ def test_plain_colcon_build_found_and_installed_all_three_packages(workspace):
     assert (lib / "sorting_line").read_bytes() == (h.ROOT / "target" / "release" / "sorting_line").read_bytes()
     share = installed(workspace, "sorting_line", "share", "sorting_line")
     for name in ["sorting_line.launch.py", "sorting_line.yaml", "package.xml"]:
-        assert (share / name).read_bytes() == (h.ROOT / "launch_scripts" / name if name != "package.xml"
-                                               else h.ROOT / name).read_bytes(), name
-    python = installed(workspace, "sorting_line_interfaces", "lib", "python3.11", "site-packages",
-                       "sorting_line_interfaces")
+        assert (share / name).read_bytes() == (
+            h.ROOT / "launch_scripts" / name if name != "package.xml" else h.ROOT / name
+        ).read_bytes(), name
+    python = installed(
+        workspace, "sorting_line_interfaces", "lib", "python3.11", "site-packages", "sorting_line_interfaces"
+    )
     assert (python / "msg" / "_line_state.py").is_file() and (python / "srv" / "_reset_line.py").is_file()
     # .venv provides simulation_interfaces: our copy builds and installs nothing, so it shadows nothing.
     log = (workspace / "log" / "latest_build" / "simulation_interfaces" / "stdout.log").read_text()
@@ -139,10 +161,14 @@ def test_ros2_pkg_and_interface_see_the_installed_packages(ros2, workspace):
         prefix = ros2.run("pkg", "prefix", package, timeout=30).stdout.strip()
         assert prefix == str(installed(workspace, package)), (package, prefix)
     listed = ros2.run("interface", "list", timeout=30).stdout.split()
-    ours = [f"sorting_line_interfaces/{kind}/{f.stem}" for kind in ["msg", "srv"]
-            for f in (h.ROOT / "msg" / kind).iterdir()]
-    standard = [f"simulation_interfaces/{kind}/{f.stem}" for kind in ["msg", "srv", "action"]
-                for f in (h.ROOT / "msg" / "simulation_interfaces" / kind).iterdir()]
+    ours = [
+        f"sorting_line_interfaces/{kind}/{f.stem}" for kind in ["msg", "srv"] for f in (h.ROOT / "msg" / kind).iterdir()
+    ]
+    standard = [
+        f"simulation_interfaces/{kind}/{f.stem}"
+        for kind in ["msg", "srv", "action"]
+        for f in (h.ROOT / "msg" / "simulation_interfaces" / kind).iterdir()
+    ]
     assert not set(ours + standard) - set(listed), sorted(set(ours + standard) - set(listed))
     package = ros2.run("interface", "package", "sorting_line_interfaces", timeout=30).stdout.split()
     assert sorted(package) == sorted(ours), package
@@ -151,17 +177,42 @@ def test_ros2_pkg_and_interface_see_the_installed_packages(ros2, workspace):
 def test_ros2_run_the_node(ros2, workspace, namespace, tmp_path):
     """`ros2 run sorting_line sorting_line node ...`: the installed binary, its topics with their types."""
     ns = namespace("run")
-    node = Started(ros2, ["run", "sorting_line", "sorting_line", "node", "--variant", "advanced", "--mode", "realtime",
-                          "--rate", "10", "--max-steps", "1000000", "--seed", "3", "--ros-args", "-r", f"__ns:={ns}"],
-                   tmp_path / "run.log")
+    node = Started(
+        ros2,
+        [
+            "run",
+            "sorting_line",
+            "sorting_line",
+            "node",
+            "--variant",
+            "advanced",
+            "--mode",
+            "realtime",
+            "--rate",
+            "10",
+            "--max-steps",
+            "1000000",
+            "--seed",
+            "3",
+            "--ros-args",
+            "-r",
+            f"__ns:={ns}",
+        ],
+        tmp_path / "run.log",
+    )
     try:
         want = {h.join_ns(ns, rel): f"[{t}]" for rel, t in LINE_TYPES.items()}
 
         def listed(out):
             return dict(line.split(" ", 1) for line in out.splitlines() if " " in line)
 
-        out = poll(ros2, ["topic", "list", "-t"], lambda out: want.items() <= listed(out).items(), "every line topic",
-                   timeout=30)
+        out = poll(
+            ros2,
+            ["topic", "list", "-t"],
+            lambda out: want.items() <= listed(out).items(),
+            "every line topic",
+            timeout=30,
+        )
         assert str(installed(workspace, "sorting_line", "lib", "sorting_line", "sorting_line")) in node.executables()
         state = yaml_docs(ros2.run("topic", "echo", "--once", h.join_ns(ns, "state"), timeout=30).stdout)[0]
         assert state["seed"] == 3 and state["speed"] == 0.6 and state["step"] >= 0, state
@@ -176,8 +227,11 @@ def test_ros2_launch_sorting_line(ros2, workspace, namespace, tmp_path):
     the file (the node's defaults) and lines:=4 over it."""
     ns = namespace("plant")
     params = installed(workspace, "sorting_line", "share", "sorting_line", "sorting_line.yaml")
-    launch = Started(ros2, ["launch", "sorting_line", "sorting_line.launch.py", f"namespace:={ns}", "lines:=4",
-                            f"params_file:={params}"], tmp_path / "launch.log")
+    launch = Started(
+        ros2,
+        ["launch", "sorting_line", "sorting_line.launch.py", f"namespace:={ns}", "lines:=4", f"params_file:={params}"],
+        tmp_path / "launch.log",
+    )
     fqn = f"{ns}/sorting_line"
     try:
         poll(ros2, ["node", "list"], lambda out: fqn in out.split(), f"node {fqn}", timeout=30)
@@ -185,8 +239,12 @@ def test_ros2_launch_sorting_line(ros2, workspace, namespace, tmp_path):
         dump = yaml.safe_load(ros2.run("param", "dump", fqn, timeout=20).stdout)[fqn]["ros__parameters"]
         defaults = yaml.safe_load(params.read_text())["/**"]["ros__parameters"]
         assert dump == {**defaults, "lines": 4, "use_sim_time": False}, dump
-        poll(ros2, ["topic", "list"], lambda out: all(f"{ns}/line_{k}/state" in out.split() for k in range(4)),
-             "the four lines' topics")
+        poll(
+            ros2,
+            ["topic", "list"],
+            lambda out: all(f"{ns}/line_{k}/state" in out.split() for k in range(4)),
+            "the four lines' topics",
+        )
     finally:
         log = launch.stop()
     assert "process has finished cleanly" in log, log
@@ -199,11 +257,41 @@ def test_ros2_run_the_bridge_entries(ros2, namespace, tmp_path):
         out = ros2.run("run", "sorting_line", name, "--help", timeout=60).stdout
         assert out.startswith(f"usage: {name}"), out
     ns = namespace("controller")
-    node = Started(ros2, ["run", "sorting_line", "sorting_line", "node", "--mode", "realtime", "--rate", "10",
-                          "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}"], tmp_path / "node.log")
+    node = Started(
+        ros2,
+        [
+            "run",
+            "sorting_line",
+            "sorting_line",
+            "node",
+            "--mode",
+            "realtime",
+            "--rate",
+            "10",
+            "--max-steps",
+            "1000000",
+            "--ros-args",
+            "-r",
+            f"__ns:={ns}",
+        ],
+        tmp_path / "node.log",
+    )
     decisions = tmp_path / "decisions.jsonl"
-    controller = Started(ros2, ["run", "sorting_line", "sorting-line-controller", "--setup", "A", "--namespace", ns,
-                                "--decision-log", str(decisions)], tmp_path / "controller.log")
+    controller = Started(
+        ros2,
+        [
+            "run",
+            "sorting_line",
+            "sorting-line-controller",
+            "--setup",
+            "A",
+            "--namespace",
+            ns,
+            "--decision-log",
+            str(decisions),
+        ],
+        tmp_path / "controller.log",
+    )
     try:
         deadline = time.monotonic() + 60
         while not (decisions.is_file() and len(decisions.read_text().splitlines()) >= 5):
