@@ -26,7 +26,6 @@ OVER_60_LINES = {
     "bridge/sorting_line_gym/bag/cli.py::_check_parser",
     "bridge/sorting_line_gym/bag/cli.py::_parser",
     "bridge/sorting_line_gym/bag/cli.py::main",
-    "tests/python/test_rllib.py::test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker",
 }
 
 

@@ -102,9 +102,49 @@ def test_ppo_with_two_env_runners_each_on_a_node_of_its_own(start_node, namespac
     assert all(p["keeps_participant"] for p in placement), placement
 
 
+class RayCluster:
+    """`ray start --block` daemons on the hosts of a netns_hosts.Hosts, all with the same env."""
+
+    def __init__(self, hosts, env: dict[str, str], gcs: str, tmp_path):
+        self.hosts, self.env, self.gcs, self.tmp_path = hosts, env, gcs, tmp_path
+        self.ray = str(Path(sys.executable).with_name("ray"))
+        self.daemons: dict[str, subprocess.Popen] = {}
+
+    def status(self) -> subprocess.CompletedProcess:
+        argv = self.hosts.argv("head", [self.ray, "status", f"--address={self.gcs}"])
+        return subprocess.run(argv, capture_output=True, text=True, timeout=60, env=self.env)
+
+    def start(self, host: str, flags: str, ready, what: str) -> None:
+        """`ray start FLAGS --block` on `host`, until `ready(ray status)`. Ray gives its raylet a fixed
+        30 s to register and exits when it is late, which happens on the 2 shared cores under load:
+        then it is started again (3 attempts)."""
+        log = open(self.tmp_path / f"ray_{host}.log", "a")
+        for _ in range(3):
+            argv = [self.ray, "start", *flags.split(), "--block"]
+            self.daemons[host] = p = self.hosts.popen(host, argv, env=self.env, stdout=log, stderr=subprocess.STDOUT)
+            deadline = time.monotonic() + 240
+            while not ready(last := self.status()):
+                if p.poll() is not None:
+                    break
+                assert time.monotonic() < deadline, f"{what} within 240 s:\n{last.stdout}\n{last.stderr[-2000:]}"
+                time.sleep(2)
+            else:
+                return
+        pytest.fail(f"{what}: `ray start` exited in 3 attempts (log {self.tmp_path}/ray_{host}.log)")
+
+    def stop(self) -> None:
+        for host in ("worker", "head"):
+            p = self.daemons.get(host)
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGTERM)  # `ray start --block` stops the Ray processes it started
+                try:
+                    p.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+
+
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
 def test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_worker(tmp_path):
-    ray = str(Path(sys.executable).with_name("ray"))
     # Ray's unix sockets live under its temp dir: keep the path short (a socket path has 107 bytes).
     temp = {host: tempfile.mkdtemp(prefix=f"slray_{host}_") for host in ("head", "worker")}
     with netns_hosts.Hosts(["head", "worker"]) as hosts:
@@ -114,51 +154,21 @@ def test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_wo
         # this test's own (Ray's token authentication; `ray start --head` requires one).
         env = ray_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", RAY_AUTH_MODE="token",
                       RAY_AUTH_TOKEN=secrets.token_hex(32))
-        logs = {host: open(tmp_path / f"ray_{host}.log", "a") for host in ("head", "worker")}
-        daemons: dict[str, subprocess.Popen] = {}
-
-        def status() -> subprocess.CompletedProcess:
-            return subprocess.run(hosts.argv("head", [ray, "status", f"--address={gcs}"]), capture_output=True,
-                                  text=True, timeout=60, env=env)
-
-        def start(host: str, argv: list[str], ready, what: str) -> None:
-            """`ray start ... --block` on `host`, until `ready(ray status)`. Ray gives its raylet a fixed
-            30 s to register and exits when it is late, which happens on the 2 shared cores under load:
-            then it is started again (3 attempts)."""
-            for _ in range(3):
-                daemons[host] = p = hosts.popen(host, argv, env=env, stdout=logs[host], stderr=subprocess.STDOUT)
-                deadline = time.monotonic() + 240
-                while not ready(last := status()):
-                    if p.poll() is not None:
-                        break
-                    assert time.monotonic() < deadline, f"{what} within 240 s:\n{last.stdout}\n{last.stderr[-2000:]}"
-                    time.sleep(2)
-                else:
-                    return
-            pytest.fail(f"{what}: `ray start` exited in 3 attempts (log {tmp_path}/ray_{host}.log)")
-
+        cluster = RayCluster(hosts, env, gcs, tmp_path)
         try:
-            start("head", [ray, "start", "--head", "--block", f"--node-ip-address={head_ip}", "--port=6379",
-                           "--num-cpus=0", "--include-dashboard=false", f"--temp-dir={temp['head']}",
-                           "--disable-usage-stats"],
-                  lambda s: s.returncode == 0, "the head did not answer")
+            head = f"--head --node-ip-address={head_ip} --port=6379 --num-cpus=0 --include-dashboard=false"
+            cluster.start("head", f"{head} --temp-dir={temp['head']} --disable-usage-stats",
+                          lambda s: s.returncode == 0, "the head did not answer")
             # The driver would wait forever for CPUs: first the worker's 2 CPUs must be in the cluster.
-            start("worker", [ray, "start", "--block", f"--address={gcs}", f"--node-ip-address={worker_ip}",
-                             "--num-cpus=2", f"--temp-dir={temp['worker']}", "--disable-usage-stats"],
-                  lambda s: s.returncode == 0 and "/2.0 CPU" in s.stdout, "the worker did not join the head")
-            driver = hosts.argv("head", [*TRAIN, "--setup", "A", "--env-runners", "2", "--envs-per-runner", "4",
-                                         "--timesteps", "4000", "--batch", "1000", "--address", gcs])
+            worker = f"--address={gcs} --node-ip-address={worker_ip} --num-cpus=2 --temp-dir={temp['worker']}"
+            cluster.start("worker", f"{worker} --disable-usage-stats",
+                          lambda s: s.returncode == 0 and "/2.0 CPU" in s.stdout, "the worker did not join the head")
+            flags = "--setup A --env-runners 2 --envs-per-runner 4 --timesteps 4000 --batch 1000"
+            driver = hosts.argv("head", [*TRAIN, *flags.split(), "--address", gcs])
             r = subprocess.run(driver, capture_output=True, text=True, timeout=400, env=env)
             result = summary(r, "RLlib PPO on the two-host Ray cluster")
         finally:
-            for host in ("worker", "head"):
-                p = daemons.get(host)
-                if p is not None and p.poll() is None:
-                    p.send_signal(signal.SIGTERM)  # `ray start --block` stops the Ray processes it started
-                    try:
-                        p.wait(timeout=30)
-                    except subprocess.TimeoutExpired:
-                        p.kill()
+            cluster.stop()
     print(json.dumps(result, indent=1))
     check_training(result, 2000, "Ray cluster")
     assert {p["node_ip"] for p in result["env_runners"]} == {worker_ip}, f"EnvRunners not all on the worker: {result}"
