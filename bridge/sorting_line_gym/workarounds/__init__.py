@@ -82,4 +82,8 @@ Rules that need no code of their own: no ``spin_until_future_complete`` anywhere
 per call in rclpy 7.1; every wait is ``ros.waits.Waiter``'s loop of ``spin_once`` or an rcl wait
 set), and bags compare values, never bytes (Fast DDS leaves garbage in CDR padding;
 ``bag.compare``).
+Designs shaped by these defects but not workarounds (they stay when the defects go): line servers
+(``line.line_server``: fewer participants per host), envs that connect at their first reset (a
+forked child never inherits a live context), and rclpy initialised without its signal handlers
+(``ros.context``: an env is a guest in its user's process).
 """
