@@ -313,8 +313,8 @@ def run_trace(
 ) -> list[dict]:
     """`sorting_line trace`: the pure-library trajectory, one dict per line (first = initial reset)."""
     tokens = [str(a) for a in actions]
-    argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),
-            "--max-steps", str(max_steps)]
+    flags = f"--setup {setup} --variant {variant} --seed {seed} --max-steps {max_steps}"
+    argv = [str(node_binary()), "trace", *flags.split()]
     if tokens:
         argv += ["--actions", ",".join(tokens)]
     r = subprocess.run(argv, capture_output=True, text=True, timeout=30)

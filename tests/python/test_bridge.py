@@ -48,10 +48,10 @@ UNLIMITED = MAX_EPISODE_STEPS  # the env's node episode length when gymnasium's 
 # The KPIs every step's info carries (env.py's docstring). Its "episode" (the node's episode number)
 # and "sim_time" are not required here: see test_step_info_does_not_depend_on_earlier_episodes and
 # the episode-statistics tests for why they cannot stay as they are.
-INFO_KEYS = {
-    "accuracy", "purity", "recall_a", "recall_b", "speed", "speed_index", "mode", "occupancy", "containers",
-    "speed_changes", "cumulative_reward", "step", "seed",
-}
+INFO_KEYS = set(
+    "accuracy purity recall_a recall_b speed speed_index mode occupancy containers speed_changes cumulative_reward "
+    "step seed".split()
+)
 
 
 # --------------------------------------------------------------------------------------------
@@ -67,8 +67,8 @@ def node_binary() -> Path:
 def trace(setup: str, variant: str, seed: int, actions, max_steps: int = UNLIMITED) -> list[dict]:
     """`sorting_line trace`: one dict per line; "reset" entries for (re)sets, step entries otherwise.
     `actions` are Gymnasium actions, or "r<seed>" to reset with a seed."""
-    argv = [str(node_binary()), "trace", "--setup", setup, "--variant", variant, "--seed", str(seed),
-            "--max-steps", str(max_steps), "--actions", ",".join(str(a) for a in actions)]
+    flags = f"--setup {setup} --variant {variant} --seed {seed} --max-steps {max_steps}"
+    argv = [str(node_binary()), "trace", *flags.split(), "--actions", ",".join(str(a) for a in actions)]
     r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, f"`{' '.join(argv)}` failed ({r.returncode}): {r.stderr}"
     return [json.loads(line) for line in r.stdout.splitlines() if line.strip()]

@@ -197,19 +197,8 @@ def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> d
     path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
     if path.is_file():
         return json.loads(path.read_text())
-    argv = [
-        find_node_binary(),
-        "oracle",
-        "--setup",
-        setup,
-        "--variant",
-        variant,
-        "--seed",
-        str(seed),
-        "--episodes",
-        str(episodes),
-        "--json",
-    ]
+    flags = f"--setup {setup} --variant {variant} --seed {seed} --episodes {episodes} --json"
+    argv = [find_node_binary(), "oracle", *flags.split()]
     result = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     if result.returncode != 0:
         raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
