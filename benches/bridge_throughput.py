@@ -79,11 +79,14 @@ class RawLine:
         from sorting_line_interfaces.msg import LineState, SpeedCommand
         from sorting_line_interfaces.srv import ResetLine
 
+        # The node benchmark's node flags and watchdog (imported here, after any re-exec into the venv
+        # and netns: node_lockstep imports rclpy).
+        from node_lockstep import Watchdog, node_args
+
         self.ns = f"/bench_raw_{os.getpid()}"
         self.log = open(log_dir / "raw_node.log", "wb")
         self.proc = subprocess.Popen(
-            [str(node_binary()), "node", "--variant", "basic", "--lines", "1", "--max-steps", "1000000",
-             "--seed", "100", "--ros-args", "-r", f"__ns:={self.ns}"],
+            [str(node_binary()), "node", *node_args(1, self.ns)],
             stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT)
         self.rclpy = rclpy
         self.context = rclpy.Context()
@@ -101,10 +104,6 @@ class RawLine:
         self.stamp = None  # (sec, nanosec) of the tick we answer
         self.arrived = False
         self._ResetLine = ResetLine
-        # The node benchmark's watchdog (imported here, after any re-exec into the venv and netns:
-        # node_lockstep imports rclpy).
-        from node_lockstep import Watchdog
-
         self.watchdog = Watchdog(self.executor)
 
     def _on_state(self, msg) -> None:

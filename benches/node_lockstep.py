@@ -267,10 +267,14 @@ class LockstepClient:
 # One configuration
 
 
+def node_args(lines: int, ns: str) -> list[str]:
+    """`sorting_line node` flags of the benchmarks' lock-step node: basic lines, episodes that do not end."""
+    flags = f"--variant basic --lines {lines} --max-steps 1000000 --seed 100"
+    return [*flags.split(), "--ros-args", "-r", f"__ns:={ns}"]
+
+
 def start_node(lines: int, ns: str, log_dir: Path) -> h.NodeProcess:
-    args = ["--variant", "basic", "--lines", str(lines), "--max-steps", "1000000", "--seed", "100",
-            "--ros-args", "-r", f"__ns:={ns}"]
-    return h.NodeProcess(args, log_dir / f"node_{ns.strip('/')}.log")
+    return h.NodeProcess(node_args(lines, ns), log_dir / f"node_{ns.strip('/')}.log")
 
 
 def stop_node(node: h.NodeProcess) -> None:
