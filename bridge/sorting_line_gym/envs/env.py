@@ -110,11 +110,7 @@ class SortingLineEnv(gym.Env):
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
-        options = LineOptions(
-            setup=setup, variant=variant, namespace=namespace, node=node, max_episode_steps=max_episode_steps,
-            step_timeout=step_timeout, startup_timeout=startup_timeout,
-            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
-        )
+        options = LineOptions.among(locals())
         self.variant = variant
         self.render_mode = render_mode
         self.observation_space = observation_space(variant)

@@ -39,11 +39,7 @@ class SortingLineSB3VecEnv(VecEnv):
         threshold: float = THRESHOLD,
     ):
         namespaces = node_namespaces(namespace)
-        options = LineOptions(
-            setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
-            max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
-            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
-        )
+        options = LineOptions.among(locals(), namespace=namespaces[0] if namespaces else None)
         self._lines = Lines(num_envs, options, namespaces)
         self.render_mode = None
         super().__init__(num_envs, observation_space(variant), action_space(variant))

@@ -116,11 +116,7 @@ class SortingLineVectorEnv(VectorEnv):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
         namespaces = node_namespaces(namespace)
-        options = LineOptions(
-            setup=setup, variant=variant, namespace=namespaces[0] if namespaces else None, node=node,
-            max_episode_steps=max_episode_steps, step_timeout=step_timeout, startup_timeout=startup_timeout,
-            input=input, obs_noise=obs_noise, action_penalty=action_penalty, threshold=threshold,
-        )
+        options = LineOptions.among(locals(), namespace=namespaces[0] if namespaces else None)
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)
         self.single_action_space = action_space(variant)

@@ -8,6 +8,7 @@ checks and the node's options are written here only. No ROS: constructing option
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +45,13 @@ class LineOptions:
     action_penalty: float | None = None
     #: An evolution schedule file the node runs the line by (``--evolution``), or None.
     evolution: str | None = None
+
+    @classmethod
+    def among(cls, arguments: dict[str, object], **overrides: object) -> LineOptions:
+        """The options among an env constructor's ``arguments`` (its ``locals()``: the parameters of
+        the same names as the fields), with ``overrides``; the others keep their defaults."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in arguments.items() if k in names and k not in overrides}, **overrides)
 
     def __post_init__(self) -> None:
         check_variant(self.variant)
