@@ -97,23 +97,21 @@ def start_node(tmp_path, request):
         return node
 
     yield start
-    problems = []
-    for node in nodes:
-        if node.stopped_by_test:
-            continue
-        if not node.running():
-            problems.append(f"node exited on its own with {node.proc.returncode}\n{node.describe()}")
-            node.kill()
-            continue
-        try:
-            code = node.stop(signal.SIGINT, timeout=5.0)
-        except AssertionError as e:
-            problems.append(str(e))
-            continue
-        if code != 0:
-            problems.append(f"node exited with {code} after SIGINT (want 0)\n{node.describe()}")
+    problems = h.stop_problems(nodes, _stop_node_at_teardown)
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
+
+
+def _stop_node_at_teardown(node: h.NodeProcess) -> str | None:
+    """SIGINT to a node the test left running: what is wrong if it does not exit with 0 (or had died)."""
+    if node.stopped_by_test:
+        return None
+    if not node.running():
+        problem = f"node exited on its own with {node.proc.returncode}\n{node.describe()}"
+        node.kill()
+        return problem
+    code = node.stop(signal.SIGINT, timeout=5.0)
+    return None if code == 0 else f"node exited with {code} after SIGINT (want 0)\n{node.describe()}"
 
 
 @pytest.fixture

@@ -291,6 +291,21 @@ class ScriptProcess:
         return self.wait(timeout, signal.SIGINT)
 
 
+def stop_problems(procs: Iterable, stop: Callable[[Any], str | None]) -> list[str]:
+    """At a fixture's teardown: ``stop(p)`` for every process, each a problem (or None); an
+    AssertionError (a process that did not exit in time) is a problem too. Every process is
+    stopped whatever the others did."""
+    problems = []
+    for p in procs:
+        try:
+            problem = stop(p)
+        except AssertionError as e:
+            problem = str(e)
+        if problem:
+            problems.append(problem)
+    return problems
+
+
 def run_node_expecting_failure(args: Iterable[str], env: dict[str, str] | None = None, timeout: float = 10.0):
     """Runs `sorting_line node ARGS` that must fail at start; returns (exit code, stderr)."""
     full_env = dict(os.environ)

@@ -101,15 +101,12 @@ def start_controller(tmp_path):
         return p
 
     yield start
-    problems = []
-    for p in procs:
-        try:
-            code = p.stop()
-        except AssertionError as e:
-            problems.append(str(e))
-            continue
-        if code != 0:
-            problems.append(f"controller exited with {code}\n{p.describe()}")
+
+    def stop(p: ControllerProcess) -> str | None:
+        code = p.stop()
+        return None if code == 0 else f"controller exited with {code}\n{p.describe()}"
+
+    problems = h.stop_problems(procs, stop)
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
 
