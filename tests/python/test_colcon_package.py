@@ -300,3 +300,17 @@ def test_ros2_run_the_bridge_entries(ros2, namespace, tmp_path):
     finally:
         controller.stop()
         node.stop()
+
+
+def test_the_launch_file_takes_the_installed_binary_or_the_clones(ros2):
+    """Without `sorting_line_bin`, the installed launch file starts the package's executable (the
+    ament index's, as the launch test above sees) and the clone's starts the clone's release build."""
+
+    def default_binary(launch_file: str, *package: str) -> str:
+        out = ros2.run("launch", *package, launch_file, "--show-args", timeout=60).stdout
+        block = out.split("'sorting_line_bin':", 1)[1].split("\n\n", 1)[0]
+        return block.split("(default: '", 1)[1].split("')", 1)[0]
+
+    assert default_binary("sorting_line.launch.py", "sorting_line") == ""
+    clone = default_binary(str(h.ROOT / "launch_scripts" / "sorting_line.launch.py"))
+    assert clone == str(h.ROOT / "target" / "release" / "sorting_line")
