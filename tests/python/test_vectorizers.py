@@ -94,6 +94,14 @@ def script_environment() -> dict[str, str]:
     return dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1", ROS_DOMAIN_ID=str(domain))
 
 
+def start_script(path: Path, code: str, *args: str) -> subprocess.Popen:
+    """``code`` as the script ``path``, started with ``args`` in the script environment; its
+    stdin, stdout and stderr are pipes (text)."""
+    path.write_text(code)
+    pipes = dict(stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen([sys.executable, str(path), *args], text=True, env=script_environment(), **pipes)
+
+
 def run_script(tmp_path: Path, name: str, code: str, args=(), timeout: float = 240.0) -> dict:
     """Runs ``code`` (after RECORDER) as a script in a fresh interpreter, bounded by ``timeout``;
     returns the JSON object its last stdout line holds. A script still running at the timeout
@@ -290,11 +298,7 @@ def test_a_process_with_a_live_env_dies_of_sigterm(tmp_path, node):
     after a worker failed) must end a worker whose env is connected: the env does not install
     rclpy's signal handlers, under which SIGTERM only shut rclpy down and the worker lived on,
     blocked, with its parent waiting for it forever."""
-    script = tmp_path / "live_env.py"
-    script.write_text(LIVE_ENV_WAITING)
-    env = script_environment()
-    p = subprocess.Popen([sys.executable, str(script), BASIC, node], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env)
+    p = start_script(tmp_path / "live_env.py", LIVE_ENV_WAITING, BASIC, node)
     try:
         line = p.stdout.readline().strip()
         assert line == "ready", f"the env did not start: {line!r}\n{p.stderr.read() if p.poll() is not None else ''}"
@@ -339,11 +343,7 @@ def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path, start):
     training script timed out, or killed by its user), must not live on: it held the parent's
     pipe, so nothing would ever wake it, and its leased line stayed leased. With forkserver the
     signal comes through the fork server, which exits when the parent is gone."""
-    script = tmp_path / "orphan.py"
-    script.write_text(ORPHANED_WORKER)
-    env = script_environment()
-    p = subprocess.Popen([sys.executable, str(script), BASIC, start], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env)
+    p = start_script(tmp_path / "orphan.py", ORPHANED_WORKER, BASIC, start)
     worker = None
     try:
         line = p.stdout.readline().strip()
