@@ -239,15 +239,8 @@ class _Window:
 def _soak_env(lines: int, setup: str, variant: str, step_timeout: float, namespace, node: str):
     from sorting_line_gym import SortingLineVectorEnv
 
-    return SortingLineVectorEnv(
-        num_envs=lines,
-        setup=setup,
-        variant=variant,
-        max_episode_steps=EPISODE_STEPS,
-        step_timeout=step_timeout,
-        namespace=namespace,
-        node=node,
-    )
+    line = dict(setup=setup, variant=variant, namespace=namespace, node=node)
+    return SortingLineVectorEnv(num_envs=lines, max_episode_steps=EPISODE_STEPS, step_timeout=step_timeout, **line)
 
 
 def _progress_bar(ticks: int, show: bool):
