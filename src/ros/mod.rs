@@ -1,4 +1,4 @@
-//! The ROS 2 node: the line's topics, service, clock and diagnostics on DDS (ros2-client), and
+//! The ROS 2 node: the line's topics, services, action, clock and diagnostics on DDS (ros2-client), and
 //! the ROS conventions ros2-client leaves to us (`--ros-args`, parameters, `ROS_DOMAIN_ID`).
 //!
 //! - `options`: the `node` subcommand's flags; `ros_args`: `--ros-args`; `params`: all of them
@@ -10,7 +10,8 @@
 //! - `simulation`: the node as a standard simulator (simulation_interfaces: state, step, reset,
 //!   features), as rules without I/O; `simulation_interfaces`: the standard's types on the wire.
 //! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire.
-//! - `node`: the DDS participant and the event loop.
+//! - `node`: the running node: the DDS participant, the endpoints, and the server whose loop
+//!   handles every event (one module per concern, listed there).
 
 pub mod clock;
 pub mod diagnostics;

@@ -1,6 +1,6 @@
 //! The node as a standard simulator (ROS 2's `simulation_interfaces`), as rules without I/O:
 //! which state a request leads to, which result code answers it, what a reset covers, and which
-//! features the node advertises. `node.rs` applies the outcomes to the lines.
+//! features the node advertises. The node (`ros::node`) applies the outcomes to the lines.
 //!
 //! The node's simulation state covers all its lines at once:
 //! - **PAUSED**: lock-step. Each line waits at its tick for the commands that answer it, or for
@@ -13,7 +13,7 @@
 //!   commands are rejected (`stopped` on /diagnostics) and StepSimulation answers INCORRECT_STATE.
 //!   PLAYING or PAUSED starts it again.
 //! - The **SimulateSteps** action steps as StepSimulation does, with feedback (the first step, at most one per
-//!   10 ms, the last step: `node.rs` FEEDBACK_PERIOD); a
+//!   10 ms, the last step: FEEDBACK_PERIOD in `ros::node`); a
 //!   cancel ends it after the step in progress. A goal the rules refuse is accepted and ends at
 //!   once, aborted, with the refusal's code and reason in its result (a rejected goal could not
 //!   say why).

@@ -139,14 +139,47 @@ pub fn service_type(name: &str) -> ServiceTypeName {
     ServiceTypeName::new(PACKAGE, name)
 }
 
-/// The services the node serves in its private namespace: (relative name, type name).
-pub const SERVICES: [(&str, &str); 5] = [
-    ("get_simulator_features", "GetSimulatorFeatures"),
-    ("get_simulation_state", "GetSimulationState"),
-    ("set_simulation_state", "SetSimulationState"),
-    ("step_simulation", "StepSimulation"),
-    ("reset_simulation", "ResetSimulation"),
-];
+/// The services the node serves in its private namespace.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimService {
+    Features,
+    GetState,
+    SetState,
+    Step,
+    Reset,
+}
+
+impl SimService {
+    pub const ALL: [SimService; 5] =
+        [SimService::Features, SimService::GetState, SimService::SetState, SimService::Step, SimService::Reset];
+
+    /// The service's name in the private namespace.
+    pub fn name(self) -> &'static str {
+        match self {
+            SimService::Features => "get_simulator_features",
+            SimService::GetState => "get_simulation_state",
+            SimService::SetState => "set_simulation_state",
+            SimService::Step => "step_simulation",
+            SimService::Reset => "reset_simulation",
+        }
+    }
+
+    /// The type's name in `simulation_interfaces/srv`.
+    pub fn type_name(self) -> &'static str {
+        match self {
+            SimService::Features => "GetSimulatorFeatures",
+            SimService::GetState => "GetSimulationState",
+            SimService::SetState => "SetSimulationState",
+            SimService::Step => "StepSimulation",
+            SimService::Reset => "ResetSimulation",
+        }
+    }
+
+    /// `simulation_interfaces/srv/<type>`.
+    pub fn service_type(self) -> ServiceTypeName {
+        service_type(self.type_name())
+    }
+}
 
 #[cfg(test)]
 mod tests {
@@ -201,7 +234,13 @@ mod tests {
         ]
         .concat();
         assert_eq!(action, fields("action/SimulateSteps.action"));
-        let built = std::fs::read_dir(format!("{root}/srv")).unwrap().count();
-        assert_eq!(SERVICES.len(), built, "the node serves every service of msg/simulation_interfaces/srv");
+        let mut built: Vec<String> = std::fs::read_dir(format!("{root}/srv"))
+            .unwrap()
+            .map(|f| f.unwrap().file_name().to_string_lossy().trim_end_matches(".srv").to_string())
+            .collect();
+        built.sort();
+        let mut served: Vec<String> = SimService::ALL.iter().map(|s| s.type_name().to_string()).collect();
+        served.sort();
+        assert_eq!(served, built, "the node serves every service of msg/simulation_interfaces/srv");
     }
 }

@@ -1,0 +1,90 @@
+//! Creating the node's DDS endpoints (publishers, subscriptions, service servers, all with the
+//! default QoS), and the input streams that own them, so the node's event set can hold them for
+//! as long as it serves.
+
+use std::rc::Rc;
+
+use futures::stream::{self, Stream};
+use ros2_client::{
+    Message, MessageInfo, Name, Node, Publisher, ReadResult, RmwRequestId, Server as ServiceServer, ServiceMapping,
+    ServiceTypeName, Subscription,
+};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+use super::super::messages::Typed;
+use super::super::qos::default_profile;
+
+pub(super) fn topic_name(absolute: &str) -> Result<Name, String> {
+    Name::parse(absolute).map_err(|e| format!("'{absolute}' is not a valid topic name: {e:?}"))
+}
+
+pub(super) fn publisher<M: Message + Serialize + Typed>(
+    node: &mut Node,
+    absolute: &str,
+) -> Result<Publisher<M>, String> {
+    let qos = default_profile();
+    let topic = node
+        .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
+        .map_err(|e| format!("cannot create topic {absolute}: {e:?}"))?;
+    node.create_publisher(&topic, Some(qos)).map_err(|e| format!("cannot publish {absolute}: {e:?}"))
+}
+
+pub(super) fn subscription<M>(node: &mut Node, absolute: &str) -> Result<Subscription<M>, String>
+where
+    M: Message + Typed + DeserializeOwned + 'static,
+{
+    let qos = default_profile();
+    let topic = node
+        .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
+        .map_err(|e| format!("cannot create topic {absolute}: {e:?}"))?;
+    node.create_subscription(&topic, Some(qos)).map_err(|e| format!("cannot subscribe {absolute}: {e:?}"))
+}
+
+/// A service server, shared (`Rc`) between the stream of its requests and whoever answers them.
+pub(super) fn service<Req, Resp>(
+    node: &mut Node,
+    absolute: &str,
+    service: ServiceTypeName,
+) -> Result<Rc<ServiceServer<Req, Resp>>, String>
+where
+    Req: Message + Clone + DeserializeOwned + 'static,
+    Resp: Message + Serialize + 'static,
+{
+    let qos = default_profile();
+    node.create_server(
+        ServiceMapping::Enhanced, // what rmw_fastrtps_cpp (Jazzy's default) speaks
+        &topic_name(absolute)?,
+        &service,
+        qos.clone(),
+        qos,
+    )
+    .map(Rc::new)
+    .map_err(|e| format!("cannot serve {absolute}: {e:?}"))
+}
+
+/// The requests to `server`, from a stream that holds it (with whoever answers them).
+pub(super) fn requests<Req, Resp>(
+    server: &Rc<ServiceServer<Req, Resp>>,
+) -> impl Stream<Item = ReadResult<(RmwRequestId, Req)>> + 'static
+where
+    Req: Message + Clone + DeserializeOwned + 'static,
+    Resp: Message + Serialize + 'static,
+{
+    stream::unfold(Rc::clone(server), |server| async move {
+        let received = server.async_receive_request().await;
+        Some((received, server))
+    })
+}
+
+/// The messages of a subscription, from a stream that owns it: the subscription leaves the graph
+/// when the stream is dropped.
+pub(super) fn messages<M>(subscription: Subscription<M>) -> impl Stream<Item = ReadResult<(M, MessageInfo)>> + 'static
+where
+    M: DeserializeOwned + 'static,
+{
+    stream::unfold(subscription, |subscription| async move {
+        let received = subscription.async_take().await;
+        Some((received, subscription))
+    })
+}

@@ -1,0 +1,210 @@
+//! One hosted line in the node: its simulation with the protocol and counters, its endpoints, and
+//! what it publishes for each tick and reset. The fixed endpoints live as long as the node; those
+//! of the line's hardware (ratio sensor, sort modes) come and go with it ([`Line::fit_hardware`]).
+
+use std::rc::Rc;
+
+use futures::channel::oneshot;
+use futures::stream::{LocalBoxStream, StreamExt};
+use ros2_client::{MessageInfo, Node, Publisher, Server as ServiceServer};
+
+use super::super::clock::SimClock;
+use super::super::diagnostics::LineCounters;
+use super::super::messages::*;
+use super::super::names::Names;
+use super::super::params::NodeParams;
+use super::super::protocol::{Command, HostedLine};
+use super::commands::client_of;
+use super::endpoints::{messages, publisher, requests, service, subscription};
+use super::{log, Event, Graph};
+use crate::sim::Observation;
+
+/// One line: the simulation with its protocol, its counters and evolution bookkeeping, and its
+/// endpoints.
+pub(super) struct Line {
+    /// Its index among the node's lines (k in `line_k/`).
+    pub(super) index: usize,
+    pub(super) namespace: String,
+    pub(super) host: HostedLine,
+    pub(super) counters: LineCounters,
+    /// The tick whose pending evolution events were announced since the last reset (a reset
+    /// announces them again after its own, so a client that reset knows what its first step
+    /// brings).
+    pub(super) announced_tick: Option<u64>,
+    /// The newest tick whose events were counted (they are counted once however often announced).
+    pub(super) counted_tick: Option<u64>,
+    /// Evolution events announced so far.
+    pub(super) evolution_events: u64,
+    input: Publisher<MaterialInput>,
+    belt: Publisher<BeltOccupancy>,
+    state: Publisher<LineState>,
+    reset_event: Publisher<ResetEvent>,
+    /// `events/evolution`, on an evolving line.
+    pub(super) evolution: Option<Publisher<EvolutionEvent>>,
+    /// The `reset` service (its requests come through the node's events).
+    pub(super) reset: Rc<ServiceServer<ResetLineRequest, ResetLineResponse>>,
+    /// `sensors/ratio`, while the line has its ratio sensor.
+    ratio: Option<Publisher<MaterialRatio>>,
+    /// While `cmd/sort_mode` is subscribed: its stream (in the node's events) owns the
+    /// subscription and ends, dropping it, when this sender is dropped.
+    mode_cmd: Option<oneshot::Sender<()>>,
+    ratio_topic: String,
+    mode_topic: String,
+}
+
+impl Line {
+    /// Line k with its fixed endpoints, and the input streams of those (`cmd/speed`, `reset`).
+    pub(super) fn new(
+        node: &mut Node,
+        names: &Names,
+        params: &NodeParams,
+        k: u32,
+    ) -> Result<(Self, Vec<LocalBoxStream<'static, Event>>), String> {
+        let namespace = names.line_namespace(k, params.lines);
+        let t = |relative: &str| names.topic(&namespace, relative);
+        let reset = service(node, &t("reset"), reset_service_type())?;
+        let input = publisher(node, &t("input"))?;
+        let belt = publisher(node, &t("belt/occupancy"))?;
+        let state = publisher(node, &t("state"))?;
+        let reset_event = publisher(node, &t("events/reset"))?;
+        let evolving = !params.evolution.is_empty();
+        let evolution = if evolving { Some(publisher(node, &t("events/evolution"))?) } else { None };
+        let speed_cmd = subscription::<SpeedCommand>(node, &t("cmd/speed"))?;
+        let clock = SimClock::new(params.tick_period);
+        let seed = params.seed + u64::from(k);
+        let index = k as usize;
+        let host = HostedLine::with_evolution(params.line.clone(), seed, params.evolution.clone(), clock, params.mode);
+        let err = |e| format!("{e:?}");
+        let speed =
+            |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
+        let streams = vec![
+            messages(speed_cmd)
+                .map(move |r| Event::Command(index, "cmd/speed", r.map(speed).map_err(err)))
+                .boxed_local(),
+            requests(&reset).map(move |r| Event::Reset(index, r.map_err(err))).boxed_local(),
+        ];
+        let line = Line {
+            index,
+            counters: LineCounters::new(namespace.clone()),
+            host,
+            announced_tick: None,
+            counted_tick: None,
+            evolution_events: 0,
+            input,
+            belt,
+            state,
+            reset_event,
+            evolution,
+            reset,
+            ratio: None,
+            mode_cmd: None,
+            ratio_topic: t("sensors/ratio"),
+            mode_topic: t("cmd/sort_mode"),
+            namespace,
+        };
+        Ok((line, streams))
+    }
+
+    pub(super) fn show(&self, relative: &str) -> String {
+        show(&self.namespace, relative)
+    }
+
+    /// Makes the hardware endpoints match the line: `sensors/ratio` while its observation comes
+    /// with a ratio reading, `cmd/sort_mode` while the step it waits for runs with sort modes
+    /// (an upgrade due at that tick included, so a client can command the first upgraded step).
+    pub(super) fn fit_hardware(&mut self, graph: &mut Graph) {
+        let sensor = self.host.line().ratio_sensor();
+        if sensor != self.ratio.is_some() {
+            self.ratio = None;
+            if sensor {
+                match publisher(&mut graph.node, &self.ratio_topic) {
+                    Ok(p) => self.ratio = Some(p),
+                    Err(e) => log("ERROR", e),
+                }
+            }
+            if self.host.evolving() {
+                let how = if sensor { "appears (ratio sensor fitted)" } else { "goes (ratio sensor removed)" };
+                log("INFO", format!("{} {how}", self.show("sensors/ratio")));
+            }
+        }
+        let modes = self.host.takes_modes();
+        if modes != self.mode_cmd.is_some() {
+            self.mode_cmd = None; // ends the old stream, which drops its subscription
+            if modes {
+                match subscription::<SortModeCommand>(&mut graph.node, &self.mode_topic) {
+                    Ok(sub) => {
+                        let (stop, stopped) = oneshot::channel();
+                        graph.events.push(mode_commands(self.index, sub, stopped));
+                        self.mode_cmd = Some(stop);
+                    }
+                    Err(e) => log("ERROR", e),
+                }
+            }
+            if self.host.evolving() {
+                let how = if modes { "appears (machine upgrade: sort modes)" } else { "goes (sort modes removed)" };
+                log("INFO", format!("{} {how}", self.show("cmd/sort_mode")));
+            }
+        }
+    }
+
+    /// Publishes everything that describes the current tick to the topics that have a reader
+    /// (see [`Graph::offer`]); `state` last, because clients wait for it and by then the sensors
+    /// of the same tick are out. Before them: the hardware is fitted to the line and evolution
+    /// events due at the start of the coming step are announced.
+    pub(super) fn publish_tick(&mut self, graph: &mut Graph) {
+        self.fit_hardware(graph);
+        self.announce_tick_events(graph);
+        let host = &self.host;
+        let namespace = &self.namespace;
+        let topic = |relative: &'static str| move || show(namespace, relative);
+        let counters = &mut self.counters;
+        counters.count_published(graph.offer(&self.input, &topic("input"), || MaterialInput::of(host)));
+        counters.count_published(graph.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy::of(host)));
+        if let Some(ratio) = &self.ratio {
+            counters.count_published(graph.offer(ratio, &topic("sensors/ratio"), || MaterialRatio::of(host)));
+        }
+        counters.count_published(graph.offer(&self.state, &topic("state"), || LineState::of(host)));
+    }
+
+    /// `events/reset`, for bags: the line's new episode (`seeded`: whether the reset named a seed).
+    pub(super) fn publish_reset_event(&mut self, graph: &Graph, seeded: bool) {
+        let sent = graph.offer(&self.reset_event, &|| self.show("events/reset"), || ResetEvent::of(&self.host, seeded));
+        self.counters.count_published(sent);
+    }
+
+    /// A reset's `events/reset`, and on an evolving line its `events/evolution`: every reset
+    /// announces the setup the episode starts with, naming the episode's events (if any).
+    pub(super) fn publish_reset_events(&mut self, graph: &mut Graph, seeded: bool) {
+        self.publish_reset_event(graph, seeded);
+        self.announce_reset(graph);
+    }
+
+    /// Resets the line and publishes its new tick (and the reset event, for bags).
+    pub(super) fn reset(&mut self, graph: &mut Graph, seed: Option<u64>) -> Observation {
+        let observation = self.host.reset(seed);
+        self.counters.episodes += 1;
+        self.publish_reset_events(graph, seed.is_some());
+        self.publish_tick(graph);
+        observation
+    }
+}
+
+/// A topic of the line in `namespace`, for messages.
+fn show(namespace: &str, relative: &str) -> String {
+    format!("{}/{relative}", namespace.trim_end_matches('/'))
+}
+
+/// Line k's `cmd/sort_mode` commands, from a stream that owns the subscription and ends (dropping
+/// it, so the subscription leaves the graph) when `stop` fires or its sender is dropped.
+fn mode_commands(
+    k: usize,
+    sub: ros2_client::Subscription<SortModeCommand>,
+    stop: oneshot::Receiver<()>,
+) -> LocalBoxStream<'static, Event> {
+    let mode =
+        |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
+    messages(sub)
+        .map(move |r| Event::Command(k, "cmd/sort_mode", r.map(mode).map_err(|e| format!("{e:?}"))))
+        .take_until(stop)
+        .boxed_local()
+}
