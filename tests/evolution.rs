@@ -1,4 +1,4 @@
-//! The evolving line (issue 16): every event kind changes exactly what it names, from exactly its
+//! The evolving line (`--evolution FILE`): every event kind changes exactly what it names, from exactly its
 //! tick or episode, and nothing before; the trajectory is fixed by schedule, seed and actions;
 //! streams an event does not name do not move; bad schedules are refused naming the event; the
 //! ready schedules in `bridge/sorting_line_gym/evolutions/` parse and run; random schedules never

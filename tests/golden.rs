@@ -337,7 +337,7 @@ macro_rules! golden_tests {
         })+
 
         /// The evolving line with the empty schedule is bit-for-bit today's line: it meets every
-        /// golden file too (issue 16). Never blessed from: the plain line defines the files.
+        /// golden file too. Never blessed from: the plain line defines the files.
         #[test]
         fn an_empty_evolution_schedule_changes_no_golden_trajectory() {
             if std::env::var(BLESS_VAR).is_ok_and(|v| v == "1") {
