@@ -48,7 +48,7 @@ def _time(store, ns: int):
 
 
 def diagnostics(store, namespace: str, stamp_ns: int, options: dict):
-    """A /diagnostics array with the line's status, as the node publishes it (node.rs)."""
+    """A /diagnostics array with the line's status, as the node publishes it (src/ros/node/diagnostics.rs)."""
     kv = store.types["diagnostic_msgs/msg/KeyValue"]
     values = [kv(key=k, value=str(options[k])) for k in ("seed", "variant", "input", "mode")]
     status = store.types["diagnostic_msgs/msg/DiagnosticStatus"](
