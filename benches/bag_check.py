@@ -64,10 +64,16 @@ def record_bag(out: Path, ticks: int) -> None:
         tool = ToolNode("bench_bag_check", _Watch(node, controller))
         link = LineLink(tool.node, ns, advanced=False)
         steps: list[int] = [-1]
-        tool.raw_subscription(join(ns, "state"), LINE_TYPES["state"],
-                              lambda data, _t: steps.append(decode(data, LINE_TYPES["state"])["step"]))
-        tool.until(lambda: link.endpoints_matched(tool.node) and tool.node.count_subscribers(join(ns, "input")) > 0,
-                   60, f"the node and the controller in {ns}")
+        tool.raw_subscription(
+            join(ns, "state"),
+            LINE_TYPES["state"],
+            lambda data, _t: steps.append(decode(data, LINE_TYPES["state"])["step"]),
+        )
+        tool.until(
+            lambda: link.endpoints_matched(tool.node) and tool.node.count_subscribers(join(ns, "input")) > 0,
+            60,
+            f"the node and the controller in {ns}",
+        )
         speed = join(ns, "cmd/speed")
         recorder = _Recorder(ns, out, 30, {speed: tool.node.count_publishers(speed)})
         tool.spin_for(1.0)
@@ -159,10 +165,20 @@ def checks(bag: Path, runs: int, controller: str | list[str], tag: str) -> list[
         if not verdict.passed:
             sys.exit(f"the check failed, so its timing means nothing:\n{verdict.summary()}")
         lat = verdict.latency()
-        out.append({"ticks": verdict.ticks, "seconds": verdict.seconds, "rate": verdict.ticks / verdict.seconds,
-                    "wall": wall, "p50": lat["p50"], "p99": lat["p99"]})
-        progress(f"  {tag} {run + 1}/{runs}: {verdict.ticks} ticks in {verdict.seconds:.2f} s "
-                 f"({verdict.ticks / verdict.seconds:,.0f} ticks/s), {wall:.1f} s with the controller's start-up")
+        out.append(
+            {
+                "ticks": verdict.ticks,
+                "seconds": verdict.seconds,
+                "rate": verdict.ticks / verdict.seconds,
+                "wall": wall,
+                "p50": lat["p50"],
+                "p99": lat["p99"],
+            }
+        )
+        progress(
+            f"  {tag} {run + 1}/{runs}: {verdict.ticks} ticks in {verdict.seconds:.2f} s "
+            f"({verdict.ticks / verdict.seconds:,.0f} ticks/s), {wall:.1f} s with the controller's start-up"
+        )
     return out
 
 
@@ -170,13 +186,17 @@ def _report(tag: str, results: list[dict], raw: list[float]) -> None:
     rate = statistics.median(r["rate"] for r in results)
     ratios = [r_raw / r["rate"] for r_raw, r in zip(raw, results, strict=True)]
     ratio = statistics.median(ratios)
-    print(f"  check with {tag}: {rate:,.0f} ticks/s in the play phase (runs "
-          + "/".join(f"{r['rate']:,.0f}" for r in results)
-          + f"), answer latency p50 {statistics.median(r['p50'] for r in results):.2f} ms, "
-          f"p99 {statistics.median(r['p99'] for r in results):.2f} ms; whole command (controller start-up, "
-          f"discovery, play, stop) {statistics.median(r['wall'] for r in results):.1f} s")
-    print("    raw / check per run " + "/".join(f"{x:.2f}" for x in ratios) + f", median {ratio:.2f}x (target: "
-          f"within {TARGET_RATIO:g}x) -> {'OK' if ratio <= TARGET_RATIO else 'MISSED'}")
+    print(
+        f"  check with {tag}: {rate:,.0f} ticks/s in the play phase (runs "
+        + "/".join(f"{r['rate']:,.0f}" for r in results)
+        + f"), answer latency p50 {statistics.median(r['p50'] for r in results):.2f} ms, "
+        f"p99 {statistics.median(r['p99'] for r in results):.2f} ms; whole command (controller start-up, "
+        f"discovery, play, stop) {statistics.median(r['wall'] for r in results):.1f} s"
+    )
+    print(
+        "    raw / check per run " + "/".join(f"{x:.2f}" for x in ratios) + f", median {ratio:.2f}x (target: "
+        f"within {TARGET_RATIO:g}x) -> {'OK' if ratio <= TARGET_RATIO else 'MISSED'}"
+    )
 
 
 def main() -> int:
@@ -202,10 +222,14 @@ def main() -> int:
             raw.append(raw_round_trips(args.ticks, 1, Path(tmp))["rt_s"])
             ours += checks(bag, 1, CONTROLLER, "sorting-line-controller")
             lean += checks(bag, 1, [sys.executable, __file__, "--lean-controller", str(bag)], "lean")
-    print(f"\nopen-loop check of a {ours[0]['ticks']}-tick bag (setup D, basic line), {args.runs} runs; "
-          f"{os.cpu_count()} CPUs; machine before: {conditions_before}, after: {h.machine_conditions()}")
-    print(f"  raw rclpy lock-step round trips (client <-> node, benches/node_lockstep.py): "
-          f"{statistics.median(raw):,.0f}/s (runs " + "/".join(f"{x:,.0f}" for x in raw) + ")")
+    print(
+        f"\nopen-loop check of a {ours[0]['ticks']}-tick bag (setup D, basic line), {args.runs} runs; "
+        f"{os.cpu_count()} CPUs; machine before: {conditions_before}, after: {h.machine_conditions()}"
+    )
+    print(
+        f"  raw rclpy lock-step round trips (client <-> node, benches/node_lockstep.py): "
+        f"{statistics.median(raw):,.0f}/s (runs " + "/".join(f"{x:,.0f}" for x in raw) + ")"
+    )
     _report("sorting-line-controller", ours, raw)
     _report("a lean rclpy controller (wait set, no executor)", lean, raw)
     return 0

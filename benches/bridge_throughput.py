@@ -87,16 +87,24 @@ class RawLine:
         self.log = open(log_dir / "raw_node.log", "wb")
         self.proc = subprocess.Popen(
             [str(node_binary()), "node", *node_args(1, self.ns)],
-            stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT)
+            stdin=subprocess.DEVNULL,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+        )
         self.rclpy = rclpy
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node(f"bench_raw_client_{os.getpid()}", context=self.context,
-                                      start_parameter_services=False, enable_rosout=False)
+        self.node = rclpy.create_node(
+            f"bench_raw_client_{os.getpid()}", context=self.context, start_parameter_services=False, enable_rosout=False
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
-                         history=HistoryPolicy.KEEP_LAST)
+        qos = QoSProfile(
+            depth=10,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+            history=HistoryPolicy.KEEP_LAST,
+        )
         self.pub = self.node.create_publisher(SpeedCommand, f"{self.ns}/cmd/speed", qos)
         self.sub = self.node.create_subscription(LineState, f"{self.ns}/state", self._on_state, qos)
         self.reset_client = self.node.create_client(ResetLine, f"{self.ns}/reset")
@@ -122,8 +130,15 @@ class RawLine:
             self.executor.spin_once(timeout_sec=0.05)
 
     def connect(self) -> None:
-        self._spin_until(lambda: self.pub.get_subscription_count() > 0 and self.sub.get_publisher_count() > 0
-                         and self.reset_client.service_is_ready(), 20.0, f"the node serving {self.ns}")
+        self._spin_until(
+            lambda: (
+                self.pub.get_subscription_count() > 0
+                and self.sub.get_publisher_count() > 0
+                and self.reset_client.service_is_ready()
+            ),
+            20.0,
+            f"the node serving {self.ns}",
+        )
         for attempt in range(3):
             future = self.reset_client.call_async(self._ResetLine.Request(has_seed=True, seed=100))
             try:
@@ -331,8 +346,18 @@ def measure_here(key: str, single: int, vector: int) -> None:
 
 
 def measure_in_child(key: str, args) -> tuple[str, int, float]:
-    command = [sys.executable, os.path.abspath(__file__), "--subject", key, "--single", str(args.single),
-               "--vector", str(args.vector), "--domain", str(args.domain)]
+    command = [
+        sys.executable,
+        os.path.abspath(__file__),
+        "--subject",
+        key,
+        "--single",
+        str(args.single),
+        "--vector",
+        str(args.vector),
+        "--domain",
+        str(args.domain),
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=600)
     if result.returncode != 0:
         sys.exit(f"bridge_throughput.py: measuring {key} failed (exit {result.returncode}):\n{result.stderr[-3000:]}")
@@ -378,8 +403,10 @@ def _rounds(args) -> list[Row]:
 
 def _report(ordered: list[Row], args, before: str, after: str) -> None:
     by_key = {s.key: s for s in ordered}
-    print(f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "
-          f"steps single, {args.vector} round trips vector); {os.cpu_count()} CPUs; {before} before, {after} after")
+    print(
+        f"\nsorting_line_gym throughput, env-steps/s (median of {args.rounds} interleaved rounds; N = {args.single} "
+        f"steps single, {args.vector} round trips vector); {os.cpu_count()} CPUs; {before} before, {after} after"
+    )
     width = max(len(s.label) for s in ordered)
     header = f"{'measurement':<{width}} | {'env-steps/s':>11} | {'round trips/s':>13} | rounds (env-steps/s)"
     print(header)

@@ -150,5 +150,6 @@ def main() -> None:
     )
     _report(names, nodes, clients, results, ids)
 
+
 if __name__ == "__main__":
     main()

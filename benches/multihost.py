@@ -63,8 +63,15 @@ def measure(cfg: dict) -> dict:
     from sorting_line_gym import SortingLineVectorEnv
 
     n = LINES * len(cfg["namespaces"])
-    env = SortingLineVectorEnv(num_envs=n, setup="A", namespace=cfg["namespaces"], node="attach",
-                               max_episode_steps=50, step_timeout=10.0, startup_timeout=60.0)
+    env = SortingLineVectorEnv(
+        num_envs=n,
+        setup="A",
+        namespace=cfg["namespaces"],
+        node="attach",
+        max_episode_steps=50,
+        step_timeout=10.0,
+        startup_timeout=60.0,
+    )
     rng = np.random.default_rng(1)
     env.reset(seed=1)
     for _ in range(100):
@@ -83,10 +90,15 @@ def measure(cfg: dict) -> dict:
     nodes = [cpu_seconds(pid) - c for pid, c in zip(cfg["node_pids"], nodes0, strict=False)]
     env.close()
     times.sort()
-    row = {"hosts": len(cfg["namespaces"]), "lines": n, "round_trips_per_s": round(len(times) / total, 1),
-           "line_ticks_per_s": round(n * len(times) / total, 1),
-           "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
-           "p50_ms": round(1e3 * times[len(times) // 2], 3), "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3)}
+    row = {
+        "hosts": len(cfg["namespaces"]),
+        "lines": n,
+        "round_trips_per_s": round(len(times) / total, 1),
+        "line_ticks_per_s": round(n * len(times) / total, 1),
+        "trainer_cpu_ms": round(1e3 * cpu / len(times), 3),
+        "p50_ms": round(1e3 * times[len(times) // 2], 3),
+        "p99_ms": round(1e3 * times[int(len(times) * 0.99)], 3),
+    }
     if nodes:  # nodes on this machine (not --attach)
         row["node_cpu_ms"] = round(1e3 * sum(nodes) / len(nodes) / len(times), 3)
     return row
@@ -96,18 +108,38 @@ def soak(cfg: dict) -> dict:
     """In the trainer host: benches/soak.py's soak over the nodes of ``cfg["namespaces"]``."""
     from soak import report, run_soak
 
-    r = run_soak(cfg["ticks"], lines=LINES * len(cfg["namespaces"]), setup="A", seed=11, window=25_000,
-                 namespace=cfg["namespaces"], node="attach", step_timeout=10.0, show_progress=False)
+    r = run_soak(
+        cfg["ticks"],
+        lines=LINES * len(cfg["namespaces"]),
+        setup="A",
+        seed=11,
+        window=25_000,
+        namespace=cfg["namespaces"],
+        node="attach",
+        step_timeout=10.0,
+        show_progress=False,
+    )
     print(report(r), file=sys.stderr, flush=True)
-    return {"ticks": r.ticks, "lines": r.config["lines"], "hosts": len(cfg["namespaces"]), "lost": r.lost,
-            "misaligned": r.misaligned, "values_compared": r.verified, "mismatched": r.mismatched,
-            "seconds": round(r.seconds, 1), "line_ticks_per_s": round(r.ticks / max(r.seconds, 1e-9), 1),
-            "ok": r.ok()}
+    return {
+        "ticks": r.ticks,
+        "lines": r.config["lines"],
+        "hosts": len(cfg["namespaces"]),
+        "lost": r.lost,
+        "misaligned": r.misaligned,
+        "values_compared": r.verified,
+        "mismatched": r.mismatched,
+        "seconds": round(r.seconds, 1),
+        "line_ticks_per_s": round(r.ticks / max(r.seconds, 1e-9), 1),
+        "ok": r.ok(),
+    }
 
 
 def ros_env(**values: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",
-                                                             "ROS_LOCALHOST_ONLY")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
+    }
     env.setdefault("ROS_DOMAIN_ID", "93")
     env.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
     env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(ROOT / "launch_scripts" / "fastdds_profile.xml"))
@@ -199,8 +231,11 @@ def plot(rows: list[dict], path: Path) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--role", help=argparse.SUPPRESS)
     p.add_argument("cfg", nargs="?", help=argparse.SUPPRESS)
     p.add_argument("--hosts", type=int, nargs="+", default=[1, 2, 4])
@@ -211,9 +246,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path)
     p.add_argument("--plot", type=Path)
     p.add_argument("--logs", type=Path, default=Path("/tmp/sorting_line_multihost"))
-    p.add_argument("--attach", nargs="+", metavar="NS",
-                   help="measure over running nodes of these namespaces, 16 lines each, in this ROS environment, "
-                        "instead of making network namespaces (see below)")
+    p.add_argument(
+        "--attach",
+        nargs="+",
+        metavar="NS",
+        help="measure over running nodes of these namespaces, 16 lines each, in this ROS environment, "
+        "instead of making network namespaces (see below)",
+    )
     return p
 
 
@@ -297,6 +336,7 @@ def main() -> int:
     if args.plot:
         plot(rows, args.plot)
     return 0 if ok else 1
+
 
 if __name__ == "__main__":
     sys.exit(main())

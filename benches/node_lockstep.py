@@ -80,7 +80,7 @@ def proc_status(pid: int, key: str) -> float:
 def cpu_seconds(pid: int) -> float:
     """utime + stime of a process (all its threads), in seconds."""
     stat = Path(f"/proc/{pid}/stat").read_text()
-    fields = stat[stat.rindex(")") + 2:].split()
+    fields = stat[stat.rindex(")") + 2 :].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
@@ -136,8 +136,9 @@ class LockstepClient:
 
         self.session, self.executor, self.pattern = session, session.executor, pattern
         # No parameter services, no rosout: fewer entities in every wait set.
-        self.node = rclpy.node.Node(f"bench_client_{os.getpid()}", context=session.context,
-                                    start_parameter_services=False, enable_rosout=False)
+        self.node = rclpy.node.Node(
+            f"bench_client_{os.getpid()}", context=session.context, start_parameter_services=False, enable_rosout=False
+        )
         self.executor.add_node(self.node)
         self.n = len(namespaces)
         self.namespaces = namespaces
@@ -169,6 +170,7 @@ class LockstepClient:
         def on_state(msg) -> None:
             if msg.header.stamp.sec == self.expected_sec[k] and msg.header.stamp.nanosec == 0:
                 self.arrived += 1
+
         return on_state
 
     def destroy(self) -> None:
@@ -178,14 +180,17 @@ class LockstepClient:
 
     def connect_and_reset(self, timeout: float = 15.0) -> None:
         """Matches, resets every line (seed 100 + k) and takes the tick each line waits at."""
+
         def matched():
             return all(p.get_subscription_count() >= 1 for p in self.pubs) and all(
-                s.get_publisher_count() >= 1 for s in self.subs)
+                s.get_publisher_count() >= 1 for s in self.subs
+            )
 
         self.session.spin_until(matched, timeout, "the client's publishers and subscriptions to match the node")
         for k, client in enumerate(self.resets):
-            reply = self.session.call_service(client, self._ResetLine.Request(has_seed=True, seed=100 + k),
-                                              f"{self.namespaces[k]}/reset")
+            reply = self.session.call_service(
+                client, self._ResetLine.Request(has_seed=True, seed=100 + k), f"{self.namespaces[k]}/reset"
+            )
             assert reply.success and reply.stamp.nanosec == 0, reply
             self.expected_sec[k] = reply.stamp.sec  # the tick the line waits at
         if self.lean:
@@ -259,8 +264,10 @@ class LockstepClient:
 
     def _timeout(self, timeout: float):
         waiting = [self.namespaces[k] for k in range(self.n)]
-        raise TimeoutError(f"{self.arrived}/{self.n} states within {timeout} s (lines {waiting[:4]}..., "
-                           f"awaited stamps {self.expected_sec[:4]}...)")
+        raise TimeoutError(
+            f"{self.arrived}/{self.n} states within {timeout} s (lines {waiting[:4]}..., "
+            f"awaited stamps {self.expected_sec[:4]}...)"
+        )
 
 
 # ------------------------------------------------------------------------------------------
@@ -287,8 +294,17 @@ def line_namespaces(ns: str, lines: int) -> list[str]:
     return [ns] if lines == 1 else [f"{ns}/line_{k}" for k in range(lines)]
 
 
-def measure(session: h.RosSession, lines: int, ticks: int, runs: int, pattern: str, idle_s: float,
-            log_dir: Path, tag: str, lean: bool = True) -> dict:
+def measure(
+    session: h.RosSession,
+    lines: int,
+    ticks: int,
+    runs: int,
+    pattern: str,
+    idle_s: float,
+    log_dir: Path,
+    tag: str,
+    lean: bool = True,
+) -> dict:
     ns = f"/bench_{tag}_{os.getpid()}"
     node = start_node(lines, ns, log_dir)
     client = LockstepClient(session, line_namespaces(ns, lines), pattern, lean)
@@ -493,6 +509,7 @@ def main() -> int:
     if pattern_results:
         _print_patterns(pattern_results, args)
     return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

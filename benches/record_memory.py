@@ -58,12 +58,28 @@ def _args() -> argparse.Namespace:
 
 def _recorder(args, out: Path, log: Path) -> subprocess.Popen:
     topics = [f"{NAMESPACE}/line_{k}/{t}" for k in range(args.lines) for t in LINE_TOPICS] + ["/clock"]
-    argv = [sys.executable, "-m", "sorting_line_gym.bag.cli", "record", "--namespace", f"{NAMESPACE}/line_0",
-            "-o", str(out), "--compression", args.compression, "--wait", "60"]
+    argv = [
+        sys.executable,
+        "-m",
+        "sorting_line_gym.bag.cli",
+        "record",
+        "--namespace",
+        f"{NAMESPACE}/line_0",
+        "-o",
+        str(out),
+        "--compression",
+        args.compression,
+        "--wait",
+        "60",
+    ]
     for t in topics:
         argv += ["--topic", t]
-    return subprocess.Popen(argv, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=str(ROOT / "bridge")))
+    return subprocess.Popen(
+        argv,
+        stdout=open(log, "wb"),
+        stderr=subprocess.STDOUT,
+        env=dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=str(ROOT / "bridge")),
+    )
 
 
 def _wait_for(log: Path, text: str, proc: subprocess.Popen, timeout: float) -> None:
@@ -96,10 +112,14 @@ def _compare(bag_path: Path, statuses: dict[str, list[dict]], lines: int) -> dic
                 counters[ns].on_message(connection.topic, raw)
     reports = [c.report() for c in counters.values()]
     compared = [r for r in reports if r.get("compared")]
-    return {"messages": messages, "lines_compared": len(compared),
-            "published": sum(r["published"] for r in compared), "received": sum(r["received"] for r in compared),
-            "missing": sum(r["missing"] for r in compared),
-            "not_compared": [r.get("why") for r in reports if not r.get("compared")][:3]}
+    return {
+        "messages": messages,
+        "lines_compared": len(compared),
+        "published": sum(r["published"] for r in compared),
+        "received": sum(r["received"] for r in compared),
+        "missing": sum(r["missing"] for r in compared),
+        "not_compared": [r.get("why") for r in reports if not r.get("compared")][:3],
+    }
 
 
 def _diagnostics(session, statuses: dict[str, list[dict]]):
@@ -126,8 +146,10 @@ def main() -> int:
     h.ros_environment(args.domain)
     work = Path(tempfile.mkdtemp(prefix="record_memory_"))
     out = Path(args.out) if args.out else work / "bag"
-    node = h.NodeProcess(["--lines", args.lines, "--mode", "realtime", "--rate", args.rate, "--ros-args", "-r",
-                          f"__ns:={NAMESPACE}"], work / "node.log")
+    node = h.NodeProcess(
+        ["--lines", args.lines, "--mode", "realtime", "--rate", args.rate, "--ros-args", "-r", f"__ns:={NAMESPACE}"],
+        work / "node.log",
+    )
     session = h.RosSession()
     statuses: dict[str, list[dict]] = {}
     probe = _diagnostics(session, statuses)
@@ -163,19 +185,29 @@ def main() -> int:
     figures = _compare(out, statuses, args.lines)
     size = sum(f.stat().st_size for f in out.glob("*.mcap"))
     seconds = 60 * args.minutes
-    print(f"record_memory: {args.lines} lines at {args.rate:g} Hz, {args.minutes:g} min, compression "
-          f"{args.compression}; {h.machine_conditions()}")
-    print(f"  recorder RSS: start {samples[0][1]:.1f} MB, after the first minute {minute or 0:.1f} MB, end "
-          f"{end_rss:.1f} MB ({(end_rss / minute - 1) * 100 if minute else 0:+.1f} % against the first minute)")
-    print(f"  messages: the bag holds {figures['messages']:,} ({figures['messages'] / seconds:,.0f}/s); over the "
-          f"report window of {figures['lines_compared']} lines the node published {figures['published']:,} and the "
-          f"recorder stored {figures['received']:,}: missing {figures['missing']:,}")
+    print(
+        f"record_memory: {args.lines} lines at {args.rate:g} Hz, {args.minutes:g} min, compression "
+        f"{args.compression}; {h.machine_conditions()}"
+    )
+    print(
+        f"  recorder RSS: start {samples[0][1]:.1f} MB, after the first minute {minute or 0:.1f} MB, end "
+        f"{end_rss:.1f} MB ({(end_rss / minute - 1) * 100 if minute else 0:+.1f} % against the first minute)"
+    )
+    print(
+        f"  messages: the bag holds {figures['messages']:,} ({figures['messages'] / seconds:,.0f}/s); over the "
+        f"report window of {figures['lines_compared']} lines the node published {figures['published']:,} and the "
+        f"recorder stored {figures['received']:,}: missing {figures['missing']:,}"
+    )
     if figures["not_compared"]:
         print(f"  not compared: {figures['not_compared']}")
-    print(f"  recorder CPU: {cpu:.1f} s over {seconds:.0f} s ({100 * cpu / seconds:.0f} % of a core), "
-          f"{1e6 * cpu / max(1, figures['messages']):.0f} us per message stored")
-    print(f"  bag: {size / 1e6:.1f} MB in {len(list(out.glob('*.mcap')))} file(s), "
-          f"{size / max(1, figures['messages']):.1f} bytes per message")
+    print(
+        f"  recorder CPU: {cpu:.1f} s over {seconds:.0f} s ({100 * cpu / seconds:.0f} % of a core), "
+        f"{1e6 * cpu / max(1, figures['messages']):.0f} us per message stored"
+    )
+    print(
+        f"  bag: {size / 1e6:.1f} MB in {len(list(out.glob('*.mcap')))} file(s), "
+        f"{size / max(1, figures['messages']):.1f} bytes per message"
+    )
     summary = log.read_text(errors="replace").strip().splitlines()
     print(f"  the recorder's own summary: {summary[-2].split(' (')[0]} | {summary[-1]}")
     print(f"  RSS samples (s, MB): {[(round(t), round(m, 1)) for t, m in samples]}")

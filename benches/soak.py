@@ -84,8 +84,9 @@ class LineLedger:
     def __post_init__(self):
         self.episode_seed = self.seed
 
-    def expect_step(self, action: int, info_seed: int, info_step: int, reward: float, cumulative: float,
-                    observation: tuple) -> bool:
+    def expect_step(
+        self, action: int, info_seed: int, info_step: int, reward: float, cumulative: float, observation: tuple
+    ) -> bool:
         """Records one step; False if it is not the step this line should have taken next."""
         self.step += 1
         self.tokens.append(str(int(action)))
@@ -123,8 +124,8 @@ class LineLedger:
         last_reset = max((i for i, s in enumerate(self.seen) if s[0] == "reset"), default=None)
         if last_reset is None:
             return  # the first episode is still running: keep it all
-        self.tokens = self.tokens[last_reset + 1:]
-        self.seen = self.seen[last_reset + 1:]
+        self.tokens = self.tokens[last_reset + 1 :]
+        self.seen = self.seen[last_reset + 1 :]
         self.seed = self.episode_seed
         self.episodes = 0
 
@@ -366,8 +367,11 @@ def plot(r: SoakResult, path: Path) -> None:
     top.plot(x, [w["ticks_per_s"] for w in r.windows], marker=".")
     top.set_ylabel("line-ticks/s (per window)")
     top.set_ylim(bottom=0)
-    top.set_title(f"soak: {r.ticks:,} line-ticks, {r.config['lines']} lines; lost {r.lost}, misaligned "
-                  f"{r.misaligned}, mismatched {r.mismatched}", fontsize=10)
+    top.set_title(
+        f"soak: {r.ticks:,} line-ticks, {r.config['lines']} lines; lost {r.lost}, misaligned "
+        f"{r.misaligned}, mismatched {r.mismatched}",
+        fontsize=10,
+    )
     middle.plot(x, [w["rss_node_mb"] for w in r.windows], marker=".", label="node")
     middle.plot(x, [w["rss_bridge_mb"] for w in r.windows], marker=".", label="bridge (Python)")
     middle.set_ylabel("RSS (MB)")
@@ -392,9 +396,13 @@ def main() -> int:
     parser.add_argument("--variant", default="basic", choices=VARIANTS)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--window", type=int, default=50_000, help="line-ticks per throughput/RSS sample")
-    parser.add_argument("--verify-episodes", type=int, default=20,
-                        help="episodes per line between two `sorting_line trace` replays (default 20); the "
-                             "unverified episodes are memory this (bridge) process holds")
+    parser.add_argument(
+        "--verify-episodes",
+        type=int,
+        default=20,
+        help="episodes per line between two `sorting_line trace` replays (default 20); the "
+        "unverified episodes are memory this (bridge) process holds",
+    )
     parser.add_argument("--domain", type=int, default=91, help="ROS_DOMAIN_ID (default 91)")
     parser.add_argument("--json", type=Path, help="write the result (with the per-window series) here")
     parser.add_argument("--plot", type=Path, help="write a PNG of throughput and RSS over the run here")

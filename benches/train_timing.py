@@ -213,5 +213,6 @@ def main() -> int:
     _print_projection(args, times)
     return 0
 
+
 if __name__ == "__main__":
     sys.exit(main())

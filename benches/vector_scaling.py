@@ -39,8 +39,12 @@ sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 import ros_harness as h  # noqa: E402
 
-SUBJECTS = ["raw"] + [f"sync_{n}" for n in (1, 8, 32, 64)] + [f"async_{n}" for n in (4, 8)] + [
-    f"ours_{n}" for n in (1, 4, 8, 32, 64)]
+SUBJECTS = (
+    ["raw"]
+    + [f"sync_{n}" for n in (1, 8, 32, 64)]
+    + [f"async_{n}" for n in (4, 8)]
+    + [f"ours_{n}" for n in (1, 4, 8, 32, 64)]
+)
 #: The raw loop is measured again next to these subjects (the machine's speed drifts during a run):
 #: its figure is the median of all its measurements.
 RAW_AGAIN_AFTER = ("sync_1", "sync_64", "async_8", "ours_64")
@@ -120,8 +124,9 @@ def measure_here(key: str, steps: int, raw_steps: int) -> dict:
 
         env = SortingLineVectorEnv(num_envs=n, setup="A", variant="basic", max_episode_steps=50)
     else:
-        env = gymnasium.make_vec("sorting_line_gym:SortingLine-v0", num_envs=n, vectorization_mode=kind, setup="A",
-                                 node="shared")
+        env = gymnasium.make_vec(
+            "sorting_line_gym:SortingLine-v0", num_envs=n, vectorization_mode=kind, setup="A", node="shared"
+        )
     try:
         env.reset(seed=1)
         start_s = time.perf_counter() - started
@@ -140,8 +145,18 @@ def measure_here(key: str, steps: int, raw_steps: int) -> dict:
 
 
 def measure_in_child(key: str, domain: int, args) -> dict:
-    command = [sys.executable, os.path.abspath(__file__), "--subject", key, "--steps", str(args.steps),
-               "--raw-steps", str(args.raw_steps), "--domain", str(domain)]
+    command = [
+        sys.executable,
+        os.path.abspath(__file__),
+        "--subject",
+        key,
+        "--steps",
+        str(args.steps),
+        "--raw-steps",
+        str(args.raw_steps),
+        "--domain",
+        str(domain),
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=900)
     if result.returncode != 0:
         sys.exit(f"vector_scaling.py: measuring {key} failed (exit {result.returncode}):\n{result.stderr[-3000:]}")
@@ -170,8 +185,11 @@ def _print_table(results: dict, raw: float, raws: list[float]) -> None:
     )
     print(header)
     print("-" * len(header))
-    names = {"sync": "SyncVectorEnv, node='shared'", "async": "AsyncVectorEnv (fork), node='shared'",
-             "ours": "SortingLineVectorEnv (one node)"}
+    names = {
+        "sync": "SyncVectorEnv, node='shared'",
+        "async": "AsyncVectorEnv (fork), node='shared'",
+        "ours": "SortingLineVectorEnv (one node)",
+    }
     base = results["sync_1"]["rss_mb"]
     for key, r in results.items():
         if key == "raw":
@@ -183,8 +201,10 @@ def _print_table(results: dict, raw: float, raws: list[float]) -> None:
             continue
         kind, n = key.split("_")
         per_env = f"{(r['rss_mb'] - base) / (int(n) - 1):>6.1f}" if kind == "sync" and int(n) > 1 else f"{'':>6}"
-        print(f"{names[kind] + f', {n} envs':<48} | {r['rate']:>11,.0f} | {r['rate'] / raw:>6.2f} | "
-              f"{r['start_s']:>10.2f} | {r['rss_mb']:>7.0f} | {per_env}")
+        print(
+            f"{names[kind] + f', {n} envs':<48} | {r['rate']:>11,.0f} | {r['rate'] / raw:>6.2f} | "
+            f"{r['start_s']:>10.2f} | {r['rss_mb']:>7.0f} | {per_env}"
+        )
 
 
 def _print_targets(results: dict, raw: float) -> None:
@@ -201,8 +221,10 @@ def _print_targets(results: dict, raw: float) -> None:
         f"{'OK' if mb < TARGET_MB_PER_ENV else 'MISSED'}"
     )
     share = s64["rate"] / raw
-    print(f"  {s64['rate']:,.0f} env-steps/s = {share:.0%} of the raw loop's round trips/s (target >= "
-          f"{TARGET_RAW_SHARE:.0%}) {'OK' if share >= TARGET_RAW_SHARE else 'MISSED'}")
+    print(
+        f"  {s64['rate']:,.0f} env-steps/s = {share:.0%} of the raw loop's round trips/s (target >= "
+        f"{TARGET_RAW_SHARE:.0%}) {'OK' if share >= TARGET_RAW_SHARE else 'MISSED'}"
+    )
 
 
 def main() -> int:
@@ -236,6 +258,7 @@ def main() -> int:
     _print_table(results, raw, raws)
     _print_targets(results, raw)
     return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

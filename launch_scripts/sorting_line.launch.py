@@ -57,6 +57,7 @@ def _typed(text):
 def _node(context):
     def value(name):
         return context.launch_configurations.get(name, "")
+
     parameters = []
     if value("params_file"):
         parameters.append(value("params_file"))
@@ -86,8 +87,11 @@ def generate_launch_description():
         DeclareLaunchArgument("namespace", default_value="/", description="namespace of the node"),
         DeclareLaunchArgument("node_name", default_value="sorting_line"),
         DeclareLaunchArgument("params_file", default_value="", description="YAML parameter file"),
-        DeclareLaunchArgument("sorting_line_bin", default_value=DEFAULT_BIN,
-                              description="node binary (empty: the installed package's executable)"),
+        DeclareLaunchArgument(
+            "sorting_line_bin",
+            default_value=DEFAULT_BIN,
+            description="node binary (empty: the installed package's executable)",
+        ),
     ]
     arguments += [DeclareLaunchArgument(name, default_value="", description=text) for name, text in PARAMETERS]
     return LaunchDescription(arguments + [OpaqueFunction(function=_node)])

@@ -47,6 +47,7 @@ def __getattr__(name: str):
         return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
+
 # max_episode_steps here is the TimeLimit gymnasium.make applies (and overrides with its own
 # max_episode_steps argument, which it never passes to the env): the env itself then leaves
 # truncation to that wrapper.

@@ -61,14 +61,25 @@ def __getattr__(name: str):
 
 def pytest_addoption(parser):
     group = parser.getgroup("sorting_line", "sorting_line_gym.testing (ROS 2 graphs of the sorting line per test)")
-    group.addoption("--sorting-line-domain", type=int, default=None, metavar="N",
-                    help="first ROS_DOMAIN_ID of the tests' graphs (each test takes the next of "
-                         f"{DOMAINS_PER_SESSION}; default 100 + pid mod 80)")
-    group.addoption("--sorting-line-same-domain", action="store_true",
-                    help="every test on the first domain (for ROS objects that outlive a test: a session-wide "
-                         "rclpy context, a module-scoped env); tests still get namespaces of their own")
-    group.addoption("--sorting-line-require-netns", action="store_true",
-                    help="skip the tests that start ROS graphs unless in a loopback-only network namespace")
+    group.addoption(
+        "--sorting-line-domain",
+        type=int,
+        default=None,
+        metavar="N",
+        help="first ROS_DOMAIN_ID of the tests' graphs (each test takes the next of "
+        f"{DOMAINS_PER_SESSION}; default 100 + pid mod 80)",
+    )
+    group.addoption(
+        "--sorting-line-same-domain",
+        action="store_true",
+        help="every test on the first domain (for ROS objects that outlive a test: a session-wide "
+        "rclpy context, a module-scoped env); tests still get namespaces of their own",
+    )
+    group.addoption(
+        "--sorting-line-require-netns",
+        action="store_true",
+        help="skip the tests that start ROS graphs unless in a loopback-only network namespace",
+    )
 
 
 def isolation_problem() -> str | None:
@@ -113,10 +124,14 @@ def sorting_line_graph(request, monkeypatch) -> Graph:
         pytest.skip(f"--sorting-line-require-netns: {problem}")
     if problem and not getattr(config, "_sorting_line_warned", False):
         config._sorting_line_warned = True
-        warnings.warn(pytest.PytestWarning(
-            f"sorting_line_gym.testing: {problem}: the tests' DDS traffic stays on this host only through "
-            "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (run under `unshare -n` with lo up to isolate it fully, "
-            "or pass --sorting-line-require-netns to skip instead)"), stacklevel=1)
+        warnings.warn(
+            pytest.PytestWarning(
+                f"sorting_line_gym.testing: {problem}: the tests' DDS traffic stays on this host only through "
+                "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (run under `unshare -n` with lo up to isolate it fully, "
+                "or pass --sorting-line-require-netns to skip instead)"
+            ),
+            stacklevel=1,
+        )
     k = next(_TESTS)
     same = config.getoption("--sorting-line-same-domain")
     domain = domain_of_test(config.getoption("--sorting-line-domain"), k, same)
@@ -132,8 +147,10 @@ def domain_of_test(first: int | None, k: int, same: bool = False) -> int:
     if first is None:
         first = 100 + os.getpid() % 80
     if not 0 <= first <= 232 - DOMAINS_PER_SESSION:
-        raise pytest.UsageError(f"--sorting-line-domain {first}: the tests' domains {first}.."
-                                f"{first + DOMAINS_PER_SESSION - 1} must lie within 0..232")
+        raise pytest.UsageError(
+            f"--sorting-line-domain {first}: the tests' domains {first}.."
+            f"{first + DOMAINS_PER_SESSION - 1} must lie within 0..232"
+        )
     return first if same else first + k % DOMAINS_PER_SESSION
 
 
@@ -162,9 +179,11 @@ class LineNode:
         self._tool = tool = ToolNode("sorting_line_test", self.process)
         self._reset_client = tool.node.create_client(ResetLine, f"{self.namespace}/reset")
         tool.node.create_subscription(LineState, f"{self.namespace}/state", self.states.append, DEEP_QOS)
-        tool.until(lambda: self._reset_client.service_is_ready()
-                   and tool.node.count_publishers(f"{self.namespace}/state") > 0,
-                   timeout, f"the sorting_line node serving {self.namespace}")
+        tool.until(
+            lambda: self._reset_client.service_is_ready() and tool.node.count_publishers(f"{self.namespace}/state") > 0,
+            timeout,
+            f"the sorting_line node serving {self.namespace}",
+        )
 
     def reset(self, seed: int | None = None, timeout: float = 10.0):
         """Resets the line (``seed`` None: the streams carry on); returns the service's response."""
@@ -186,13 +205,19 @@ class LineNode:
 
         def first_answer(limit: float) -> int:
             episode = self.reset(seed).episode
-            self._until_state(lambda s: s.episode == episode and s.step >= 1, limit,
-                              f"the first answer to episode {episode} of {self.namespace}")
+            self._until_state(
+                lambda s: s.episode == episode and s.step >= 1,
+                limit,
+                f"the first answer to episode {episode} of {self.namespace}",
+            )
             return episode
 
         episode = retried_handshake(first_answer, [FIRST_ANSWER_TIMEOUT] * attempts, TimeoutError)
-        self._until_state(lambda s: s.episode == episode and (s.truncated or s.terminated), timeout,
-                          f"the end of episode {episode} of {self.namespace}")
+        self._until_state(
+            lambda s: s.episode == episode and (s.truncated or s.terminated),
+            timeout,
+            f"the end of episode {episode} of {self.namespace}",
+        )
         return [s for s in self.states if s.episode == episode]
 
     def _until_state(self, wanted, timeout: float, what: str) -> None:
@@ -239,8 +264,9 @@ class Recording:
         self.result = None
         self._stop, self._ready = threading.Event(), threading.Event()
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, args=(topics, wait), daemon=True,
-                                        name=f"sorting_line_recorder {namespace}")
+        self._thread = threading.Thread(
+            target=self._run, args=(topics, wait), daemon=True, name=f"sorting_line_recorder {namespace}"
+        )
         self._thread.start()
         if not self._ready.wait(wait + 30.0) or self._error is not None:
             self.stop()
@@ -265,11 +291,12 @@ class Recording:
         (a controller's commands sent before that are not in the bag)."""
         want = f"matched {self.namespace.rstrip('/')}/{relative}: "
         deadline = time.monotonic() + timeout
-        while not any(line.startswith(want) and int(line[len(want):].split()[0]) >= publishers
-                      for line in self.lines):
+        while not any(line.startswith(want) and int(line[len(want) :].split()[0]) >= publishers for line in self.lines):
             if time.monotonic() > deadline:
-                raise TimeoutError(f"the recorder of {self.namespace} matched no {publishers} writer(s) of {relative} "
-                                   f"in {timeout} s (it said: {self.lines})")
+                raise TimeoutError(
+                    f"the recorder of {self.namespace} matched no {publishers} writer(s) of {relative} "
+                    f"in {timeout} s (it said: {self.lines})"
+                )
             time.sleep(0.05)
 
     def stop(self, timeout: float = 30.0):
@@ -289,8 +316,9 @@ def sorting_line_recorder(sorting_line_graph, tmp_path):
     :class:`Recording` of the test's line (``out`` default: ``<tmp_path>/recorded``)."""
     recordings: list[Recording] = []
 
-    def start(out: str | Path | None = None, namespace: str | None = None, topics: list[str] | None = None,
-              wait: float = 10.0) -> Recording:
+    def start(
+        out: str | Path | None = None, namespace: str | None = None, topics: list[str] | None = None, wait: float = 10.0
+    ) -> Recording:
         path = Path(out) if out is not None else tmp_path / f"recorded{len(recordings) or ''}"
         recording = Recording(namespace or sorting_line_graph.namespace, path, topics, wait)
         recordings.append(recording)

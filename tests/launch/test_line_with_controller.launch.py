@@ -44,21 +44,32 @@ def _seconds(stamp) -> int:
 @pytest.mark.launch_test
 def generate_test_description():
     node = launch_ros.actions.Node(
-        executable=_executable("SORTING_LINE_BIN", "sorting_line")[0], name="sorting_line", namespace=NAMESPACE,
-        arguments=["node", "--mode", "realtime", "--rate", "10", "--setup", "D", "--seed", "5"], output="screen",
-        sigterm_timeout="10")
+        executable=_executable("SORTING_LINE_BIN", "sorting_line")[0],
+        name="sorting_line",
+        namespace=NAMESPACE,
+        arguments=["node", "--mode", "realtime", "--rate", "10", "--setup", "D", "--seed", "5"],
+        output="screen",
+        sigterm_timeout="10",
+    )
     controller_command = _executable("SORTING_LINE_CONTROLLER", "sorting-line-controller")
     controller = launch.actions.ExecuteProcess(
         cmd=[*controller_command, "--setup", "D", "--variant", "basic", "--ros-args", "-r", f"__ns:={NAMESPACE}"],
-        name="controller", output="screen", sigterm_timeout="10")
+        name="controller",
+        output="screen",
+        sigterm_timeout="10",
+    )
     description = launch.LaunchDescription([node, controller, launch_testing.actions.ReadyToTest()])
     return description, {"node": node, "controller": controller}
 
 
 class TestTheLineRuns(unittest.TestCase):
     def test_sensors_state_and_commands_flow(self):
-        topics = [(f"{NAMESPACE}/input", MaterialInput), (f"{NAMESPACE}/belt/occupancy", BeltOccupancy),
-                  (f"{NAMESPACE}/state", LineState), (f"{NAMESPACE}/cmd/speed", SpeedCommand)]
+        topics = [
+            (f"{NAMESPACE}/input", MaterialInput),
+            (f"{NAMESPACE}/belt/occupancy", BeltOccupancy),
+            (f"{NAMESPACE}/state", LineState),
+            (f"{NAMESPACE}/cmd/speed", SpeedCommand),
+        ]
         with WaitForTopics(topics, timeout=60.0, messages_received_buffer_length=50) as wait:
             commands = wait.received_messages(f"{NAMESPACE}/cmd/speed")
             self.assertTrue(all(round(c.speed, 1) in SPEEDS for c in commands), [c.speed for c in commands])
@@ -69,16 +80,21 @@ class TestTheLineRuns(unittest.TestCase):
         # says so. The controller changes speeds often (rule-based, seasonal input): seen applied,
         # they cannot be the node's own.
         state, command = f"{NAMESPACE}/state", f"{NAMESPACE}/cmd/speed"
-        with WaitForTopics([(state, LineState), (command, SpeedCommand)], timeout=60.0,
-                           messages_received_buffer_length=200) as wait:
+        with WaitForTopics(
+            [(state, LineState), (command, SpeedCommand)], timeout=60.0, messages_received_buffer_length=200
+        ) as wait:
             time.sleep(3.0)  # ~30 ticks at 10 ticks/s
             states, commands = wait.received_messages(state), wait.received_messages(command)
         sent = {_seconds(c.header.stamp): round(c.speed, 1) for c in commands}
-        applied = {round(s.speed, 1) for s in states
-                   if round(s.speed, 1) in [sent.get(_seconds(s.header.stamp) - k) for k in (1, 2, 3)]}
+        applied = {
+            round(s.speed, 1)
+            for s in states
+            if round(s.speed, 1) in [sent.get(_seconds(s.header.stamp) - k) for k in (1, 2, 3)]
+        }
         seen = [(_seconds(s.header.stamp), round(s.speed, 1)) for s in states][:20]
-        self.assertGreater(len(applied), 1, f"speeds applied {applied}; sent {sorted(sent.items())[:20]}; "
-                                            f"states (stamp, speed) {seen}")
+        self.assertGreater(
+            len(applied), 1, f"speeds applied {applied}; sent {sorted(sent.items())[:20]}; states (stamp, speed) {seen}"
+        )
 
     def test_the_node_says_it_is_up(self, proc_output, node):
         proc_output.assertWaitFor("up on ROS_DOMAIN_ID", process=node, timeout=30, stream="stderr")

@@ -56,15 +56,20 @@ class BagProcess(h.ScriptProcess):
                 time.sleep(0.05)
 
 
-def wait_for_command_writers(session: h.RosSession, recorder: BagProcess, namespace: str, variant: str,
-                             context=lambda: "", writers: int = 2) -> None:
+def wait_for_command_writers(
+    session: h.RosSession, recorder: BagProcess, namespace: str, variant: str, context=lambda: "", writers: int = 2
+) -> None:
     """Waits until the recorder records and has matched ``writers`` writers on each command topic
     (by default two: the LineClient's and the controller's). Discovery between two rclpy
     processes can take seconds, and a command sent before it is not in the bag."""
     recorder.wait_for_output("recording", 20.0, session)
     for rel in ["cmd/speed"] + (["cmd/sort_mode"] if variant == "advanced" else []):
-        session.spin_until(lambda: f"matched {namespace}/{rel}: {writers} publisher(s)" in recorder.log(), 20.0,
-                           f"the recorder to match {writers} writer(s) of {rel}", context)
+        session.spin_until(
+            lambda: f"matched {namespace}/{rel}: {writers} publisher(s)" in recorder.log(),
+            20.0,
+            f"the recorder to match {writers} writer(s) of {rel}",
+            context,
+        )
 
 
 def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda: "") -> None:
@@ -86,8 +91,12 @@ def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda:
                 print(f"attempt {attempt}: nobody answered the tick of the reset; resetting again", file=sys.stderr)
         else:
             raise AssertionError(f"the controller never answered a reset's tick\n{context()}")
-        session.spin_until(lambda: any(s.episode == episode and s.truncated for s in client.msgs["state"]), 30.0,
-                           f"{client.ns}: episode {episode} driven to its end", context)
+        session.spin_until(
+            lambda: any(s.episode == episode and s.truncated for s in client.msgs["state"]),
+            30.0,
+            f"{client.ns}: episode {episode} driven to its end",
+            context,
+        )
     session.spin_for(0.3)  # the controller's answer to the last (truncated) tick
 
 
@@ -96,15 +105,39 @@ def record_golden(name: str, out: Path, session: h.RosSession, workdir: Path, na
     from test_controller import ControllerProcess  # the controller as the controller tests run it
 
     spec = GOLDEN[name]
-    node = h.NodeProcess([*h.SETUP_FLAGS[spec["setup"]], "--variant", spec["variant"], "--seed", spec["seed"],
-                          "--max-steps", MAX_STEPS, "--ros-args", "-r", f"__ns:={namespace}"],
-                         workdir / f"node_{name}.log")
+    node = h.NodeProcess(
+        [
+            *h.SETUP_FLAGS[spec["setup"]],
+            "--variant",
+            spec["variant"],
+            "--seed",
+            spec["seed"],
+            "--max-steps",
+            MAX_STEPS,
+            "--ros-args",
+            "-r",
+            f"__ns:={namespace}",
+        ],
+        workdir / f"node_{name}.log",
+    )
     recorder = controller = None
     client = LineClient(session, namespace, spec["variant"], node_proc=node)
     try:
         client.wait_connected()
-        controller = ControllerProcess(workdir, name, ["--namespace", namespace, "--setup", spec["setup"],
-                                                        "--variant", spec["variant"], "--agent", spec["agent"]])
+        controller = ControllerProcess(
+            workdir,
+            name,
+            [
+                "--namespace",
+                namespace,
+                "--setup",
+                spec["setup"],
+                "--variant",
+                spec["variant"],
+                "--agent",
+                spec["agent"],
+            ],
+        )
         recorder = BagProcess(["record", "--namespace", namespace, "-o", out], workdir / f"record_{name}.log")
 
         def context():

@@ -36,8 +36,10 @@ def pytest_sessionstart(session):
 
 def pytest_report_header(config):
     env = h.ros_environment()
-    return [f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items()),
-            f"ros2 CLI: {ros2_cli.describe()}"]
+    return [
+        f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items()),
+        f"ros2 CLI: {ros2_cli.describe()}",
+    ]
 
 
 @pytest.fixture(scope="session")

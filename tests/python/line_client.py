@@ -31,9 +31,18 @@ class LineClient:
 
     TOPICS = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
 
-    def __init__(self, session: RosSession, namespace: str, variant: str = "basic", tick_period: float = 1.0,
-                 node=None, node_proc: NodeProcess | None = None, topics: list[str] | None = None,
-                 mode_topic: bool = False, depth: int = 10):
+    def __init__(
+        self,
+        session: RosSession,
+        namespace: str,
+        variant: str = "basic",
+        tick_period: float = 1.0,
+        node=None,
+        node_proc: NodeProcess | None = None,
+        topics: list[str] | None = None,
+        mode_topic: bool = False,
+        depth: int = 10,
+    ):
         from diagnostic_msgs.msg import DiagnosticArray
         from sorting_line_interfaces.msg import (
             BeltOccupancy,
@@ -60,19 +69,26 @@ class LineClient:
         # this participant's readers (see wait_connected); (receive time, values) per status.
         self.diagnostics: list[tuple[float, dict[str, str]]] = []
         self.diag_sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        types = {"input": MaterialInput, "belt/occupancy": BeltOccupancy, "sensors/ratio": MaterialRatio,
-                 "state": LineState, "events/reset": ResetEvent}
+        types = {
+            "input": MaterialInput,
+            "belt/occupancy": BeltOccupancy,
+            "sensors/ratio": MaterialRatio,
+            "state": LineState,
+            "events/reset": ResetEvent,
+        }
         wanted = topics if topics is not None else self.TOPICS
         if variant != "advanced":
             wanted = [t for t in wanted if t != "sensors/ratio"]
         # depth: the node's QoS is keep-last 10; a deeper reader queue lets a stalled client (a busy
         # machine) catch up on a realtime stream without losing samples.
-        self.subs = {t: self.node.create_subscription(types[t], self.name(t), self._recorder(t), depth)
-                     for t in wanted}
+        self.subs = {t: self.node.create_subscription(types[t], self.name(t), self._recorder(t), depth) for t in wanted}
         self.speed_pub = self.node.create_publisher(SpeedCommand, self.name("cmd/speed"), 10)
         # The basic line has no cmd/sort_mode: publish it there only on request (mode_topic=True).
-        self.mode_pub = (self.node.create_publisher(SortModeCommand, self.name("cmd/sort_mode"), 10)
-                         if variant == "advanced" or mode_topic else None)
+        self.mode_pub = (
+            self.node.create_publisher(SortModeCommand, self.name("cmd/sort_mode"), 10)
+            if variant == "advanced" or mode_topic
+            else None
+        )
         self.reset_client = self.node.create_client(ResetLine, self.name("reset"))
         self._SpeedCommand, self._SortModeCommand, self._ResetLine = SpeedCommand, SortModeCommand, ResetLine
 
@@ -112,9 +128,11 @@ class LineClient:
         matched["cmd/speed (subscribers)"] = self.speed_pub.get_subscription_count()
         if self.mode_pub is not None:
             matched["cmd/sort_mode (subscribers)"] = self.mode_pub.get_subscription_count()
-        lines = [f"line {self.ns}: waiting at stamp {show_ns(self.stamp) if self.stamp is not None else '?'}; "
-                 f"last states seen: {states or 'none'}; matched endpoints: {matched}; "
-                 f"nodes in the graph: {sorted(self.node.get_node_names_and_namespaces())}"]
+        lines = [
+            f"line {self.ns}: waiting at stamp {show_ns(self.stamp) if self.stamp is not None else '?'}; "
+            f"last states seen: {states or 'none'}; matched endpoints: {matched}; "
+            f"nodes in the graph: {sorted(self.node.get_node_names_and_namespaces())}"
+        ]
         if self.node_proc is not None:
             lines.append(self.node_proc.describe())
         return "\n".join(lines)
@@ -134,23 +152,38 @@ class LineClient:
         A match count alone proves nothing (stale endpoints linger ~50 s after a node exits), and
         the node's side may lag ours: a `reset` reply sent before the node has matched our reply
         reader is lost for good (volatile). The first reset() reply is the proof the node serves."""
+
         def matched():
             ok = self.speed_pub.get_subscription_count() >= 1 and self.subs["state"].get_publisher_count() >= 1
             if self.variant == "advanced":
                 ok = ok and self.mode_pub.get_subscription_count() >= 1
             return ok and all(s.get_publisher_count() >= 1 for s in self.subs.values())
 
-        self.session.spin_until(matched, timeout, f"{self.ns}: command publishers and topic subscriptions to match",
-                                self.context, abort=self.node_gone)
-        self.session.spin_until(lambda: self.diagnostics, timeout, f"/diagnostics: a status of {self.ns}",
-                                self.context, abort=self.node_gone)
+        self.session.spin_until(
+            matched,
+            timeout,
+            f"{self.ns}: command publishers and topic subscriptions to match",
+            self.context,
+            abort=self.node_gone,
+        )
+        self.session.spin_until(
+            lambda: self.diagnostics,
+            timeout,
+            f"/diagnostics: a status of {self.ns}",
+            self.context,
+            abort=self.node_gone,
+        )
 
     def wait_message(self, topic: str, stamp: int, timeout: float = 5.0):
         """The first message on `topic` stamped `stamp` (ns)."""
         found = self.by_stamp[topic]
-        return self.session.spin_until(lambda: found.get(stamp, [None])[0], timeout,
-                                       f"{self.name(topic)} for the tick stamped {show_ns(stamp)}", self.context,
-                                       abort=self.node_gone)
+        return self.session.spin_until(
+            lambda: found.get(stamp, [None])[0],
+            timeout,
+            f"{self.name(topic)} for the tick stamped {show_ns(stamp)}",
+            self.context,
+            abort=self.node_gone,
+        )
 
     def wait_state(self, stamp: int, timeout: float = 5.0):
         return self.wait_message("state", stamp, timeout)
@@ -176,9 +209,14 @@ class LineClient:
         """The reply of a reset whose reply was lost, from its events/reset and the new tick's state."""
         state = self.wait_state(stamp_ns(event.header.stamp))
         return self._ResetLine.Response(
-            success=True, seed=event.seed, episode=event.episode, stamp=event.header.stamp,
-            quantity=state.observation_quantity, category=state.observation_category,
-            message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}")
+            success=True,
+            seed=event.seed,
+            episode=event.episode,
+            stamp=event.header.stamp,
+            quantity=state.observation_quantity,
+            category=state.observation_category,
+            message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}",
+        )
 
     def reset(self, seed: int | None = None, timeout: float = 10.0, wait_tick: bool = True):
         """Calls `reset` and returns its response; waits for the new tick's state.
@@ -198,8 +236,9 @@ class LineClient:
             called = time.monotonic()
             future = self.reset_client.call_async(request)
             try:
-                response = self.session.wait_future(future, 3.0, f"a reply from {what} (attempt {attempt}/3)",
-                                                    self.context, self.node_gone)
+                response = self.session.wait_future(
+                    future, 3.0, f"a reply from {what} (attempt {attempt}/3)", self.context, self.node_gone
+                )
                 break
             except WaitTimeout:
                 pass
@@ -210,14 +249,18 @@ class LineClient:
                 response = future.result()
                 break
             self.reset_client.remove_pending_request(future)
-            print(f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
-                  file=sys.stderr)
+            print(
+                f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
+                file=sys.stderr,
+            )
             if found == "event":
                 response = self._rebuilt_reset_response(self.msgs["events/reset"][events_before])
                 break
             if found == "diag-reset":
-                raise WaitTimeout(f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
-                                  f"events/reset nor the state arrived\n{self.context()}")
+                raise WaitTimeout(
+                    f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
+                    f"events/reset nor the state arrived\n{self.context()}"
+                )
             # "diag-same": the request never reached the node; calling again is safe.
         if response is None:
             raise WaitTimeout(f"no reply from {what} after 3 attempts\n{self.context()}")

@@ -30,9 +30,17 @@ STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 
 def _qos(depth: int, durability: QosDurability) -> Qos:
     zero = QosTime(0, 0)
-    return Qos(history=QosHistory.KEEP_LAST, depth=depth, reliability=QosReliability.RELIABLE, durability=durability,
-               deadline=zero, lifespan=zero, liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=zero,
-               avoid_ros_namespace_conventions=False)
+    return Qos(
+        history=QosHistory.KEEP_LAST,
+        depth=depth,
+        reliability=QosReliability.RELIABLE,
+        durability=durability,
+        deadline=zero,
+        lifespan=zero,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=zero,
+        avoid_ros_namespace_conventions=False,
+    )
 
 
 def user_typestore():
@@ -52,7 +60,8 @@ def diagnostics(store, namespace: str, stamp_ns: int, options: dict):
     kv = store.types["diagnostic_msgs/msg/KeyValue"]
     values = [kv(key=k, value=str(options[k])) for k in ("seed", "variant", "input", "mode")]
     status = store.types["diagnostic_msgs/msg/DiagnosticStatus"](
-        level=0, name=f"sorting_line: {namespace}", message="running", hardware_id="", values=values)
+        level=0, name=f"sorting_line: {namespace}", message="running", hardware_id="", values=values
+    )
     header = store.types["std_msgs/msg/Header"](stamp=_time(store, stamp_ns), frame_id="")
     return store.types["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[status])
 
@@ -65,47 +74,79 @@ def parameter_event(store, node: str, stamp_ns: int, parameters: dict):
         kind = {bool: 1, int: 2, float: 3, str: 4}[type(v)]
         fields = {"bool_value": False, "integer_value": 0, "double_value": 0.0, "string_value": ""}
         fields[{1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value"}[kind]] = v
-        empty = {f"{name}_array_value": np.array([], dtype=dtype) for name, dtype in
-                 (("byte", np.uint8), ("bool", np.bool_), ("integer", np.int64), ("double", np.float64))}
+        empty = {
+            f"{name}_array_value": np.array([], dtype=dtype)
+            for name, dtype in (("byte", np.uint8), ("bool", np.bool_), ("integer", np.int64), ("double", np.float64))
+        }
         return value_type(type=kind, string_array_value=[], **empty, **fields)
 
     parameter = store.types["rcl_interfaces/msg/Parameter"]
     return store.types["rcl_interfaces/msg/ParameterEvent"](
-        stamp=_time(store, stamp_ns), node=node, new_parameters=[parameter(name=k, value=value(v))
-                                                                 for k, v in parameters.items()],
-        changed_parameters=[], deleted_parameters=[])
+        stamp=_time(store, stamp_ns),
+        node=node,
+        new_parameters=[parameter(name=k, value=value(v)) for k, v in parameters.items()],
+        changed_parameters=[],
+        deleted_parameters=[],
+    )
 
 
 def _extras(store, namespace: str, t0: int, options: dict, node_parameters: dict | None) -> list:
     """(topic, msgtype, log_time, message, qos) of what else a `ros2 bag record -a` catches."""
-    log = store.types["rcl_interfaces/msg/Log"](stamp=_time(store, t0), level=20, name="sorting_line_controller",
-                                                msg="controlling the line", file="controller.py", function="main",
-                                                line=1)
+    log = store.types["rcl_interfaces/msg/Log"](
+        stamp=_time(store, t0),
+        level=20,
+        name="sorting_line_controller",
+        msg="controlling the line",
+        file="controller.py",
+        function="main",
+        line=1,
+    )
     cell = store.types[CELL_STATUS](cell="cell_3", temperature=41.5)
     volatile, local = _qos(1000, QosDurability.VOLATILE), _qos(1000, QosDurability.TRANSIENT_LOCAL)
-    extras = [("/rosout", "rcl_interfaces/msg/Log", t0 - 3_000_000, log, local),
-              ("/parameter_events", "rcl_interfaces/msg/ParameterEvent", t0 - 2_000_000,
-               parameter_event(store, f"{namespace}/sorting_line_controller", t0, {"use_sim_time": False,
-                                                                                  "variant": "basic"}), volatile),
-              ("/factory/cell_status", CELL_STATUS, t0 - 1_000_000, cell, NODE_QOS),
-              ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", t0 - 500_000,
-               diagnostics(store, namespace, 0, options), NODE_QOS)]
+    extras = [
+        ("/rosout", "rcl_interfaces/msg/Log", t0 - 3_000_000, log, local),
+        (
+            "/parameter_events",
+            "rcl_interfaces/msg/ParameterEvent",
+            t0 - 2_000_000,
+            parameter_event(
+                store, f"{namespace}/sorting_line_controller", t0, {"use_sim_time": False, "variant": "basic"}
+            ),
+            volatile,
+        ),
+        ("/factory/cell_status", CELL_STATUS, t0 - 1_000_000, cell, NODE_QOS),
+        (
+            "/diagnostics",
+            "diagnostic_msgs/msg/DiagnosticArray",
+            t0 - 500_000,
+            diagnostics(store, namespace, 0, options),
+            NODE_QOS,
+        ),
+    ]
     if node_parameters is not None:
         node = f"{namespace.rsplit('/', 1)[0] or ''}/sorting_line"
-        extras.append(("/parameter_events", "rcl_interfaces/msg/ParameterEvent", t0 - 4_000_000,
-                       parameter_event(store, node, t0, node_parameters), volatile))
+        extras.append(
+            (
+                "/parameter_events",
+                "rcl_interfaces/msg/ParameterEvent",
+                t0 - 4_000_000,
+                parameter_event(store, node, t0, node_parameters),
+                volatile,
+            )
+        )
     return extras
 
 
-def write_ros2_bag(golden: Path, out: Path, storage: str, namespace: str, options: dict,
-                   node_parameters: dict | None = None) -> Path:
+def write_ros2_bag(
+    golden: Path, out: Path, storage: str, namespace: str, options: dict, node_parameters: dict | None = None
+) -> Path:
     """The golden bag ``golden`` as `ros2 bag record -a` would have written it with its line in
     ``namespace``. ``options``: the line's variant, input, seed and mode for its /diagnostics;
     ``node_parameters``: the node's parameters on /parameter_events too (None: not caught)."""
     bag = open_bag(golden)
     old = bag.info.namespace
     store = user_typestore()
-    rename = {t: (namespace + t[len(old):] if t.startswith(old + "/") else t) for t in bag.types}
+    rename = {t: (namespace + t[len(old) :] if t.startswith(old + "/") else t) for t in bag.types}
     messages = [(rename[m.topic], m.msgtype, m.log_time, m.data, NODE_QOS) for m in bag.messages]
     t0 = messages[0][2]
     for topic, msgtype, log_time, message, qos in _extras(store, namespace, t0, options, node_parameters):

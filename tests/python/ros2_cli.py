@@ -47,8 +47,12 @@ def shared_dir() -> Path | None:
         candidates.append(Path(os.environ["SORTING_LINE_SHARED"]))
     candidates.append(ROOT.parent / "shared")
     try:  # a git worktree: shared/ sits beside the main checkout
-        common = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--path-format=absolute", "--git-common-dir"],
-                                capture_output=True, text=True, timeout=10).stdout.strip()
+        common = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--path-format=absolute", "--git-common-dir"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
         if common:
             candidates.append(Path(common).parent.parent / "shared")
     except (OSError, subprocess.TimeoutExpired):
@@ -92,15 +96,28 @@ def build(tools: Path, log=sys.stdout) -> Path:
         t0 = time.monotonic()
         env = dict(os.environ, ROS2CLI_VENV=str(venv), PYTHON=shutil.which("python3.11") or sys.executable)
         # Nothing of the project's environment may leak into the build (it makes a venv of its own).
-        for k in ["VIRTUAL_ENV", "PYTHONPATH", "AMENT_PREFIX_PATH", "CMAKE_PREFIX_PATH", "LD_LIBRARY_PATH",
-                  "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "PYTHONHOME"]:
+        for k in [
+            "VIRTUAL_ENV",
+            "PYTHONPATH",
+            "AMENT_PREFIX_PATH",
+            "CMAKE_PREFIX_PATH",
+            "LD_LIBRARY_PATH",
+            "_ROS_WHEELS_BOOTSTRAP_COMPLETE",
+            "PYTHONHOME",
+        ]:
             env.pop(k, None)
-        env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep)
-                                      if not p.startswith(str(PROJECT_VENV)))
+        env["PATH"] = os.pathsep.join(
+            p for p in env.get("PATH", "").split(os.pathsep) if not p.startswith(str(PROJECT_VENV))
+        )
         with open(build_log, "wb") as out:
             try:
-                r = subprocess.run(["bash", str(tools / "make_ros2cli_venv.sh")], stdout=out, stderr=subprocess.STDOUT,
-                                   env=env, timeout=BUILD_TIMEOUT)
+                r = subprocess.run(
+                    ["bash", str(tools / "make_ros2cli_venv.sh")],
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                    env=env,
+                    timeout=BUILD_TIMEOUT,
+                )
                 code = r.returncode
             except subprocess.TimeoutExpired:
                 code = f"timeout after {BUILD_TIMEOUT:.0f} s"
@@ -141,21 +158,33 @@ class Ros2Cli:
     def argv(self, *args: str) -> list[str]:
         return [self.executable, *[str(a) for a in args]]
 
-    def run(self, *args: str, timeout: float = 30.0, check: bool = True, input: str | None = None
-            ) -> subprocess.CompletedProcess:
+    def run(
+        self, *args: str, timeout: float = 30.0, check: bool = True, input: str | None = None
+    ) -> subprocess.CompletedProcess:
         """Runs `ros2 ARGS` (bounded); with `check`, a non-zero exit fails naming the command and output."""
         argv = self.argv(*args)
         try:
-            r = subprocess.run(argv, capture_output=True, text=True, env=self.env, timeout=timeout, input=input,
-                               stdin=None if input is not None else subprocess.DEVNULL)
+            r = subprocess.run(
+                argv,
+                capture_output=True,
+                text=True,
+                env=self.env,
+                timeout=timeout,
+                input=input,
+                stdin=None if input is not None else subprocess.DEVNULL,
+            )
         except subprocess.TimeoutExpired as e:
             out = (e.stdout or b"").decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
             err = (e.stderr or b"").decode(errors="replace") if isinstance(e.stderr, bytes) else (e.stderr or "")
-            raise AssertionError(f"`ros2 {' '.join(argv[1:])}` did not finish within {timeout} s\n"
-                                 f"--- stdout ---\n{out}\n--- stderr ---\n{err}") from None
+            raise AssertionError(
+                f"`ros2 {' '.join(argv[1:])}` did not finish within {timeout} s\n"
+                f"--- stdout ---\n{out}\n--- stderr ---\n{err}"
+            ) from None
         if check and r.returncode != 0:
-            raise AssertionError(f"`ros2 {' '.join(argv[1:])}` exited with {r.returncode}\n"
-                                 f"--- stdout ---\n{r.stdout}\n--- stderr ---\n{r.stderr}")
+            raise AssertionError(
+                f"`ros2 {' '.join(argv[1:])}` exited with {r.returncode}\n"
+                f"--- stdout ---\n{r.stdout}\n--- stderr ---\n{r.stderr}"
+            )
         return r
 
 
@@ -186,18 +215,23 @@ def locate(overlay_dir: Path, log_dir: Path, interfaces=INTERFACES) -> tuple[Ros
     else:
         tools = tool_dir()
         if tools is None:
-            return None, ("no ROS 2 CLI: `ros2` is not on PATH and shared/tools/ros2cli was not found "
-                          f"(looked in $SORTING_LINE_SHARED, {ROOT.parent / 'shared'})")
+            return None, (
+                "no ROS 2 CLI: `ros2` is not on PATH and shared/tools/ros2cli was not found "
+                f"(looked in $SORTING_LINE_SHARED, {ROOT.parent / 'shared'})"
+            )
         venv = venv_dir(tools)
         if not built(venv):
-            return None, (f"no ROS 2 CLI: the venv {venv} from {tools} is not built; build it outside the test "
-                          f"network namespace with `python {Path(__file__).relative_to(ROOT)} --build` "
-                          "(launch_scripts/test.sh does)")
+            return None, (
+                f"no ROS 2 CLI: the venv {venv} from {tools} is not built; build it outside the test "
+                f"network namespace with `python {Path(__file__).relative_to(ROOT)} --build` "
+                "(launch_scripts/test.sh does)"
+            )
         cli, origin = Ros2Cli(str(venv / "bin" / "ros2"), _venv_env(venv)), f"venv {venv} built from {tools}"
     overlay = interfaces_overlay(overlay_dir, interfaces)
     env = cli.env
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(overlay / "lib/python3.11/site-packages"),
-                                                      env.get("PYTHONPATH")]))
+    env["PYTHONPATH"] = os.pathsep.join(
+        filter(None, [str(overlay / "lib/python3.11/site-packages"), env.get("PYTHONPATH")])
+    )
     env["AMENT_PREFIX_PATH"] = os.pathsep.join(filter(None, [str(overlay), env.get("AMENT_PREFIX_PATH")]))
     env["LD_LIBRARY_PATH"] = os.pathsep.join(filter(None, [str(overlay / "lib"), env.get("LD_LIBRARY_PATH")]))
     env["ROS_LOG_DIR"] = str(log_dir)
@@ -205,8 +239,12 @@ def locate(overlay_dir: Path, log_dir: Path, interfaces=INTERFACES) -> tuple[Ros
 
 
 def _ros2_on_path() -> str | None:
-    return shutil.which("ros2", path=os.pathsep.join(p for p in os.environ.get("PATH", "").split(os.pathsep)
-                                                    if p and not p.startswith(str(PROJECT_VENV))))
+    return shutil.which(
+        "ros2",
+        path=os.pathsep.join(
+            p for p in os.environ.get("PATH", "").split(os.pathsep) if p and not p.startswith(str(PROJECT_VENV))
+        ),
+    )
 
 
 def describe() -> str:
@@ -238,8 +276,12 @@ def run_cli(args: list[str]) -> int:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--build", action="store_true", help="build the cached venv unless ros2 is on PATH")
-    parser.add_argument("--run", nargs=argparse.REMAINDER, metavar="ARGS",
-                        help="run `ros2 ARGS` with the project's interfaces (after --build), e.g. --run topic list")
+    parser.add_argument(
+        "--run",
+        nargs=argparse.REMAINDER,
+        metavar="ARGS",
+        help="run `ros2 ARGS` with the project's interfaces (after --build), e.g. --run topic list",
+    )
     args = parser.parse_args()
     if args.run is not None:
         return run_cli(args.run)

@@ -129,6 +129,7 @@ def run_isolated(script: str, mark: str = "SORTING_LINE_IN_NETNS") -> None:
 def machine_conditions(steal_window: float = 0.5) -> str:
     """Load average and the CPU time the hypervisor took from this VM (steal, sampled over
     ``steal_window`` s), printed beside benchmark figures: they are only comparable at low steal."""
+
     def sample():
         fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
         return sum(fields), fields[7]
@@ -245,7 +246,8 @@ class ScriptProcess:
             script = Path(shutil.which(name) or script)
         assert script.is_file(), (
             f"console script {script} missing: reinstall the bridge "
-            "(.venv/bin/pip install --no-deps --no-build-isolation -e bridge)")
+            "(.venv/bin/pip install --no-deps --no-build-isolation -e bridge)"
+        )
         self.label = label or name
         self.log_path = Path(log_path)
         self.argv = [str(script), *[str(a) for a in args]]
@@ -354,33 +356,68 @@ def decode_action(variant: str, action: int) -> tuple[float, int | None]:
 
 def trace_reset_view(entry: dict) -> dict:
     r = entry["reset"]
-    return {"seed": r["seed"], "episode": r["episode"], "observation_quantity": r["observation"]["quantity"],
-            "observation_category": CATEGORIES[r["observation"]["category"]]}
+    return {
+        "seed": r["seed"],
+        "episode": r["episode"],
+        "observation_quantity": r["observation"]["quantity"],
+        "observation_category": CATEGORIES[r["observation"]["category"]],
+    }
 
 
 def state_reset_view(state) -> dict:
-    return {"seed": state.seed, "episode": state.episode, "observation_quantity": state.observation_quantity,
-            "observation_category": state.observation_category}
+    return {
+        "seed": state.seed,
+        "episode": state.episode,
+        "observation_quantity": state.observation_quantity,
+        "observation_category": state.observation_category,
+    }
 
 
 def trace_step_view(entry: dict) -> dict:
     s, c = entry["step"], entry["containers"]
     return {
-        "episode": entry["episode"], "step": s["step"], "speed_index": s["action"]["speed_index"],
-        "mode": MODES[s["action"]["mode"]], "occupancy": s["occupancy"], "accuracy": s["accuracy"],
-        "reward": s["reward"], "cumulative_reward": entry["cumulative_reward"], "purity": entry["purity"],
-        "container_a": c["a"], "container_a_false": c["a_false"], "container_b": c["b"],
-        "container_b_false": c["b_false"], "speed_changes": entry["speed_changes"],
+        "episode": entry["episode"],
+        "step": s["step"],
+        "speed_index": s["action"]["speed_index"],
+        "mode": MODES[s["action"]["mode"]],
+        "occupancy": s["occupancy"],
+        "accuracy": s["accuracy"],
+        "reward": s["reward"],
+        "cumulative_reward": entry["cumulative_reward"],
+        "purity": entry["purity"],
+        "container_a": c["a"],
+        "container_a_false": c["a_false"],
+        "container_b": c["b"],
+        "container_b_false": c["b_false"],
+        "speed_changes": entry["speed_changes"],
         "observation_quantity": s["observation"]["quantity"],
         "observation_category": CATEGORIES[s["observation"]["category"]],
-        "terminated": s["terminated"], "truncated": s["truncated"],
+        "terminated": s["terminated"],
+        "truncated": s["truncated"],
     }
 
 
 def state_step_view(state) -> dict:
-    keys = ["episode", "step", "speed_index", "mode", "occupancy", "accuracy", "reward", "cumulative_reward",
-            "purity", "container_a", "container_a_false", "container_b", "container_b_false", "speed_changes",
-            "observation_quantity", "observation_category", "terminated", "truncated"]
+    keys = [
+        "episode",
+        "step",
+        "speed_index",
+        "mode",
+        "occupancy",
+        "accuracy",
+        "reward",
+        "cumulative_reward",
+        "purity",
+        "container_a",
+        "container_a_false",
+        "container_b",
+        "container_b_false",
+        "speed_changes",
+        "observation_quantity",
+        "observation_category",
+        "terminated",
+        "truncated",
+    ]
     return {k: getattr(state, k) for k in keys}
 
 
@@ -427,9 +464,15 @@ class RosSession:
         self.executor.remove_node(node)
         node.destroy_node()
 
-    def spin_until(self, condition: Callable[[], Any], timeout: float, what: str,
-                   context: Callable[[], str] = lambda: "", step: float = 0.02,
-                   abort: Callable[[], str | None] = lambda: None):
+    def spin_until(
+        self,
+        condition: Callable[[], Any],
+        timeout: float,
+        what: str,
+        context: Callable[[], str] = lambda: "",
+        step: float = 0.02,
+        abort: Callable[[], str | None] = lambda: None,
+    ):
         """Spins until `condition()` is truthy (and returns it); raises WaitTimeout naming `what`
         after `timeout` s, or at once when `abort()` says why waiting is pointless."""
         deadline = time.monotonic() + timeout
@@ -454,25 +497,43 @@ class RosSession:
         while (remaining := deadline - time.monotonic()) > 0:
             self.executor.spin_once(timeout_sec=min(0.02, remaining))
 
-    def wait_future(self, future, timeout: float, what: str, context: Callable[[], str] = lambda: "",
-                    abort: Callable[[], str | None] = lambda: None):
+    def wait_future(
+        self,
+        future,
+        timeout: float,
+        what: str,
+        context: Callable[[], str] = lambda: "",
+        abort: Callable[[], str | None] = lambda: None,
+    ):
         self.spin_until(future.done, timeout, what, context, abort=abort)
         return future.result()
 
-    def call_service(self, client, request, what: str, wait: float = 10.0, attempt_timeout: float = 3.0,
-                     attempts: int = 3, context: Callable[[], str] = lambda: "",
-                     abort: Callable[[], str | None] = lambda: None):
+    def call_service(
+        self,
+        client,
+        request,
+        what: str,
+        wait: float = 10.0,
+        attempt_timeout: float = 3.0,
+        attempts: int = 3,
+        context: Callable[[], str] = lambda: "",
+        abort: Callable[[], str | None] = lambda: None,
+    ):
         """Waits (bounded) for the service, then calls it, retrying a call that got no reply."""
         self.spin_until(client.service_is_ready, wait, f"service {what} to be available", context, abort=abort)
         for attempt in range(1, attempts + 1):
             future = client.call_async(request)
             try:
-                return self.wait_future(future, attempt_timeout, f"a reply from {what} (attempt {attempt}/{attempts})",
-                                        context, abort)
+                return self.wait_future(
+                    future, attempt_timeout, f"a reply from {what} (attempt {attempt}/{attempts})", context, abort
+                )
             except WaitTimeout:
                 client.remove_pending_request(future)
-                print(f"ros_harness: no reply from {what} within {attempt_timeout} s (attempt {attempt}/{attempts})\n"
-                      f"{context()}", file=sys.stderr)
+                print(
+                    f"ros_harness: no reply from {what} within {attempt_timeout} s (attempt {attempt}/{attempts})\n"
+                    f"{context()}",
+                    file=sys.stderr,
+                )
                 if attempt == attempts:
                     raise
         raise AssertionError("unreachable")
@@ -493,9 +554,11 @@ class TopicRecorder:
         self.session, self.topic, self.msgs = session, topic, []
         self.sub = node.create_subscription(msg_type, topic, self.msgs.append, qos)
 
-    def wait_for(self, predicate: Callable[[Any], bool], timeout: float, what: str,
-                 context: Callable[[], str] = lambda: ""):
+    def wait_for(
+        self, predicate: Callable[[Any], bool], timeout: float, what: str, context: Callable[[], str] = lambda: ""
+    ):
         """The first recorded message (old or new) for which `predicate` holds."""
+
         def found():
             return next((m for m in self.msgs if predicate(m)), None)
 

@@ -26,8 +26,12 @@ from std_msgs.msg import Header
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.schema import stamp_ns
 
-QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
-                 history=HistoryPolicy.KEEP_LAST)
+QOS = QoSProfile(
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+    history=HistoryPolicy.KEEP_LAST,
+)
 
 
 def _pairs(items: list[str], kind) -> dict[int, object]:
@@ -76,8 +80,9 @@ def main() -> int:
         key = stamp.sec * 1_000_000_000 + stamp.nanosec
         tick = key // period_ns
         if tick in exits:
-            print(f"scripted_controller: exiting with {exits[tick]} at tick {tick}, as told", file=sys.stderr,
-                  flush=True)
+            print(
+                f"scripted_controller: exiting with {exits[tick]} at tick {tick}, as told", file=sys.stderr, flush=True
+            )
             exit_code.append(exits[tick])
             return
         recorded = commands.get(key, {})
@@ -92,8 +97,14 @@ def main() -> int:
         mode = recorded["cmd/sort_mode"]["mode"] if "cmd/sort_mode" in recorded else None
         speed = float(speeds.get(tick, recorded["cmd/speed"]["speed"]))
         if batch_pub is not None:
-            batch_pub.publish(LineCommands(stamp_sec=[stamp.sec], stamp_nanosec=[stamp.nanosec], speeds=[speed],
-                                           modes=[] if mode is None else [mode]))
+            batch_pub.publish(
+                LineCommands(
+                    stamp_sec=[stamp.sec],
+                    stamp_nanosec=[stamp.nanosec],
+                    speeds=[speed],
+                    modes=[] if mode is None else [mode],
+                )
+            )
             return
         if mode is not None:
             mode_pub.publish(SortModeCommand(header=Header(stamp=stamp), mode=mode))

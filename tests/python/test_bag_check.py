@@ -45,8 +45,9 @@ def same_binary(monkeypatch):
 def our_controller(name: str, agent: str | None = None) -> str:
     spec = GOLDEN[name]
     script = Path(sys.executable).parent / "sorting-line-controller"
-    return shlex.join([str(script), "--setup", spec["setup"], "--variant", spec["variant"],
-                       "--agent", agent or spec["agent"]])
+    return shlex.join(
+        [str(script), "--setup", spec["setup"], "--variant", spec["variant"], "--agent", agent or spec["agent"]]
+    )
 
 
 def scripted(name: str, *misbehaviour: str) -> list[str]:
@@ -61,9 +62,21 @@ def test_our_controller_passes_open_loop_on_the_command_line(namespace, tmp_path
     """basic_d through the console script: exit 0, the summary, JSON and a JUnit file that parses.
     The controller is told another namespace: the remap the check appends wins, as for any ROS node."""
     cmd = our_controller("basic_d") + " --namespace /somewhere_else"
-    tool = BagProcess(["check", DATA / "basic_d", "--namespace", namespace("cli"), "--controller", cmd,
-                       "--json", tmp_path / "v.json", "--junit", tmp_path / "v.xml"],
-                      tmp_path / "check.log")
+    tool = BagProcess(
+        [
+            "check",
+            DATA / "basic_d",
+            "--namespace",
+            namespace("cli"),
+            "--controller",
+            cmd,
+            "--json",
+            tmp_path / "v.json",
+            "--junit",
+            tmp_path / "v.xml",
+        ],
+        tmp_path / "check.log",
+    )
     assert tool.wait(120) == 0, tool.describe()
     assert "255 matching, 0 differing, 0 missing" in tool.log() and "PASSED" in tool.log(), tool.log()
     data = json.loads((tmp_path / "v.json").read_text())
@@ -80,8 +93,11 @@ def test_our_controller_already_running_passes_open_and_closed_loop_on_the_advan
     from test_controller import ControllerProcess
 
     spec, ns = GOLDEN["advanced_b"], namespace("adv")
-    controller = ControllerProcess(tmp_path, "adv", ["--setup", spec["setup"], "--variant", spec["variant"],
-                                                     "--agent", spec["agent"], "--namespace", ns])
+    controller = ControllerProcess(
+        tmp_path,
+        "adv",
+        ["--setup", spec["setup"], "--variant", spec["variant"], "--agent", spec["agent"], "--namespace", ns],
+    )
     try:
         verdict = check_controller(DATA / "advanced_b", namespace=ns, wait=30)
         assert verdict.passed, verdict.summary()
@@ -104,8 +120,9 @@ def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loo
     from test_controller import ControllerProcess
 
     spec, ns = GOLDEN["advanced_b"], namespace("rba")
-    controller = ControllerProcess(tmp_path, "rba", ["--setup", spec["setup"], "--variant", spec["variant"],
-                                                     "--agent", "rba", "--namespace", ns])
+    controller = ControllerProcess(
+        tmp_path, "rba", ["--setup", spec["setup"], "--variant", spec["variant"], "--agent", "rba", "--namespace", ns]
+    )
     try:
         verdict = check_controller(DATA / "advanced_b", namespace=ns, wait=30)
         closed = check_controller(DATA / "advanced_b", namespace=ns, closed_loop=True)
@@ -114,21 +131,27 @@ def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loo
     assert verdict.exit_code == 1, verdict.summary()
     first = verdict.first_difference
     assert (first.tick, first.topic, first.field) == (3, "cmd/speed", "speed"), verdict.summary()
-    assert "first difference: cmd/speed at tick 3 (stamp 3.000000000 s, episode 1 step 2), field speed: bag 0.8, " \
-           "controller 0.9" in verdict.summary(), verdict.summary()
+    assert (
+        "first difference: cmd/speed at tick 3 (stamp 3.000000000 s, episode 1 step 2), field speed: bag 0.8, "
+        "controller 0.9" in verdict.summary()
+    ), verdict.summary()
     junit = ET.fromstring(verdict.to_junit()).find("testsuite")
     assert junit.find("testcase[@name='episode 1']/failure") is not None
 
     assert closed.exit_code == 1, closed.summary()
     episode = closed.episodes[0]
-    assert episode.parted.startswith("tick 4 (stamp 4.000000000 s, step 3), field speed: bag 0.8, run 0.9"), \
+    assert episode.parted.startswith("tick 4 (stamp 4.000000000 s, step 3), field speed: bag 0.8, run 0.9"), (
         episode.parted
+    )
     assert episode.run.reward < episode.bag.reward and "reward" in episode.failures[0], closed.summary()
     # The tolerances decide: the same episodes pass within loose ones (rba loses up to ~30% here).
     from sorting_line_gym.bag.check_verdict import Tolerance
 
-    loose = {"reward": Tolerance.parse("35%", "r"), "accuracy": Tolerance.parse("0.01", "a"),
-             "purity": Tolerance.parse("1%", "p")}
+    loose = {
+        "reward": Tolerance.parse("35%", "r"),
+        "accuracy": Tolerance.parse("0.01", "a"),
+        "purity": Tolerance.parse("1%", "p"),
+    }
     for e in closed.episodes:
         e.failures.clear()
         e.judge(loose)
@@ -136,14 +159,18 @@ def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loo
 
 
 def test_one_wrong_speed_at_a_known_tick(namespace):
-    verdict = check_controller(DATA / "basic_d", namespace=namespace("one"),
-                               controller=scripted("basic_d", "--speed-at", "60=0.2"))
+    verdict = check_controller(
+        DATA / "basic_d", namespace=namespace("one"), controller=scripted("basic_d", "--speed-at", "60=0.2")
+    )
     assert verdict.exit_code == 1, verdict.summary()
-    assert [(d.tick, d.field, d.recorded, d.answered) for d in verdict.differences] == [(60, "speed", 0.8, 0.2)], \
+    assert [(d.tick, d.field, d.recorded, d.answered) for d in verdict.differences] == [(60, "speed", 0.8, 0.2)], (
         verdict.summary()
+    )
     assert verdict.count("matching") == 254 and verdict.count("missing") == 0, verdict.summary()
-    assert "cmd/speed at tick 60 (stamp 60.000000000 s, episode 2 step 8), field speed: bag 0.8, controller 0.2" \
+    assert (
+        "cmd/speed at tick 60 (stamp 60.000000000 s, episode 2 step 8), field speed: bag 0.8, controller 0.2"
         in verdict.summary()
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -152,9 +179,14 @@ def test_one_wrong_speed_at_a_known_tick(namespace):
 
 def test_missing_answers_wrong_stamp_and_bad_speed_are_reported_and_the_run_goes_on(namespace):
     """A controller answering on batch/cmd (entry 0), as a vectorised one would."""
-    verdict = check_controller(DATA / "basic_d", namespace=namespace("bad"), answer_timeout=0.5,
-                               controller=scripted("basic_d", "--batch", "--skip", "10", "--skip", "11",
-                                                   "--stamp-shift-at", "30=0.5", "--speed-at", "40=1.5"))
+    verdict = check_controller(
+        DATA / "basic_d",
+        namespace=namespace("bad"),
+        answer_timeout=0.5,
+        controller=scripted(
+            "basic_d", "--batch", "--skip", "10", "--skip", "11", "--stamp-shift-at", "30=0.5", "--speed-at", "40=1.5"
+        ),
+    )
     assert verdict.exit_code == 1, verdict.summary()
     missing = [a.tick for a in verdict.answers if a.status == "missing"]
     assert missing == [10, 11], verdict.summary()
@@ -171,11 +203,13 @@ def test_missing_answers_wrong_stamp_and_bad_speed_are_reported_and_the_run_goes
 
 
 def test_a_controller_that_crashes_fails_the_run_with_its_code_and_output(namespace):
-    verdict = check_controller(DATA / "basic_d", namespace=namespace("crash"),
-                               controller=scripted("basic_d", "--exit-at", "100=7"))
+    verdict = check_controller(
+        DATA / "basic_d", namespace=namespace("crash"), controller=scripted("basic_d", "--exit-at", "100=7")
+    )
     assert verdict.exit_code == 3, verdict.summary()
-    assert "exited with code 7" in verdict.error and "exiting with 7 at tick 100, as told" in verdict.error, \
+    assert "exited with code 7" in verdict.error and "exiting with 7 at tick 100, as told" in verdict.error, (
         verdict.error
+    )
     assert ET.fromstring(verdict.to_junit()).find("testsuite/testcase[@name='run']/error") is not None
 
 
@@ -193,8 +227,13 @@ def test_our_controller_passes_closed_loop_and_the_recorded_run_replays(namespac
     from sorting_line_gym.bag.replay import replay
 
     out = tmp_path / "run"
-    verdict = check_controller(DATA / "basic_d", namespace=namespace("closed"), controller=our_controller("basic_d"),
-                               closed_loop=True, record=out)
+    verdict = check_controller(
+        DATA / "basic_d",
+        namespace=namespace("closed"),
+        controller=our_controller("basic_d"),
+        closed_loop=True,
+        record=out,
+    )
     assert verdict.passed, verdict.summary()
     assert [e.episode for e in verdict.episodes] == [1, 2, 3, 4, 5] and verdict.ticks == 255, verdict.summary()
     assert all(e.parted is None and e.run == e.bag for e in verdict.episodes), verdict.summary()
@@ -209,9 +248,13 @@ def test_closed_loop_names_the_nodes_reason_for_a_refused_answer(namespace):
     """An out-of-range speed at tick 60: the node refuses it, the episode stalls there. Before
     that, no answer to the first tick (as when a first answer is lost while endpoints match): the
     bag's first reset has no seed, so the check starts a fresh node and begins again."""
-    verdict = check_controller(DATA / "basic_d", namespace=namespace("closed_bad"), closed_loop=True,
-                               answer_timeout=1.0,
-                               controller=scripted("basic_d", "--skip-once", "1", "--speed-at", "60=1.5"))
+    verdict = check_controller(
+        DATA / "basic_d",
+        namespace=namespace("closed_bad"),
+        closed_loop=True,
+        answer_timeout=1.0,
+        controller=scripted("basic_d", "--skip-once", "1", "--speed-at", "60=1.5"),
+    )
     assert verdict.exit_code == 1, verdict.summary()
     assert "the node was restarted and the run began again" in verdict.summary()
     assert verdict.episodes[0].passed and not verdict.episodes[1].passed, verdict.summary()

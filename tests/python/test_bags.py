@@ -88,8 +88,13 @@ def test_a_changed_field_is_named_by_topic_tick_and_field(tmp_path):
 
 def test_a_changed_command_shows_where_the_node_goes_another_way(tmp_path):
     # Tick 60 is answered with speed 0.7 here (episode 2, step 8): the node's next tick differs.
-    bag = _tampered(tmp_path, "basic_d", "cmd/speed", 60,
-                    lambda c: dataclasses.replace(c, speed=0.7 if abs(c.speed - 0.7) > 1e-9 else 0.3))
+    bag = _tampered(
+        tmp_path,
+        "basic_d",
+        "cmd/speed",
+        60,
+        lambda c: dataclasses.replace(c, speed=0.7 if abs(c.speed - 0.7) > 1e-9 else 0.3),
+    )
     result = replay(bag)
     d = result.difference
     assert d is not None, result.report()
@@ -176,8 +181,18 @@ def test_golden_bag_opens_with_rosbags_and_mcap(name):
 
 def test_record_a_live_line_and_replay_it(ros, start_node, client_factory, namespace, tmp_path):
     ns = namespace("rec")
-    node = start_node(*h.SETUP_FLAGS["C"], "--variant", "advanced", "--seed", "3", "--max-steps", "6",
-                      "--ros-args", "-r", f"__ns:={ns}")
+    node = start_node(
+        *h.SETUP_FLAGS["C"],
+        "--variant",
+        "advanced",
+        "--seed",
+        "3",
+        "--max-steps",
+        "6",
+        "--ros-args",
+        "-r",
+        f"__ns:={ns}",
+    )
     c = client_factory(ns, "advanced", node_proc=node)
     c.wait_connected()
     out = tmp_path / "live"
@@ -199,8 +214,14 @@ def test_record_a_live_line_and_replay_it(ros, start_node, client_factory, names
     bag = open_bag(out)
     assert bag.info.namespace == ns
     node_options = {k: bag.info.node[k] for k in ("variant", "input", "obs_noise", "max_steps", "seed", "mode")}
-    assert node_options == {"variant": "advanced", "input": "random", "obs_noise": 0.3, "max_steps": 6, "seed": 3,
-                            "mode": "lockstep"}
+    assert node_options == {
+        "variant": "advanced",
+        "input": "random",
+        "obs_noise": 0.3,
+        "max_steps": 6,
+        "seed": 3,
+        "mode": "lockstep",
+    }
     events = relative(bag, "events/reset")
     assert [(e["seed"], e["seeded"]) for e in events] == [(7, True), (7, False), (7, True)]
     assert [m["speed"] for m in relative(bag, "cmd/speed")][3] == 0.55
@@ -221,22 +242,34 @@ def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace
     spec, bag = GOLDEN["advanced_b"], open_bag(DATA / "advanced_b")
     ns = namespace("play")
     rec = line_recorders(probe, ns)
-    controller = ControllerProcess(tmp_path, "play", ["--namespace", ns, "--setup", spec["setup"],
-                                                      "--variant", spec["variant"], "--agent", spec["agent"]])
+    controller = ControllerProcess(
+        tmp_path,
+        "play",
+        ["--namespace", ns, "--setup", spec["setup"], "--variant", spec["variant"], "--agent", spec["agent"]],
+    )
     try:
-        ros.spin_until(lambda: all(rec[t].sub.get_publisher_count() for t in ("cmd/speed", "cmd/sort_mode")), 20.0,
-                       "the controller's command writers", controller.describe)
+        ros.spin_until(
+            lambda: all(rec[t].sub.get_publisher_count() for t in ("cmd/speed", "cmd/sort_mode")),
+            20.0,
+            "the controller's command writers",
+            controller.describe,
+        )
         # Tick by tick, each after the controller's answer, as the lock-step node it was recorded
         # with. (Played by time at the recorded pace, ~250 ticks/s, a controller that stalls for
         # a moment on this shared machine loses readings from its keep-last-10 queues and never
         # answers those ticks: seen at --rate 1, 0.2, and once at 0.1 under a load of 8.)
         player = BagProcess(["play", DATA / "advanced_b", "--namespace", ns, "--lockstep"], tmp_path / "play.log")
         want = {t: {plain_stamp(m): m for m in relative(bag, t)} for t in ("cmd/speed", "cmd/sort_mode")}
-        ros.spin_until(lambda: all(len(rec[t].items) >= len(want[t]) for t in want), 30.0,
-                       f"{len(want['cmd/speed'])} commands of each kind from the controller",
-                       lambda: f"received {[len(rec[t].items) for t in want]}; no decision for the ticks "
-                               f"{sorted(s // NS_PER_S for s in set(want['cmd/speed']) - set(controller.decisions()))}"
-                               f"\n{player.describe()}\n{controller.describe()}")
+        ros.spin_until(
+            lambda: all(len(rec[t].items) >= len(want[t]) for t in want),
+            30.0,
+            f"{len(want['cmd/speed'])} commands of each kind from the controller",
+            lambda: (
+                f"received {[len(rec[t].items) for t in want]}; no decision for the ticks "
+                f"{sorted(s // NS_PER_S for s in set(want['cmd/speed']) - set(controller.decisions()))}"
+                f"\n{player.describe()}\n{controller.describe()}"
+            ),
+        )
         assert player.wait(30) == 0, player.describe()
     finally:
         assert controller.stop() == 0, controller.describe()
@@ -256,8 +289,10 @@ def test_play_keeps_the_recorded_timing(ros, probe, namespace, tmp_path):
     bag = open_bag(DATA / "basic_d")
     ns = namespace("timing")
     inputs = h.TopicRecorder(ros, probe, f"{ns}/input", MaterialInput, qos=1000)
-    player = BagProcess(["play", DATA / "basic_d", "--namespace", ns, "--rate", "4", "--topic", "input",
-                         "--topic", "/clock"], tmp_path / "play.log")
+    player = BagProcess(
+        ["play", DATA / "basic_d", "--namespace", ns, "--rate", "4", "--topic", "input", "--topic", "/clock"],
+        tmp_path / "play.log",
+    )
     ros.spin_until(lambda: not player.running(), 30.0, "play to finish", player.describe)
     assert player.wait(5) == 0, player.describe()
     ros.spin_for(0.2)

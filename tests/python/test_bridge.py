@@ -95,10 +95,15 @@ def assert_step(variant: str, obs, reward, info: dict, entry: dict, where: str) 
     assert_obs(obs, variant, s["observation"], where)
     assert reward == s["reward"], f"{where}: reward {reward!r} != library {s['reward']!r}"
     got = {
-        "accuracy": info["accuracy"], "purity": info["purity"], "containers": tuple(int(x) for x in info["containers"]),
-        "speed_changes": int(info["speed_changes"]), "occupancy": info["occupancy"],
-        "cumulative_reward": info["cumulative_reward"], "speed_index": int(info["speed_index"]),
-        "mode": int(info["mode"]), "step": int(info["step"]),
+        "accuracy": info["accuracy"],
+        "purity": info["purity"],
+        "containers": tuple(int(x) for x in info["containers"]),
+        "speed_changes": int(info["speed_changes"]),
+        "occupancy": info["occupancy"],
+        "cumulative_reward": info["cumulative_reward"],
+        "speed_index": int(info["speed_index"]),
+        "mode": int(info["mode"]),
+        "step": int(info["step"]),
     }
     want = {
         "accuracy": s["accuracy"],
@@ -138,8 +143,13 @@ def strip_node_counters(info: dict) -> dict:
 def same(a, b) -> bool:
     """Exact structural equality of trajectories (arrays by value, dtype included)."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype == b.dtype
-                and a.shape == b.shape and bool(np.all(a == b)))
+        return (
+            isinstance(a, np.ndarray)
+            and isinstance(b, np.ndarray)
+            and a.dtype == b.dtype
+            and a.shape == b.shape
+            and bool(np.all(a == b))
+        )
     if isinstance(a, dict):
         return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
     if isinstance(a, (list, tuple)):
@@ -458,9 +468,26 @@ def test_short_ppo_run(make_vec):
 def test_throughput_benchmark_runs_and_reports_the_targets(tmp_path):
     plot = tmp_path / "throughput.png"
     result = subprocess.run(
-        [sys.executable, str(ROOT / "benches" / "bridge_throughput.py"), "--rounds", "2", "--single", "60",
-         "--vector", "30", "--lines", "1", "16", "--domain", os.environ["ROS_DOMAIN_ID"], "--plot", str(plot)],
-        capture_output=True, text=True, timeout=240,
+        [
+            sys.executable,
+            str(ROOT / "benches" / "bridge_throughput.py"),
+            "--rounds",
+            "2",
+            "--single",
+            "60",
+            "--vector",
+            "30",
+            "--lines",
+            "1",
+            "16",
+            "--domain",
+            os.environ["ROS_DOMAIN_ID"],
+            "--plot",
+            str(plot),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     out = result.stdout

@@ -75,8 +75,9 @@ def test_vector_env_matches_the_library_across_autoreset(setup, variant, make_ve
                 assert infos["_final_obs"][k] and infos["_final_info"][k]
                 final = infos["final_obs"][k]
                 assert_step(variant, final, float(rewards[k]), info_k, want[50], f"{where} step 50 (info)")
-                assert_step(variant, final, float(rewards[k]), _final_info(infos, k), want[50],
-                            f"{where} step 50 (final_info)")
+                assert_step(
+                    variant, final, float(rewards[k]), _final_info(infos, k), want[50], f"{where} step 50 (final_info)"
+                )
                 # The observation returned is the new episode's first one.
                 assert obs[k] in env.single_observation_space
                 assert want[51]["reset"]["seed"] == new_seeds[k]
@@ -147,8 +148,12 @@ def test_sb3_vec_env_matches_the_library_across_autoreset(make_vec):
             assert rewards.dtype == np.float32 and bool(dones[k]) == (t == 50)
             if t == 50:
                 assert infos[k]["TimeLimit.truncated"] is True
-                assert_obs(infos[k]["terminal_observation"], "advanced", entry["step"]["observation"],
-                           f"line {k} terminal_observation")
+                assert_obs(
+                    infos[k]["terminal_observation"],
+                    "advanced",
+                    entry["step"]["observation"],
+                    f"line {k} terminal_observation",
+                )
                 assert_obs(obs[k], "advanced", want[51]["reset"]["observation"], f"line {k} post-reset obs")
             else:
                 assert "terminal_observation" not in infos[k]
@@ -174,8 +179,9 @@ def test_sb3_vec_env_constructor_seed_reproduces(make_vec):
 
 
 def test_make_vec_uses_the_vector_entry_point(make_vec):
-    env = make_vec(lambda **kw: gymnasium.make_vec(ADVANCED, vectorization_mode="vector_entry_point", **kw),
-                   num_envs=2, setup="B")
+    env = make_vec(
+        lambda **kw: gymnasium.make_vec(ADVANCED, vectorization_mode="vector_entry_point", **kw), num_envs=2, setup="B"
+    )
     assert isinstance(env, SortingLineVectorEnv) and env.num_envs == 2
     assert env.single_action_space == gymnasium.spaces.Discrete(30)
     obs, _ = env.reset(seed=1)
@@ -201,8 +207,12 @@ def test_record_episode_statistics_single(make_env):
 
 
 def test_record_episode_statistics_vector(make_vec):
-    env = make_vec(lambda **kw: gymnasium.wrappers.vector.RecordEpisodeStatistics(SortingLineVectorEnv(**kw)),
-                   num_envs=2, setup="A", variant="basic")
+    env = make_vec(
+        lambda **kw: gymnasium.wrappers.vector.RecordEpisodeStatistics(SortingLineVectorEnv(**kw)),
+        num_envs=2,
+        setup="A",
+        variant="basic",
+    )
     env.reset(seed=1)
     for t in range(1, 51):
         _, _, _, truncated, infos = env.step(np.array([t % 10, 9 - t % 10]))

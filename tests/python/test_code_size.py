@@ -61,9 +61,7 @@ def test_no_python_file_is_over_700_lines():
 
 
 def test_no_python_function_is_over_60_lines():
-    found = {
-        f"{p.relative_to(ROOT)}::{name}": n for p in python_files() for name, n in function_lengths(p).items()
-    }
+    found = {f"{p.relative_to(ROOT)}::{name}": n for p in python_files() for name, n in function_lengths(p).items()}
     long = {k: n for k, n in found.items() if n > MAX_FUNCTION_LINES and k not in OVER_60_LINES}
     assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them): {long}"
     gone = sorted(OVER_60_LINES - found.keys())

@@ -79,8 +79,12 @@ class ControllerProcess(h.ScriptProcess):
 
     def __init__(self, tmp_path: Path, tag: str, args: list[str]):
         self.decision_path = tmp_path / f"decisions_{tag}.jsonl"
-        super().__init__("sorting-line-controller", [*args, "--decision-log", self.decision_path],
-                         tmp_path / f"controller_{tag}.log", label="controller")
+        super().__init__(
+            "sorting-line-controller",
+            [*args, "--decision-log", self.decision_path],
+            tmp_path / f"controller_{tag}.log",
+            label="controller",
+        )
 
     def decisions(self) -> dict[int, dict]:
         """The decision log, by tick stamp (ns)."""
@@ -121,8 +125,12 @@ class TimedRecorder:
     def __init__(self, node, topic: str, msg_type):
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        qos = QoSProfile(depth=500, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
+        qos = QoSProfile(
+            depth=500,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+        )
         self.topic = topic
         self.items: list[tuple[float, object]] = []
         self.sub = node.create_subscription(msg_type, topic, lambda m: self.items.append((time.monotonic(), m)), qos)
@@ -178,9 +186,11 @@ def what_was_applied(where: str, applied: tuple, want: tuple, held: tuple, d: di
     t+1 arrived here (``received``) and its readings-to-command latency."""
     if d is None:
         return f"{where}: not answered; applied {applied}, held {held}"
-    return (f"{where}: applied {applied}, sent {want}, held {held}; published "
-            f"{(d['published_monotonic'] - received) * 1e3:+.1f} ms relative to state t+1 arriving here, "
-            f"{d['latency_ms']:.1f} ms after its first reading")
+    return (
+        f"{where}: applied {applied}, sent {want}, held {held}; published "
+        f"{(d['published_monotonic'] - received) * 1e3:+.1f} ms relative to state t+1 arriving here, "
+        f"{d['latency_ms']:.1f} ms after its first reading"
+    )
 
 
 def decision_problems(agent, d: dict, observed: tuple, want: tuple, commands: dict, t: int, where: str) -> list[str]:
@@ -193,8 +203,9 @@ def decision_problems(agent, d: dict, observed: tuple, want: tuple, commands: di
     if readings != (q, cat) + ((cur,) if agent.hold else ()):
         problems.append(f"{where}: the controller read {readings}")
     if (d["speed_index"], d["mode"]) != want:
-        problems.append(f"{where}: the controller decided {(d['speed_index'], d['mode'])}, "
-                        f"RuleBasedAgent.act says {want}")
+        problems.append(
+            f"{where}: the controller decided {(d['speed_index'], d['mode'])}, RuleBasedAgent.act says {want}"
+        )
     heard_speed, heard_mode = commands["cmd/speed"].get(t), commands["cmd/sort_mode"].get(t)
     if heard_speed is not None and speed_index(heard_speed[1].speed) != d["speed_index"]:
         problems.append(f"{where}: cmd/speed said {heard_speed[1].speed}, the log {d['speed_index']}")
@@ -296,8 +307,9 @@ def measurable_ticks(items, states: dict, period: int) -> tuple[list[int], int]:
 
 
 @pytest.mark.parametrize("agent_name", ["rba", "rba-hold"])
-def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_controller, client_factory, probe,
-                                          namespace):
+def test_controller_drives_a_realtime_line(
+    agent_name, ros, start_node, start_controller, client_factory, probe, namespace
+):
     ns = namespace(agent_name)
     realtime = ["--mode", "realtime", "--rate", str(RATE_HZ), "--variant", "advanced", *h.SETUP_FLAGS["B"]]
     node = start_node(*realtime, "--seed", "7", *ns_args(ns))
@@ -310,12 +322,22 @@ def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_co
 
     # Live once it has decided; measure from the states after that (its first answers may be a
     # backlog of older ticks that a late joiner receives, answered after the fact).
-    ros.spin_until(lambda: ctl.decision_path.exists() and ctl.decision_path.stat().st_size > 0, 30.0,
-                   "the controller's first decision", context, abort=abort)
+    ros.spin_until(
+        lambda: ctl.decision_path.exists() and ctl.decision_path.stat().st_size > 0,
+        30.0,
+        "the controller's first decision",
+        context,
+        abort=abort,
+    )
     ros.spin_for(0.2)
     start = len(rec["state"].items)
-    ros.spin_until(lambda: len(rec["state"].items) >= start + MEASURED_TICKS + 2, 5.0 + 3 * MEASURED_TICKS / RATE_HZ,
-                   f"{ns}/state: {MEASURED_TICKS + 2} realtime ticks", context, abort=abort)
+    ros.spin_until(
+        lambda: len(rec["state"].items) >= start + MEASURED_TICKS + 2,
+        5.0 + 3 * MEASURED_TICKS / RATE_HZ,
+        f"{ns}/state: {MEASURED_TICKS + 2} realtime ticks",
+        context,
+        abort=abort,
+    )
     assert ctl.stop() == 0, ctl.describe()
     ros.spin_for(0.1)  # commands still in flight
 
@@ -331,8 +353,10 @@ def test_controller_drives_a_realtime_line(agent_name, ros, start_node, start_co
     commands = {k: rec[k].by_stamp() for k in ("cmd/speed", "cmd/sort_mode")}
     result = check_realtime_run(agent, states, ctl.decisions(), commands, ticks, period)
     n = len(ticks)
-    report = (f"{agent_name}: {n} ticks, {result['matched']} applied on time, {len(result['late'])} late, "
-              f"{restarts} automatic restart(s); {summary[0].split('stopping:')[1].strip()}")
+    report = (
+        f"{agent_name}: {n} ticks, {result['matched']} applied on time, {len(result['late'])} late, "
+        f"{restarts} automatic restart(s); {summary[0].split('stopping:')[1].strip()}"
+    )
     print(report)
     for line in result["late_report"]:
         print("  late:", line)
@@ -349,24 +373,40 @@ def test_late_detection_accepts_held_and_late_commands_only():
     quantities = [0.25, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.5]
     assert [agent.act(q, 0, 0)[0] for q in quantities[:7]] == [8, 7, 6, 5, 4, 3, 2]
     # State k shows the speed applied at step k (state 0: what the node held before).
-    applied = [9,
-               8,  # tick 0: on time
-               8,  # tick 1: late, the node kept 8
-               8,  # tick 2: late
-               7,  # tick 3: not answered, and the command of tick 1 arrived only now
-               4,  # tick 4: on time
-               6,  # tick 5: the command of tick 2, older than the one applied at tick 4: wrong
-               2]  # tick 6: on time
+    applied = [
+        9,
+        8,  # tick 0: on time
+        8,  # tick 1: late, the node kept 8
+        8,  # tick 2: late
+        7,  # tick 3: not answered, and the command of tick 1 arrived only now
+        4,  # tick 4: on time
+        6,  # tick 5: the command of tick 2, older than the one applied at tick 4: wrong
+        2,
+    ]  # tick 6: on time
     period = NS_PER_S
-    states = {k * period: (float(k), SimpleNamespace(episode=0, step=k, observation_quantity=q, observation_category=0,
-                                                     speed_index=a, mode=0))
-              for k, (q, a) in enumerate(zip(quantities, applied, strict=False))}
-    decisions = {k * period: {"quantity": q, "category": 0, "current_speed_index": None,
-                              "speed_index": agent.act(q, 0, 0)[0], "mode": 0, "latency_ms": 1.0,
-                              "published_monotonic": float(k)}
-                 for k, q in enumerate(quantities[:7]) if k != 3}
-    result = check_realtime_run(agent, states, decisions, {"cmd/speed": {}, "cmd/sort_mode": {}},
-                                [k * period for k in range(7)], period)
+    states = {
+        k * period: (
+            float(k),
+            SimpleNamespace(episode=0, step=k, observation_quantity=q, observation_category=0, speed_index=a, mode=0),
+        )
+        for k, (q, a) in enumerate(zip(quantities, applied, strict=False))
+    }
+    decisions = {
+        k * period: {
+            "quantity": q,
+            "category": 0,
+            "current_speed_index": None,
+            "speed_index": agent.act(q, 0, 0)[0],
+            "mode": 0,
+            "latency_ms": 1.0,
+            "published_monotonic": float(k),
+        }
+        for k, q in enumerate(quantities[:7])
+        if k != 3
+    }
+    result = check_realtime_run(
+        agent, states, decisions, {"cmd/speed": {}, "cmd/sort_mode": {}}, [k * period for k in range(7)], period
+    )
     assert result["matched"] == 3, result
     assert result["late"] == [period, 2 * period, 3 * period], result
     assert len(result["problems"]) == 1 and "tick 5.000000000" in result["problems"][0], result["problems"]
@@ -406,12 +446,17 @@ def check_decisions_and_commands(states: list, agent, ctl, rec) -> list[int]:
     for s0, s1 in zip(states, states[1:], strict=False):
         want = agent.act(s0.observation_quantity, s0.observation_category, s0.speed_index)
         t = stamp_ns(s0.header.stamp)
-        where = (f"step {s0.step} -> {s1.step} (q={s0.observation_quantity}, cat {s0.observation_category}, "
-                 f"speed {s0.speed_index})")
+        where = (
+            f"step {s0.step} -> {s1.step} (q={s0.observation_quantity}, cat {s0.observation_category}, "
+            f"speed {s0.speed_index})"
+        )
         d = decisions.get(t)
         assert d is not None, f"{where}: the controller logged no decision for this tick\n{ctl.describe()}"
         assert (d["quantity"], d["category"], d["current_speed_index"]) == (
-            s0.observation_quantity, s0.observation_category, s0.speed_index if agent.hold else None), where
+            s0.observation_quantity,
+            s0.observation_category,
+            s0.speed_index if agent.hold else None,
+        ), where
         assert (d["speed_index"], d["mode"]) == want, f"{where}: controller decided {d}, RuleBasedAgent.act says {want}"
         if t in speeds:
             assert speed_index(speeds[t][1].speed) == d["speed_index"], f"{where}: cmd/speed differs from the log"
@@ -436,8 +481,26 @@ def check_the_library_plays_the_same_episode(agent_name: str, seed: int, states:
         assert view == h.trace_step_view(entry), f"step {k}: node {view} != trace {h.trace_step_view(entry)}"
 
     # And the Rust agent, offline, plays the same episode.
-    r = subprocess.run([str(h.node_binary()), "eval", "--agent", agent_name, "--setup", "B", "--variant", "advanced",
-                        "--episodes", "1", "--seed", str(seed), "--json"], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [
+            str(h.node_binary()),
+            "eval",
+            "--agent",
+            agent_name,
+            "--setup",
+            "B",
+            "--variant",
+            "advanced",
+            "--episodes",
+            "1",
+            "--seed",
+            str(seed),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     offline = json.loads(r.stdout)["per_episode"][0]
     assert offline["reward"] == pytest.approx(states[-1].cumulative_reward, abs=1e-9)
@@ -445,8 +508,9 @@ def check_the_library_plays_the_same_episode(agent_name: str, seed: int, states:
 
 
 @pytest.mark.parametrize("agent_name", ["rba", "rba-hold"])
-def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_node, start_controller, client_factory,
-                                                     probe, namespace):
+def test_controller_drives_a_lockstep_episode_exactly(
+    agent_name, ros, start_node, start_controller, client_factory, probe, namespace
+):
     ns = namespace(agent_name)
     seed = 42
     node = start_node("--variant", "advanced", *h.SETUP_FLAGS["B"], *ns_args(ns))
@@ -482,15 +546,29 @@ def test_controller_drives_a_lockstep_episode_exactly(agent_name, ros, start_nod
 
 
 def eval_per_episode(agent: str, setup: str, variant: str, episodes: int, seed: int) -> list[dict]:
-    argv = [str(h.node_binary()), "eval", "--agent", agent, "--setup", setup, "--variant", variant,
-            "--episodes", str(episodes), "--seed", str(seed), "--json"]
+    argv = [
+        str(h.node_binary()),
+        "eval",
+        "--agent",
+        agent,
+        "--setup",
+        setup,
+        "--variant",
+        variant,
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(seed),
+        "--json",
+    ]
     r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, f"`{' '.join(argv)}` failed: {r.stderr}"
     return json.loads(r.stdout)["per_episode"]
 
 
-@pytest.mark.parametrize("agent_name,variant", [("rba", "basic"), ("rba-hold", "basic"), ("rba", "advanced"),
-                                                ("rba-hold", "advanced")])
+@pytest.mark.parametrize(
+    "agent_name,variant", [("rba", "basic"), ("rba-hold", "basic"), ("rba", "advanced"), ("rba-hold", "advanced")]
+)
 def test_python_agent_through_the_env_scores_like_eval(agent_name, variant):
     agent = make_agent(agent_name, "B", variant)
     env = SortingLineEnv(setup="B", variant=variant, max_episode_steps=50)
@@ -527,7 +605,16 @@ def test_level_rounds_like_the_rust_side():
     assert level(0.285) == 28  # 0.285 * 100 = 28.499999999999996
     assert level(0.29) == 29 and level(np.float32(0.29)) == 29
     assert [level(x) for x in (0.0, 0.004, 0.005, 0.995, 1.0, 1.7, -0.3, math.nan, math.inf)] == [
-        0, 0, 1, 100, 100, 100, 0, 0, 100]
+        0,
+        0,
+        1,
+        100,
+        100,
+        100,
+        0,
+        0,
+        100,
+    ]
 
 
 def test_rule_based_agent_is_the_exported_table():

@@ -48,6 +48,7 @@ CYCLONE_CONFIG = """<CycloneDDS><Domain Id="any">
 
 # ---- The ROS types as DDS sees them (field order = .msg order)
 
+
 @dataclass
 class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
     sec: t.int32
@@ -116,8 +117,12 @@ class ResetLineResponse(IdlStruct, typename="sorting_line_interfaces::srv::dds_:
     category: t.uint8
 
 
-ROS_QOS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile,
-              Policy.History.KeepLast(10), Policy.DataRepresentation(use_cdrv0_representation=True))
+ROS_QOS = Qos(
+    Policy.Reliability.Reliable(duration(seconds=1)),
+    Policy.Durability.Volatile,
+    Policy.History.KeepLast(10),
+    Policy.DataRepresentation(use_cdrv0_representation=True),
+)
 
 
 class CycloneLine:
@@ -138,11 +143,13 @@ class CycloneLine:
         self.states: dict[int, LineState] = {}
 
     def matched(self) -> dict[str, int]:
-        return {"state": len(self.state.get_matched_publications()),
-                "cmd/speed": len(self.speed.get_matched_subscriptions()),
-                "cmd/sort_mode": len(self.mode.get_matched_subscriptions()),
-                "resetRequest": len(self.request.get_matched_subscriptions()),
-                "resetReply": len(self.reply.get_matched_publications())}
+        return {
+            "state": len(self.state.get_matched_publications()),
+            "cmd/speed": len(self.speed.get_matched_subscriptions()),
+            "cmd/sort_mode": len(self.mode.get_matched_subscriptions()),
+            "resetRequest": len(self.request.get_matched_subscriptions()),
+            "resetReply": len(self.reply.get_matched_publications()),
+        }
 
     def wait(self, condition, timeout: float, what: str, context=lambda: ""):
         deadline = time.monotonic() + timeout
@@ -152,8 +159,9 @@ class CycloneLine:
             if result:
                 return result
             if time.monotonic() > deadline:
-                raise AssertionError(f"cyclone: timed out after {timeout} s waiting for {what}; matched "
-                                     f"{self.matched()}\n{context()}")
+                raise AssertionError(
+                    f"cyclone: timed out after {timeout} s waiting for {what}; matched {self.matched()}\n{context()}"
+                )
             time.sleep(0.002)
 
     def collect(self) -> None:
@@ -177,8 +185,9 @@ def cyclone_env(monkeypatch):
 def test_cyclone_participant_drives_a_lockstep_episode_like_the_library(cyclone_env, start_node, namespace):
     setup, variant, seed, episode_seed = "D", "advanced", 3, 2024
     ns = namespace("cyclone")
-    node = start_node("--variant", variant, *h.SETUP_FLAGS[setup], "--seed", str(seed), "--ros-args", "-r",
-                      f"__ns:={ns}")
+    node = start_node(
+        "--variant", variant, *h.SETUP_FLAGS[setup], "--seed", str(seed), "--ros-args", "-r", f"__ns:={ns}"
+    )
     line = CycloneLine(int(os.environ["ROS_DOMAIN_ID"]), ns)
     context = node.describe
     line.wait(lambda: all(v >= 1 for v in line.matched().values()), 15.0, "every endpoint to match", context)

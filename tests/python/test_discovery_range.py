@@ -67,8 +67,11 @@ def ros_env(**values: str) -> dict[str, str]:
 def start_nodes_on_a(hosts, names: dict[str, str], tmp_path) -> dict[str, subprocess.Popen]:
     """The node on host a three times: default discovery range, LOCALHOST, ROS_LOCALHOST_ONLY=1."""
     nodes = {}
-    node_envs = {"default": ros_env(), "localhost": ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"),
-                 "legacy": ros_env(ROS_LOCALHOST_ONLY="1")}
+    node_envs = {
+        "default": ros_env(),
+        "localhost": ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"),
+        "legacy": ros_env(ROS_LOCALHOST_ONLY="1"),
+    }
     for key, env in node_envs.items():
         log = open(tmp_path / f"{key}.log", "wb")
         argv = [str(h.node_binary()), "node", "--ros-args", "-r", f"__node:={names[key]}"]
@@ -88,23 +91,33 @@ def stop_with_sigint(nodes: dict[str, subprocess.Popen]) -> dict[str, int | str]
 
 def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
     tag = f"{os.getpid()}"
-    names = {"default": f"sl_default_{tag}", "localhost": f"sl_localhost_{tag}",
-             "legacy": f"sl_localhost_only_{tag}", "reference": f"rclpy_default_{tag}"}
+    names = {
+        "default": f"sl_default_{tag}",
+        "localhost": f"sl_localhost_{tag}",
+        "legacy": f"sl_localhost_only_{tag}",
+        "reference": f"rclpy_default_{tag}",
+    }
     with netns_hosts.TwoHosts() as hosts:
         nodes = start_nodes_on_a(hosts, names, tmp_path)
         hosts.popen("a", [sys.executable, "-c", REFERENCE, names["reference"], "30"], env=ros_env())
 
         def probe(env: dict[str, str], want: list[str]) -> subprocess.Popen:
-            return hosts.popen("b", [sys.executable, "-c", PROBE, "5", "12", ",".join(want),
-                                     ",".join(names.values())],
-                               env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            return hosts.popen(
+                "b",
+                [sys.executable, "-c", PROBE, "5", "12", ",".join(want), ",".join(names.values())],
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
 
         a = hosts.address("a")
         probes = {
             "SUBNET": probe(ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET"), [names["default"], names["reference"]]),
             f"LOCALHOST, ROS_STATIC_PEERS={a}": probe(
                 ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_STATIC_PEERS=a),
-                [names["default"], names["reference"]]),
+                [names["default"], names["reference"]],
+            ),
         }
         seen = {}
         for what, p in probes.items():
@@ -120,7 +133,8 @@ def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
         assert names["reference"] in got, f"{what}: the rclpy control node was not seen\n{report}"
     assert names["default"] in seen["SUBNET"], f"the node (default range) is not seen under SUBNET\n{report}"
     assert names["default"] in seen[f"LOCALHOST, ROS_STATIC_PEERS={a}"], (
-        f"the node is not seen by a peer that names it in ROS_STATIC_PEERS\n{report}")
+        f"the node is not seen by a peer that names it in ROS_STATIC_PEERS\n{report}"
+    )
     for what, got in seen.items():
         assert names["localhost"] not in got, f"{what}: the LOCALHOST node was seen from another host\n{report}"
         assert names["legacy"] not in got, f"{what}: the ROS_LOCALHOST_ONLY=1 node was seen from another host\n{report}"

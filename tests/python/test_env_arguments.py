@@ -50,8 +50,11 @@ def test_threshold_moves_the_reward_cut(make_env):
     ],
 )
 def test_bad_settings_fail_at_make_naming_value_and_range(kwargs, message):
-    for make in (lambda: gymnasium.make(BASIC, **kwargs), lambda: SortingLineVectorEnv(2, **kwargs),
-                 lambda: SortingLineSB3VecEnv(2, **kwargs)):
+    for make in (
+        lambda: gymnasium.make(BASIC, **kwargs),
+        lambda: SortingLineVectorEnv(2, **kwargs),
+        lambda: SortingLineSB3VecEnv(2, **kwargs),
+    ):
         with pytest.raises(ValueError, match=message.replace(".", r"\.").replace("(", r"\(")):
             make()
 

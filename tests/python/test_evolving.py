@@ -44,8 +44,20 @@ BATCH_STEP = 2  # this step of episode 1 goes through batch/cmd with a mode the 
 
 
 def trace(schedule_file, tokens, seed: int = SEED) -> list[dict]:
-    argv = [str(h.node_binary()), "trace", "--setup", "B", "--variant", "advanced", "--seed", str(seed),
-            "--evolution", str(schedule_file), "--actions", ",".join(map(str, tokens))]
+    argv = [
+        str(h.node_binary()),
+        "trace",
+        "--setup",
+        "B",
+        "--variant",
+        "advanced",
+        "--seed",
+        str(seed),
+        "--evolution",
+        str(schedule_file),
+        "--actions",
+        ",".join(map(str, tokens)),
+    ]
     out = subprocess.run(argv, capture_output=True, text=True, timeout=30, check=True).stdout
     return [json.loads(line) for line in out.splitlines()]
 
@@ -62,8 +74,19 @@ def evolving_line(tmp_path, start_node, client_factory, ns: str):
     appears only with the machine upgrade). Returns (schedule file, ns, node, client)."""
     schedule = tmp_path / "schedule.yaml"
     schedule.write_text(SCHEDULE)
-    node = start_node("--setup", "B", "--variant", "advanced", "--seed", SEED, "--evolution", schedule,
-                      "--ros-args", "-r", f"__ns:={ns}")
+    node = start_node(
+        "--setup",
+        "B",
+        "--variant",
+        "advanced",
+        "--seed",
+        SEED,
+        "--evolution",
+        schedule,
+        "--ros-args",
+        "-r",
+        f"__ns:={ns}",
+    )
     return schedule, ns, node, client_factory(ns, "basic", node_proc=node, mode_topic=True)
 
 
@@ -72,8 +95,10 @@ def test_bad_schedule_fails_at_start_naming_the_event(tmp_path):
     bad.write_text("events:\n  - at: {tick: 5}\n    obs_noise: 0.1\n  - at: {tick: 500}\n    threshold: 1.2\n")
     code, err = h.run_node_expecting_failure(["--evolution", bad])
     assert code != 0
-    assert ("parameter evolution_file = " + str(bad) + " (from --evolution): evolution event 1 (at tick 500): "
-            "threshold = 1.2 is out of range: allowed 0.0 ..< 1.0") in err, err
+    assert (
+        "parameter evolution_file = " + str(bad) + " (from --evolution): evolution event 1 (at tick 500): "
+        "threshold = 1.2 is out of range: allowed 0.0 ..< 1.0"
+    ) in err, err
     code, err = h.run_node_expecting_failure(["--ros-args", "-p", f"evolution_file:={tmp_path / 'missing.yaml'}"])
     assert code != 0 and "evolution_file" in err and "cannot read it" in err, err
 
@@ -86,8 +111,9 @@ def step_line(c, batch, action: int, via_batch: bool = False):
     speed, mode = h.decode_action("advanced", action)
     if via_batch:
         t = c.stamp
-        batch.publish(LineCommands(stamp_sec=[t // NS_PER_S], stamp_nanosec=[t % NS_PER_S], speeds=[speed],
-                                   modes=[mode]))
+        batch.publish(
+            LineCommands(stamp_sec=[t // NS_PER_S], stamp_nanosec=[t % NS_PER_S], speeds=[speed], modes=[mode])
+        )
     else:
         if c.mode_pub.get_subscription_count() >= 1:
             c.send_mode(mode)
@@ -112,8 +138,11 @@ def check_states_follow_the_trace(expected: list[dict], states: list) -> None:
 def check_evolution_events(ros, events: list, expected: list[dict], states: list) -> None:
     """events/evolution: one message per reset, and one per tick with events, the trace's events."""
     ros.spin_until(lambda: len(events) >= 4, 5, "the events/evolution messages")
-    applied = [(e["reset"]["episode"] if "reset" in e else None, e["tick"], [x["index"] for x in e["evolution"]])
-               for e in expected if e["evolution"]]
+    applied = [
+        (e["reset"]["episode"] if "reset" in e else None, e["tick"], [x["index"] for x in e["evolution"]])
+        for e in expected
+        if e["evolution"]
+    ]
     announced = [(m.episode if m.at_reset else None, m.tick, list(m.event_indices)) for m in events if m.event_indices]
     assert announced == applied, (announced, applied)
     resets = [m for m in events if m.at_reset]
@@ -143,23 +172,35 @@ def check_parameters_moved(ros, probe, ns: str, param_events: list, schedule, co
     ros.spin_until(lambda: changed("threshold"), 5, "/parameter_events with threshold")
     assert (changed("obs_noise"), changed("threshold")) == ([0.2], [0.8])
     get = probe.create_client(GetParameters, f"{ns}/sorting_line/get_parameters")
-    reply = ros.call_service(get, GetParameters.Request(names=["obs_noise", "threshold", "evolution_file"]),
-                             "get_parameters", context=context)
+    reply = ros.call_service(
+        get,
+        GetParameters.Request(names=["obs_noise", "threshold", "evolution_file"]),
+        "get_parameters",
+        context=context,
+    )
     assert [v.double_value for v in reply.values[:2]] == [0.2, 0.8]
     assert reply.values[2].string_value == str(schedule)
 
 
 def check_diagnostics_show_the_evolution(ros, c, node, schedule) -> None:
     """/diagnostics: the refused mode is counted, and the evolution state shown; the node's log says so."""
-    want = {"rejected_sort_modes_off": "1", "sort_modes": "true", "ratio_sensor": "true", "obs_noise": "0.2",
-            "threshold": "0.8", "evolution_events_applied": "5", "evolution_events_total": "5",
-            "evolution_file": str(schedule)}
+    want = {
+        "rejected_sort_modes_off": "1",
+        "sort_modes": "true",
+        "ratio_sensor": "true",
+        "obs_noise": "0.2",
+        "threshold": "0.8",
+        "evolution_events_applied": "5",
+        "evolution_events_total": "5",
+        "evolution_file": str(schedule),
+    }
 
     def diagnosed():
         return c.diagnostics and all(c.diagnostics[-1][1].get(k) == v for k, v in want.items())
 
-    ros.spin_until(diagnosed, 5, f"/diagnostics showing {want}",
-                   lambda: str(c.diagnostics[-1][1] if c.diagnostics else None))
+    ros.spin_until(
+        diagnosed, 5, f"/diagnostics showing {want}", lambda: str(c.diagnostics[-1][1] if c.diagnostics else None)
+    )
     assert "rejected sort mode 2" in node.log() and "[sort_modes_off]" in node.log(), node.log_tail()
     assert "sensors/ratio appears" in node.log() and "cmd/sort_mode appears" in node.log(), node.log_tail()
 
@@ -174,8 +215,12 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     ratios: list = []
     ratio_sub = probe.create_subscription(MaterialRatio, f"{ns}/sensors/ratio", ratios.append, 10)
     param_events: list = []
-    probe.create_subscription(ParameterEvent, "/parameter_events",
-                              lambda m: param_events.append(m) if m.node == f"{ns}/sorting_line" else None, 100)
+    probe.create_subscription(
+        ParameterEvent,
+        "/parameter_events",
+        lambda m: param_events.append(m) if m.node == f"{ns}/sorting_line" else None,
+        100,
+    )
     batch = probe.create_publisher(LineCommands, f"{ns}/batch/cmd", 10)
     c.wait_connected()
     ros.spin_until(lambda: batch.get_subscription_count() >= 1, 10, "batch/cmd to match", c.context)
@@ -245,8 +290,13 @@ def make_env(schedule_file, **kwargs):
 
     import sorting_line_gym  # noqa: F401 - registers the ids
 
-    return gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", evolution=str(schedule_file), setup="B",
-                          max_episode_steps=ENV_EPISODE_STEPS, **kwargs)
+    return gymnasium.make(
+        "sorting_line_gym:SortingLineEvolving-v0",
+        evolution=str(schedule_file),
+        setup="B",
+        max_episode_steps=ENV_EPISODE_STEPS,
+        **kwargs,
+    )
 
 
 def env_rows_of_the_trace(schedule, tokens: list[str], seed: int) -> list[tuple]:
@@ -285,8 +335,14 @@ def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
             assert info["settings"]["sort_modes"] == upgraded and info["settings"]["ratio_sensor"] == upgraded
             assert (obs[1] == 0.5) != upgraded, f"episode {episode}: category {obs[1]}"
             if episode == 3:
-                assert info["evolution"] == [{"at_reset": True, "episode": 3, "tick": 20,
-                                              "changed": {"sort_modes": "true", "ratio_sensor": "true"}}]
+                assert info["evolution"] == [
+                    {
+                        "at_reset": True,
+                        "episode": 3,
+                        "tick": 20,
+                        "changed": {"sort_modes": "true", "ratio_sensor": "true"},
+                    }
+                ]
             got.append(("reset", obs.tolist()))
             for action in acts:
                 obs, reward, terminated, truncated, info = env.step(action)
@@ -294,8 +350,9 @@ def test_evolving_env_is_the_trace_with_masks_and_unknown_category(tmp_path):
                 got.append(("step", obs.tolist(), reward, info["mode"]))
                 assert (obs[1] == 0.5) != upgraded
                 if info["line_tick"] == 25:
-                    assert info["evolution"] == [{"at_reset": False, "episode": 3, "tick": 25,
-                                                  "changed": {"obs_noise": "0.1"}}], info["evolution"]
+                    assert info["evolution"] == [
+                        {"at_reset": False, "episode": 3, "tick": 25, "changed": {"obs_noise": "0.1"}}
+                    ], info["evolution"]
                     assert info["settings"]["obs_noise"] == 0.1
             assert truncated and not terminated
     finally:
@@ -336,7 +393,7 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
     assert len(picks) >= 80
     assert all(allowed for allowed, _ in picks), [i for i, (ok, _) in enumerate(picks) if not ok]
     before = [modes for _, modes in picks[: 2 * ENV_EPISODE_STEPS]]
-    assert not any(before) and all(modes for _, modes in picks[2 * ENV_EPISODE_STEPS:]), "the upgrade at episode 3"
+    assert not any(before) and all(modes for _, modes in picks[2 * ENV_EPISODE_STEPS :]), "the upgrade at episode 3"
 
 
 # --------------------------------------------------------------------------------------------
@@ -362,8 +419,12 @@ def check_a_tampered_event_is_named(out, tmp_path) -> None:
     assert rewrite_bag(out, tmp_path / "tampered", edit) == 1
     tampered = replay(tmp_path / "tampered")
     assert not tampered.identical
-    assert (tampered.difference.topic, tampered.difference.field, tampered.difference.recorded,
-            tampered.difference.replayed) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
+    assert (
+        tampered.difference.topic,
+        tampered.difference.field,
+        tampered.difference.recorded,
+        tampered.difference.replayed,
+    ) == ("events/evolution", "threshold", 0.75, 0.8), tampered.report()
 
 
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
@@ -399,7 +460,12 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
     assert bag.info.node["evolution"] == SCHEDULE and bag.info.node["evolution_file"] == str(schedule)
     evolution = [m.plain for m in bag.on(f"{ns}/events/evolution")]
     assert [(e["at_reset"], e["episode"], e["tick"], e["event_indices"]) for e in evolution] == [
-        (True, 1, 0, []), (False, 1, 4, [1]), (False, 1, 6, [2]), (True, 2, 10, [3]), (False, 2, 14, [4])]
+        (True, 1, 0, []),
+        (False, 1, 4, [1]),
+        (False, 1, 6, [2]),
+        (True, 2, 10, [3]),
+        (False, 2, 14, [4]),
+    ]
     result = replay(out)
     assert result.identical, result.report()
     assert result.comparison.compared["events/evolution"] == 5
@@ -418,8 +484,10 @@ def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, star
     import time
 
     schedule = tmp_path / "upgrade-at-1.yaml"
-    schedule.write_text("events:\n  - at: {episode: 0}\n    sort_modes: false\n    ratio_sensor: false\n"
-                        "  - at: {episode: 1}\n    sort_modes: true\n    ratio_sensor: true\n")
+    schedule.write_text(
+        "events:\n  - at: {episode: 0}\n    sort_modes: false\n    ratio_sensor: false\n"
+        "  - at: {episode: 1}\n    sort_modes: true\n    ratio_sensor: true\n"
+    )
     ns = namespace("cli")
     node = start_node(
         "--setup", "B", "--variant", "advanced", "--evolution", schedule, "--ros-args", "-r", f"__ns:={ns}"

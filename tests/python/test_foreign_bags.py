@@ -29,9 +29,20 @@ from sorting_line_gym.bag.cli import main
 from sorting_line_gym.bag.replay import replay
 
 #: The node serving /plant/line_2 hosted three lines with seed 7: line 2 has seed 9, advanced_b's.
-PLANT_PARAMETERS = {"variant": "advanced", "input": "seasonal", "obs_noise": 0.0, "action_penalty": 0.5,
-                    "threshold": 0.7, "max_steps": 50, "seed": 7, "mode": "lockstep", "lines": 3,
-                    "tick_period": 1.0, "rate": 10.0, "use_sim_time": False}
+PLANT_PARAMETERS = {
+    "variant": "advanced",
+    "input": "seasonal",
+    "obs_noise": 0.0,
+    "action_penalty": 0.5,
+    "threshold": 0.7,
+    "max_steps": 50,
+    "seed": 7,
+    "mode": "lockstep",
+    "lines": 3,
+    "tick_period": 1.0,
+    "rate": 10.0,
+    "use_sim_time": False,
+}
 
 
 def _diagnostics_options(name: str) -> dict:
@@ -44,10 +55,17 @@ def ros2_bags(tmp_path_factory) -> dict[str, Path]:
     """storage -> a bag of a golden bag's data as `ros2 bag record -a` writes it."""
     base = tmp_path_factory.mktemp("ros2_bags")
     return {
-        "mcap": write_ros2_bag(DATA / "basic_d", base / "cell_3", "mcap", "/factory/cell_3",
-                               _diagnostics_options("basic_d")),
-        "sqlite3": write_ros2_bag(DATA / "advanced_b", base / "plant", "sqlite3", "/plant/line_2",
-                                  _diagnostics_options("advanced_b"), node_parameters=PLANT_PARAMETERS),
+        "mcap": write_ros2_bag(
+            DATA / "basic_d", base / "cell_3", "mcap", "/factory/cell_3", _diagnostics_options("basic_d")
+        ),
+        "sqlite3": write_ros2_bag(
+            DATA / "advanced_b",
+            base / "plant",
+            "sqlite3",
+            "/plant/line_2",
+            _diagnostics_options("advanced_b"),
+            node_parameters=PLANT_PARAMETERS,
+        ),
     }
 
 
@@ -62,8 +80,13 @@ def test_info_tells_the_line_and_where_each_option_came_from(ros2_bags, capsys):
     cell = next(line for line in out.splitlines() if "/factory/cell_status" in line)
     assert CELL_STATUS in cell and "type not known here" in cell, out
     assert "line /factory/cell_3 (recorded by another tool" in out, out
-    for told in ("variant=basic (/diagnostics)", "seed=5 (/diagnostics)", "max_steps=50 (states)",
-                 "tick_period=1.0 (states)", "input=seasonal (/diagnostics)"):
+    for told in (
+        "variant=basic (/diagnostics)",
+        "seed=5 (/diagnostics)",
+        "max_steps=50 (states)",
+        "tick_period=1.0 (states)",
+        "input=seasonal (/diagnostics)",
+    ):
         assert told in out, out
     assert "not in the bag: obs_noise, action_penalty, threshold" in out, out
 
@@ -80,8 +103,10 @@ def test_info_tells_the_line_and_where_each_option_came_from(ros2_bags, capsys):
 def test_replay_names_the_missing_flags_then_reproduces_the_bag(ros2_bags, capsys):
     assert main(["replay", str(ros2_bags["mcap"])]) == 2
     err = capsys.readouterr().err
-    assert "does not say the node's obs_noise, action_penalty, threshold: pass --obs-noise ... " \
-           "--action-penalty ... --threshold ... (--setup A|B|C|D gives" in err, err
+    assert (
+        "does not say the node's obs_noise, action_penalty, threshold: pass --obs-noise ... "
+        "--action-penalty ... --threshold ... (--setup A|B|C|D gives" in err
+    ), err
     result = replay(ros2_bags["mcap"], {"setup": GOLDEN["basic_d"]["setup"]})
     assert result.identical, result.report()
     assert result.comparison.compared["state"] == 255 and result.resets == 5, result.report()
@@ -117,8 +142,11 @@ def test_open_loop_check_passes_the_controller_that_drove_the_line(ros2_bags, st
 
     name = "basic_d" if storage == "mcap" else "advanced_b"
     spec = GOLDEN[name]
-    verdict = check_controller(ros2_bags[storage], controller=f"sorting-line-controller --setup {spec['setup']} "
-                                                              f"--variant {spec['variant']} --agent {spec['agent']}")
+    verdict = check_controller(
+        ros2_bags[storage],
+        controller=f"sorting-line-controller --setup {spec['setup']} "
+        f"--variant {spec['variant']} --agent {spec['agent']}",
+    )
     assert verdict.passed and verdict.exit_code == 0, verdict.summary()
     assert verdict.namespace == ("/factory/cell_3" if storage == "mcap" else "/plant/line_2"), verdict.summary()
     assert verdict.count("matching") >= 250 and not verdict.differences, verdict.summary()
@@ -131,8 +159,12 @@ def test_closed_loop_check_names_the_missing_flags_then_passes_with_them(ros2_ba
     verdict = check_controller(ros2_bags["mcap"], closed_loop=True, wait=1.0)
     assert verdict.exit_code == 2, verdict.summary()
     assert "pass --obs-noise ... --action-penalty ... --threshold ... (--setup A|B|C|D" in verdict.error, verdict.error
-    verdict = check_controller(ros2_bags["mcap"], closed_loop=True, overrides={"setup": spec["setup"]},
-                               controller=f"sorting-line-controller --setup {spec['setup']} --agent {spec['agent']}")
+    verdict = check_controller(
+        ros2_bags["mcap"],
+        closed_loop=True,
+        overrides={"setup": spec["setup"]},
+        controller=f"sorting-line-controller --setup {spec['setup']} --agent {spec['agent']}",
+    )
     assert verdict.passed and len(verdict.episodes) == 5, verdict.summary()
 
 
@@ -141,5 +173,7 @@ def test_play_leaves_out_the_recorded_graphs_own_topics(ros2_bags, capsys):
     out = capsys.readouterr().out
     # 255 ticks of input, belt/occupancy, state and /clock, 5 resets, 1 /diagnostics; not the commands
     assert "played 1026 messages" in out and "/elsewhere/state 255" in out, out
-    assert ("not played: /factory/cell_status (type factory_msgs/msg/CellStatus not known here), /parameter_events "
-            "(the recorded nodes' own topic), /rosout (the recorded nodes' own topic)") in out, out
+    assert (
+        "not played: /factory/cell_status (type factory_msgs/msg/CellStatus not known here), /parameter_events "
+        "(the recorded nodes' own topic), /rosout (the recorded nodes' own topic)"
+    ) in out, out

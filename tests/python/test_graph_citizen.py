@@ -36,8 +36,10 @@ def endpoints_of(probe, node_name: str, namespace: str):
     """(topic, kind, type, hash) of every endpoint of the node, service topics included."""
     found = []
     for topic, _ in probe.get_topic_names_and_types(no_demangle=True):
-        for kind, getter in (("pub", probe.get_publishers_info_by_topic),
-                             ("sub", probe.get_subscriptions_info_by_topic)):
+        for kind, getter in (
+            ("pub", probe.get_publishers_info_by_topic),
+            ("sub", probe.get_subscriptions_info_by_topic),
+        ):
             for info in getter(topic, no_mangle=True):
                 if (info.node_name, info.node_namespace) == (node_name, namespace):
                     found.append((topic, kind, ros_type(info.topic_type), str(info.topic_type_hash)))
@@ -74,8 +76,10 @@ def test_endpoints_announce_rosidls_hashes_and_clock_has_one_type(ros, start_nod
         node_state = probe.get_publishers_info_by_topic(f"{ns}/state")
         print(f"\n{ns}/state: node {node_state[0].topic_type_hash}, rclpy {rclpy_state[0].topic_type_hash}")
         assert str(node_state[0].topic_type_hash) == str(rclpy_state[0].topic_type_hash)
-        for suffix, getter in (("resetRequest", probe.get_subscriptions_info_by_topic),
-                               ("resetReply", probe.get_publishers_info_by_topic)):
+        for suffix, getter in (
+            ("resetRequest", probe.get_subscriptions_info_by_topic),
+            ("resetReply", probe.get_publishers_info_by_topic),
+        ):
             prefix = "rq" if suffix.endswith("Request") else "rr"
             mine = ros.spin_until(lambda: getter(f"{prefix}{ns}_probe/{suffix}", no_mangle=True), 5.0, "rclpy service")
             theirs = getter(f"{prefix}{ns}/{suffix}", no_mangle=True)
@@ -101,16 +105,20 @@ def test_parameters_are_described_read_only_with_ranges(ros, start_node, namespa
     try:
         describe = probe.create_client(DescribeParameters, f"{ns}/sorting_line/describe_parameters")
         names = ["rate", "threshold", "max_steps", "lines", "variant", "seed"]
-        reply = ros.call_service(describe, DescribeParameters.Request(names=names), "describe_parameters",
-                                 context=node.describe)
+        reply = ros.call_service(
+            describe, DescribeParameters.Request(names=names), "describe_parameters", context=node.describe
+        )
         d = {x.name: x for x in reply.descriptors}
         for name in names:
             assert d[name].read_only and d[name].description, d[name]
             assert "missing" not in d[name].description
+
         def fp(n):
             return (d[n].floating_point_range[0].from_value, d[n].floating_point_range[0].to_value)
+
         def ir(n):
             return (d[n].integer_range[0].from_value, d[n].integer_range[0].to_value)
+
         assert fp("rate") == (0.0, 100000.0) and "0.0 <.." in d["rate"].additional_constraints
         assert fp("threshold") == (0.0, 1.0) and "..< 1.0" in d["threshold"].additional_constraints
         assert ir("max_steps") == (1, 1_000_000) and ir("lines") == (1, 64) and ir("seed") == (0, 2**63 - 1)
@@ -121,8 +129,11 @@ def test_parameters_are_described_read_only_with_ranges(ros, start_node, namespa
         print("\n" + str(d["threshold"]))
 
         setter = probe.create_client(SetParameters, f"{ns}/sorting_line/set_parameters")
-        request = SetParameters.Request(parameters=[Parameter(
-            name="rate", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5.0))])
+        request = SetParameters.Request(
+            parameters=[
+                Parameter(name="rate", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5.0))
+            ]
+        )
         result = ros.call_service(setter, request, "set_parameters", context=node.describe).results[0]
         assert not result.successful and "fixed for the run" in result.reason, result
     finally:
@@ -136,14 +147,17 @@ def leave_after(ros, start_node, namespace, sig, listed_in) -> float:
     node = start_node("--ros-args", "-r", f"__ns:={ns}")
     probe = ros.make_node("leave_probe")
     try:
+
         def listed():
             return listed_in(probe, ns)
+
         ros.spin_until(listed, 15.0, f"{ns} in the peer's graph", node.describe)
         ros.spin_for(0.5)
         t0 = time.monotonic()
         assert node.stop(sig, timeout=5.0) == 0, node.describe()
-        ros.spin_until(lambda: not listed(), 5.0, f"{ns} to leave the peer's graph after {sig.name}", node.describe,
-                       step=0.01)
+        ros.spin_until(
+            lambda: not listed(), 5.0, f"{ns} to leave the peer's graph after {sig.name}", node.describe, step=0.01
+        )
         return time.monotonic() - t0
     finally:
         ros.destroy_node(probe)
@@ -153,25 +167,39 @@ def leave_after(ros, start_node, namespace, sig, listed_in) -> float:
 def test_a_running_peer_stops_listing_the_node_and_its_endpoints(ros, start_node, namespace, sig):
     """The goal is 2 s (without the disposes a peer kept them for the DDS lease, 50 s);
     the check allows 5 s for a loaded machine and prints the measured time."""
-    took = leave_after(ros, start_node, namespace, sig,
-                       lambda probe, ns: (("sorting_line", ns) in probe.get_node_names_and_namespaces()
-                                          or probe.get_publishers_info_by_topic(f"{ns}/state")
-                                          or probe.get_subscriptions_info_by_topic(f"{ns}/cmd/speed")))
+    took = leave_after(
+        ros,
+        start_node,
+        namespace,
+        sig,
+        lambda probe, ns: (
+            ("sorting_line", ns) in probe.get_node_names_and_namespaces()
+            or probe.get_publishers_info_by_topic(f"{ns}/state")
+            or probe.get_subscriptions_info_by_topic(f"{ns}/cmd/speed")
+        ),
+    )
     print(f"\n{sig.name}: the peer stopped listing the node and its endpoints after {took:.3f} s")
 
 
-@pytest.mark.parametrize("env,expected", [
-    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "localhost"},
-     "ROS_AUTOMATIC_DISCOVERY_RANGE = localhost is not valid: allowed SUBNET, LOCALHOST, OFF, SYSTEM_DEFAULT"),
-    ({"ROS_STATIC_PEERS": "::1"}, "ROS_STATIC_PEERS: peer '::1' is IPv6"),
-], ids=["range", "peer"])
+@pytest.mark.parametrize(
+    "env,expected",
+    [
+        (
+            {"ROS_AUTOMATIC_DISCOVERY_RANGE": "localhost"},
+            "ROS_AUTOMATIC_DISCOVERY_RANGE = localhost is not valid: allowed SUBNET, LOCALHOST, OFF, SYSTEM_DEFAULT",
+        ),
+        ({"ROS_STATIC_PEERS": "::1"}, "ROS_STATIC_PEERS: peer '::1' is IPv6"),
+    ],
+    ids=["range", "peer"],
+)
 def test_bad_discovery_variables_fail_at_start(env, expected):
     code, stderr = h.run_node_expecting_failure([], env=env)
     assert code == 2 and expected in stderr, f"exit {code}:\n{stderr}"
 
 
-@pytest.mark.parametrize("range_,visible", [("SUBNET", True), ("LOCALHOST", True), ("SYSTEM_DEFAULT", True),
-                                            ("OFF", False)])
+@pytest.mark.parametrize(
+    "range_,visible", [("SUBNET", True), ("LOCALHOST", True), ("SYSTEM_DEFAULT", True), ("OFF", False)]
+)
 def test_the_node_follows_the_discovery_range(ros, start_node, namespace, range_, visible):
     """Same host, the peer (rclpy) under LOCALHOST: every range but OFF finds it (the multi-host
     cases need a second network namespace: the veth test)."""
@@ -179,8 +207,10 @@ def test_the_node_follows_the_discovery_range(ros, start_node, namespace, range_
     node = start_node("--ros-args", "-r", f"__ns:={ns}", env={"ROS_AUTOMATIC_DISCOVERY_RANGE": range_})
     probe = ros.make_node("range_probe")
     try:
+
         def seen():
             return probe.get_publishers_info_by_topic(f"{ns}/state")
+
         if visible:
             ros.spin_until(seen, 10.0, f"{ns}/state under {range_}", node.describe)
         else:

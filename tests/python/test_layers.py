@@ -72,8 +72,12 @@ def test_the_workarounds_the_line_layer_uses_need_no_ros():
 def test_no_layer_needs_sb3_but_those_that_train(subpackage):
     """SB3 and torch (half a GB, seconds of start-up) load only where a model is trained or loaded:
     the SB3 VecEnv, training, and the reports that train (the benchmark)."""
-    allowed_sb3 = {"sorting_line_gym.envs.sb3_vec_env", "sorting_line_gym.training.callbacks",
-                   "sorting_line_gym.training.train", "sorting_line_gym.reports.benchmark"}
+    allowed_sb3 = {
+        "sorting_line_gym.envs.sb3_vec_env",
+        "sorting_line_gym.training.callbacks",
+        "sorting_line_gym.training.train",
+        "sorting_line_gym.reports.benchmark",
+    }
     modules = [m for m in modules_of(subpackage) if m not in allowed_sb3]
     assert modules
     assert "stable_baselines3" not in loaded_after_import(*modules), modules

@@ -185,16 +185,32 @@ class Conversation:
 
 def start_node(hosts, tmp_path, host: str, namespace: str, env: dict) -> subprocess.Popen:
     log = open(tmp_path / f"node_{host}_{namespace.strip('/').replace('/', '_')}.log", "wb")
-    argv = [str(h.node_binary()), "node", "--setup", SETUP, "--variant", VARIANT, "--lines", str(LINES),
-            "--max-steps", str(EPISODE), "--ros-args", "-r", f"__ns:={namespace}"]
+    argv = [
+        str(h.node_binary()),
+        "node",
+        "--setup",
+        SETUP,
+        "--variant",
+        VARIANT,
+        "--lines",
+        str(LINES),
+        "--max-steps",
+        str(EPISODE),
+        "--ros-args",
+        "-r",
+        f"__ns:={namespace}",
+    ]
     return hosts.popen(host, argv, env=env, stdout=log, stderr=subprocess.STDOUT)
 
 
 def discovery_env(**values: str) -> dict[str, str]:
     import os
 
-    env = {k: v for k, v in os.environ.items() if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",
-                                                             "ROS_LOCALHOST_ONLY")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")
+    }
     env.update(values, PYTHONUNBUFFERED="1", SORTING_LINE_BIN=str(h.node_binary()))
     return env
 
@@ -223,8 +239,12 @@ def assert_line_matches_trace(line: dict, seed: int, actions: list[int], where: 
         if step["truncated"] and t + 1 < len(line["steps"]):
             fresh = next(want)
             assert "reset" in fresh, f"{where} step {t + 1}: the library has no reset after it: {fresh}"
-            assert_obs(np.array(step["obs"], dtype=np.float32), VARIANT, fresh["reset"]["observation"],
-                       f"{where} autoreset after step {t + 1}")
+            assert_obs(
+                np.array(step["obs"], dtype=np.float32),
+                VARIANT,
+                fresh["reset"]["observation"],
+                f"{where} autoreset after step {t + 1}",
+            )
         info = dict(step["info"], containers=tuple(step["info"]["containers"]))
         reward = step["reward"]
         if float32_rewards and "step" in entry:
@@ -241,15 +261,20 @@ def check_lines(lines: list[dict], seed: int, actions: list[list[int]], where: s
         assert_line_matches_trace(line, seed + k, [row[k] for row in actions], f"{where}, line {k}", float32_rewards)
 
 
-
-
 def start_trainer(hosts, tmp_path, env: dict, cfg: dict) -> Conversation:
     """The trainer script on the trainer host, for the scenario of ``cfg``; its log in tmp_path."""
     script = tmp_path / "trainer.py"
     script.write_text(TRAINER)
     log = tmp_path / f"trainer_{cfg['scenario']}.log"
-    proc = hosts.popen("trainer", [sys.executable, str(script), json.dumps(cfg)], env=env, text=True,
-                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=open(log, "w"))
+    proc = hosts.popen(
+        "trainer",
+        [sys.executable, str(script), json.dumps(cfg)],
+        env=env,
+        text=True,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=open(log, "w"),
+    )
     return Conversation(proc, log)
 
 
@@ -271,7 +296,8 @@ def check_faults_and_recovery(trainer, hosts, nodes: dict, node_envs: dict, tmp_
     assert failure["kind"] == "BridgeTimeout", failure
     assert "/h2/plant" in failure["error"] and f"lines {first}..{last}" in failure["error"], failure
     assert "/h1/plant" not in failure["error"] and "/h3/plant" not in failure["error"], (
-        f"the error names nodes that answered: {failure}")
+        f"the error names nodes that answered: {failure}"
+    )
     # The wait is bounded by step_timeout (plus its own 50 ms slices): a loose bound, as the
     # machine is shared; it tells a bounded wait from a hang.
     assert failure["seconds"] < STEP_TIMEOUT + 3.0, failure
@@ -324,7 +350,7 @@ def test_one_vector_env_over_three_hosts_faults_and_recovery(tmp_path):
         report = t.expect("trajectories")
         check_lines(report["lines"], 500, actions, "3 hosts")
         # The SB3 face over the same three nodes, through one autoreset of every line.
-        check_lines(t.expect("sb3")["lines"], 550, actions[:EPISODE + 3], "SB3 face, 3 hosts", float32_rewards=True)
+        check_lines(t.expect("sb3")["lines"], 550, actions[: EPISODE + 3], "SB3 face, 3 hosts", float32_rewards=True)
         assert t.proc.wait(timeout=30) == 0, t.tail()
 
         # 2. Faults: h2's link down, then back; h3's node killed, then replaced.
@@ -375,16 +401,21 @@ def assert_bench_output(out: str, node_cpu: str) -> None:
     assert re.search(rf"^\| 1 \| 16 \| [\d,]+ \| [\d,]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| {node_cpu} \|", out, re.M), out
     assert re.search(rf"^\| 2 \| 32 \| [\d,]+ \| [\d,]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| {node_cpu} \|", out, re.M), out
     assert re.search(r"^2 hosts / 1 host, p50 round trip: [\d.]+x \(target <= 1.5x\)$", out, re.M), out
-    assert re.search(r"^soak: [\d,]+ line-ticks over 2 hosts \(32 lines\): lost 0, misaligned 0, values compared with "
-                     r"the library [1-9][\d,]+, mismatched 0;", out, re.M), out
+    assert re.search(
+        r"^soak: [\d,]+ line-ticks over 2 hosts \(32 lines\): lost 0, misaligned 0, values compared with "
+        r"the library [1-9][\d,]+, mismatched 0;",
+        out,
+        re.M,
+    ), out
 
 
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
 def test_the_multihost_benchmark_on_hosts_it_makes(tmp_path):
     """benches/multihost.py, which gives docs/scaling.md its figures, at a small size over the
     network-namespace hosts it makes itself."""
-    r = subprocess.run([sys.executable, str(BENCH), *SMALL_BENCH, "--logs", str(tmp_path)],
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, str(BENCH), *SMALL_BENCH, "--logs", str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
     assert_bench_output(r.stdout, r"[\d.]+")
 
@@ -401,12 +432,20 @@ def test_the_multihost_benchmark_attaches_to_running_nodes(tmp_path):
         for n in ("m1", "m2")
     ]
     try:
-        r = subprocess.run([sys.executable, str(BENCH), "--attach", "/m1/plant", "/m2/plant", *SMALL_BENCH],
-                           capture_output=True, text=True, timeout=300)
+        r = subprocess.run(
+            [sys.executable, str(BENCH), "--attach", "/m1/plant", "/m2/plant", *SMALL_BENCH],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:] + "".join(n.describe() for n in nodes)
         assert_bench_output(r.stdout, "n/a")
-        too_many = subprocess.run([sys.executable, str(BENCH), "--attach", "/m1/plant", "--hosts", "1", "2"],
-                                  capture_output=True, text=True, timeout=60)
+        too_many = subprocess.run(
+            [sys.executable, str(BENCH), "--attach", "/m1/plant", "--hosts", "1", "2"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert too_many.returncode != 0 and "ask for 3 nodes, --attach names 1" in too_many.stderr, too_many.stderr
     finally:
         for n in nodes:

@@ -16,8 +16,16 @@ import ros_harness as h
 from line_client import LineClient
 from ros_harness import LINE_TYPES, show_ns, stamp_ns
 
-REASONS = ["invalid_speed", "unknown_mode", "mode_on_basic_line", "stale", "duplicate", "unknown_tick",
-           "episode_over", "malformed"]
+REASONS = [
+    "invalid_speed",
+    "unknown_mode",
+    "mode_on_basic_line",
+    "stale",
+    "duplicate",
+    "unknown_tick",
+    "episode_over",
+    "malformed",
+]
 
 # The fixed line contents after a reset (src/sim/line.rs).
 START_BELT = (40, 20)
@@ -39,9 +47,11 @@ def diagnostics_recorder(ros, probe):
     return h.TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
 
 
-def wait_diagnostics(diag: h.TopicRecorder, hardware_id: str, want: dict[str, str], timeout: float = 5.0,
-                     context=lambda: "") -> dict[str, str]:
+def wait_diagnostics(
+    diag: h.TopicRecorder, hardware_id: str, want: dict[str, str], timeout: float = 5.0, context=lambda: ""
+) -> dict[str, str]:
     """Waits (the node publishes at 1 Hz) for a status of `hardware_id` whose values include `want`."""
+
     def matches(array):
         values = h.diagnostic_values(array, hardware_id)
         return values is not None and all(values.get(k) == v for k, v in want.items())
@@ -68,13 +78,17 @@ SUBSCRIBED = ["cmd/speed", "cmd/sort_mode"]
 def check_line_endpoints(probe, line_ns: str, variant: str, node_name: str, node_ns: str) -> None:
     """The node publishes/subscribes each topic of the line with the right type (and the basic line
     has no sensors/ratio and no cmd/sort_mode)."""
+
     def owners(infos):
         return {(i.node_name, i.node_namespace, i.topic_type) for i in infos}
 
     for rel in PUBLISHED + SUBSCRIBED:
         name = f"{line_ns}/{rel}"
-        infos = (probe.get_publishers_info_by_topic(name) if rel in PUBLISHED
-                 else probe.get_subscriptions_info_by_topic(name))
+        infos = (
+            probe.get_publishers_info_by_topic(name)
+            if rel in PUBLISHED
+            else probe.get_subscriptions_info_by_topic(name)
+        )
         mine = {o for o in owners(infos) if o[:2] == (node_name, node_ns)}
         if variant == "basic" and rel in ("sensors/ratio", "cmd/sort_mode"):
             assert not mine, f"the basic line has {name}: {mine}"
@@ -103,12 +117,14 @@ def check_tick_consistency(c: LineClient, stamps: list[int], reset_stamps: set[i
         else:
             assert previous_input is not None
             assert (belt.amount_a, belt.amount_b) == (previous_input.amount_a, previous_input.amount_b), (
-                f"{where}: the belt carries the previous tick's input")
+                f"{where}: the belt carries the previous tick's input"
+            )
         if c.variant == "advanced":
             ratio = c.wait_message("sensors/ratio", stamp)
             assert (ratio.episode, ratio.step) == (state.episode, state.step), where
             assert (ratio.ratio, ratio.category) == h.ratio_rule(inp.amount_a, inp.amount_b), (
-                f"{where}: ratio {ratio.ratio} category {ratio.category} for A={inp.amount_a} B={inp.amount_b}")
+                f"{where}: ratio {ratio.ratio} category {ratio.category} for A={inp.amount_a} B={inp.amount_b}"
+            )
             assert state.observation_category == ratio.category, where
         previous_input = inp
 
@@ -185,8 +201,11 @@ BAD_START = [
 ]
 
 
-@pytest.mark.parametrize("args,env,expected", BAD_START, ids=[
-    " ".join([*(f"{k}={v}" for k, v in env.items()), *args]) for args, env, _ in BAD_START])
+@pytest.mark.parametrize(
+    "args,env,expected",
+    BAD_START,
+    ids=[" ".join([*(f"{k}={v}" for k, v in env.items()), *args]) for args, env, _ in BAD_START],
+)
 def test_bad_start_arguments_exit_2_naming_value_and_range(args, env, expected, tmp_path):
     for name, (text, _) in BAD_PARAMS_FILES.items():
         (tmp_path / name).write_text(text)
@@ -208,10 +227,18 @@ def check_line_counters(diag, ns: str, setup: str, variant: str, steps: int, fin
     (seed 11), the last at ``final``."""
     accepted = steps * (2 if variant == "advanced" else 1)
     values = wait_diagnostics(diag, ns, {"ticks": str(steps), "sim_time": show_ns(final)}, context=context)
-    want = {"episodes": "1", "commands_accepted": str(accepted), "commands_rejected": "0", "seed": "11",
-            "episode": "1", "step": str(steps), "variant": variant,
-            "input": "seasonal" if setup in "BD" else "random", "mode": "lockstep",
-            **{f"rejected_{r}": "0" for r in REASONS}}
+    want = {
+        "episodes": "1",
+        "commands_accepted": str(accepted),
+        "commands_rejected": "0",
+        "seed": "11",
+        "episode": "1",
+        "step": str(steps),
+        "variant": variant,
+        "input": "seasonal" if setup in "BD" else "random",
+        "mode": "lockstep",
+        **{f"rejected_{r}": "0" for r in REASONS},
+    }
     assert {k: values.get(k) for k in want} == want
     assert float(values["tick_rate"]) >= 0.0
     status = next(s for a in reversed(diag.msgs) for s in a.status if s.hardware_id == ns)
@@ -329,21 +356,36 @@ def check_fixed_parameters_of_plant_sorter(ros, probe, context) -> None:
 
     get = probe.create_client(GetParameters, "/plant/sorter/get_parameters")
     names = "variant max_steps seed threshold mode lines input obs_noise action_penalty tick_period".split()
-    reply = ros.call_service(get, GetParameters.Request(names=names), "/plant/sorter/get_parameters",
-                             context=context)
+    reply = ros.call_service(get, GetParameters.Request(names=names), "/plant/sorter/get_parameters", context=context)
 
     def value(v):
-        return {ParameterType.PARAMETER_BOOL: v.bool_value, ParameterType.PARAMETER_INTEGER: v.integer_value,
-                ParameterType.PARAMETER_DOUBLE: v.double_value, ParameterType.PARAMETER_STRING: v.string_value,
-                }.get(v.type, f"<type {v.type}>")
+        return {
+            ParameterType.PARAMETER_BOOL: v.bool_value,
+            ParameterType.PARAMETER_INTEGER: v.integer_value,
+            ParameterType.PARAMETER_DOUBLE: v.double_value,
+            ParameterType.PARAMETER_STRING: v.string_value,
+        }.get(v.type, f"<type {v.type}>")
 
     got = dict(zip(names, map(value, reply.values), strict=False))
-    assert got == {"variant": "advanced", "max_steps": 30, "seed": 3, "threshold": 0.75, "mode": "lockstep",
-                   "lines": 1, "input": "random", "obs_noise": 0.0, "action_penalty": 0.0, "tick_period": 1.0}
+    assert got == {
+        "variant": "advanced",
+        "max_steps": 30,
+        "seed": 3,
+        "threshold": 0.75,
+        "mode": "lockstep",
+        "lines": 1,
+        "input": "random",
+        "obs_noise": 0.0,
+        "action_penalty": 0.0,
+        "tick_period": 1.0,
+    }
     # Fixed for the run: a set request is refused with a reason.
     set_client = probe.create_client(SetParameters, "/plant/sorter/set_parameters")
-    request = SetParameters.Request(parameters=[Parameter(
-        name="threshold", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.9))])
+    request = SetParameters.Request(
+        parameters=[
+            Parameter(name="threshold", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.9))
+        ]
+    )
     result = ros.call_service(set_client, request, "/plant/sorter/set_parameters", context=context).results[0]
     assert not result.successful and "fixed" in result.reason, result
 
@@ -351,8 +393,19 @@ def check_fixed_parameters_of_plant_sorter(ros, probe, context) -> None:
 def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_path):
     params = tmp_path / "f.yaml"
     params.write_text("/**:\n  ros__parameters:\n    variant: advanced\n    max_steps: 30\n")
-    node = start_node("--ros-args", "-r", "__ns:=/plant", "-r", "__node:=sorter", "-p", "seed:=3",
-                      "-p", "threshold:=0.75", "--params-file", str(params))
+    node = start_node(
+        "--ros-args",
+        "-r",
+        "__ns:=/plant",
+        "-r",
+        "__node:=sorter",
+        "-p",
+        "seed:=3",
+        "-p",
+        "threshold:=0.75",
+        "--params-file",
+        str(params),
+    )
     c = client_factory("/plant", "advanced", node_proc=node)
     c.wait_connected()
     response = c.reset()  # no seed: the streams of the node's seed carry on
@@ -367,8 +420,7 @@ def test_started_like_launch_ros(ros, start_node, client_factory, probe, tmp_pat
     for rel, type_name in LINE_TYPES.items():
         assert types.get(f"/plant/{rel}") == [type_name], rel
     assert "/state" not in types and "/input" not in types
-    assert dict(probe.get_service_names_and_types()).get("/plant/reset") == [
-        "sorting_line_interfaces/srv/ResetLine"]
+    assert dict(probe.get_service_names_and_types()).get("/plant/reset") == ["sorting_line_interfaces/srv/ResetLine"]
 
     # max_steps 30 from the parameter file: the 30th step truncates.
     states = [c.step(0.5, 0) for _ in range(30)]
@@ -385,8 +437,9 @@ def test_a_setup_is_a_preset_that_explicit_values_override(ros, start_node, clie
     c.wait_connected()
     names = ["setup", "input", "obs_noise", "action_penalty", "threshold"]
     get = probe.create_client(GetParameters, f"{ns}/sorting_line/get_parameters")
-    reply = ros.call_service(get, GetParameters.Request(names=names), f"{ns}/sorting_line/get_parameters",
-                             context=c.context)
+    reply = ros.call_service(
+        get, GetParameters.Request(names=names), f"{ns}/sorting_line/get_parameters", context=c.context
+    )
     got = [v.string_value or v.double_value for v in reply.values]
     assert got == ["D", "seasonal", 0.1, 0.5, 0.7], got
 
@@ -414,8 +467,19 @@ def answer_one_tick_amid_bad_commands(noisy, diag, ns_noisy: str, expected: dict
         noisy.send_mode((mode + 1) % 3, t)
         expected["duplicate"] += 1
         wait_diagnostics(diag, ns_noisy, {"rejected_duplicate": "1"}, context=noisy.context)
-    for bad_speed, stamp in [(math.nan, t), (math.inf, t), (-math.inf, t), (0.55, t), (-1.0, t), (0.0, t),
-                             (1.1, t), (speed, t - p), (speed, t + p), (speed, t + p // 2), (speed, 0)]:
+    for bad_speed, stamp in [
+        (math.nan, t),
+        (math.inf, t),
+        (-math.inf, t),
+        (0.55, t),
+        (-1.0, t),
+        (0.0, t),
+        (1.1, t),
+        (speed, t - p),
+        (speed, t + p),
+        (speed, t + p // 2),
+        (speed, 0),
+    ]:
         noisy.send_speed(bad_speed, stamp)
     expected["invalid_speed"] += 7
     expected["stale"] += 2  # t - p and tick 0 (the line is past both)
@@ -453,13 +517,17 @@ def test_bad_command_flood_leaves_the_state_stream_identical(ros, start_node, cl
 
     for topic in ["state", "input", "belt/occupancy", "sensors/ratio"]:
         assert [h.msg_to_dict(m) for m in noisy.since_reset(topic)] == [
-            h.msg_to_dict(m) for m in clean.since_reset(topic)], (
-            f"{topic}: the noisy run differs from the clean run")
+            h.msg_to_dict(m) for m in clean.since_reset(topic)
+        ], f"{topic}: the noisy run differs from the clean run"
     assert len(noisy.since_reset("state")) == len(actions) + 1
 
     total = sum(expected.values())
-    want = {"ticks": str(len(actions)), "commands_accepted": str(2 * len(actions)),
-            "commands_rejected": str(total), **{f"rejected_{r}": str(n) for r, n in expected.items()}}
+    want = {
+        "ticks": str(len(actions)),
+        "commands_accepted": str(2 * len(actions)),
+        "commands_rejected": str(total),
+        **{f"rejected_{r}": str(n) for r, n in expected.items()},
+    }
     got = wait_diagnostics(diag, ns_noisy, {"commands_rejected": str(total)}, context=noisy.context)
     assert {k: got.get(k) for k in want} == want
     got_clean = wait_diagnostics(diag, ns_clean, {"ticks": str(len(actions))}, context=clean.context)

@@ -32,8 +32,16 @@ from test_node import (
 def test_two_node_processes_and_the_library_agree(variant, setup, start_node, client_factory, namespace):
     seed = 8
     n_actions = 10 if variant == "basic" else 30
-    tokens = ["r", *[(7 * k + 3) % n_actions for k in range(7)], "r", 4, 9, 1, "r99",
-              *[(5 * k + 1) % n_actions for k in range(6)]]
+    tokens = [
+        "r",
+        *[(7 * k + 3) % n_actions for k in range(7)],
+        "r",
+        4,
+        9,
+        1,
+        "r99",
+        *[(5 * k + 1) % n_actions for k in range(6)],
+    ]
     clients = []
     for tag in ["a", "b"]:  # two node processes, started together
         ns = namespace(tag)
@@ -45,8 +53,9 @@ def test_two_node_processes_and_the_library_agree(variant, setup, start_node, cl
         runs.append((c, run_tokens(c, tokens)))
     (a, states_a), (b, states_b) = runs
     for topic in ["state", "input", "belt/occupancy", "sensors/ratio", "events/reset"]:
-        assert [h.msg_to_dict(m) for m in a.since_reset(topic)] == [
-            h.msg_to_dict(m) for m in b.since_reset(topic)], topic
+        assert [h.msg_to_dict(m) for m in a.since_reset(topic)] == [h.msg_to_dict(m) for m in b.since_reset(topic)], (
+            topic
+        )
     compare_with_trace(states_a, h.run_trace(setup, variant, seed, tokens), f"{a.ns} vs trace")
     assert [e.seed for e in a.since_reset("events/reset")] == [seed, seed, 99]
     assert [e.episode for e in a.since_reset("events/reset")] == [1, 2, 3]
@@ -88,9 +97,14 @@ def test_four_lines_are_independent_and_seeded_seed_plus_k(ros, start_node, clie
     clock.wait_for(lambda m: stamp_ns(m.clock) == final, 3.0, f"clock at {show_ns(final)}")
     values = [stamp_ns(m.clock) for m in clock.msgs]
     assert values == sorted(set(values)) and values[-1] == final
-    array = diag.wait_for(lambda a: all((v := h.diagnostic_values(a, f"{ns}/line_{k}")) is not None
-                                        and v["ticks"] == str(len(plans[k])) for k in range(4)),
-                          5.0, "statuses of the 4 lines with their tick counts")
+    array = diag.wait_for(
+        lambda a: all(
+            (v := h.diagnostic_values(a, f"{ns}/line_{k}")) is not None and v["ticks"] == str(len(plans[k]))
+            for k in range(4)
+        ),
+        5.0,
+        "statuses of the 4 lines with their tick counts",
+    )
     for k in range(4):
         values = h.diagnostic_values(array, f"{ns}/line_{k}")
         assert (values["seed"], values["episodes"], values["commands_rejected"]) == (str(seed + k), "1", "0")
@@ -108,8 +122,11 @@ def stamp_fields(stamps_ns: list[int]) -> dict[str, list[int]]:
 
 def check_refused_resets(reset, stamps: list[int]) -> None:
     """batch/reset requests that are malformed answer success=false naming why, and reset nothing."""
-    for request, reason in [(([0, 1], [True], [1, 2]), "same length"), (([2], [False], [0]), "out of range"),
-                            (([1, 1], [False, False], [0, 0]), "repeated")]:
+    for request, reason in [
+        (([0, 1], [True], [1, 2]), "same length"),
+        (([2], [False], [0]), "out of range"),
+        (([1, 1], [False, False], [0, 0]), "repeated"),
+    ]:
         refused = reset(*request)
         assert not refused.success and reason in refused.message, refused
         assert batch_stamps(refused.states) == stamps
@@ -203,8 +220,18 @@ def test_malformed_batch_requests_are_rejected_counted_and_change_nothing(ros, s
 
 def test_truncation_then_episode_over_then_reset(ros, start_node, client_factory, probe, namespace):
     ns, setup, variant = namespace(), "A", "basic"
-    node = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--max-steps", "5", "--seed", "1",
-                      "--tick-period", "0.25", *ns_args(ns))
+    node = start_node(
+        *h.SETUP_FLAGS[setup],
+        "--variant",
+        variant,
+        "--max-steps",
+        "5",
+        "--seed",
+        "1",
+        "--tick-period",
+        "0.25",
+        *ns_args(ns),
+    )
     diag = diagnostics_recorder(ros, probe)
     c = client_factory(ns, variant, node_proc=node, tick_period=0.25)
     c.wait_connected()
@@ -221,8 +248,9 @@ def test_truncation_then_episode_over_then_reset(ros, start_node, client_factory
         c.send_speed(speed)
     ros.spin_for(0.5)
     assert len(c.msgs["state"]) == count, "a step after truncation"
-    wait_diagnostics(diag, ns, {"rejected_episode_over": "3", "commands_rejected": "3", "ticks": "5"},
-                     context=c.context)
+    wait_diagnostics(
+        diag, ns, {"rejected_episode_over": "3", "commands_rejected": "3", "ticks": "5"}, context=c.context
+    )
     assert "[episode_over]" in node.log()
     # A reset starts the next episode.
     response = c.reset(6)

@@ -49,8 +49,12 @@ def test_realtime_holds_the_speed_and_rejects_nan(ros, start_node, client_factor
     ros.spin_for(0.5)
     assert len(states) > mark + 10
     assert all(s.speed == 0.9 for s in states[first:])
-    wait_diagnostics(diag, ns, {"rejected_invalid_speed": "1", "commands_rejected": "1", "commands_accepted": "1",
-                                "mode": "realtime"}, context=c.context)
+    wait_diagnostics(
+        diag,
+        ns,
+        {"rejected_invalid_speed": "1", "commands_rejected": "1", "commands_accepted": "1", "mode": "realtime"},
+        context=c.context,
+    )
     assert all(s.episode == 0 for s in states)
 
 
@@ -75,8 +79,9 @@ def test_realtime_restarts_episodes_and_keeps_streaming(ros, start_node, client_
             continue
     first = first_fast()
     assert first is not None, "speed 0.9 never taken"
-    ros.spin_until(lambda: len({s.episode for s in states[first:]}) >= 4, 5.0, f"{ns}/state: 3 episode restarts",
-                   c.context)
+    ros.spin_until(
+        lambda: len({s.episode for s in states[first:]}) >= 4, 5.0, f"{ns}/state: 3 episode restarts", c.context
+    )
     stamps = [stamp_ns(s.header.stamp) for s in states]
     assert all(b - a == NS_PER_S for a, b in zip(stamps, stamps[1:], strict=False)), (
         "the stream goes on across restarts"
@@ -134,8 +139,9 @@ def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reade
         for t in range(10):
             _, rewards, _, _, info = env.step(np.array([t % 10, 9 - t % 10]))
             step = int(info["step"][1])
-            got = ros.spin_until(lambda: next((m for m in states.msgs if m.step == step), None), 2.0,
-                                 f"{line1}/state of step {step}")
+            got = ros.spin_until(
+                lambda: next((m for m in states.msgs if m.step == step), None), 2.0, f"{line1}/state of step {step}"
+            )
             assert got.reward == rewards[1] and got.speed == info["speed"][1], (got, rewards, info)
             ros.spin_until(lambda: any(m.step == step for m in inputs.msgs), 2.0, f"{line1}/input of step {step}")
         values = wait_diagnostics(diag, line1, {"ticks": str(int(info["step"][1]))})

@@ -34,7 +34,7 @@ DOC = h.ROOT / "docs" / "testing-controllers.md"
 PLUGIN = "sorting_line_gym.testing"
 
 #: The player and the graph fixture, and the isolation rules (isolation_problem faked in a conftest).
-FIXTURES_TEST = '''
+FIXTURES_TEST = """
 import os
 from pathlib import Path
 
@@ -50,16 +50,16 @@ def test_graph_of_its_own(sorting_line_graph):
 def test_player_plays_into_the_tests_namespace(sorting_line_bag_player, sorting_line_graph):
     result = sorting_line_bag_player(GOLDEN, rate=0, topics=["input", "state"], wait_for=[])
     assert result.counts == {f"{sorting_line_graph.namespace}/input": 255, f"{sorting_line_graph.namespace}/state": 255}
-'''
-FAKE_HOST_NETWORK = '''
+"""
+FAKE_HOST_NETWORK = """
 import sorting_line_gym.testing as plugin
 
 plugin.isolation_problem = lambda: "not in a loopback-only network namespace (interfaces eth9 besides lo)"
-'''
-WARNING_TEST = '''
+"""
+WARNING_TEST = """
 def test_warns(sorting_line_graph):
     pass
-'''
+"""
 
 
 def run_pytest(directory: Path, *args: str, timeout: float = 240.0) -> tuple[subprocess.CompletedProcess, dict]:
@@ -68,8 +68,14 @@ def run_pytest(directory: Path, *args: str, timeout: float = 240.0) -> tuple[sub
     env = dict(os.environ, SORTING_LINE_BIN=str(h.node_binary()))
     # Before setup.sh reinstalled the bridge from this pyproject.toml the entry point is not there yet.
     plugin = [] if _entry_point() else ["-p", PLUGIN]
-    proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-rA", f"--junitxml={junit}",
-                           *plugin, *args], cwd=directory, env=env, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-rA", f"--junitxml={junit}", *plugin, *args],
+        cwd=directory,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     outcomes = {}
     if junit.is_file():
         for case in ET.parse(junit).getroot().iter("testcase"):
@@ -98,12 +104,13 @@ def test_the_docs_show_the_examples_verbatim():
 
 def test_the_examples_pass_and_a_changed_controller_fails(tmp_path):
     project = _user_project(tmp_path)
-    changed = (project / "test_my_controller.py").read_text().replace("--agent rba\"", "--agent rba-hold\"")
+    changed = (project / "test_my_controller.py").read_text().replace('--agent rba"', '--agent rba-hold"')
     (project / "test_changed_controller.py").write_text(changed)
     (project / "test_fixtures.py").write_text(FIXTURES_TEST)
     (project / "conftest.py").write_text(FAKE_HOST_NETWORK)  # the warning, once for the whole run
-    proc, outcomes = run_pytest(project, "--deselect",
-                                "test_changed_controller.py::test_no_worse_than_recorded_in_closed_loop")
+    proc, outcomes = run_pytest(
+        project, "--deselect", "test_changed_controller.py::test_no_worse_than_recorded_in_closed_loop"
+    )
     report = proc.stdout[-6000:] + proc.stderr[-2000:]
     assert outcomes == {
         "test_my_controller::test_answers_every_tick_as_recorded": "passed",
@@ -115,8 +122,10 @@ def test_the_examples_pass_and_a_changed_controller_fails(tmp_path):
     }, report
     # The changed controller's failure shows the check's summary: the first difference by tick and field.
     assert "first difference: cmd/speed at tick " in proc.stdout and ", field speed: bag " in proc.stdout, report
-    warning = ("interfaces eth9 besides lo): the tests' DDS traffic stays on this host only through "
-               "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST")
+    warning = (
+        "interfaces eth9 besides lo): the tests' DDS traffic stays on this host only through "
+        "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
+    )
     assert proc.stdout.count(warning) == 1, report
 
 
@@ -140,5 +149,7 @@ def test_each_test_gets_a_domain_of_its_own_within_the_range():
 
 
 def test_pytest_finds_the_plugin_by_its_entry_point():
-    assert _entry_point(), (f"no pytest11 entry point {PLUGIN!r} in this environment: the bridge was installed "
-                            "from an older bridge/pyproject.toml; run launch_scripts/setup.sh")
+    assert _entry_point(), (
+        f"no pytest11 entry point {PLUGIN!r} in this environment: the bridge was installed "
+        "from an older bridge/pyproject.toml; run launch_scripts/setup.sh"
+    )

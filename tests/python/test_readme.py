@@ -54,8 +54,9 @@ def run_python(code: str, tmp_path: Path, name: str, timeout: float) -> subproce
     script.write_text(code)
     env = dict(os.environ, ROS_DOMAIN_ID=quickstart_domain())
     try:
-        done = subprocess.run([sys.executable, script.name], cwd=tmp_path, env=env, capture_output=True, text=True,
-                              timeout=timeout)
+        done = subprocess.run(
+            [sys.executable, script.name], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=timeout
+        )
     except subprocess.TimeoutExpired as e:
         why = f"{name} (from the README) did not finish within {timeout} s\n{e.stdout}\n{e.stderr}"
         raise AssertionError(why) from None
@@ -105,7 +106,7 @@ def test_ppo(tmp_path):
     # A tiny budget: 4 rollouts of 64 steps instead of the snippet's 20,000 steps in rollouts of 2,048.
     code, budget = re.subn(r"total_timesteps=[\d_]+", "total_timesteps=256", snippet("ppo"))
     code, rollout = re.subn(r'PPO\("MlpPolicy", env, ', 'PPO("MlpPolicy", env, n_steps=64, batch_size=64, ', code)
-    assert (budget, rollout) == (1, 1), "the README's PPO snippet must make PPO(\"MlpPolicy\", env, ...) and learn()"
+    assert (budget, rollout) == (1, 1), 'the README\'s PPO snippet must make PPO("MlpPolicy", env, ...) and learn()'
     done = run_python(code, tmp_path, "ppo.py", timeout=300.0)
     assert "total_timesteps" in done.stdout, f"SB3 reported no training progress\n{done.stdout}\n{done.stderr}"
 

@@ -99,10 +99,14 @@ def test_a_killed_recorder_leaves_a_bag_reindex_recovers(ros, probe, start_node,
     assert bag.info.namespace == ns and bag.info.node["mode"] == "realtime"
 
 
-@pytest.mark.parametrize("name,options", [
-    ("advanced_b", WriteOptions(max_bag_size=48 * 1024)),
-    ("basic_d", WriteOptions(compression="zstd")),
-], ids=["split", "zstd"])
+@pytest.mark.parametrize(
+    "name,options",
+    [
+        ("advanced_b", WriteOptions(max_bag_size=48 * 1024)),
+        ("basic_d", WriteOptions(compression="zstd")),
+    ],
+    ids=["split", "zstd"],
+)
 def test_split_and_compressed_bags_round_trip_through_info_and_replay(name, options, tmp_path, capsys):
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader
@@ -113,8 +117,9 @@ def test_split_and_compressed_bags_round_trip_through_info_and_replay(name, opti
     out = tmp_path / name
     rewrite_bag(DATA / name, out, options=options)
     golden, bag = open_bag(DATA / name), open_bag(out)
-    assert [(m.topic, m.log_time, m.data) for m in bag.messages] == \
-        [(m.topic, m.log_time, m.data) for m in golden.messages]
+    assert [(m.topic, m.log_time, m.data) for m in bag.messages] == [
+        (m.topic, m.log_time, m.data) for m in golden.messages
+    ]
 
     info = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     files = info["relative_file_paths"]
@@ -155,11 +160,13 @@ def test_reading_tools_say_how_to_recover_a_cut_bag(tmp_path, capsys):
     last_file = meta["rosbag2_bagfile_information"]["relative_file_paths"].pop()
     meta["rosbag2_bagfile_information"]["files"].pop()
     (unlisted / "metadata.yaml").write_text(yaml.safe_dump(meta))
-    for args, message in [(("info", cut), f"`sorting-line-bag reindex {cut}` recovers"),
-                          (("replay", cut), "without the MCAP summary and footer"),
-                          (("play", cut, "--no-wait"), f"`sorting-line-bag reindex {cut}`"),
-                          (("info", bare), f"`sorting-line-bag reindex {bare}` rebuilds metadata.yaml"),
-                          (("info", unlisted), f"metadata.yaml does not list {last_file}")]:
+    for args, message in [
+        (("info", cut), f"`sorting-line-bag reindex {cut}` recovers"),
+        (("replay", cut), "without the MCAP summary and footer"),
+        (("play", cut, "--no-wait"), f"`sorting-line-bag reindex {cut}`"),
+        (("info", bare), f"`sorting-line-bag reindex {bare}` rebuilds metadata.yaml"),
+        (("info", unlisted), f"metadata.yaml does not list {last_file}"),
+    ]:
         code = main([str(a) for a in args])
         err = capsys.readouterr().err
         assert (code, message in err) == (2, True), f"{args}: exit {code}, stderr {err!r}"
@@ -174,10 +181,12 @@ def test_reading_tools_say_how_to_recover_a_cut_bag(tmp_path, capsys):
 def test_bad_recording_options_fail_at_start_naming_value_and_range(tmp_path, capsys):
     from sorting_line_gym.bag.cli import main
 
-    cases = [(["--max-bag-size", "5"], "--max-bag-size 5: must be 0 (no splitting) or a whole number of bytes >= 16"),
-             (["--max-bag-size", "1e9"], "'1e9' is not a whole number"),
-             (["--max-bag-duration", "0.2"], "--max-bag-duration 0.2: must be 0 (no splitting) or a finite number"),
-             (["--compression", "gzip"], "--compression gzip: must be one of none, zstd, lz4")]
+    cases = [
+        (["--max-bag-size", "5"], "--max-bag-size 5: must be 0 (no splitting) or a whole number of bytes >= 16"),
+        (["--max-bag-size", "1e9"], "'1e9' is not a whole number"),
+        (["--max-bag-duration", "0.2"], "--max-bag-duration 0.2: must be 0 (no splitting) or a finite number"),
+        (["--compression", "gzip"], "--compression gzip: must be one of none, zstd, lz4"),
+    ]
     for flags, message in cases:
         with pytest.raises(SystemExit) as exit_:
             main(["record", "--namespace", "/x", "-o", str(tmp_path / "out"), *flags])
@@ -203,8 +212,13 @@ def test_a_full_disk_ends_the_recording_with_a_message_and_a_readable_bag(start_
         {tool} info {disk}/bag; echo "info exit $?"
         cp -a {disk}/bag {copied}
     """
-    run = subprocess.run(["unshare", "-m", "--propagation", "private", "bash", "-c", script], capture_output=True,
-                         text=True, timeout=120, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    run = subprocess.run(
+        ["unshare", "-m", "--propagation", "private", "bash", "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )
     log = run.stdout + run.stderr
     assert "record exit 3" in log and "info exit 0" in log, log
     assert "No space left on device (errno ENOSPC)" in log and "Recording stopped" in log, log
@@ -241,8 +255,15 @@ def test_the_loss_counter_names_what_the_node_published_and_the_recorder_missed(
         if tick == 13:
             counter.on_status({"sim_time": "13.000000000", "messages_published": str(100 + 8 * 3 + 1)})
     report = counter.report()
-    assert report == {"compared": True, "window_ns": [5 * s, 13 * s], "ticks": 8, "published": 25, "received": 22,
-                      "missing": 3, "topics": {"state": 2, "input": 1}}, report
+    assert report == {
+        "compared": True,
+        "window_ns": [5 * s, 13 * s],
+        "ticks": 8,
+        "published": 25,
+        "received": 22,
+        "missing": 3,
+        "topics": {"state": 2, "input": 1},
+    }, report
     assert "MESSAGES MISSED: 3 of the 25" in describe_losses(report) and "state 2" in describe_losses(report)
     partial = LossCounter(ns, topics[:2], "basic", False, 1.0)
     assert not partial.report()["compared"] and "state" in partial.report()["why"]

@@ -85,8 +85,16 @@ def test_soak_checker_catches_lost_misaligned_and_wrong_observations():
         ok = []
         for action, entry in zip(actions_seen, entries, strict=False):
             s = entry["step"]
-            ok.append(ledger.expect_step(action, seed, s["step"], s["reward"], entry["cumulative_reward"],
-                                         soak.observation_of(variant, s["observation"])))
+            ok.append(
+                ledger.expect_step(
+                    action,
+                    seed,
+                    s["step"],
+                    s["reward"],
+                    entry["cumulative_reward"],
+                    soak.observation_of(variant, s["observation"]),
+                )
+            )
         return ledger, ok
 
     ledger, ok = ledger_from(trace[1:], actions)
@@ -188,8 +196,13 @@ while True:
 
 def start_bridge(mode: str, ns: str) -> tuple[subprocess.Popen, dict[str, str]]:
     """A bridge process (SortingLineEnv, attach or spawn) that steps forever once it said so."""
-    proc = subprocess.Popen([sys.executable, "-c", BRIDGE_SCRIPT, mode, ns], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", BRIDGE_SCRIPT, mode, ns],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )
     line = proc.stdout.readline()
     if not line.startswith("stepping"):
         try:
@@ -236,7 +249,8 @@ def test_killed_bridges_leave_the_node_serving_without_growth(ros, start_node, c
     while time.monotonic() < deadline and Path(f"/proc/{node_pid}").exists():
         time.sleep(0.05)
     assert not Path(f"/proc/{node_pid}").exists() or "Z" in Path(f"/proc/{node_pid}/stat").read_text().split()[2], (
-        f"the node {node_pid} of a killed bridge is still running")
+        f"the node {node_pid} of a killed bridge is still running"
+    )
     log.unlink(missing_ok=True)  # a SIGKILLed bridge cannot clean up after itself
 
 
@@ -289,8 +303,9 @@ def test_node_restarted_under_a_running_realtime_controller(ros, start_node, pro
         time.sleep(0.5)
         since = len(diag.msgs)  # every status from here on is the new node's
         start_node(*args)
-        values = wait_diagnostics_where(diag, ns, lambda v: int(v["commands_accepted"]) >= 20, 30.0,
-                                        controller.describe, since=since)
+        values = wait_diagnostics_where(
+            diag, ns, lambda v: int(v["commands_accepted"]) >= 20, 30.0, controller.describe, since=since
+        )
         assert values["owner"] != "none" and values["commands_rejected"] == "0", values
         assert controller.running(), controller.describe()
         assert len(controller.decisions()) > decisions_before
@@ -298,10 +313,12 @@ def test_node_restarted_under_a_running_realtime_controller(ros, start_node, pro
         assert controller.stop() == 0, controller.describe()
 
 
-def wait_diagnostics_where(diag: h.TopicRecorder, hardware_id: str, predicate, timeout: float, context,
-                           since: int = 0) -> dict[str, str]:
+def wait_diagnostics_where(
+    diag: h.TopicRecorder, hardware_id: str, predicate, timeout: float, context, since: int = 0
+) -> dict[str, str]:
     """The values of the first status of `hardware_id` (among those recorded from index `since` on)
     that satisfy `predicate`; waits for it (the node publishes at 1 Hz)."""
+
     def found():
         for array in diag.msgs[since:]:
             values = h.diagnostic_values(array, hardware_id)
@@ -316,13 +333,15 @@ def wait_diagnostics_where(diag: h.TopicRecorder, hardware_id: str, predicate, t
 # Bad input
 
 
-def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(ros, start_node, client_factory, probe,
-                                                                           namespace):
+def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(
+    ros, start_node, client_factory, probe, namespace
+):
     """A seeded random flood of bad commands on the topics of a real node (advanced line)."""
     variant, setup, seed = "advanced", "D", 31
     ns = namespace("flood")
-    node = start_node("--variant", variant, *h.SETUP_FLAGS[setup], "--max-steps", str(max(50, FLOOD_TICKS)),
-                      *ns_args(ns))
+    node = start_node(
+        "--variant", variant, *h.SETUP_FLAGS[setup], "--max-steps", str(max(50, FLOOD_TICKS)), *ns_args(ns)
+    )
     diag = diagnostics_recorder(ros, probe)
     line = client_factory(ns, variant, node_proc=node)
     line.wait_connected()
@@ -358,8 +377,9 @@ def test_random_flood_at_the_node_is_counted_per_reason_and_changes_nothing(ros,
             line.send_mode((mode + 1) % 3, now)
             expected["duplicate"] += 1
             sent += 1
-            wait_diagnostics_where(diag, ns, lambda v, n=expected["duplicate"]: v["rejected_duplicate"] == str(n), 5.0,
-                                   line.context)
+            wait_diagnostics_where(
+                diag, ns, lambda v, n=expected["duplicate"]: v["rejected_duplicate"] == str(n), 5.0, line.context
+            )
         line.send_speed(speed, now)
         state = line.wait_state(now + p)
         line.stamp = now + p
@@ -395,13 +415,16 @@ def test_malformed_params_file_fails_at_start_naming_the_problem(name, tmp_path)
         assert want in stderr, f"stderr lacks {want!r}:\n{stderr}"
 
 
-@pytest.mark.parametrize("ros_args,expected", [
-    (["--unknown-flag"], "unknown argument '--unknown-flag'"),
-    (["-p", "seed:=[1"], "-p seed:=[1 is not valid YAML"),
-    (["--params-file"], "--params-file needs a file"),
-    (["-r", "no_separator"], "'no_separator' is not of the form"),
-    (["-r", ":=x"], "has an empty name"),
-])
+@pytest.mark.parametrize(
+    "ros_args,expected",
+    [
+        (["--unknown-flag"], "unknown argument '--unknown-flag'"),
+        (["-p", "seed:=[1"], "-p seed:=[1 is not valid YAML"),
+        (["--params-file"], "--params-file needs a file"),
+        (["-r", "no_separator"], "'no_separator' is not of the form"),
+        (["-r", ":=x"], "has an empty name"),
+    ],
+)
 def test_bad_ros_args_fail_at_start_naming_the_argument(ros_args, expected):
     code, stderr = h.run_node_expecting_failure(["--ros-args", *ros_args])
     assert code == 2 and expected in stderr, f"exit code {code}; stderr:\n{stderr}"
@@ -493,13 +516,16 @@ def run_vector_env(variant, setup, episodes, lines, k):
 
 
 @pytest.mark.parametrize("variant,setup", [("basic", "C"), ("advanced", "D")])
-def test_library_node_bridge_and_vector_paths_give_identical_trajectories(variant, setup, ros, start_node,
-                                                                         client_factory, namespace, tmp_path):
+def test_library_node_bridge_and_vector_paths_give_identical_trajectories(
+    variant, setup, ros, start_node, client_factory, namespace, tmp_path
+):
     rng = np.random.default_rng(99)
     n_actions = 30 if variant == "advanced" else 10
     # A whole episode (to its truncation) and part of another, with new seeds.
-    episodes = [(1234, [int(a) for a in rng.integers(0, n_actions, 50)]),
-                (77, [int(a) for a in rng.integers(0, n_actions, 12)])]
+    episodes = [
+        (1234, [int(a) for a in rng.integers(0, n_actions, 50)]),
+        (77, [int(a) for a in rng.integers(0, n_actions, 12)]),
+    ]
     paths = {"library (sorting_line trace)": run_library(setup, variant, episodes)}
 
     ns1, ns16 = namespace("one"), namespace("sixteen")

@@ -152,17 +152,26 @@ def test_ray_cluster_head_and_worker_in_two_hosts_runs_the_env_runners_on_the_wo
         gcs = f"{head_ip}:6379"
         # The lines stay on the worker host; the cluster's members prove themselves with a token of
         # this test's own (Ray's token authentication; `ray start --head` requires one).
-        env = ray_env(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", RAY_AUTH_MODE="token",
-                      RAY_AUTH_TOKEN=secrets.token_hex(32))
+        env = ray_env(
+            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(32)
+        )
         cluster = RayCluster(hosts, env, gcs, tmp_path)
         try:
             head = f"--head --node-ip-address={head_ip} --port=6379 --num-cpus=0 --include-dashboard=false"
-            cluster.start("head", f"{head} --temp-dir={temp['head']} --disable-usage-stats",
-                          lambda s: s.returncode == 0, "the head did not answer")
+            cluster.start(
+                "head",
+                f"{head} --temp-dir={temp['head']} --disable-usage-stats",
+                lambda s: s.returncode == 0,
+                "the head did not answer",
+            )
             # The driver would wait forever for CPUs: first the worker's 2 CPUs must be in the cluster.
             worker = f"--address={gcs} --node-ip-address={worker_ip} --num-cpus=2 --temp-dir={temp['worker']}"
-            cluster.start("worker", f"{worker} --disable-usage-stats",
-                          lambda s: s.returncode == 0 and "/2.0 CPU" in s.stdout, "the worker did not join the head")
+            cluster.start(
+                "worker",
+                f"{worker} --disable-usage-stats",
+                lambda s: s.returncode == 0 and "/2.0 CPU" in s.stdout,
+                "the worker did not join the head",
+            )
             flags = "--setup A --env-runners 2 --envs-per-runner 4 --timesteps 4000 --batch 1000"
             driver = hosts.argv("head", [*TRAIN, *flags.split(), "--address", gcs])
             r = subprocess.run(driver, capture_output=True, text=True, timeout=400, env=env)

@@ -25,8 +25,22 @@ pytestmark = pytest.mark.usefixtures("ros2_daemon")
 
 RATE = 10.0  # ticks per second of the realtime lines here
 NODE_TYPES = {"/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
-PARAMETERS = ["action_penalty", "evolution_file", "input", "lines", "max_steps", "mode", "obs_noise", "rate", "seed",
-              "setup", "threshold", "tick_period", "use_sim_time", "variant"]
+PARAMETERS = [
+    "action_penalty",
+    "evolution_file",
+    "input",
+    "lines",
+    "max_steps",
+    "mode",
+    "obs_noise",
+    "rate",
+    "seed",
+    "setup",
+    "threshold",
+    "tick_period",
+    "use_sim_time",
+    "variant",
+]
 HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
 
 
@@ -46,8 +60,24 @@ def rt_line(tmp_path_factory):
     """One advanced realtime line at RATE Hz for the read-only checks (it never gets a command)."""
     ns = f"/cli_rt_{os.getpid()}"
     log = tmp_path_factory.mktemp("rt_line") / "node.log"
-    node = h.NodeProcess(["--variant", "advanced", "--mode", "realtime", "--rate", str(RATE), "--seed", "5",
-                          "--max-steps", "1000000", "--ros-args", "-r", f"__ns:={ns}"], log)
+    node = h.NodeProcess(
+        [
+            "--variant",
+            "advanced",
+            "--mode",
+            "realtime",
+            "--rate",
+            str(RATE),
+            "--seed",
+            "5",
+            "--max-steps",
+            "1000000",
+            "--ros-args",
+            "-r",
+            f"__ns:={ns}",
+        ],
+        log,
+    )
     line = Line(ns, node)
     yield line
     alive = node.running()
@@ -65,8 +95,10 @@ def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: f
             return r.stdout
         last = r
         if time.monotonic() > deadline:
-            raise AssertionError(f"`ros2 {' '.join(args)}` did not show {what} within {timeout} s; last answer "
-                                 f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}")
+            raise AssertionError(
+                f"`ros2 {' '.join(args)}` did not show {what} within {timeout} s; last answer "
+                f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}"
+            )
         time.sleep(0.5)
 
 
@@ -96,9 +128,11 @@ def test_node_list_and_info(ros2, rt_line):
     poll(ros2, ["node", "list"], lambda out: rt_line.fqn in out.split(), f"node {rt_line.fqn}")
     published = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
     parameter_services = ["describe_parameters", "get_parameters", "list_parameters", "set_parameters"]
-    expected = {"Subscribers": [rt_line.name("cmd/speed"), rt_line.name("cmd/sort_mode")],
-                "Publishers": [rt_line.name(rel) for rel in published] + list(NODE_TYPES),
-                "Service Servers": [rt_line.name("reset")] + [f"{rt_line.fqn}/{s}" for s in parameter_services]}
+    expected = {
+        "Subscribers": [rt_line.name("cmd/speed"), rt_line.name("cmd/sort_mode")],
+        "Publishers": [rt_line.name(rel) for rel in published] + list(NODE_TYPES),
+        "Service Servers": [rt_line.name("reset")] + [f"{rt_line.fqn}/{s}" for s in parameter_services],
+    }
 
     def complete(out):
         found = node_info_sections(out)
@@ -141,8 +175,13 @@ def test_interface_show(ros2):
         shown[name] = out
         definition = (h.ROOT / "msg" / f"{name}.{name[:3]}").read_text().splitlines()
         fields = [f for f in (re.sub(r"\s*#.*", "", line).strip() for line in definition) if f]
-        top = [f for f in (re.sub(r"\s*#.*", "", line).strip() for line in out.splitlines()
-                           if not line.startswith(("\t", " "))) if f]
+        top = [
+            f
+            for f in (
+                re.sub(r"\s*#.*", "", line).strip() for line in out.splitlines() if not line.startswith(("\t", " "))
+            )
+            if f
+        ]
         assert top == fields, f"{name}:\n{out}"
     assert "\tbuiltin_interfaces/Time stamp" in shown["msg/LineState"], shown["msg/LineState"]
     assert "\tstring frame_id" in shown["msg/LineState"], shown["msg/LineState"]
@@ -155,9 +194,17 @@ def test_interface_show(ros2):
 def echo_once_each(ros2, topics: list[str]) -> dict[str, dict]:
     """`ros2 topic echo --once` of each topic, all at once (they are independent): topic -> its
     first message as YAML; fails naming every topic without one."""
-    procs = {t: subprocess.Popen(ros2.argv("topic", "echo", "--once", t), stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, text=True, env=ros2.env, stdin=subprocess.DEVNULL)
-             for t in topics}
+    procs = {
+        t: subprocess.Popen(
+            ros2.argv("topic", "echo", "--once", t),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=ros2.env,
+            stdin=subprocess.DEVNULL,
+        )
+        for t in topics
+    }
     results, problems = {}, []
     for topic, p in procs.items():
         try:
@@ -210,9 +257,15 @@ def test_echo_once_every_topic(ros2, rt_line):
 def test_topic_hz_in_realtime_mode(ros2, rt_line):
     """`ros2 topic hz` of the realtime state: about RATE (generous bounds; a busy machine is no failure)."""
     topic = rt_line.name("state")
-    p = subprocess.Popen(ros2.argv("topic", "hz", "--window", "20", topic), stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True, env=ros2.env, stdin=subprocess.DEVNULL,
-                         start_new_session=True)
+    p = subprocess.Popen(
+        ros2.argv("topic", "hz", "--window", "20", topic),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=ros2.env,
+        stdin=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     time.sleep(6.0)
     os.killpg(p.pid, signal.SIGINT)
     try:
@@ -246,26 +299,40 @@ def test_type_hashes_equal_rclpy_endpoints(ros2, rt_line, ros, probe):
     from sorting_line_interfaces.msg import LineState, MaterialRatio, SortModeCommand, SpeedCommand
 
     # rclpy endpoints opposite the node's: subscriptions to what it publishes, publishers to what it reads.
-    subs = [probe.create_subscription(LineState, rt_line.name("state"), lambda m: None, 10),
-            probe.create_subscription(MaterialRatio, rt_line.name("sensors/ratio"), lambda m: None, 10),
-            probe.create_subscription(Clock, "/clock", lambda m: None, 10),
-            probe.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10)]
-    pubs = [probe.create_publisher(SpeedCommand, rt_line.name("cmd/speed"), 10),
-            probe.create_publisher(SortModeCommand, rt_line.name("cmd/sort_mode"), 10)]
+    subs = [
+        probe.create_subscription(LineState, rt_line.name("state"), lambda m: None, 10),
+        probe.create_subscription(MaterialRatio, rt_line.name("sensors/ratio"), lambda m: None, 10),
+        probe.create_subscription(Clock, "/clock", lambda m: None, 10),
+        probe.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10),
+    ]
+    pubs = [
+        probe.create_publisher(SpeedCommand, rt_line.name("cmd/speed"), 10),
+        probe.create_publisher(SortModeCommand, rt_line.name("cmd/sort_mode"), 10),
+    ]
     ros.spin_for(0.2)
     me = probe.get_name()
     try:
-        for topic in [rt_line.name("state"), rt_line.name("sensors/ratio"), "/clock", "/diagnostics",
-                      rt_line.name("cmd/speed"), rt_line.name("cmd/sort_mode")]:
-            out = poll(ros2, ["topic", "info", "-v", topic],
-                       lambda out: {n for n, _, _ in endpoint_hashes(out)} >= {"sorting_line", me},
-                       f"the node's and the test's endpoints on {topic}")
+        for topic in [
+            rt_line.name("state"),
+            rt_line.name("sensors/ratio"),
+            "/clock",
+            "/diagnostics",
+            rt_line.name("cmd/speed"),
+            rt_line.name("cmd/sort_mode"),
+        ]:
+            out = poll(
+                ros2,
+                ["topic", "info", "-v", topic],
+                lambda out: {n for n, _, _ in endpoint_hashes(out)} >= {"sorting_line", me},
+                f"the node's and the test's endpoints on {topic}",
+            )
             ends = endpoint_hashes(out)
             node_hashes = {hsh for n, _, hsh in ends if n == "sorting_line"}
             rclpy_hashes = {hsh for n, _, hsh in ends if n == me}
             assert len(rclpy_hashes) == 1 and HASH.fullmatch(next(iter(rclpy_hashes))), out
             assert node_hashes == rclpy_hashes, (
-                f"{topic}: the node's endpoint announces {sorted(node_hashes)}, rclpy's {sorted(rclpy_hashes)}\n{out}")
+                f"{topic}: the node's endpoint announces {sorted(node_hashes)}, rclpy's {sorted(rclpy_hashes)}\n{out}"
+            )
     finally:
         for sub in subs:
             probe.destroy_subscription(sub)
@@ -280,8 +347,11 @@ def test_service_endpoint_type_hashes_equal_rclpy_clients(rt_line, ros, probe):
     from rcl_interfaces.srv import DescribeParameters, GetParameters
     from sorting_line_interfaces.srv import ResetLine
 
-    services = {rt_line.name("reset"): ResetLine, f"{rt_line.fqn}/get_parameters": GetParameters,
-                f"{rt_line.fqn}/describe_parameters": DescribeParameters}
+    services = {
+        rt_line.name("reset"): ResetLine,
+        f"{rt_line.fqn}/get_parameters": GetParameters,
+        f"{rt_line.fqn}/describe_parameters": DescribeParameters,
+    }
     clients = [probe.create_client(kind, name) for name, kind in services.items()]
     me, problems = probe.get_name(), []
     try:
@@ -290,10 +360,16 @@ def test_service_endpoint_type_hashes_equal_rclpy_clients(rt_line, ros, probe):
                 opposite = "publishers" if role == "subscriptions" else "subscriptions"
 
                 def endpoints():
-                    node_side = [e for e in getattr(probe, f"get_{role}_info_by_topic")(dds_topic, no_mangle=True)
-                                 if e.node_name == "sorting_line"]
-                    ours = [e for e in getattr(probe, f"get_{opposite}_info_by_topic")(dds_topic, no_mangle=True)
-                            if e.node_name == me]
+                    node_side = [
+                        e
+                        for e in getattr(probe, f"get_{role}_info_by_topic")(dds_topic, no_mangle=True)
+                        if e.node_name == "sorting_line"
+                    ]
+                    ours = [
+                        e
+                        for e in getattr(probe, f"get_{opposite}_info_by_topic")(dds_topic, no_mangle=True)
+                        if e.node_name == me
+                    ]
                     return (node_side, ours) if node_side and ours else None
 
                 node_side, ours = ros.spin_until(endpoints, 15.0, f"the node's and our endpoints on {dds_topic}")
@@ -363,8 +439,12 @@ def test_param_describe_shows_description_read_only_and_ranges(ros2, rt_line):
         if d.get("Read only") != "true":
             problems.append(f"{name}: not declared read-only ({d})")
     # The ranges validation enforces (src/ros/params.rs), as ROS ranges.
-    ranges = {"lines": ("1", "64"), "max_steps": ("1", "1000000"), "obs_noise": ("0.0", "1.0"),
-              "action_penalty": ("0.0", "10.0")}
+    ranges = {
+        "lines": ("1", "64"),
+        "max_steps": ("1", "1000000"),
+        "obs_noise": ("0.0", "1.0"),
+        "action_penalty": ("0.0", "10.0"),
+    }
     for name, (low, high) in ranges.items():
         got = (described[name].get("Min value"), described[name].get("Max value"))
         if got != (low, high):
@@ -412,16 +492,18 @@ def test_service_call_reset_with_and_without_seed(ros2, start_node, namespace):
     ns = namespace("reset")
     node = start_node("--variant", "advanced", *h.SETUP_FLAGS["C"], "--seed", "11", "--ros-args", "-r", f"__ns:={ns}")
     service = h.join_ns(ns, "reset")
-    seeded = ros2.run("service", "call", service, "sorting_line_interfaces/srv/ResetLine",
-                      "{has_seed: true, seed: 1234}", timeout=40).stdout
+    seeded = ros2.run(
+        "service", "call", service, "sorting_line_interfaces/srv/ResetLine", "{has_seed: true, seed: 1234}", timeout=40
+    ).stdout
     got = parse_response(seeded)
     first = h.run_trace("C", "advanced", 1234, [])[0]["reset"]
     assert got["success"] == "True" and got["seed"] == "1234", seeded
     assert float(got["quantity"]) == first["observation"]["quantity"], (seeded, first)
     assert int(got["category"]) == h.CATEGORIES[first["observation"]["category"]], (seeded, first)
 
-    unseeded = ros2.run("service", "call", service, "sorting_line_interfaces/srv/ResetLine", "{has_seed: false}",
-                        timeout=40).stdout
+    unseeded = ros2.run(
+        "service", "call", service, "sorting_line_interfaces/srv/ResetLine", "{has_seed: false}", timeout=40
+    ).stdout
     again = parse_response(unseeded)
     assert again["success"] == "True", unseeded
     assert int(again["episode"]) == int(got["episode"]) + 1, (seeded, unseeded)
@@ -440,11 +522,26 @@ def test_topic_pub_speed_command_on_a_realtime_line(ros2, ros, start_node, clien
     first = ros.spin_until(lambda: c.msgs["state"], 10.0, f"{ns}/state", c.context)[0]
     assert first.speed == 0.6, first  # the start speed, before anyone commands
     seen = len(c.msgs["state"])
-    r = ros2.run("topic", "pub", "--once", "-w", "1", "--keep-alive", "2", h.join_ns(ns, "cmd/speed"),
-                 "sorting_line_interfaces/msg/SpeedCommand", "{speed: 0.3}", timeout=30)
+    r = ros2.run(
+        "topic",
+        "pub",
+        "--once",
+        "-w",
+        "1",
+        "--keep-alive",
+        "2",
+        h.join_ns(ns, "cmd/speed"),
+        "sorting_line_interfaces/msg/SpeedCommand",
+        "{speed: 0.3}",
+        timeout=30,
+    )
     assert "publishing #1" in r.stdout, r.stdout
-    ros.spin_until(lambda: any(s.speed == 0.3 for s in c.msgs["state"][seen:]), 5.0,
-                   "a state with speed 0.3 after `ros2 topic pub`", c.context)
+    ros.spin_until(
+        lambda: any(s.speed == 0.3 for s in c.msgs["state"][seen:]),
+        5.0,
+        "a state with speed 0.3 after `ros2 topic pub`",
+        c.context,
+    )
     ros.spin_for(0.5)  # and it holds: a realtime line keeps the last valid command
     speeds = [s.speed for s in c.msgs["state"]]
     changed = speeds.index(0.3)
@@ -456,8 +553,13 @@ def test_the_daemon_stops_listing_a_stopped_node_at_once(ros2, start_node, names
     SIGTERM, not after the DDS lease (tens of seconds). The goal is 2 s; the bound here
     adds the start of a `ros2` process on a busy machine and still cannot be met by the lease."""
     ns = namespace("leave")
-    nodes = {sig: (start_node("--ros-args", "-r", f"__ns:={ns}", "-r", f"__node:=by_{sig.name.lower()}"),
-                   f"{ns}/by_{sig.name.lower()}") for sig in (signal.SIGINT, signal.SIGTERM)}
+    nodes = {
+        sig: (
+            start_node("--ros-args", "-r", f"__ns:={ns}", "-r", f"__node:=by_{sig.name.lower()}"),
+            f"{ns}/by_{sig.name.lower()}",
+        )
+        for sig in (signal.SIGINT, signal.SIGTERM)
+    }
     names = {fqn for _, fqn in nodes.values()}
     poll(ros2, ["node", "list"], lambda out: names <= set(out.split()), f"nodes {sorted(names)}")
     for sig, (node, _) in nodes.items():
@@ -487,12 +589,25 @@ def stop_launch(launch: subprocess.Popen) -> int | str:
 def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, namespace):
     ns = namespace("launch")
     params = tmp_path / "line.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    variant: advanced\n    obs_noise: 0.3\n    max_steps: 20\n"
-                      "    seed: 7\n")
-    argv = ["setsid", "env", "--default-signal=INT",
-            *ros2.argv("launch", str(h.ROOT / "launch_scripts" / "sorting_line.launch.py"), f"namespace:={ns}",
-                       "lines:=2", f"params_file:={params}", "max_steps:=9", "mode:=realtime", f"rate:={RATE}",
-                       f"sorting_line_bin:={h.node_binary()}")]
+    params.write_text(
+        "/**:\n  ros__parameters:\n    variant: advanced\n    obs_noise: 0.3\n    max_steps: 20\n    seed: 7\n"
+    )
+    argv = [
+        "setsid",
+        "env",
+        "--default-signal=INT",
+        *ros2.argv(
+            "launch",
+            str(h.ROOT / "launch_scripts" / "sorting_line.launch.py"),
+            f"namespace:={ns}",
+            "lines:=2",
+            f"params_file:={params}",
+            "max_steps:=9",
+            "mode:=realtime",
+            f"rate:={RATE}",
+            f"sorting_line_bin:={h.node_binary()}",
+        ),
+    ]
     log_path = tmp_path / "launch.log"
     with open(log_path, "wb") as log:
         launch = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=ros2.env, stdin=subprocess.DEVNULL)
@@ -501,11 +616,22 @@ def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, n
         poll(ros2, ["node", "list"], lambda out: fqn in out.split(), f"node {fqn}", timeout=30)
         dump = yaml.safe_load(ros2.run("param", "dump", fqn, timeout=20).stdout)[fqn]["ros__parameters"]
         # The params file, the launch overrides (max_steps over the file's 20) and lines:=2.
-        assert (dump["variant"], dump["obs_noise"], dump["seed"], dump["max_steps"], dump["lines"], dump["mode"],
-                dump["rate"]) == ("advanced", 0.3, 7, 9, 2, "realtime", RATE), dump
+        assert (
+            dump["variant"],
+            dump["obs_noise"],
+            dump["seed"],
+            dump["max_steps"],
+            dump["lines"],
+            dump["mode"],
+            dump["rate"],
+        ) == ("advanced", 0.3, 7, 9, 2, "realtime", RATE), dump
         # Two lines, line k in <ns>/line_k with seed 7 + k, episodes of 9 steps.
-        out = poll(ros2, ["topic", "list", "-t"],
-                   lambda out: all(f"{ns}/line_{k}/state" in out for k in (0, 1)), "both lines' topics")
+        out = poll(
+            ros2,
+            ["topic", "list", "-t"],
+            lambda out: all(f"{ns}/line_{k}/state" in out for k in (0, 1)),
+            "both lines' topics",
+        )
         assert f"{ns}/line_1/sensors/ratio [sorting_line_interfaces/msg/MaterialRatio]" in out, out
         state = yaml_docs(ros2.run("topic", "echo", "--once", f"{ns}/line_1/state", timeout=30).stdout)[0]
         assert state["seed"] == 8 and 0 <= state["step"] <= 9, state

@@ -67,8 +67,9 @@ class Simulator:
         self.ros.spin_until(client.service_is_ready, 10.0, f"{self.fqn}/{name}", self.context, abort=self.gone)
         self.ros.spin_until(lambda: self.diag.msgs, 10.0, "/diagnostics from the node", self.context, abort=self.gone)
         request = self.types[name].Request(**fields)
-        return self.ros.wait_future(client.call_async(request), timeout, f"the reply of {name} {fields}",
-                                    self.context, abort=self.gone)
+        return self.ros.wait_future(
+            client.call_async(request), timeout, f"the reply of {name} {fields}", self.context, abort=self.gone
+        )
 
     def result(self, name: str, **fields) -> tuple[int, str]:
         r = self.call(name, **fields).result
@@ -86,12 +87,14 @@ class Simulator:
 
     def states_after(self, stamp: int, count: int, timeout: float = 10.0) -> list:
         """The first `count` states stamped after `stamp` (ns), in order (waits for them)."""
+
         def enough():
             later = [s for s in self.states.msgs if stamp_ns(s.header.stamp) > stamp]
             return later[:count] if len(later) >= count else None
 
-        return self.ros.spin_until(enough, timeout, f"{count} states after {show_ns(stamp)}", self.context,
-                                   abort=self.gone)
+        return self.ros.spin_until(
+            enough, timeout, f"{count} states after {show_ns(stamp)}", self.context, abort=self.gone
+        )
 
     def last_stamp(self) -> int:
         return stamp_ns(self.states.msgs[-1].header.stamp)
@@ -129,8 +132,19 @@ def assert_trajectory(states: list, tokens: list, what: str) -> None:
 @pytest.fixture
 def simulator(ros, start_node, namespace):
     ns = namespace("simif")
-    proc = start_node("--setup", SETUP, "--variant", VARIANT, "--seed", str(SEED), "--rate", str(RATE),
-                      "--ros-args", "-r", f"__ns:={ns}")
+    proc = start_node(
+        "--setup",
+        SETUP,
+        "--variant",
+        VARIANT,
+        "--seed",
+        str(SEED),
+        "--rate",
+        str(RATE),
+        "--ros-args",
+        "-r",
+        f"__ns:={ns}",
+    )
     sim = Simulator(ros, ns, proc)
     yield sim
     sim.destroy()
@@ -143,8 +157,9 @@ def wait_diag(sim, hardware_id: str, want: dict[str, str]) -> dict[str, str]:
         values = h.diagnostic_values(array, hardware_id)
         return values is not None and all(values.get(k) == v for k, v in want.items())
 
-    array = sim.diag.wait_for(matches, 5.0, f"{hardware_id} with {want}",
-                              lambda: str(h.diagnostic_values(sim.diag.msgs[-1], hardware_id)))
+    array = sim.diag.wait_for(
+        matches, 5.0, f"{hardware_id} with {want}", lambda: str(h.diagnostic_values(sim.diag.msgs[-1], hardware_id))
+    )
     return h.diagnostic_values(array, hardware_id)
 
 
@@ -199,7 +214,7 @@ def check_full_reset_and_playing(sim, held: int) -> None:
     sim.ros.spin_until(lambda: len(sim.states.msgs) >= count + 15, 10.0, "15 realtime ticks", sim.context)
     assert sim.set_state(PAUSED) == (OK, "")
     sim.ros.spin_for(0.3)  # ticks published before the pause may still be on their way
-    played = sim.states.msgs[count + 1:]
+    played = sim.states.msgs[count + 1 :]
     sim.ros.spin_for(3 / RATE + 0.2)
     assert len(sim.states.msgs) == count + 1 + len(played), "ticks after PAUSED"
     tokens = [held] * len(played) if len(played) <= 50 else [held] * 50 + ["r"] + [held] * (len(played) - 51)
@@ -231,7 +246,8 @@ def check_refused_while_stepping(sim) -> None:
     big = sim.clients["step_simulation"].call_async(sim.types["step_simulation"].Request(steps=5000))
     busy_step = sim.clients["step_simulation"].call_async(sim.types["step_simulation"].Request(steps=1))
     busy_play = sim.clients["set_simulation_state"].call_async(
-        sim.types["set_simulation_state"].Request(state=SimulationState(state=PLAYING)))
+        sim.types["set_simulation_state"].Request(state=SimulationState(state=PLAYING))
+    )
     for future, what in ((busy_step, "step"), (busy_play, "play")):
         reply = sim.ros.wait_future(future, 10.0, f"the {what} during a step", sim.context, abort=sim.gone)
         assert reply.result.result == INCORRECT_STATE, reply
@@ -280,8 +296,13 @@ def matched_simulate_steps_client(sim):
     created = len(sim.diag.msgs)
     sim.ros.spin_until(client.server_is_ready, 10.0, "the simulate_steps action server", sim.context, abort=sim.gone)
     sim.ros.spin_until(lambda: sim.states.sub.get_publisher_count() >= 1, 10.0, "state to match", sim.context)
-    sim.ros.spin_until(lambda: len(sim.diag.msgs) > created + 1, 10.0, "/diagnostics after the action client",
-                       sim.context, abort=sim.gone)
+    sim.ros.spin_until(
+        lambda: len(sim.diag.msgs) > created + 1,
+        10.0,
+        "/diagnostics after the action client",
+        sim.context,
+        abort=sim.gone,
+    )
     feedback_topic = f"{sim.fqn}/simulate_steps/_action/feedback"
     sim.ros.spin_until(lambda: sim.node.count_publishers(feedback_topic) >= 1, 10.0, feedback_topic, sim.context)
     return client

@@ -110,14 +110,23 @@ def run_script(tmp_path: Path, name: str, code: str, args=(), timeout: float = 2
     script = tmp_path / f"{name}.py"
     script.write_text(RECORDER + code)
     env = script_environment()
-    p = subprocess.Popen([sys.executable, str(script), *map(str, args)], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path, start_new_session=True)
+    p = subprocess.Popen(
+        [sys.executable, str(script), *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        start_new_session=True,
+    )
     try:
         stdout, stderr = p.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         stdout, stderr, native = _stacks_then_kill(p)
-        pytest.fail(f"{name} did not finish within {timeout:g} s (a hang); its last output:\n{stdout[-1000:]}\n"
-                    f"its stderr, ending with every process's Python stacks:\n{stderr[-8000:]}\n{native[-16000:]}")
+        pytest.fail(
+            f"{name} did not finish within {timeout:g} s (a hang); its last output:\n{stdout[-1000:]}\n"
+            f"its stderr, ending with every process's Python stacks:\n{stderr[-8000:]}\n{native[-16000:]}"
+        )
     assert p.returncode == 0, f"{name} failed ({p.returncode}):\n{stdout[-2000:]}\n{stderr[-4000:]}"
     return json.loads(stdout.strip().splitlines()[-1])
 
@@ -131,13 +140,20 @@ def _stacks_then_kill(p: subprocess.Popen) -> tuple[str, str, str]:
     if shutil.which("gdb"):
         for pid in _session_members(p.pid):
             try:
-                bt = subprocess.run(["gdb", "-p", str(pid), "-batch", "-ex", "thread apply all bt 25"],
-                                    capture_output=True, text=True, timeout=60).stdout
+                bt = subprocess.run(
+                    ["gdb", "-p", str(pid), "-batch", "-ex", "thread apply all bt 25"],
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                ).stdout
             except subprocess.TimeoutExpired:
                 bt = "(gdb timed out)"
             # "#3 0x7f.. in func (args...) at file.c:12" -> "#3 func at file.c:12"
-            frames = [re.sub(r"^(#\d+)\s+(?:0x[0-9a-f]+ in )?(\S+) \(.*\) (at|from) ", r"\1 \2 \3 ", line)
-                      for line in bt.splitlines() if line.startswith(("#", "Thread "))]
+            frames = [
+                re.sub(r"^(#\d+)\s+(?:0x[0-9a-f]+ in )?(\S+) \(.*\) (at|from) ", r"\1 \2 \3 ", line)
+                for line in bt.splitlines()
+                if line.startswith(("#", "Thread "))
+            ]
             native.append(f"--- native stacks of pid {pid}:\n" + "\n".join(frames)[-6000:])
     for sig, pause in ((signal.SIGUSR1, 3.0), (signal.SIGKILL, 0.0)):
         try:
@@ -155,15 +171,16 @@ def _session_members(session: int) -> list[int]:
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
             comm_end = (text := stat.read_text()).rindex(")")
-            if int(text[comm_end + 2:].split()[3]) == session and "python" in text[:comm_end]:
+            if int(text[comm_end + 2 :].split()[3]) == session and "python" in text[:comm_end]:
                 members.append(int(stat.parent.name))
         except (OSError, ValueError, IndexError):
             continue
     return sorted(members)
 
 
-def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, actions: list[int], max_steps: int,
-                         where: str) -> None:
+def assert_matches_trace(
+    episode: dict, setup: str, variant: str, seed: int, actions: list[int], max_steps: int, where: str
+) -> None:
     want = trace(setup, variant, seed, actions, max_steps=max_steps)
     assert_obs(np.array(episode["obs"], dtype=np.float32), variant, want[0]["reset"]["observation"], f"{where} reset")
     assert len(episode["steps"]) == len(actions), f"{where}: {len(episode['steps'])} steps for {len(actions)} actions"
@@ -176,7 +193,7 @@ def assert_matches_trace(episode: dict, setup: str, variant: str, seed: int, act
 # fork
 
 
-ASYNC_VECTOR_ENV = r'''
+ASYNC_VECTOR_ENV = r"""
 import sys
 import time
 import gymnasium as gym
@@ -201,7 +218,7 @@ if __name__ == "__main__":
         record_step(episodes, obs, rewards, lambda k: {key: info[key][k] for key in KEYS})
     print(json.dumps({"episodes": episodes, "truncated": truncated.tolist()}))
     envs.close()
-'''
+"""
 
 
 def test_async_vector_env_with_the_default_fork_context_matches_the_library(tmp_path):
@@ -224,13 +241,18 @@ def test_async_vector_env_with_the_forkserver_and_spawn_contexts_matches_the_lib
     n, steps, seed, variant = 2, 30, 4200, "basic"
     per_env = [fixed_actions(10, steps, seed + k) for k in range(n)]
     by_step = [[per_env[k][t] for k in range(n)] for t in range(steps)]
-    out = run_script(tmp_path, f"async_{context}", ASYNC_VECTOR_ENV,
-                     [BASIC, "B", seed, steps, n, json.dumps(by_step), context], timeout=120)
+    out = run_script(
+        tmp_path,
+        f"async_{context}",
+        ASYNC_VECTOR_ENV,
+        [BASIC, "B", seed, steps, n, json.dumps(by_step), context],
+        timeout=120,
+    )
     for k, episode in enumerate(out["episodes"]):
         assert_matches_trace(episode, "B", variant, seed + k, per_env[k], steps, f"{context} worker {k}")
 
 
-FORK_WITH_LIVE_CONTEXT = r'''
+FORK_WITH_LIVE_CONTEXT = r"""
 import os, sys, time
 import gymnasium as gym
 import sorting_line_gym
@@ -262,7 +284,7 @@ os.waitpid(child, 0)
 env.step(2)  # the parent's env is unharmed
 env.close()
 print(json.dumps({"parent": os.getpid(), **child_out}))
-'''
+"""
 
 
 def test_forked_child_with_an_inherited_live_context_gets_a_clear_error(tmp_path):
@@ -280,7 +302,7 @@ def test_forked_child_with_an_inherited_live_context_gets_a_clear_error(tmp_path
 # many envs per host: line servers
 
 
-LIVE_ENV_WAITING = r'''
+LIVE_ENV_WAITING = r"""
 import sys
 import time
 import gymnasium as gym
@@ -289,7 +311,7 @@ env = gym.make(sys.argv[1], setup="B", node=sys.argv[2])
 env.reset(seed=1)
 print("ready", flush=True)
 sys.stdin.read()  # as a vectorizer's worker waits for its next command
-'''
+"""
 
 
 @pytest.mark.parametrize("node", ["spawn", "shared"])
@@ -314,7 +336,7 @@ def test_a_process_with_a_live_env_dies_of_sigterm(tmp_path, node):
             p.wait()
 
 
-ORPHANED_WORKER = r'''
+ORPHANED_WORKER = r"""
 import multiprocessing, sys
 import gymnasium as gym
 import sorting_line_gym  # noqa: F401
@@ -334,7 +356,7 @@ if __name__ == "__main__":
     ours.recv()
     print(child.pid, flush=True)
     sys.stdin.read()  # the test kills this process here
-'''
+"""
 
 
 @pytest.mark.parametrize("start", ["fork", "forkserver", "spawn"])
@@ -438,7 +460,7 @@ def test_sb3_subproc_vec_env_of_16_workers_matches_the_library(tmp_path):
         assert_matches_trace(episode, "D", variant, seed + k, per_env[k], 1_000_000, f"worker {k}")
 
 
-SYNC_IN_A_PROCESS = r'''
+SYNC_IN_A_PROCESS = r"""
 import sys
 import time
 import gymnasium as gym
@@ -462,7 +484,7 @@ for t in range(steps):
     record_step(episodes, obs, rewards, lambda k: {key: info[key][k] for key in KEYS})
 print(json.dumps({"episodes": episodes, "namespaces": [e.unwrapped.namespace for e in envs.envs]}))
 envs.close()
-'''
+"""
 
 
 def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_path):
@@ -515,7 +537,7 @@ def test_two_vector_envs_in_two_processes_at_once_do_not_disturb_each_other(tmp_
             assert_matches_trace(episode, "A", variant, s + k, per_env[s][k], 1_000_000, f"process seed {s} env {k}")
 
 
-KEEPS_ITS_PARTICIPANT = r'''
+KEEPS_ITS_PARTICIPANT = r"""
 import multiprocessing, sys
 import gymnasium as gym
 import rclpy
@@ -547,7 +569,7 @@ if __name__ == "__main__":
     env.close()
     print(json.dumps({"forked_child_after_close": in_child, "parent_after_close": state(),
                       "child_exit": child.exitcode}))
-'''
+"""
 
 
 def test_a_forked_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp_path):
@@ -556,8 +578,11 @@ def test_a_forked_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp
     for minutes in Fast DDS 2.14); elsewhere rclpy is shut down when the last env closes, so that
     the process may fork afterwards."""
     out = run_script(tmp_path, "keeps_participant", KEEPS_ITS_PARTICIPANT, [BASIC], timeout=180)
-    assert out == {"forked_child_after_close": {"rclpy_ok": True, "anchor": True},
-                   "parent_after_close": {"rclpy_ok": False, "anchor": False}, "child_exit": 0}
+    assert out == {
+        "forked_child_after_close": {"rclpy_ok": True, "anchor": True},
+        "parent_after_close": {"rclpy_ok": False, "anchor": False},
+        "child_exit": 0,
+    }
 
 
 # --------------------------------------------------------------------------------------------

@@ -39,7 +39,9 @@ def test_speeds_modes_and_numbers_equal_the_rust_librarys(rust):
     assert v.INPUTS == tuple(rust["inputs"])
     assert v.THRESHOLD == rust["threshold"]
     assert (v.CATEGORY_UNKNOWN_CODE, v.CATEGORY_UNKNOWN_OBSERVATION) == (
-        rust["category_unknown_code"], rust["category_unknown_observation"])
+        rust["category_unknown_code"],
+        rust["category_unknown_observation"],
+    )
     assert v.EPISODE_STEPS == rust["episode_steps"]
     assert v.MAX_EPISODE_STEPS == rust["max_episode_steps"]
     assert set(v.MODE_LABELS) == set(v.MODES.values())
@@ -49,8 +51,11 @@ def test_the_harness_setup_flags_are_the_vocabularys():
     for name, setup in v.SETUPS.items():
         flags = h.SETUP_FLAGS[name]
         values = dict(zip(flags[::2], flags[1::2], strict=False))
-        assert values == {"--input": setup["input"], "--obs-noise": str(setup["obs_noise"]),
-                          "--action-penalty": str(setup["action_penalty"])}
+        assert values == {
+            "--input": setup["input"],
+            "--obs-noise": str(setup["obs_noise"]),
+            "--action-penalty": str(setup["action_penalty"]),
+        }
 
 
 def test_checks_name_the_argument_the_value_and_the_allowed_values():
@@ -90,13 +95,31 @@ def test_observations_of_one_line_are_rows_of_the_batch(variant):
 
 def test_the_info_of_one_line_is_its_entry_of_the_batched_info():
     fields = {
-        "accuracy": [0.9, 0.65], "purity": [0.8, 0.7], "recall_a": [0.75, 0.5], "recall_b": [1.0, 0.25],
-        "speed": [0.6, 0.1], "speed_index": [5, 0], "mode": [0, 2], "occupancy": [0.4, 0.9],
-        "container_a": [10, 1], "container_a_false": [2, 3], "container_b": [7, 4], "container_b_false": [0, 5],
-        "speed_changes": [1, 4], "cumulative_reward": [1.5, -0.2], "step": [3, 9], "seed": [2**63 + 5, 7],
+        "accuracy": [0.9, 0.65],
+        "purity": [0.8, 0.7],
+        "recall_a": [0.75, 0.5],
+        "recall_b": [1.0, 0.25],
+        "speed": [0.6, 0.1],
+        "speed_index": [5, 0],
+        "mode": [0, 2],
+        "occupancy": [0.4, 0.9],
+        "container_a": [10, 1],
+        "container_a_false": [2, 3],
+        "container_b": [7, 4],
+        "container_b_false": [0, 5],
+        "speed_changes": [1, 4],
+        "cumulative_reward": [1.5, -0.2],
+        "step": [3, 9],
+        "seed": [2**63 + 5, 7],
     }
-    kinds = {"speed_index": np.uint8, "mode": np.uint8, "speed_changes": np.uint32, "step": np.uint32,
-             "seed": np.uint64, **{f: np.uint32 for f in fields if f.startswith("container")}}
+    kinds = {
+        "speed_index": np.uint8,
+        "mode": np.uint8,
+        "speed_changes": np.uint32,
+        "step": np.uint32,
+        "seed": np.uint64,
+        **{f: np.uint32 for f in fields if f.startswith("container")},
+    }
     batch = SimpleNamespace(**{k: np.array(x, dtype=kinds.get(k, np.float64)) for k, x in fields.items()})
     sim_time = np.array([1.5, 4.5])
     batched = v.state_info(batch, sim_time)

@@ -76,8 +76,16 @@ def endpoint_types(type_name: str) -> list[str]:
     of its goal and result services and its feedback message."""
     pkg, kind, name = type_name.split("/")
     if kind == "action":
-        return [f"{type_name}_{part}" for part in ("SendGoal_Request", "SendGoal_Response", "GetResult_Request",
-                                                   "GetResult_Response", "FeedbackMessage")]
+        return [
+            f"{type_name}_{part}"
+            for part in (
+                "SendGoal_Request",
+                "SendGoal_Response",
+                "GetResult_Request",
+                "GetResult_Response",
+                "FeedbackMessage",
+            )
+        ]
     return [type_name] if kind == "msg" else [f"{type_name}_Request", f"{type_name}_Response"]
 
 

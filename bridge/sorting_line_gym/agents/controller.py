@@ -81,8 +81,14 @@ class ControllerNode(Node):
     ``decision_log``: an open text file that gets one JSON line per decision (stamp, episode, step,
     readings, decision, and ``latency_ms`` from the tick's first reading to the publication)."""
 
-    def __init__(self, agent: Agent, variant: str, namespace: str | None = None,
-                 node_name: str = "sorting_line_controller", decision_log: IO[str] | None = None):
+    def __init__(
+        self,
+        agent: Agent,
+        variant: str,
+        namespace: str | None = None,
+        node_name: str = "sorting_line_controller",
+        decision_log: IO[str] | None = None,
+    ):
         super().__init__(node_name, namespace=namespace)
         self.agent, self.variant = agent, variant
         self.advanced = variant == "advanced"
@@ -143,8 +149,9 @@ class ControllerNode(Node):
     def _on_ratio(self, msg: MaterialRatio) -> None:
         if msg.category > 2:
             self.invalid += 1
-            self.get_logger().warning(f"sensors/ratio: category {msg.category} is not 0, 1 or 2",
-                                      throttle_duration_sec=5.0)
+            self.get_logger().warning(
+                f"sensors/ratio: category {msg.category} is not 0, 1 or 2", throttle_duration_sec=5.0
+            )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, category=int(msg.category))
 
@@ -152,8 +159,9 @@ class ControllerNode(Node):
         index = speed_index_of(msg.speed)
         if index is None:
             self.invalid += 1
-            self.get_logger().warning(f"belt/occupancy: speed {msg.speed} is not one of the ten speeds",
-                                      throttle_duration_sec=5.0)
+            self.get_logger().warning(
+                f"belt/occupancy: speed {msg.speed} is not one of the ten speeds", throttle_duration_sec=5.0
+            )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, speed_index=index)
 
@@ -215,13 +223,22 @@ class ControllerNode(Node):
         latency_ms = (published - tick.first_seen) * 1e3
         self.latencies.append(latency_ms)
         if self.decisions == 1:
-            self.get_logger().info(f"first decision: tick {key / NS_PER_S:.3f} s (episode {tick.episode}, "
-                                   f"step {tick.step}) -> speed {SPEEDS[speed_index]}, mode {mode}")
+            self.get_logger().info(
+                f"first decision: tick {key / NS_PER_S:.3f} s (episode {tick.episode}, "
+                f"step {tick.step}) -> speed {SPEEDS[speed_index]}, mode {mode}"
+            )
         if self.decision_log is not None:
             record = {
-                "stamp_ns": key, "episode": tick.episode, "step": tick.step, "quantity": tick.quantity,
-                "category": tick.category, "current_speed_index": tick.speed_index, "speed_index": speed_index,
-                "mode": mode, "latency_ms": round(latency_ms, 3), "published_monotonic": published,
+                "stamp_ns": key,
+                "episode": tick.episode,
+                "step": tick.step,
+                "quantity": tick.quantity,
+                "category": tick.category,
+                "current_speed_index": tick.speed_index,
+                "speed_index": speed_index,
+                "mode": mode,
+                "latency_ms": round(latency_ms, 3),
+                "published_monotonic": published,
             }
             self.decision_log.write(json.dumps(record) + "\n")
             self.decision_log.flush()
@@ -234,24 +251,34 @@ class ControllerNode(Node):
             timing = f"; readings-to-command latency p50 {p50:.2f} ms, p99 {p99:.2f} ms"
             if len(lat) == LATENCY_WINDOW:
                 timing += f" (last {LATENCY_WINDOW} decisions)"
-        return (f"{self.decisions} decisions, {self.skipped} ticks skipped (incomplete readings), "
-                f"{self.stale} stale readings, {self.invalid} invalid readings{timing}")
+        return (
+            f"{self.decisions} decisions, {self.skipped} ticks skipped (incomplete readings), "
+            f"{self.stale} stale readings, {self.invalid} invalid readings{timing}"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     full = ["sorting-line-controller", *(sys.argv[1:] if argv is None else argv)]
-    p = argparse.ArgumentParser(prog="sorting-line-controller", description=__doc__.split("\n\n")[0],
-                                epilog="ROS arguments go after --ros-args (e.g. --ros-args -r __ns:=/plant).")
-    p.add_argument("--namespace", default=None,
-                   help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)")
+    p = argparse.ArgumentParser(
+        prog="sorting-line-controller",
+        description=__doc__.split("\n\n")[0],
+        epilog="ROS arguments go after --ros-args (e.g. --ros-args -r __ns:=/plant).",
+    )
+    p.add_argument(
+        "--namespace", default=None, help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)"
+    )
     p.add_argument("--setup", choices=list(SETUPS), required=True, help="the setup of the node's line (A..D)")
     p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
     p.add_argument(
         "--agent", choices=["rba", "rba-hold"], default="rba", help="the rule-based policy (default %(default)s)"
     )
     p.add_argument("--node-name", default="sorting_line_controller", help="this ROS node's name (default %(default)s)")
-    p.add_argument("--decision-log", default=None, metavar="FILE",
-                   help="write one JSON line per decision (readings, decision, latency) to FILE")
+    p.add_argument(
+        "--decision-log",
+        default=None,
+        metavar="FILE",
+        help="write one JSON line per decision (readings, decision, latency) to FILE",
+    )
     args = p.parse_args(remove_ros_args(full)[1:])
     # The table first: a missing binary fails before anything joins the graph.
     try:
@@ -271,8 +298,7 @@ def main(argv: list[str] | None = None) -> int:
     executor = SingleThreadedExecutor()
     node = None
     try:
-        node = ControllerNode(agent, args.variant, namespace=args.namespace, node_name=args.node_name,
-                              decision_log=log)
+        node = ControllerNode(agent, args.variant, namespace=args.namespace, node_name=args.node_name, decision_log=log)
         executor.add_node(node)
         while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=SPIN_PERIOD)

@@ -140,8 +140,10 @@ def open_bag(path: str | Path) -> Bag:
     if info is None:
         info = _described_by_topics(types, [m for m in messages if m.topic not in unknown])
     if unknown and info is None:
-        raise BagError(f"{path}: message types this tool does not know: {', '.join(sorted(set(unknown.values())))} "
-                       "(and no sorting line's state topic)")
+        raise BagError(
+            f"{path}: message types this tool does not know: {', '.join(sorted(set(unknown.values())))} "
+            "(and no sorting line's state topic)"
+        )
     return Bag(path, types, messages, info, custom, unknown)
 
 

@@ -37,12 +37,22 @@ WAIT_STARTED, WAIT_RUNNING = 60.0, 10.0
 FIGURES = ("reward", "accuracy", "purity")
 
 
-def check_controller(bag: str | Path, *, namespace: str | None = None,
-                     controller: str | Sequence[str] | None = None, closed_loop: bool = False,
-                     record: str | Path | None = None, answer_timeout: float = 5.0, wait: float | None = None,
-                     max_reward_drop: str | float | None = None, max_accuracy_drop: str | float | None = None,
-                     max_purity_drop: str | float | None = None, overrides: dict | None = None,
-                     progress: bool = False, stop: Callable[[], bool] = lambda: False) -> Verdict:
+def check_controller(
+    bag: str | Path,
+    *,
+    namespace: str | None = None,
+    controller: str | Sequence[str] | None = None,
+    closed_loop: bool = False,
+    record: str | Path | None = None,
+    answer_timeout: float = 5.0,
+    wait: float | None = None,
+    max_reward_drop: str | float | None = None,
+    max_accuracy_drop: str | float | None = None,
+    max_purity_drop: str | float | None = None,
+    overrides: dict | None = None,
+    progress: bool = False,
+    stop: Callable[[], bool] = lambda: False,
+) -> Verdict:
     """Checks a controller against the bag at ``bag`` and returns the verdict (the one
     `sorting-line-bag check` prints; ``verdict.passed``, ``verdict.exit_code``,
     ``verdict.summary()``, ``verdict.to_json()``, ``verdict.to_junit()``). Never raises for a bad
@@ -59,8 +69,10 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
     verdict = Verdict(str(bag), closed_loop=closed_loop, namespace=namespace or "")
     started = time.monotonic()
     try:
-        tolerances = {f: Tolerance.parse(v, f"--max-{f}-drop") for f, v in
-                      zip(FIGURES, (max_reward_drop, max_accuracy_drop, max_purity_drop), strict=True)}
+        tolerances = {
+            f: Tolerance.parse(v, f"--max-{f}-drop")
+            for f, v in zip(FIGURES, (max_reward_drop, max_accuracy_drop, max_purity_drop), strict=True)
+        }
         verdict.tolerances = {f: str(t) for f, t in tolerances.items()} if closed_loop else {}
         if answer_timeout <= 0:
             raise ValueError(f"--answer-timeout {answer_timeout}: must be > 0 (seconds)")
@@ -81,13 +93,32 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
         if closed_loop:
             from .check_closed import run_closed_loop
 
-            run_closed_loop(loaded, verdict, tolerances, answer_timeout=answer_timeout, wait=wait, process=process,
-                            overrides=overrides, record=record, stop=stop, progress=progress)
+            run_closed_loop(
+                loaded,
+                verdict,
+                tolerances,
+                answer_timeout=answer_timeout,
+                wait=wait,
+                process=process,
+                overrides=overrides,
+                record=record,
+                stop=stop,
+                progress=progress,
+            )
         else:
             from .check_open import run_open_loop
 
-            run_open_loop(loaded, verdict, namespace=namespace, answer_timeout=answer_timeout, wait=wait,
-                          period_ns=tick_period_ns(loaded), process=process, stop=stop, progress=progress)
+            run_open_loop(
+                loaded,
+                verdict,
+                namespace=namespace,
+                answer_timeout=answer_timeout,
+                wait=wait,
+                period_ns=tick_period_ns(loaded),
+                process=process,
+                stop=stop,
+                progress=progress,
+            )
     except (FileNotFoundError, ValueError, BagError) as e:
         return _ended(verdict, EXIT_BAD_INPUT, str(e), started, process)
     except (BridgeError, TimeoutError) as e:
@@ -95,8 +126,9 @@ def check_controller(bag: str | Path, *, namespace: str | None = None,
     return _ended(verdict, None, None, started, process)
 
 
-def _ended(verdict: Verdict, code: int | None, error: str | None, started: float,
-           process: ControllerProcess | None = None) -> Verdict:
+def _ended(
+    verdict: Verdict, code: int | None, error: str | None, started: float, process: ControllerProcess | None = None
+) -> Verdict:
     """Stops the controller, and decides: a controller that died on its own during the run
     failed it (exit 3), whatever its answers were."""
     if process is not None:
@@ -120,16 +152,19 @@ def usable_bag(path: str | Path, closed_loop: bool) -> Bag:
         raise BagError(f"{bag.path}: the bag is empty (no messages): record a line with a controller driving it")
     if LINE_TYPES["state"] not in bag.types.values():
         listed = ", ".join(f"{t} ({ty})" for t, ty in sorted(bag.types.items()))
-        raise BagError(f"{bag.path}: not a bag of a sorting line: no topic of type {LINE_TYPES['state']} "
-                       f"(it has {listed})")
+        raise BagError(
+            f"{bag.path}: not a bag of a sorting line: no topic of type {LINE_TYPES['state']} (it has {listed})"
+        )
     if not closed_loop:
         from .check_open import expected_commands
 
         if not expected_commands(bag):
-            raise BagError(f"{bag.path}: the bag has no commands (no cmd/speed or cmd/sort_mode of its line): open "
-                           "loop compares the controller's answers with the bag's commands, so it needs a bag "
-                           "recorded while a controller drove the line (or use --closed-loop, which compares "
-                           "episodes instead)")
+            raise BagError(
+                f"{bag.path}: the bag has no commands (no cmd/speed or cmd/sort_mode of its line): open "
+                "loop compares the controller's answers with the bag's commands, so it needs a bag "
+                "recorded while a controller drove the line (or use --closed-loop, which compares "
+                "episodes instead)"
+            )
     return bag
 
 

@@ -57,9 +57,19 @@ class _Watch:
         return "; ".join(p.death_notice() for p in self.processes if not p.alive())
 
 
-def run_closed_loop(bag: Bag, verdict: Verdict, tolerances: dict[str, Tolerance], *, answer_timeout: float,
-                    wait: float, process=None, overrides: dict | None = None, record=None,
-                    stop=lambda: False, progress: bool = False) -> None:
+def run_closed_loop(
+    bag: Bag,
+    verdict: Verdict,
+    tolerances: dict[str, Tolerance],
+    *,
+    answer_timeout: float,
+    wait: float,
+    process=None,
+    overrides: dict | None = None,
+    record=None,
+    stop=lambda: False,
+    progress: bool = False,
+) -> None:
     """Runs the closed loop (see the module's docstring) and fills ``verdict.episodes``. Raises
     BagError for a bag it cannot use, BridgeError when the node or the controller fails."""
     plan = _plan(bag, overrides)
@@ -90,8 +100,17 @@ def run_closed_loop(bag: Bag, verdict: Verdict, tolerances: dict[str, Tolerance]
 class _Run:
     """The drive phase: a fresh node, the bag's resets, each followed by the controller's episode."""
 
-    def __init__(self, plan: _Plan, verdict: Verdict, tool: ToolNode, watch: _Watch, scratch: Path,
-                 answer_timeout: float, wait: float, stop):
+    def __init__(
+        self,
+        plan: _Plan,
+        verdict: Verdict,
+        tool: ToolNode,
+        watch: _Watch,
+        scratch: Path,
+        answer_timeout: float,
+        wait: float,
+        stop,
+    ):
         self.plan, self.verdict, self.tool, self.watch, self.scratch = plan, verdict, tool, watch, scratch
         self.answer_timeout, self.wait, self.stop = answer_timeout, wait, stop
         self.namespace = verdict.namespace
@@ -99,8 +118,7 @@ class _Run:
         self.link = LineLink(tool.node, self.namespace, advanced=False)
         self.states: list[dict] = []
         self.newest: dict[int, tuple[int, bool]] = {}  # run episode -> (newest step, ended)
-        self.state_sub = tool.raw_subscription(join(self.namespace, "state"), LINE_TYPES["state"],
-                                               self._on_state)
+        self.state_sub = tool.raw_subscription(join(self.namespace, "state"), LINE_TYPES["state"], self._on_state)
         self.resets = plan.rel_msgs.get("events/reset", [])
         self.episodes: dict[int, int] = {}  # bag episode -> run episode
 
@@ -121,8 +139,10 @@ class _Run:
         self.states.clear()
         self.newest.clear()
         self.start_node()
-        self.verdict.notes.append("the controller did not answer the first tick (its first answer can be lost "
-                                  "while endpoints still match): the node was restarted and the run began again")
+        self.verdict.notes.append(
+            "the controller did not answer the first tick (its first answer can be lost "
+            "while endpoints still match): the node was restarted and the run began again"
+        )
 
     def _on_state(self, data: bytes, _received: int) -> None:
         s = decode(data, LINE_TYPES["state"])
@@ -132,8 +152,11 @@ class _Run:
 
     def wait_for_graph(self, wait: float) -> None:
         ns, node = self.namespace, self.tool.node
-        self.tool.until(lambda: self.link.endpoints_matched(node) and self.state_sub.get_publisher_count() > 0,
-                        STARTUP_TIMEOUT, f"the check's node serving {ns} (its reset service and topics)")
+        self.tool.until(
+            lambda: self.link.endpoints_matched(node) and self.state_sub.get_publisher_count() > 0,
+            STARTUP_TIMEOUT,
+            f"the check's node serving {ns} (its reset service and topics)",
+        )
 
         def controller_seen() -> bool:
             writers = node.count_publishers(join(ns, "cmd/speed")) > 1 or node.count_publishers(join(ns, "batch/cmd"))
@@ -188,9 +211,11 @@ class _Run:
             if step >= target or ended or self.stop():
                 return None
             try:
-                self.tool.until(lambda step=step: self.newest.get(episode, (-1, False))[0] > step or self.stop(),
-                                self.answer_timeout,
-                                lambda step=step: f"an answer to step {max(step, 0)} of episode {episode}")
+                self.tool.until(
+                    lambda step=step: self.newest.get(episode, (-1, False))[0] > step or self.stop(),
+                    self.answer_timeout,
+                    lambda step=step: f"an answer to step {max(step, 0)} of episode {episode}",
+                )
             except BridgeTimeout:
                 return max(step, 0)
             bar.update(max(0, min(target, self.newest[episode][0]) - max(step, 0)))
@@ -199,11 +224,21 @@ class _Run:
         state = next((s for s in reversed(self.states) if s["episode"] == episode and s["step"] == step), None)
         stamp = stamp_ns(state) if state else 0
         refusals = [line for line in self.node.log_tail(40).splitlines() if ": rejected " in line]
-        a = Answer(stamp // self.plan.period, stamp, "cmd/speed", "speed", None, episode=int(recorded["episode"]),
-                   step=step, reason=refusals[-1].strip() if refusals else None)
+        a = Answer(
+            stamp // self.plan.period,
+            stamp,
+            "cmd/speed",
+            "speed",
+            None,
+            episode=int(recorded["episode"]),
+            step=step,
+            reason=refusals[-1].strip() if refusals else None,
+        )
         self.verdict.answers.append(a)
-        self.verdict.notes.append(f"episode {recorded['episode']}: no answer to step {step} within "
-                                  f"{self.answer_timeout:g} s" + (f" (the node: {a.reason})" if a.reason else ""))
+        self.verdict.notes.append(
+            f"episode {recorded['episode']}: no answer to step {step} within "
+            f"{self.answer_timeout:g} s" + (f" (the node: {a.reason})" if a.reason else "")
+        )
 
 
 class _Recorder:
@@ -221,7 +256,7 @@ class _Recorder:
 
         def on_ready(text: str) -> None:
             if text.startswith("matched "):
-                name, count = text[len("matched "):].rsplit(": ", 1)
+                name, count = text[len("matched ") :].rsplit(": ", 1)
                 self.matched[name] = int(count.split()[0])
             elif text.startswith("recording"):
                 self._ready.set()
@@ -258,8 +293,10 @@ def _parted(bag_states: list[dict], run_states: list[dict], period: int) -> str 
         found = first_field_difference(_strip(b), _strip(r))
         if found:
             field, was, now = found
-            return (f"tick {stamp_ns(b) // period} (stamp {show_ns(stamp_ns(b))} s, step {b['step']}), field "
-                    f"{field}: bag {was!r}, run {now!r}")
+            return (
+                f"tick {stamp_ns(b) // period} (stamp {show_ns(stamp_ns(b))} s, step {b['step']}), field "
+                f"{field}: bag {was!r}, run {now!r}"
+            )
     if len(run_states) < len(bag_states):
         b = bag_states[len(run_states)]
         return f"tick {stamp_ns(b) // period} (step {b['step']}): the run has no state there (it stopped)"

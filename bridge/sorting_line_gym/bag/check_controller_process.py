@@ -32,8 +32,9 @@ def controller_command(controller: str | list[str] | tuple[str, ...], namespace:
     if not args:
         raise ValueError("--controller: empty command")
     remap = ["-r", f"__ns:={namespace}"]
-    return args + (remap if "--ros-args" in args and "--" not in args[args.index("--ros-args"):] else
-                   ["--ros-args", *remap])
+    return args + (
+        remap if "--ros-args" in args and "--" not in args[args.index("--ros-args") :] else ["--ros-args", *remap]
+    )
 
 
 class ControllerProcess:
@@ -45,7 +46,8 @@ class ControllerProcess:
             raise FileNotFoundError(f"--controller: {self.command[0]!r} is not a program on PATH nor a file")
         # Kept open for the child to write to; stop() closes it.
         self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115
-            prefix="sorting_line_check_controller_", suffix=".log", delete=False)
+            prefix="sorting_line_check_controller_", suffix=".log", delete=False
+        )
         self.log_path = self._log.name
         # Its own process group: stopping it stops what it started (a launch file, a shell script).
         self.process = subprocess.Popen(
@@ -65,8 +67,10 @@ class ControllerProcess:
         return file_tail(self.log_path, lines)
 
     def death_notice(self) -> str:
-        return (f"the controller ({shlex.join(self.command)}) exited with code {self.process.returncode}; "
-                f"its last output lines:\n{self.output_tail()}")
+        return (
+            f"the controller ({shlex.join(self.command)}) exited with code {self.process.returncode}; "
+            f"its last output lines:\n{self.output_tail()}"
+        )
 
     def stop(self, timeout: float = 5.0) -> int | None:
         """Stops it (if still running) and returns its exit code; deletes the log unless it died

@@ -43,8 +43,11 @@ def expected_commands(bag: Bag) -> dict[int, dict[str, dict]]:
         for m in rel.get(topic, []):
             plain, stamp = m.plain, stamp_ns(m.plain)
             held = out[stamp].get(topic)
-            if held is None or (topic == "cmd/speed" and speed_index_of(held["speed"]) is None
-                                and speed_index_of(plain["speed"]) is not None):
+            if held is None or (
+                topic == "cmd/speed"
+                and speed_index_of(held["speed"]) is None
+                and speed_index_of(plain["speed"]) is not None
+            ):
                 out[stamp][topic] = plain
     return dict(out)
 
@@ -88,8 +91,9 @@ class _CheckPace(_Pace):
     """`play --lockstep`'s pacing, noting when each tick was published and awaiting the answers
     the bag shows for it (on every command topic, not only ``cmd/speed``)."""
 
-    def __init__(self, tool, selection, pubs, stop, answers: _Answers, expected, answer_timeout: float, bar,
-                 subs: list[tuple]):
+    def __init__(
+        self, tool, selection, pubs, stop, answers: _Answers, expected, answer_timeout: float, bar, subs: list[tuple]
+    ):
         super().__init__(tool, selection, pubs, stop, set(), answer_timeout)
         self.answers, self.expected, self.bar, self.subs = answers, expected, bar, subs
         self.published_at: dict[int, int] = {}
@@ -113,20 +117,26 @@ class _CheckPace(_Pace):
         topics = self.expected.get(stamp)
         if not topics:
             return
+
         def answered() -> bool:
             self.tool.take_into(self.subs)
             return self.answers.answered(stamp, topics) or self.stop()
 
         try:
             # On the command subscriptions alone, not the executor: the shorter round trip.
-            self.tool.waiter.until_received([sub for sub, _ in self.subs], answered, self.answer_timeout,
-                                            lambda: f"the controller's answer to the tick stamped {stamp / 1e9:.3f} s")
+            self.tool.waiter.until_received(
+                [sub for sub, _ in self.subs],
+                answered,
+                self.answer_timeout,
+                lambda: f"the controller's answer to the tick stamped {stamp / 1e9:.3f} s",
+            )
         except BridgeTimeout:
             self.timed_out.add(stamp)
 
 
 def _subscribe_commands(tool: ToolNode, namespace: str, answers: _Answers) -> list[tuple]:
     """The raw command subscriptions, each with the callback that files what it receives."""
+
     def on_command(topic: str):
         return lambda data, t: answers.on_command(topic, topic, decode(data, LINE_TYPES[topic]), t)
 
@@ -144,11 +154,15 @@ def _wait_for_controller(tool: ToolNode, selection: _Selection, pubs: dict, subs
     started = time.monotonic()
     try:
         _wait_for_subscribers(tool, selection, pubs, wait)
-        tool.until(lambda: any(s.get_publisher_count() for s, _ in subs), max(0.1, wait - (time.monotonic() - started)),
-                   lambda: "a writer of " + ", ".join(s.topic_name for s, _ in subs))
+        tool.until(
+            lambda: any(s.get_publisher_count() for s, _ in subs),
+            max(0.1, wait - (time.monotonic() - started)),
+            lambda: "a writer of " + ", ".join(s.topic_name for s, _ in subs),
+        )
     except TimeoutError as e:
-        raise BridgeTimeout(f"{e}: no controller answers in {selection.out_ns} (start one there, or pass "
-                            "--controller CMD)") from None
+        raise BridgeTimeout(
+            f"{e}: no controller answers in {selection.out_ns} (start one there, or pass --controller CMD)"
+        ) from None
     tool.spin_for(0.5)  # our readers are matched; give theirs a moment too
 
 
@@ -162,8 +176,18 @@ def _tick_positions(selection: _Selection) -> dict[int, tuple[int, int]]:
     return out
 
 
-def run_open_loop(bag: Bag, verdict: Verdict, *, namespace: str | None, answer_timeout: float, wait: float,
-                  period_ns: int, process=None, stop=lambda: False, progress: bool = False) -> None:
+def run_open_loop(
+    bag: Bag,
+    verdict: Verdict,
+    *,
+    namespace: str | None,
+    answer_timeout: float,
+    wait: float,
+    period_ns: int,
+    process=None,
+    stop=lambda: False,
+    progress: bool = False,
+) -> None:
     """Plays ``bag`` to the controller and fills ``verdict``'s answers (see the module's docstring).
     Raises BridgeError (the controller died, nobody answers) for the caller to report."""
     expected_msgs = expected_commands(bag)
@@ -190,16 +214,27 @@ def run_open_loop(bag: Bag, verdict: Verdict, *, namespace: str | None, answer_t
     verdict.ticks = len(pace.published_at)
     _judge(verdict, expected_msgs, answers, pace, _tick_positions(selection), period_ns, answer_timeout)
     if answers.duplicates:
-        verdict.notes.append(f"{answers.duplicates} second commands for a tick already answered (the node drops "
-                             "them; the first one is compared)")
+        verdict.notes.append(
+            f"{answers.duplicates} second commands for a tick already answered (the node drops "
+            "them; the first one is compared)"
+        )
     unexpected = sum(1 for s, got in answers.got.items() for t in got if t not in expected_msgs.get(s, {}))
     if unexpected:
-        verdict.notes.append(f"{unexpected} answers to ticks the bag shows no such command for (not compared: the "
-                             "recorded controller's was lost, or it did not answer there)")
+        verdict.notes.append(
+            f"{unexpected} answers to ticks the bag shows no such command for (not compared: the "
+            "recorded controller's was lost, or it did not answer there)"
+        )
 
 
-def _judge(verdict: Verdict, expected_msgs: dict, answers: _Answers, pace: _CheckPace, positions: dict,
-           period_ns: int, answer_timeout: float) -> None:
+def _judge(
+    verdict: Verdict,
+    expected_msgs: dict,
+    answers: _Answers,
+    pace: _CheckPace,
+    positions: dict,
+    period_ns: int,
+    answer_timeout: float,
+) -> None:
     def answer(stamp: int, topic: str, via: str, recorded) -> Answer:
         episode, step = positions.get(stamp, (None, None))
         field = FIELDS[topic][0] if via != BATCH else f"{FIELDS[topic][1]}[{answers.batch_entry}]"
@@ -239,4 +274,3 @@ def _compare(topic: str, recorded, answered) -> tuple[str, str | None]:
     if not 0 <= int(answered) <= 2:
         return "differing", node_reason("unknown_mode")
     return ("matching" if int(answered) == int(recorded) else "differing"), None
-

@@ -63,8 +63,10 @@ class Answer:
     def __str__(self) -> str:
         if self.status == "missing":
             return f"{self.topic} at {self.where()}: no answer" + (" in time (it came late)" if self.late else "")
-        text = (f"{self.topic} at {self.where()}, field {self.field}: bag {_show(self.recorded)}, "
-                f"controller {_show(self.answered)}")
+        text = (
+            f"{self.topic} at {self.where()}, field {self.field}: bag {_show(self.recorded)}, "
+            f"controller {_show(self.answered)}"
+        )
         return text + (f" (the node refuses it: {self.reason})" if self.reason else "")
 
 
@@ -91,8 +93,13 @@ class Figures:
         stepped = [s for s in states if s["step"] > 0]
         last = states[-1]
         accuracy = sum(float(s["accuracy"]) for s in stepped) / len(stepped) if stepped else 0.0
-        return cls(int(last["step"]), float(last["cumulative_reward"]), accuracy, float(last["purity"]),
-                   int(last["speed_changes"]))
+        return cls(
+            int(last["step"]),
+            float(last["cumulative_reward"]),
+            accuracy,
+            float(last["purity"]),
+            int(last["speed_changes"]),
+        )
 
 
 @dataclass
@@ -150,18 +157,21 @@ class EpisodeResult:
         for name, tol in tolerances.items():
             was, now = getattr(self.bag, name), getattr(self.run, name)
             if was - now > tol.allowed(was):
-                self.failures.append(f"{name} {now:.6g} is worse than the bag's {was:.6g} by {was - now:.6g} "
-                                     f"(allowed: {tol})")
+                self.failures.append(
+                    f"{name} {now:.6g} is worse than the bag's {was:.6g} by {was - now:.6g} (allowed: {tol})"
+                )
 
     def describe(self) -> str:
         b, r = self.bag, self.run
         if r is None:
             return f"episode {self.episode}: not run"
-        return (f"episode {self.episode}: reward {r.reward:.4g} (bag {b.reward:.4g}), accuracy {r.accuracy:.4f} "
-                f"(bag {b.accuracy:.4f}), purity {r.purity:.4f} (bag {b.purity:.4f}), speed changes "
-                f"{r.speed_changes} (bag {b.speed_changes}); "
-                + (f"trajectories part at {self.parted}" if self.parted else "same trajectory")
-                + ("" if self.passed else " -> FAILED: " + "; ".join(self.failures)))
+        return (
+            f"episode {self.episode}: reward {r.reward:.4g} (bag {b.reward:.4g}), accuracy {r.accuracy:.4f} "
+            f"(bag {b.accuracy:.4f}), purity {r.purity:.4f} (bag {b.purity:.4f}), speed changes "
+            f"{r.speed_changes} (bag {b.speed_changes}); "
+            + (f"trajectories part at {self.parted}" if self.parted else "same trajectory")
+            + ("" if self.passed else " -> FAILED: " + "; ".join(self.failures))
+        )
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -211,8 +221,12 @@ class Verdict:
         values = [a.latency_ms for a in self.answers if a.latency_ms is not None]
         if not values:
             return None
-        return {"p50": _percentile(values, 0.5), "p99": _percentile(values, 0.99), "max": max(values),
-                "count": len(values)}
+        return {
+            "p50": _percentile(values, 0.5),
+            "p99": _percentile(values, 0.99),
+            "max": max(values),
+            "count": len(values),
+        }
 
     def decide(self) -> None:
         """Sets exit_code from what was found (bad input and run failures are set where they happen)."""
@@ -234,14 +248,18 @@ class Verdict:
             what = "bad input" if self.exit_code == EXIT_BAD_INPUT else "the run failed"
             lines.append(f"{what}: {self.error}")
         if (self.answers or self.wrong_stamps) and not self.closed_loop:
-            lines.append(f"{self.ticks} ticks played in {self.seconds:.1f} s; answers: {self.count('matching')} "
-                         f"matching, {self.count('differing')} differing, {self.count('missing')} missing "
-                         f"({sum(a.late for a in self.answers)} of them late), {len(self.wrong_stamps)} with a "
-                         "stamp of no expected tick")
+            lines.append(
+                f"{self.ticks} ticks played in {self.seconds:.1f} s; answers: {self.count('matching')} "
+                f"matching, {self.count('differing')} differing, {self.count('missing')} missing "
+                f"({sum(a.late for a in self.answers)} of them late), {len(self.wrong_stamps)} with a "
+                "stamp of no expected tick"
+            )
             lat = self.latency()
             if lat:
-                lines.append(f"answer latency: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, "
-                             f"max {lat['max']:.2f} ms ({lat['count']} answers)")
+                lines.append(
+                    f"answer latency: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, "
+                    f"max {lat['max']:.2f} ms ({lat['count']} answers)"
+                )
             differences = self.differences
             if differences:
                 lines.append(f"first difference: {differences[0]}")
@@ -253,8 +271,10 @@ class Verdict:
                 shown = ", ".join(str(a.tick) for a in missing[:10]) + (" ..." if len(missing) > 10 else "")
                 lines.append(f"no answer in time ({len(missing)}): ticks {shown}; first: {missing[0]}")
         if self.episodes:
-            lines.append(f"{self.ticks} ticks run in {self.seconds:.1f} s; tolerances: "
-                         + ", ".join(f"{k} {v}" for k, v in self.tolerances.items()))
+            lines.append(
+                f"{self.ticks} ticks run in {self.seconds:.1f} s; tolerances: "
+                + ", ".join(f"{k} {v}" for k, v in self.tolerances.items())
+            )
             lines += [e.describe() for e in self.episodes]
         lines += self.notes
         if self.recorded:
@@ -267,15 +287,24 @@ class Verdict:
         counts.update(late=sum(a.late for a in self.answers), wrong_stamp=len(self.wrong_stamps))
         first = self.first_difference
         return {
-            "bag": self.bag, "closed_loop": self.closed_loop, "namespace": self.namespace,
-            "controller": self.controller, "passed": self.passed, "exit_code": self.exit_code, "error": self.error,
-            "ticks": self.ticks, "seconds": round(self.seconds, 3), "answers": counts,
+            "bag": self.bag,
+            "closed_loop": self.closed_loop,
+            "namespace": self.namespace,
+            "controller": self.controller,
+            "passed": self.passed,
+            "exit_code": self.exit_code,
+            "error": self.error,
+            "ticks": self.ticks,
+            "seconds": round(self.seconds, 3),
+            "answers": counts,
             "first_difference": asdict(first) | {"message": str(first)} if first else None,
             "differences": [asdict(a) | {"message": str(a)} for a in self.differences[:100]],
             "missing_ticks": [a.tick for a in self.answers if a.status == "missing"],
-            "latency_ms": self.latency(), "tolerances": self.tolerances,
+            "latency_ms": self.latency(),
+            "tolerances": self.tolerances,
             "episodes": [asdict(e) | {"passed": e.passed} for e in self.episodes],
-            "notes": self.notes, "recorded": self.recorded,
+            "notes": self.notes,
+            "recorded": self.recorded,
         }
 
     def to_json(self) -> str:
@@ -302,11 +331,15 @@ def _episode_cases(v: Verdict, suite: ET.Element) -> None:
     for a in v.answers + v.wrong_stamps:
         by_episode.setdefault(a.episode, []).append(a)
     for episode in sorted(by_episode, key=lambda e: -1 if e is None else e):
-        wrong = sorted((a for a in by_episode[episode] if a.status == "differing" or a in v.wrong_stamps),
-                       key=lambda a: a.stamp_ns)
+        wrong = sorted(
+            (a for a in by_episode[episode] if a.status == "differing" or a in v.wrong_stamps), key=lambda a: a.stamp_ns
+        )
         text = "\n".join(str(a) for a in wrong[:20]) + (f"\n... {len(wrong) - 20} more" if len(wrong) > 20 else "")
-        _case(suite, f"episode {episode}" if episode is not None else "before the first episode",
-              f"{len(wrong)} differing answers:\n{text}" if wrong else None)
+        _case(
+            suite,
+            f"episode {episode}" if episode is not None else "before the first episode",
+            f"{len(wrong)} differing answers:\n{text}" if wrong else None,
+        )
 
 
 def _junit(v: Verdict) -> str:
@@ -316,8 +349,11 @@ def _junit(v: Verdict) -> str:
     _episode_cases(v, suite)
     missing = [a for a in v.answers if a.status == "missing"]
     text = "\n".join(str(a) for a in missing[:50]) + (f"\n... {len(missing) - 50} more" if len(missing) > 50 else "")
-    _case(suite, "missing or late answers",
-          f"{len(missing)} ticks without an answer in time:\n{text}" if missing else None)
+    _case(
+        suite,
+        "missing or late answers",
+        f"{len(missing)} ticks without an answer in time:\n{text}" if missing else None,
+    )
     cases = suite.findall("testcase")
     suite.set("tests", str(len(cases)))
     suite.set("failures", str(sum(1 for c in cases if c.find("failure") is not None)))

@@ -54,17 +54,26 @@ class _Stop:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sorting-line-bag", description=__doc__.split("\n\n")[0],
-                                epilog="docs/bags.md describes what a bag contains.")
+    p = argparse.ArgumentParser(
+        prog="sorting-line-bag",
+        description=__doc__.split("\n\n")[0],
+        epilog="docs/bags.md describes what a bag contains.",
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
-    r = sub.add_parser("record", help="record a running line's topics into a bag directory",
-                       description=RECORD_DESCRIPTION)
+    r = sub.add_parser(
+        "record", help="record a running line's topics into a bag directory", description=RECORD_DESCRIPTION
+    )
     r.add_argument("--namespace", required=True, help="the line's namespace (e.g. /plant or /plant/line_2)")
     r.add_argument("-o", "--output", required=True, help="the bag directory to create (must not exist)")
-    r.add_argument("--topic", action="append", dest="topics", metavar="TOPIC",
-                   help="record this topic (absolute, or relative to the namespace); repeatable. Default: "
-                        "the line's topics, its commands, its resets (events/reset) and /clock")
+    r.add_argument(
+        "--topic",
+        action="append",
+        dest="topics",
+        metavar="TOPIC",
+        help="record this topic (absolute, or relative to the namespace); repeatable. Default: "
+        "the line's topics, its commands, its resets (events/reset) and /clock",
+    )
     r.add_argument("--diagnostics", action="store_true", help="also record /diagnostics (wall-clock, not replayed)")
     r.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     r.add_argument("--max-ticks", type=int, default=None, help="stop once this many states were recorded")
@@ -81,72 +90,135 @@ def _parser() -> argparse.ArgumentParser:
     pl.add_argument("bag", help="the bag directory to play")
     pl.add_argument("--rate", type=float, default=1.0, help="speed factor: 2 = twice as fast, 0 = no waiting")
     pl.add_argument("--namespace", default=None, help="publish the line's topics in this namespace instead")
-    pl.add_argument("--topic", action="append", dest="topics", metavar="TOPIC",
-                    help="play only this topic (absolute or relative to the recorded line); repeatable")
-    pl.add_argument("--wait-for", action="append", default=None, metavar="TOPIC",
-                    help="wait for a subscriber on this topic before playing (default: the line's input)")
+    pl.add_argument(
+        "--topic",
+        action="append",
+        dest="topics",
+        metavar="TOPIC",
+        help="play only this topic (absolute or relative to the recorded line); repeatable",
+    )
+    pl.add_argument(
+        "--wait-for",
+        action="append",
+        default=None,
+        metavar="TOPIC",
+        help="wait for a subscriber on this topic before playing (default: the line's input)",
+    )
     pl.add_argument("--no-wait", action="store_true", help="do not wait for subscribers")
     pl.add_argument("--wait", type=float, default=10.0, help="how long to wait for subscribers (s)")
-    pl.add_argument("--lockstep", action="store_true",
-                    help="tick by tick instead of by time: each tick after the controller answered the previous one "
-                         "on cmd/speed (when the bag shows an answer), as a lock-step node would")
+    pl.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="tick by tick instead of by time: each tick after the controller answered the previous one "
+        "on cmd/speed (when the bag shows an answer), as a lock-step node would",
+    )
     pl.add_argument("--answer-timeout", type=float, default=5.0, help="--lockstep: longest wait for an answer (s)")
 
     i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
     i.add_argument("bag", help="the bag directory")
     _check_parser(sub)
-    x = sub.add_parser("reindex", help="recover a bag whose recorder was killed: rebuild metadata.yaml (and the "
-                                       "MCAP summary of a cut file) from what is on disk, as `ros2 bag reindex`")
+    x = sub.add_parser(
+        "reindex",
+        help="recover a bag whose recorder was killed: rebuild metadata.yaml (and the "
+        "MCAP summary of a cut file) from what is on disk, as `ros2 bag reindex`",
+    )
     x.add_argument("bag", help="the bag directory")
     return p
 
 
 def _check_parser(sub) -> None:
-    c = sub.add_parser("check", help="test a controller against a bag: a verdict (exit 0 pass, 1 fail, 2 bad input, "
-                                     "3 the run failed), as text, JSON and JUnit XML",
-                       description="Does a controller still answer a recorded line as it did, and is it no worse? "
-                                   "Tests it against a bag at topic level.", epilog=CHECK_EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    c = sub.add_parser(
+        "check",
+        help="test a controller against a bag: a verdict (exit 0 pass, 1 fail, 2 bad input, "
+        "3 the run failed), as text, JSON and JUnit XML",
+        description="Does a controller still answer a recorded line as it did, and is it no worse? "
+        "Tests it against a bag at topic level.",
+        epilog=CHECK_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     c.add_argument("bag", help="the bag directory to check against")
-    c.add_argument("--namespace", default=None,
-                   help="where the line is played (open loop) or served (closed loop); "
-                        "default: the bag's line namespace")
-    c.add_argument("--controller", default=None, metavar="CMD",
-                   help="start this command (a shell-like string, e.g. 'sorting-line-controller --setup D') with "
-                        "'--ros-args -r __ns:=<namespace>' appended, and stop it at the end; default: wait for a "
-                        "controller already running in the namespace")
-    c.add_argument("--closed-loop", action="store_true",
-                   help="a fresh lock-step node with the bag's options, reset as the bag was, driven by the "
-                        "controller; its episodes are compared with the bag's")
+    c.add_argument(
+        "--namespace",
+        default=None,
+        help="where the line is played (open loop) or served (closed loop); default: the bag's line namespace",
+    )
+    c.add_argument(
+        "--controller",
+        default=None,
+        metavar="CMD",
+        help="start this command (a shell-like string, e.g. 'sorting-line-controller --setup D') with "
+        "'--ros-args -r __ns:=<namespace>' appended, and stop it at the end; default: wait for a "
+        "controller already running in the namespace",
+    )
+    c.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="a fresh lock-step node with the bag's options, reset as the bag was, driven by the "
+        "controller; its episodes are compared with the bag's",
+    )
     c.add_argument("--record", default=None, metavar="OUT", help="--closed-loop: record the run into bag directory OUT")
     c.add_argument("--json", default=None, metavar="FILE", help="write the verdict as JSON to FILE")
-    c.add_argument("--junit", default=None, metavar="FILE",
-                   help="write the verdict as JUnit XML to FILE (a test case per episode, one for missing answers)")
-    c.add_argument("--answer-timeout", type=float, default=5.0, metavar="S",
-                   help="longest wait for the controller's answer to one tick (s); the run goes on without it")
-    c.add_argument("--wait", type=float, default=None, metavar="S",
-                   help="longest wait for the controller to appear (s; default 60 with --controller, else 10)")
+    c.add_argument(
+        "--junit",
+        default=None,
+        metavar="FILE",
+        help="write the verdict as JUnit XML to FILE (a test case per episode, one for missing answers)",
+    )
+    c.add_argument(
+        "--answer-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="longest wait for the controller's answer to one tick (s); the run goes on without it",
+    )
+    c.add_argument(
+        "--wait",
+        type=float,
+        default=None,
+        metavar="S",
+        help="longest wait for the controller to appear (s; default 60 with --controller, else 10)",
+    )
     for figure in ("reward", "accuracy", "purity"):
-        c.add_argument(f"--max-{figure}-drop", default=None, metavar="X|X%",
-                       help=f"--closed-loop: how much lower than the bag's an episode's {figure} may be, absolute "
-                            "or as a percentage of the bag's (default 0: equal or better)")
+        c.add_argument(
+            f"--max-{figure}-drop",
+            default=None,
+            metavar="X|X%",
+            help=f"--closed-loop: how much lower than the bag's an episode's {figure} may be, absolute "
+            "or as a percentage of the bag's (default 0: equal or better)",
+        )
     _add_node_options(c, "--closed-loop: ")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
 
 
 #: Node options a fresh node for a bag takes from flags (replay, closed-loop check), named as `sorting_line node`.
-NODE_OPTIONS = [("variant", str), ("input", str), ("obs-noise", float), ("action-penalty", float), ("threshold", float),
-                ("max-steps", int), ("seed", int), ("tick-period", float)]
+NODE_OPTIONS = [
+    ("variant", str),
+    ("input", str),
+    ("obs-noise", float),
+    ("action-penalty", float),
+    ("threshold", float),
+    ("max-steps", int),
+    ("seed", int),
+    ("tick-period", float),
+]
 
 
 def _add_node_options(parser, scope: str) -> None:
     """The node options and --setup, for a bag that does not store them (or to override them)."""
     for name, kind in NODE_OPTIONS:
-        parser.add_argument(f"--{name}", type=kind, default=None,
-                            help=f"{scope}the node option, overriding the bag's (needed if the bag does not store it)")
-    parser.add_argument("--setup", choices=list(SETUPS), default=None,
-                        help=f"{scope}the paper's setup of the recorded line: its input, obs-noise, action-penalty and "
-                             "threshold (for a bag that does not store them; the flags above override it)")
+        parser.add_argument(
+            f"--{name}",
+            type=kind,
+            default=None,
+            help=f"{scope}the node option, overriding the bag's (needed if the bag does not store it)",
+        )
+    parser.add_argument(
+        "--setup",
+        choices=list(SETUPS),
+        default=None,
+        help=f"{scope}the paper's setup of the recorded line: its input, obs-noise, action-penalty and "
+        "threshold (for a bag that does not store them; the flags above override it)",
+    )
 
 
 def _node_options(args) -> dict:
@@ -179,6 +251,7 @@ which topics (also shown by `info`). A full disk stops it with exit code 3 and a
 
 def _option(check, kind):
     """An argparse type from a writer check: the check's message names the value and the allowed range."""
+
     def parse(text: str):
         try:
             return check(kind(text))
@@ -187,6 +260,7 @@ def _option(check, kind):
             raise argparse.ArgumentTypeError(f"{text!r} is not a {what}") from None
         except BagError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
+
     return parse
 
 
@@ -199,15 +273,29 @@ def _add_write_options(r: argparse.ArgumentParser) -> None:
         check_max_bag_size,
     )
 
-    r.add_argument("--max-bag-size", type=_option(check_max_bag_size, int), default=0, metavar="BYTES",
-                   help=f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "
-                        f"the default; else >= {MIN_SPLIT_SIZE}), as `ros2 bag record --max-bag-size`")
-    r.add_argument("--max-bag-duration", type=_option(check_max_bag_duration, float), default=0.0, metavar="S",
-                   help=f"start a new MCAP file once the current one spans this many seconds (0: never, the "
-                        f"default; else >= {MIN_SPLIT_DURATION:g})")
-    r.add_argument("--compression", type=_option(check_compression, str), default="none",
-                   help="compress each MCAP chunk: zstd (as rosbag2's zstd presets; rosbags, mcap and Foxglove "
-                        "read it), lz4, or none (the default)")
+    r.add_argument(
+        "--max-bag-size",
+        type=_option(check_max_bag_size, int),
+        default=0,
+        metavar="BYTES",
+        help=f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "
+        f"the default; else >= {MIN_SPLIT_SIZE}), as `ros2 bag record --max-bag-size`",
+    )
+    r.add_argument(
+        "--max-bag-duration",
+        type=_option(check_max_bag_duration, float),
+        default=0.0,
+        metavar="S",
+        help=f"start a new MCAP file once the current one spans this many seconds (0: never, the "
+        f"default; else >= {MIN_SPLIT_DURATION:g})",
+    )
+    r.add_argument(
+        "--compression",
+        type=_option(check_compression, str),
+        default="none",
+        help="compress each MCAP chunk: zstd (as rosbag2's zstd presets; rosbags, mcap and Foxglove "
+        "read it), lz4, or none (the default)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -227,17 +315,29 @@ def main(argv: list[str] | None = None) -> int:
 
             options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
             with _Stop() as stop:
-                result = record(args.namespace, args.output, args.topics, duration=args.duration,
-                                max_ticks=args.max_ticks, wait=args.wait, stop=stop,
-                                on_ready=lambda s: print(s, flush=True), diagnostics=args.diagnostics,
-                                options=options)
+                result = record(
+                    args.namespace,
+                    args.output,
+                    args.topics,
+                    duration=args.duration,
+                    max_ticks=args.max_ticks,
+                    wait=args.wait,
+                    stop=stop,
+                    on_ready=lambda s: print(s, flush=True),
+                    diagnostics=args.diagnostics,
+                    options=options,
+                )
             print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
             return 0
         if args.command == "replay":
             from .replay import replay
 
-            result = replay(args.bag, _node_options(args), step_timeout=args.step_timeout,
-                            progress=not args.no_progress and sys.stderr.isatty())
+            result = replay(
+                args.bag,
+                _node_options(args),
+                step_timeout=args.step_timeout,
+                progress=not args.no_progress and sys.stderr.isatty(),
+            )
             print(result.report(), flush=True)
             return 0 if result.identical else EXIT_DIFFERENT
         if args.command == "check":
@@ -246,10 +346,18 @@ def main(argv: list[str] | None = None) -> int:
             from .play import play
 
             with _Stop() as stop:
-                result = play(args.bag, rate=args.rate, topics=args.topics, namespace=args.namespace,
-                              wait_for=[] if args.no_wait else args.wait_for, wait=args.wait, stop=stop,
-                              on_ready=lambda s: print(s, flush=True), lockstep=args.lockstep,
-                              answer_timeout=args.answer_timeout)
+                result = play(
+                    args.bag,
+                    rate=args.rate,
+                    topics=args.topics,
+                    namespace=args.namespace,
+                    wait_for=[] if args.no_wait else args.wait_for,
+                    wait=args.wait,
+                    stop=stop,
+                    on_ready=lambda s: print(s, flush=True),
+                    lockstep=args.lockstep,
+                    answer_timeout=args.answer_timeout,
+                )
             print(result.summary(), flush=True)
             return 0
     except BagWriteError as e:
@@ -271,12 +379,21 @@ def _check(args) -> int:
 
     overrides = _node_options(args)
     with _Stop() as stop:
-        verdict = check_controller(args.bag, namespace=args.namespace, controller=args.controller,
-                                   closed_loop=args.closed_loop, record=args.record,
-                                   answer_timeout=args.answer_timeout, wait=args.wait,
-                                   max_reward_drop=args.max_reward_drop, max_accuracy_drop=args.max_accuracy_drop,
-                                   max_purity_drop=args.max_purity_drop, overrides=overrides, stop=stop,
-                                   progress=not args.no_progress and sys.stderr.isatty())
+        verdict = check_controller(
+            args.bag,
+            namespace=args.namespace,
+            controller=args.controller,
+            closed_loop=args.closed_loop,
+            record=args.record,
+            answer_timeout=args.answer_timeout,
+            wait=args.wait,
+            max_reward_drop=args.max_reward_drop,
+            max_accuracy_drop=args.max_accuracy_drop,
+            max_purity_drop=args.max_purity_drop,
+            overrides=overrides,
+            stop=stop,
+            progress=not args.no_progress and sys.stderr.isatty(),
+        )
     print(verdict.summary(), flush=True)
     if verdict.error:
         print(f"sorting-line-bag check: {verdict.error}", file=sys.stderr, flush=True)

@@ -105,6 +105,7 @@ def compare(recorded: dict[str, list[dict]], replayed: dict[str, list[dict]], pe
     (see :func:`shifted`). Every recorded message must be replayed identically; a replayed message
     the bag lacks is a difference too, unless it lies past the last recorded one of its topic
     (the recording ended)."""
+
     def keyed(messages: dict[str, list[dict]]) -> dict[tuple[int, int, str], list[dict]]:
         out: dict[tuple[int, int, str], list[dict]] = defaultdict(list)
         for topic, items in messages.items():
@@ -126,18 +127,34 @@ def compare(recorded: dict[str, list[dict]], replayed: dict[str, list[dict]], pe
         sample = (ours or theirs)[0]
         ctx = dict(episode=sample.get("episode"), step=sample.get("step"))
         if not theirs:
-            return Comparison(Difference(topic, tick, stamp, "<message>", "has it",
-                                         "did not publish it (the replay node did not reach this tick)", **ctx),
-                              dict(compared), ignored)
+            return Comparison(
+                Difference(
+                    topic,
+                    tick,
+                    stamp,
+                    "<message>",
+                    "has it",
+                    "did not publish it (the replay node did not reach this tick)",
+                    **ctx,
+                ),
+                dict(compared),
+                ignored,
+            )
         if not ours:
-            return Comparison(Difference(topic, tick, stamp, "<message>", "has none", f"published {theirs[0]}", **ctx),
-                              dict(compared), ignored)
+            return Comparison(
+                Difference(topic, tick, stamp, "<message>", "has none", f"published {theirs[0]}", **ctx),
+                dict(compared),
+                ignored,
+            )
         for a, b in zip(ours, theirs, strict=False):
             found = first_field_difference(a, b)
             if found:
                 return Comparison(Difference(topic, tick, stamp, *found, **ctx), dict(compared), ignored)
             compared[topic] += 1
         if len(ours) != len(theirs):
-            return Comparison(Difference(topic, tick, stamp, "<message>", f"{len(ours)} messages",
-                                         f"{len(theirs)} messages", **ctx), dict(compared), ignored)
+            return Comparison(
+                Difference(topic, tick, stamp, "<message>", f"{len(ours)} messages", f"{len(theirs)} messages", **ctx),
+                dict(compared),
+                ignored,
+            )
     return Comparison(None, dict(compared), ignored)

@@ -25,8 +25,19 @@ from ..line.vocabulary import SETUPS, THRESHOLD
 from .schema import LINE_TYPES, join, stamp_ns
 
 #: The node's options a line's description holds (`sorting_line node` flags, underscores).
-OPTIONS = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "mode",
-           "tick_period", "lines", "evolution_file")
+OPTIONS = (
+    "variant",
+    "input",
+    "obs_noise",
+    "action_penalty",
+    "threshold",
+    "max_steps",
+    "seed",
+    "mode",
+    "tick_period",
+    "lines",
+    "evolution_file",
+)
 #: The options a fresh node for a bag needs (replay, closed-loop check): from the bag or from flags.
 REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
 #: The options a setup (``--setup A..D``) stands for.
@@ -52,8 +63,11 @@ def options_from_topics(namespace: str, messages: Messages) -> tuple[dict, dict]
     options: dict = {}
     sources: dict = {}
     finders: list[tuple[str, Callable[[str, Messages], dict]]] = [
-        ("/parameter_events", _from_parameter_events), ("events/reset", _from_first_reset),
-        ("/diagnostics", _from_diagnostics), ("states", _from_states)]
+        ("/parameter_events", _from_parameter_events),
+        ("events/reset", _from_first_reset),
+        ("/diagnostics", _from_diagnostics),
+        ("states", _from_states),
+    ]
     for name, find in finders:
         for key, value in find(namespace, messages).items():
             if key not in options and value is not None:
@@ -91,19 +105,23 @@ def describe_sources(info) -> list[str]:
     """``info``'s lines for a bag of another recorder: each option with its source, and what is
     not in the bag (the flags a replay needs)."""
     known = ", ".join(f"{k}={info.node[k]} ({info.sources[k]})" for k in OPTIONS if k in info.sources)
-    lines = [f"  line {info.namespace} (recorded by another tool, no sorting_line custom_data); from its topics: "
-             f"{known or 'no options'}"]
+    lines = [
+        f"  line {info.namespace} (recorded by another tool, no sorting_line custom_data); from its topics: "
+        f"{known or 'no options'}"
+    ]
     missing = [k for k in REQUIRED if k not in info.node]
     if missing:
-        lines.append(f"  not in the bag: {', '.join(missing)}; replay and check --closed-loop need "
-                     f"{flags_for(missing)}")
+        lines.append(
+            f"  not in the bag: {', '.join(missing)}; replay and check --closed-loop need {flags_for(missing)}"
+        )
     return lines
 
 
 def _parameter_value(value: dict):
     """A decoded rcl_interfaces/ParameterValue as a Python value (None: not set or an array)."""
-    return {1: value["bool_value"], 2: value["integer_value"], 3: value["double_value"],
-            4: value["string_value"]}.get(value["type"])
+    return {1: value["bool_value"], 2: value["integer_value"], 3: value["double_value"], 4: value["string_value"]}.get(
+        value["type"]
+    )
 
 
 def _from_parameter_events(namespace: str, messages: Messages) -> dict:
@@ -152,9 +170,20 @@ def _from_diagnostics(namespace: str, messages: Messages) -> dict:
             if status["name"] != name:
                 continue
             values = {kv["key"]: kv["value"] for kv in status["values"]}
-            return {k: kinds.get(k, str)(values[k]) for k in ("variant", "input", "seed", "mode", "obs_noise",
-                                                              "action_penalty", "threshold", "evolution_file")
-                    if values.get(k) not in (None, "")}
+            return {
+                k: kinds.get(k, str)(values[k])
+                for k in (
+                    "variant",
+                    "input",
+                    "seed",
+                    "mode",
+                    "obs_noise",
+                    "action_penalty",
+                    "threshold",
+                    "evolution_file",
+                )
+                if values.get(k) not in (None, "")
+            }
     return {}
 
 
@@ -165,8 +194,11 @@ def _from_states(namespace: str, messages: Messages) -> dict:
         s = m.plain
         if s.get("truncated") and "max_steps" not in out:
             out["max_steps"] = int(s["step"])
-        if previous and "tick_period" not in out and (previous["episode"], previous["step"] + 1) == (
-                s["episode"], s["step"]):
+        if (
+            previous
+            and "tick_period" not in out
+            and (previous["episode"], previous["step"] + 1) == (s["episode"], s["step"])
+        ):
             out["tick_period"] = (stamp_ns(s) - stamp_ns(previous)) / 1e9
         previous = s
         if len(out) == 2:

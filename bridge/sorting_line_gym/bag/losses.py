@@ -86,8 +86,10 @@ class LossCounter:
     def report(self) -> dict:
         """``{"compared": bool, ...}``: the window, published, received, missing, per-topic missing."""
         if self.missing_topics:
-            return {"compared": False, "why": f"not every topic of the line was recorded "
-                                              f"({', '.join(self.missing_topics)} left out)"}
+            return {
+                "compared": False,
+                "why": f"not every topic of the line was recorded ({', '.join(self.missing_topics)} left out)",
+            }
         if self.first is None or self.last is None or self.last == self.first:
             return {"compared": False, "why": "fewer than two /diagnostics reports of the line arrived"}
         (t0, p0), (t1, p1) = self.first, self.last
@@ -95,8 +97,15 @@ class LossCounter:
         ticks = (t1 - t0) // self.period
         topics = {rel: ticks - received[rel] for rel in self.per_tick if received[rel] < ticks}
         missing = (p1 - p0) - sum(received.values())
-        return {"compared": True, "window_ns": [t0, t1], "ticks": ticks, "published": p1 - p0,
-                "received": sum(received.values()), "missing": max(0, missing), "topics": topics}
+        return {
+            "compared": True,
+            "window_ns": [t0, t1],
+            "ticks": ticks,
+            "published": p1 - p0,
+            "received": sum(received.values()),
+            "missing": max(0, missing),
+            "topics": topics,
+        }
 
 
 def _window(r: dict) -> str:
@@ -111,11 +120,15 @@ def describe_losses(report: dict | None) -> str:
         return f"messages missed: not compared with the node's counters: {report.get('why')}"
     window = _window(report)
     if report["missing"] == 0:
-        return (f"messages missed: none (the node published {report['published']} messages of the line in "
-                f"{window}, {report['ticks']} ticks; all are in the bag)")
+        return (
+            f"messages missed: none (the node published {report['published']} messages of the line in "
+            f"{window}, {report['ticks']} ticks; all are in the bag)"
+        )
     per_topic = ", ".join(f"{t} {n}" for t, n in sorted(report["topics"].items())) or "events"
-    return (f"MESSAGES MISSED: {report['missing']} of the {report['published']} the node published in {window} "
-            f"are not in the bag ({per_topic}): the recorder fell behind or they were lost on the way")
+    return (
+        f"MESSAGES MISSED: {report['missing']} of the {report['published']} the node published in {window} "
+        f"are not in the bag ({per_topic}): the recorder fell behind or they were lost on the way"
+    )
 
 
 def recording_notes(custom: dict[str, str]) -> list[str]:
@@ -128,8 +141,10 @@ def recording_notes(custom: dict[str, str]) -> list[str]:
         return []
     o = rec.get("options") or {}
     split = [f"{k} {o[k]:g}" for k in ("max_bag_size", "max_bag_duration") if o.get(k)]
-    notes = [f"  recording: {rec.get('state', '?')}; compression {o.get('compression', 'none')}"
-             + (f"; split at {', '.join(split)}" if split else "")]
+    notes = [
+        f"  recording: {rec.get('state', '?')}; compression {o.get('compression', 'none')}"
+        + (f"; split at {', '.join(split)}" if split else "")
+    ]
     if rec.get("error"):
         notes.append(f"  recording failed: {rec['error']}")
     if rec.get("reindexed"):

@@ -44,8 +44,10 @@ class PlayResult:
 
     def summary(self) -> str:
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
-        text = (f"played {sum(self.counts.values())} messages in {self.seconds:.2f} s "
-                f"(recorded over {self.recorded_seconds:.2f} s): {per_topic}")
+        text = (
+            f"played {sum(self.counts.values())} messages in {self.seconds:.2f} s "
+            f"(recorded over {self.recorded_seconds:.2f} s): {per_topic}"
+        )
         if self.unanswered:
             text += f"; no answer in time for {len(self.unanswered)} ticks (first at {self.unanswered[0] / 1e9:.3f} s)"
         if self.skipped:
@@ -53,10 +55,19 @@ class PlayResult:
         return text
 
 
-def play(path, *, rate: float = 1.0, topics: list[str] | None = None, namespace: str | None = None,
-         wait_for: list[str] | None = None, wait: float = 10.0, stop: Callable[[], bool] = lambda: False,
-         on_ready: Callable[[str], None] = print, lockstep: bool = False,
-         answer_timeout: float = 5.0) -> PlayResult:
+def play(
+    path,
+    *,
+    rate: float = 1.0,
+    topics: list[str] | None = None,
+    namespace: str | None = None,
+    wait_for: list[str] | None = None,
+    wait: float = 10.0,
+    stop: Callable[[], bool] = lambda: False,
+    on_ready: Callable[[str], None] = print,
+    lockstep: bool = False,
+    answer_timeout: float = 5.0,
+) -> PlayResult:
     """Plays the bag at ``path``. ``rate``: speed factor (2 = twice as fast; 0 = as fast as
     possible). ``topics``: absolute or relative to the recorded line (default: all but the
     commands). ``lockstep``: tick by tick, each after the controller's answer (see the module's
@@ -73,11 +84,16 @@ def play(path, *, rate: float = 1.0, topics: list[str] | None = None, namespace:
         answered: set[int] = set()
         if lockstep:
             answers = LINE_TYPES["cmd/speed"]
-            tool.raw_subscription(join(selection.out_ns, "cmd/speed"), answers,
-                                  lambda data, _t: answered.add(stamp_ns(decode(data, answers))))
+            tool.raw_subscription(
+                join(selection.out_ns, "cmd/speed"),
+                answers,
+                lambda data, _t: answered.add(stamp_ns(decode(data, answers))),
+            )
         _wait_for_subscribers(tool, selection, pubs, wait)
-        on_ready(f"playing {len(selection.messages)} messages on {len(pubs)} topics"
-                 + (f" into {namespace}" if namespace else ""))
+        on_ready(
+            f"playing {len(selection.messages)} messages on {len(pubs)} topics"
+            + (f" into {namespace}" if namespace else "")
+        )
         pace = _Pace(tool, selection, pubs, stop, answered, answer_timeout)
         pace.result.skipped = selection.skipped
         return pace.tick_by_tick() if lockstep else pace.timed(rate)
@@ -107,8 +123,9 @@ class _Selection:
         return join(self.namespace, rel) if self.namespace and rel is not None else topic
 
     @classmethod
-    def of(cls, bag: Bag, topics: list[str] | None, namespace: str | None, wait_for: list[str] | None,
-           lockstep: bool) -> _Selection:
+    def of(
+        cls, bag: Bag, topics: list[str] | None, namespace: str | None, wait_for: list[str] | None, lockstep: bool
+    ) -> _Selection:
         line_ns = bag.info.namespace if bag.info else ""
         skipped: dict[str, str] = {}
         if topics:
@@ -165,6 +182,7 @@ def _wait_for_subscribers(tool: ToolNode, selection: _Selection, pubs: dict, wai
         tool.until(lambda p=by_name[name]: p.get_subscription_count() > 0, wait, f"a subscriber on {name}")
     if not selection.waits:
         return
+
     # A controller's other readers (ratio, belt) are announced with the one waited for: give them
     # a moment to match too (best effort: stale graph entries may never match).
     def known_matched() -> bool:
@@ -179,8 +197,15 @@ def _wait_for_subscribers(tool: ToolNode, selection: _Selection, pubs: dict, wai
 class _Pace:
     """The pace phase: publishes the selected messages on the recorder's timing, or tick by tick."""
 
-    def __init__(self, tool: ToolNode, selection: _Selection, pubs: dict, stop: Callable[[], bool],
-                 answered: set[int], answer_timeout: float):
+    def __init__(
+        self,
+        tool: ToolNode,
+        selection: _Selection,
+        pubs: dict,
+        stop: Callable[[], bool],
+        answered: set[int],
+        answer_timeout: float,
+    ):
         self.tool, self.selection, self.pubs, self.stop = tool, selection, pubs, stop
         self.answered, self.answer_timeout = answered, answer_timeout
         self.result = PlayResult()
@@ -234,7 +259,10 @@ class _Pace:
             return
         topic = join(self.selection.out_ns, "cmd/speed")
         try:
-            self.tool.until(lambda: stamp in self.answered or self.stop(), self.answer_timeout,
-                            f"an answer on {topic} for the tick stamped {stamp / 1e9:.3f} s")
+            self.tool.until(
+                lambda: stamp in self.answered or self.stop(),
+                self.answer_timeout,
+                f"an answer on {topic} for the tick stamped {stamp / 1e9:.3f} s",
+            )
         except TimeoutError:
             self.result.unanswered.append(stamp)

@@ -42,8 +42,20 @@ from .schema import CLOCK, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, join, 
 from .writer import BagWriter, WriteOptions
 
 #: The node's parameters that describe a line (and thus a replay's node).
-NODE_PARAMETERS = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "mode",
-                   "rate", "lines", "tick_period", "evolution_file")
+NODE_PARAMETERS = (
+    "variant",
+    "input",
+    "obs_noise",
+    "action_penalty",
+    "threshold",
+    "max_steps",
+    "seed",
+    "mode",
+    "rate",
+    "lines",
+    "tick_period",
+    "evolution_file",
+)
 #: Seconds the recorder lets messages queue up (in DDS) before it takes them all.
 BATCH_PAUSE = 0.01
 #: Parameters a node may lack (older nodes): recorded as "" then.
@@ -63,8 +75,10 @@ class RecordResult:
         total = sum(self.counts.values())
         size = sum(f.stat().st_size for f in self.path.iterdir() if f.is_file()) if self.path.exists() else 0
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
-        return (f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB in {self.files} "
-                f"file(s) ({per_topic})\n{describe_losses(self.losses)}")
+        return (
+            f"{self.path}: {total} messages in {self.seconds:.1f} s, {size / 1024:.1f} KiB in {self.files} "
+            f"file(s) ({per_topic})\n{describe_losses(self.losses)}"
+        )
 
 
 def _ask(tool, client, service: str, timeout: float):
@@ -83,9 +97,12 @@ def _ask(tool, client, service: str, timeout: float):
 def _parameter_value(v):
     from rcl_interfaces.msg import ParameterType
 
-    return {ParameterType.PARAMETER_BOOL: v.bool_value, ParameterType.PARAMETER_INTEGER: v.integer_value,
-            ParameterType.PARAMETER_DOUBLE: v.double_value, ParameterType.PARAMETER_STRING: v.string_value,
-            }.get(v.type)
+    return {
+        ParameterType.PARAMETER_BOOL: v.bool_value,
+        ParameterType.PARAMETER_INTEGER: v.integer_value,
+        ParameterType.PARAMETER_DOUBLE: v.double_value,
+        ParameterType.PARAMETER_STRING: v.string_value,
+    }.get(v.type)
 
 
 def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
@@ -149,14 +166,27 @@ def _store_schedule(options: dict) -> None:
     try:
         options["evolution"] = Path(path).read_text()
     except OSError as e:
-        print(f"sorting-line-bag record: warning: cannot read the node's evolution schedule {path} ({e}); "
-              "`replay` will need it", file=sys.stderr, flush=True)
+        print(
+            f"sorting-line-bag record: warning: cannot read the node's evolution schedule {path} ({e}); "
+            "`replay` will need it",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
-def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, duration: float | None = None,
-           max_ticks: int | None = None, wait: float = 10.0, stop: Callable[[], bool] = lambda: False,
-           on_ready: Callable[[str], None] = print, diagnostics: bool = False,
-           options: WriteOptions | None = None) -> RecordResult:
+def record(
+    namespace: str,
+    out: str | Path,
+    topics: list[str] | None = None,
+    *,
+    duration: float | None = None,
+    max_ticks: int | None = None,
+    wait: float = 10.0,
+    stop: Callable[[], bool] = lambda: False,
+    on_ready: Callable[[str], None] = print,
+    diagnostics: bool = False,
+    options: WriteOptions | None = None,
+) -> RecordResult:
     """Records until ``stop()`` says so, ``duration`` seconds pass or ``max_ticks`` states arrived.
 
     ``topics``: absolute names or names relative to ``namespace``; None = the line's topics and
@@ -181,8 +211,9 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
         for name, msgtype in types.items():
             writer.add_topic(name, msgtype)
         evolving = bool(node_options and node_options.get("evolution_file"))
-        counter = LossCounter(namespace, list(types), info.node.get("variant"), evolving,
-                              float(info.node.get("tick_period") or 1.0))
+        counter = LossCounter(
+            namespace, list(types), info.node.get("variant"), evolving, float(info.node.get("tick_period") or 1.0)
+        )
         diag = _line_reports(tool, namespace, counter)
         states = [0]
         state = join(namespace, "state")
@@ -193,14 +224,16 @@ def record(namespace: str, out: str | Path, topics: list[str] | None = None, *, 
                 counter.on_message(name, data)
                 if name == state:
                     states[0] += 1
+
             return on
 
         subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
         _await_matched(tool, namespace, subs, wait, evolving=evolving)
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
-        _write(tool, writer, subs, lambda: states[0], duration=duration, max_ticks=max_ticks, stop=stop,
-               on_ready=on_ready)
+        _write(
+            tool, writer, subs, lambda: states[0], duration=duration, max_ticks=max_ticks, stop=stop, on_ready=on_ready
+        )
         seconds = time.monotonic() - started
         losses = _compare_and_close(tool, writer, counter, diag)
         return RecordResult(out, dict(writer.counts), info, seconds, losses, len(writer.files))
@@ -246,18 +279,29 @@ def _line_reports(tool: ToolNode, namespace: str, counter: LossCounter):
     return tool.node.create_subscription(DiagnosticArray, "/diagnostics", on, 10)
 
 
-def _match(tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics: bool,
-           wait: float) -> tuple[dict | None, dict[str, str]]:
+def _match(
+    tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics: bool, wait: float
+) -> tuple[dict | None, dict[str, str]]:
     """The line's node options (None if it does not tell) and the recorded topics with their types."""
     state = join(namespace, "state")
-    tool.until(lambda: tool.node.count_publishers(state) > 0, wait,
-               f"a sorting_line node publishing {state} (is the namespace right?)")
+    tool.until(
+        lambda: tool.node.count_publishers(state) > 0,
+        wait,
+        f"a sorting_line node publishing {state} (is the namespace right?)",
+    )
     options = node_options(tool, namespace, min(wait, 5.0))
     if options is None:
-        print(f"sorting-line-bag record: warning: could not read the parameters of the node serving {namespace}; "
-              "`replay` will need its options as flags", file=sys.stderr, flush=True)
-    variant = options["variant"] if options else (
-        "advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
+        print(
+            f"sorting-line-bag record: warning: could not read the parameters of the node serving {namespace}; "
+            "`replay` will need its options as flags",
+            file=sys.stderr,
+            flush=True,
+        )
+    variant = (
+        options["variant"]
+        if options
+        else ("advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
+    )
     evolving = bool(options and options.get("evolution_file"))
     wanted = topics if topics else [*line_topics(variant, evolving), CLOCK] + (["/diagnostics"] if diagnostics else [])
     types = {}
@@ -275,18 +319,39 @@ def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float, evol
 
     seen_status = []
     diag = tool.node.create_subscription(
-        DiagnosticArray, "/diagnostics",
-        lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None, 10)
-    node_side = [n for n in subs if (relative_to(namespace, n) in PUBLISHED or n == CLOCK)
-                 and not (evolving and relative_to(namespace, n) in HARDWARE)]
-    tool.until(lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status, wait,
-               lambda: f"the topics of {namespace} to match and a /diagnostics status of the line "
-                       f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})")
+        DiagnosticArray,
+        "/diagnostics",
+        lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None,
+        10,
+    )
+    node_side = [
+        n
+        for n in subs
+        if (relative_to(namespace, n) in PUBLISHED or n == CLOCK)
+        and not (evolving and relative_to(namespace, n) in HARDWARE)
+    ]
+    tool.until(
+        lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status,
+        wait,
+        lambda: (
+            f"the topics of {namespace} to match and a /diagnostics status of the line "
+            f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})"
+        ),
+    )
     tool.node.destroy_subscription(diag)
 
 
-def _write(tool: ToolNode, writer: BagWriter, subs: dict, states: Callable[[], int], *, duration: float | None,
-           max_ticks: int | None, stop: Callable[[], bool], on_ready: Callable[[str], None]) -> None:
+def _write(
+    tool: ToolNode,
+    writer: BagWriter,
+    subs: dict,
+    states: Callable[[], int],
+    *,
+    duration: float | None,
+    max_ticks: int | None,
+    stop: Callable[[], bool],
+    on_ready: Callable[[str], None],
+) -> None:
     """Spins (the subscriptions write) until the end, telling who joins; then drains."""
     started = time.monotonic()
     matched: dict[str, int] = {}

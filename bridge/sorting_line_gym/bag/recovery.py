@@ -54,6 +54,7 @@ def has_footer(path: Path) -> bool:
 
 def mcap_files(path: Path) -> list[Path]:
     """The MCAP files of a bag directory in recording order (rosbag2's ``<bag>_<k>.mcap``)."""
+
     def order(p: Path):
         m = re.search(r"_(\d+)$", p.stem)
         return (p.stem[: m.start()] if m else p.stem, int(m.group(1)) if m else -1, p.name)
@@ -69,7 +70,7 @@ def _metadata(path: Path) -> dict:
 
 
 def _live_recorder(info: dict) -> str:
-    """" (sorting-line-bag record, pid N, is still running)" when the bag's recorder seems alive."""
+    """ " (sorting-line-bag record, pid N, is still running)" when the bag's recorder seems alive."""
     try:
         rec = json.loads((info.get("custom_data") or {}).get(RECORDING_KEY, "{}"))
         if rec.get("state") != "recording" or rec.get("host") != socket.gethostname():
@@ -87,26 +88,35 @@ def check_complete(path: Path) -> None:
     how = "its recorder was killed or the disk filled"
     if path.is_file():
         if path.suffix == ".mcap" and not has_footer(path):
-            raise BagError(f"{path}: cannot read the bag: the MCAP file ends without its summary and footer (the "
-                           f"recording was cut: {how}). `sorting-line-bag reindex DIR` recovers it in a bag "
-                           "directory: move the file into a directory of its own first")
+            raise BagError(
+                f"{path}: cannot read the bag: the MCAP file ends without its summary and footer (the "
+                f"recording was cut: {how}). `sorting-line-bag reindex DIR` recovers it in a bag "
+                "directory: move the file into a directory of its own first"
+            )
         return
     files = mcap_files(path)
     if not (path / "metadata.yaml").is_file():
         if files:
-            raise BagError(f"{path}: not a ROS 2 bag directory (no metadata.yaml), but it holds {len(files)} MCAP "
-                           f"file(s), a recording that did not finish ({how}): `sorting-line-bag reindex {path}` "
-                           "rebuilds metadata.yaml from them")
+            raise BagError(
+                f"{path}: not a ROS 2 bag directory (no metadata.yaml), but it holds {len(files)} MCAP "
+                f"file(s), a recording that did not finish ({how}): `sorting-line-bag reindex {path}` "
+                "rebuilds metadata.yaml from them"
+            )
         return
     info = _metadata(path)
     listed = set(info.get("relative_file_paths") or [])
     cut = [f.name for f in files if f.name in listed and not has_footer(f)]
     unlisted = [f.name for f in files if f.name not in listed]
     if cut or unlisted:
-        what = (f"{', '.join(cut)} end(s) without the MCAP summary and footer" if cut else
-                f"metadata.yaml does not list {', '.join(unlisted)}")
-        raise BagError(f"{path}: cannot read the bag: {what}: the recording was cut ({how}){_live_recorder(info)}. "
-                       f"`sorting-line-bag reindex {path}` recovers what is on disk")
+        what = (
+            f"{', '.join(cut)} end(s) without the MCAP summary and footer"
+            if cut
+            else f"metadata.yaml does not list {', '.join(unlisted)}"
+        )
+        raise BagError(
+            f"{path}: cannot read the bag: {what}: the recording was cut ({how}){_live_recorder(info)}. "
+            f"`sorting-line-bag reindex {path}` recovers what is on disk"
+        )
 
 
 @dataclass
@@ -120,8 +130,10 @@ class ReindexResult:
         total = sum(f.count for f in self.files)
         lines = [f"{self.path}: metadata.yaml rebuilt: {len(self.files)} MCAP file(s), {total} messages"]
         for name, (kept, dropped) in self.recovered.items():
-            lines.append(f"  {name}: recovered {kept} messages (a cut end of {dropped} bytes dropped); "
-                         f"the file as found is kept as {name}{CUT_SUFFIX}")
+            lines.append(
+                f"  {name}: recovered {kept} messages (a cut end of {dropped} bytes dropped); "
+                f"the file as found is kept as {name}{CUT_SUFFIX}"
+            )
         return "\n".join(lines)
 
 
@@ -136,8 +148,10 @@ def reindex(path: str | Path) -> ReindexResult:
         raise BagError(f"{path}: no .mcap files to reindex")
     old = _metadata(path)
     if _live_recorder(old):  # recovering a file under a live writer would take it from under it
-        raise BagError(f"{path} is being recorded: its recorder{_live_recorder(old).split('recorder', 1)[1]}; "
-                       "reindex it once that has ended (or was killed)")
+        raise BagError(
+            f"{path} is being recorded: its recorder{_live_recorder(old).split('recorder', 1)[1]}; "
+            "reindex it once that has ended (or was killed)"
+        )
     result = ReindexResult(path)
     for f in files:
         if not has_footer(f):
@@ -163,8 +177,9 @@ def _reindexed(text: str | None, result: ReindexResult) -> str:
         rec = {}
     if rec.get("state", "recording") == "recording":
         rec["state"] = "cut"
-    rec["reindexed"] = {name: {"messages": kept, "dropped_bytes": dropped}
-                        for name, (kept, dropped) in result.recovered.items()}
+    rec["reindexed"] = {
+        name: {"messages": kept, "dropped_bytes": dropped} for name, (kept, dropped) in result.recovered.items()
+    }
     return json.dumps(rec, sort_keys=True)
 
 
@@ -183,8 +198,9 @@ def _index(path: Path, topics: dict[str, TopicStats]) -> tuple[FileStats, dict[s
     s = summary.statistics
     for cid, channel in summary.channels.items():
         schema = summary.schemas.get(channel.schema_id)
-        t = topics.setdefault(channel.topic, TopicStats(schema.name if schema else "",
-                                                        channel.metadata.get("offered_qos_profiles", "")))
+        t = topics.setdefault(
+            channel.topic, TopicStats(schema.name if schema else "", channel.metadata.get("offered_qos_profiles", ""))
+        )
         t.count += s.channel_message_counts.get(cid, 0)
     stats.count = s.message_count
     if s.message_count:
@@ -253,8 +269,9 @@ class _Copier:
             elif isinstance(r, Schema) and r.id not in self.schemas:
                 self.schemas[r.id] = w.register_schema(r.name, r.encoding, r.data)
             elif isinstance(r, Channel) and r.id not in self.channels:
-                self.channels[r.id] = w.register_channel(r.topic, r.message_encoding, self.schemas.get(r.schema_id, 0),
-                                                         dict(r.metadata))
+                self.channels[r.id] = w.register_channel(
+                    r.topic, r.message_encoding, self.schemas.get(r.schema_id, 0), dict(r.metadata)
+                )
             elif isinstance(r, Message) and r.channel_id in self.channels:
                 w.add_message(self.channels[r.channel_id], r.log_time, r.data, r.publish_time, r.sequence)
                 self.messages += 1

@@ -73,10 +73,12 @@ class ReplayResult:
 
     def report(self) -> str:
         counts = ", ".join(f"{t} {n}" for t, n in sorted((self.comparison.compared if self.comparison else {}).items()))
-        head = (f"replayed {self.bag.path}: {self.resets} resets and {self.commands} commands into a fresh lock-step "
-                f"node ({', '.join(f'{k}={self.options[k]}' for k in REQUIRED)}) in {self.seconds:.1f} s; "
-                f"lined up as bag tick = replay tick {self.tick_shift:+d}, bag episode = replay episode "
-                f"{self.episode_shift:+d}")
+        head = (
+            f"replayed {self.bag.path}: {self.resets} resets and {self.commands} commands into a fresh lock-step "
+            f"node ({', '.join(f'{k}={self.options[k]}' for k in REQUIRED)}) in {self.seconds:.1f} s; "
+            f"lined up as bag tick = replay tick {self.tick_shift:+d}, bag episode = replay episode "
+            f"{self.episode_shift:+d}"
+        )
         lines = [head, f"compared: {counts or 'nothing'}"]
         lines += self.notes
         if self.difference is None:
@@ -120,8 +122,10 @@ def node_options(bag: Bag, overrides: dict | None) -> dict:
     options = dict(bag.info.node if bag.info else {})
     options.update(overrides)
     if options.get("mode", "lockstep") != "lockstep" and not overrides.get("mode"):
-        raise BagError(f"{bag.path} was recorded from a {options['mode']} node: replay reproduces lock-step "
-                       "recordings only (a realtime node applies commands when they arrive, which a bag does not show)")
+        raise BagError(
+            f"{bag.path} was recorded from a {options['mode']} node: replay reproduces lock-step "
+            "recordings only (a realtime node applies commands when they arrive, which a bag does not show)"
+        )
     missing = [k for k in REQUIRED if k not in options]
     if missing:
         raise BagError(f"{bag.path} does not say the node's {', '.join(missing)}: pass {flags_for(missing)}")
@@ -162,6 +166,7 @@ class _Capture:
             if rel == "state":
                 m = decode(data, LINE_TYPES["state"])
                 self.states[stamp_ns(m)] = m
+
         return keep
 
     def plain(self, rel: str) -> list[dict]:
@@ -169,8 +174,14 @@ class _Capture:
         return [decode(d, msgtype) for d in self.raw[rel]]
 
 
-def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, startup_timeout: float = 20.0,
-           progress: bool = False) -> ReplayResult:
+def replay(
+    path,
+    overrides: dict | None = None,
+    *,
+    step_timeout: float = 5.0,
+    startup_timeout: float = 20.0,
+    progress: bool = False,
+) -> ReplayResult:
     """Replays the bag at ``path`` (see the module docstring) in three phases: plan (what to send,
     from the bag alone), drive (a fresh node, fed resets and commands tick by tick) and compare
     (what it published against the recording). Raises BagError for a bag that cannot be
@@ -179,15 +190,23 @@ def replay(path, overrides: dict | None = None, *, step_timeout: float = 5.0, st
     plan = _plan(open_bag(path), overrides)
     result = ReplayResult(plan.bag, plan.options)
     if plan.ineffective:
-        result.notes.append(f"not sent: {plan.ineffective} commands for ticks the recorded node did not step from "
-                            "(the episode was over, a reset came first, or the recording ended)")
+        result.notes.append(
+            f"not sent: {plan.ineffective} commands for ticks the recorded node did not step from "
+            "(the episode was over, a reset came first, or the recording ended)"
+        )
     replay_ns = private_namespace()
     scratch = tempfile.TemporaryDirectory(prefix="sorting_line_replay_")
     if plan.evolution is not None:
-        result.notes.append("evolving line: replayed with the schedule stored in the bag; sensors/ratio not compared "
-                            "(its publisher appears with the sensor upgrade; the reading is compared in state)")
-    process = lockstep_node(plan, replay_ns, Path(scratch.name),
-                            ("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"))
+        result.notes.append(
+            "evolving line: replayed with the schedule stored in the bag; sensors/ratio not compared "
+            "(its publisher appears with the sensor upgrade; the reading is compared in state)"
+        )
+    process = lockstep_node(
+        plan,
+        replay_ns,
+        Path(scratch.name),
+        ("-r", f"/clock:={replay_ns}/clock", "-r", f"/diagnostics:={replay_ns}/diagnostics"),
+    )
     tool = None
     try:
         tool = ToolNode("sorting_line_bag_replay", process)
@@ -250,9 +269,11 @@ def _plan(bag: Bag, overrides: dict | None) -> _Plan:
         first = next((e for e in announced if e["at_reset"]), None)
         if first is None or (first["episode"], first["tick"]) != (1, 0):
             where = f"episode {first['episode']}, tick {first['tick']}" if first else "no events/evolution at a reset"
-            raise BagError(f"{bag.path} records an evolving line from {where}: its schedule counts episodes and ticks "
-                           "from the node's start, so a replay needs the recording to start at the node's first reset "
-                           "(episode 1, tick 0)")
+            raise BagError(
+                f"{bag.path} records an evolving line from {where}: its schedule counts episodes and ticks "
+                "from the node's start, so a replay needs the recording to start at the node's first reset "
+                "(episode 1, tick 0)"
+            )
     resets = rel_msgs.get("events/reset", [])
     if not resets:
         raise BagError(f"{bag.path}: no {join(namespace, 'events/reset')} in the bag: a replay starts at a reset")
@@ -262,7 +283,8 @@ def _plan(bag: Bag, overrides: dict | None) -> _Plan:
         raise BagError(
             f"{bag.path} starts with a reset without a seed at tick {start // period} (episode {first['episode']}): "
             "the node's random streams had already moved on, so that episode cannot be reproduced. Record from a "
-            "fresh node, or start the recording with a seeded reset")
+            "fresh node, or start the recording with a seeded reset"
+        )
     bag_states = {stamp_ns(m.plain): m.plain for m in rel_msgs.get("state", [])}
     # A command for a tick the recorded node never stepped from (the episode was over, a reset
     # came first, or the recording ended) changed nothing there; sent here it might step the node.
@@ -271,8 +293,19 @@ def _plan(bag: Bag, overrides: dict | None) -> _Plan:
     effective = [c for c in commands if stamp_ns(c[1].plain) in stepped]
     compared = [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t) and not (evolution and t == "sensors/ratio")]
     modes = sort_modes_by_stamp([m.plain for m in rel_msgs.get("events/evolution", [])]) if evolution else []
-    return _Plan(bag, options, period, rel_msgs, start, bag_states, _order_drivers(resets, effective),
-                 compared, len(commands) - len(effective), evolution, modes)
+    return _Plan(
+        bag,
+        options,
+        period,
+        rel_msgs,
+        start,
+        bag_states,
+        _order_drivers(resets, effective),
+        compared,
+        len(commands) - len(effective),
+        evolution,
+        modes,
+    )
 
 
 class _Replay:
@@ -297,8 +330,11 @@ class _Replay:
         """Sends every driver; stops at the first tick the node does not reach (result.difference)."""
         link, tool, plan = self.link, self.tool, self.plan
         fixed = [s for rel, s in self.capture.subs.items() if not (plan.evolution and rel in HARDWARE)]
-        tool.until(lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in fixed),
-                   startup_timeout, f"the replay node serving {self.namespace} (its reset service and topics)")
+        tool.until(
+            lambda: link.endpoints_matched(tool.node) and all(s.get_publisher_count() for s in fixed),
+            startup_timeout,
+            f"the replay node serving {self.namespace} (its reset service and topics)",
+        )
         if plan.evolution is None:
             _handshake(tool, link, int(plan.options["seed"]), self.step_timeout)
         else:
@@ -326,8 +362,11 @@ class _Replay:
         period = self.plan.period
         want = bag_stamp - self.result.tick_shift * period
         try:
-            self.tool.until(lambda: want in self.capture.states, self.step_timeout,
-                            f"{self.namespace}/state of tick {want // period} ({why})")
+            self.tool.until(
+                lambda: want in self.capture.states,
+                self.step_timeout,
+                f"{self.namespace}/state of tick {want // period} ({why})",
+            )
             return True
         except BridgeTimeout:
             self.result.difference = _missing_state(bag_stamp, period, self.plan.rel_msgs)
@@ -358,8 +397,11 @@ class _Replay:
         if self.plan.evolution is not None and rel == "cmd/sort_mode":
             if not self.plan.had_sort_modes(stamp):
                 return True  # the recorded node had no cmd/sort_mode then: it never got this command
-            self.tool.until(lambda: pub.get_subscription_count() > 0, self.step_timeout,
-                            f"{self.namespace}/cmd/sort_mode, subscribed since the machine upgrade, to match")
+            self.tool.until(
+                lambda: pub.get_subscription_count() > 0,
+                self.step_timeout,
+                f"{self.namespace}/cmd/sort_mode, subscribed since the machine upgrade, to match",
+            )
         pub.publish(_restamped(self.store, m, stamp - self.result.tick_shift * self.plan.period))
         self.result.commands += 1
         return True
@@ -383,8 +425,9 @@ def _compare(plan: _Plan, result: ReplayResult, capture: _Capture) -> None:
     if result.comparison.difference is not None:
         result.difference = result.comparison.difference
     if result.comparison.ignored_after_end:
-        result.notes.append(f"not compared: {result.comparison.ignored_after_end} replayed messages after the "
-                            "end of the recording")
+        result.notes.append(
+            f"not compared: {result.comparison.ignored_after_end} replayed messages after the end of the recording"
+        )
 
 
 def _handshake(tool: ToolNode, link: LineLink, seed: int, timeout: float) -> None:
@@ -417,9 +460,16 @@ def _restamped(store, m: BagMessage, stamp: int) -> bytes:
 
 def _missing_state(stamp: int, period: int, rel_msgs: dict[str, list[BagMessage]]) -> Difference:
     recorded = next((m.plain for m in rel_msgs.get("state", []) if stamp_ns(m.plain) == stamp), {})
-    return Difference("state", stamp // period, stamp, "<message>", "has it",
-                      "the replay node did not publish it (it did not step as the recorded node did)",
-                      recorded.get("episode"), recorded.get("step"))
+    return Difference(
+        "state",
+        stamp // period,
+        stamp,
+        "<message>",
+        "has it",
+        "the replay node did not publish it (it did not step as the recorded node did)",
+        recorded.get("episode"),
+        recorded.get("step"),
+    )
 
 
 class _NoBar:

@@ -19,8 +19,12 @@ from .schema import rclpy_class
 
 #: Deep reliable queues: a tool that falls behind for a moment (a busy machine) catches up
 #: instead of losing samples (the node's own depth is 10).
-DEEP_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+DEEP_QOS = QoSProfile(
+    depth=1000,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 
 
 def received_ns(info) -> int:
@@ -36,8 +40,9 @@ class ToolNode:
         self.context = rclpy.Context()
         # A context of our own: rclpy installs no signal handlers for it (the caller decides).
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node(f"{name}_{os.getpid()}", context=self.context,
-                                      start_parameter_services=False, enable_rosout=False)
+        self.node = rclpy.create_node(
+            f"{name}_{os.getpid()}", context=self.context, start_parameter_services=False, enable_rosout=False
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.waiter = Waiter(self.executor, process)

@@ -86,7 +86,7 @@ def join(namespace: str, relative: str) -> str:
 def relative_to(namespace: str, topic: str) -> str | None:
     """``topic`` relative to ``namespace``, or None when it is not inside it."""
     base = namespace.rstrip("/") + "/"
-    return topic[len(base):] if topic.startswith(base) else None
+    return topic[len(base) :] if topic.startswith(base) else None
 
 
 def _msg_dirs() -> list[Path]:
@@ -132,8 +132,9 @@ def to_plain(value: Any) -> Any:
     strings; NaN as the string "nan" so that NaN equals NaN in comparisons."""
     if dataclasses.is_dataclass(value):
         # (rosbags adds a __msgtype__ field: the type, not a value of the message)
-        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)
-                if not f.name.startswith("__")}
+        return {
+            f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value) if not f.name.startswith("__")
+        }
     if isinstance(value, np.ndarray):
         return [to_plain(v) for v in value.tolist()]
     if isinstance(value, (list, tuple)):

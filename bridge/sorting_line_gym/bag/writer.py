@@ -97,15 +97,18 @@ class WriteOptions:
 
 def check_max_bag_size(value: int) -> int:
     if value != 0 and not (isinstance(value, int) and value >= MIN_SPLIT_SIZE):
-        raise BagError(f"--max-bag-size {value}: must be 0 (no splitting) or a whole number of bytes "
-                       f">= {MIN_SPLIT_SIZE}")
+        raise BagError(
+            f"--max-bag-size {value}: must be 0 (no splitting) or a whole number of bytes >= {MIN_SPLIT_SIZE}"
+        )
     return value
 
 
 def check_max_bag_duration(value: float) -> float:
     if value != 0 and not value >= MIN_SPLIT_DURATION or value == float("inf"):
-        raise BagError(f"--max-bag-duration {value}: must be 0 (no splitting) or a finite number of seconds "
-                       f">= {MIN_SPLIT_DURATION:g}")
+        raise BagError(
+            f"--max-bag-duration {value}: must be 0 (no splitting) or a finite number of seconds "
+            f">= {MIN_SPLIT_DURATION:g}"
+        )
     return value
 
 
@@ -189,8 +192,12 @@ class FileStats:
     count: int = 0
 
     def rosbag2(self) -> dict:
-        return {"path": self.path, "starting_time": {"nanoseconds_since_epoch": self.start if self.count else 0},
-                "duration": {"nanoseconds": max(0, self.end - self.start)}, "message_count": self.count}
+        return {
+            "path": self.path,
+            "starting_time": {"nanoseconds_since_epoch": self.start if self.count else 0},
+            "duration": {"nanoseconds": max(0, self.end - self.start)},
+            "message_count": self.count,
+        }
 
 
 class _McapFile:
@@ -216,8 +223,9 @@ class _McapFile:
             msgdef, _ = typestore().generate_msgdef(msgtype, ros_version=2)
             self.schemas[msgtype] = self.writer.register_schema(msgtype, "ros2msg", msgdef.encode())
             self.summary_bytes += len(msgdef) + len(msgtype) + RECORD_BYTES
-        self.channels[topic] = self.writer.register_channel(topic, "cdr", self.schemas[msgtype],
-                                                            {"offered_qos_profiles": qos})
+        self.channels[topic] = self.writer.register_channel(
+            topic, "cdr", self.schemas[msgtype], {"offered_qos_profiles": qos}
+        )
         self.summary_bytes += len(topic) + len(qos) + 3 * RECORD_BYTES
         self.unflushed = self.summary_bytes  # schemas and channels go in the first chunk, and again in the summary
 
@@ -238,7 +246,7 @@ class _McapFile:
         # offset, until it writes the summary: ~25 KB a chunk with 257 topics, two chunks a second.
         # Packed, the same offsets take 10 bytes a channel. (mcap 1.6.0, pinned: a private list.)
         indexes = self.writer._Writer__chunk_indices
-        for index in indexes[self._packed:]:
+        for index in indexes[self._packed :]:
             index.message_index_offsets = _PackedOffsets(index.message_index_offsets)
             self.compressed += index.compressed_size
             self.uncompressed += index.uncompressed_size
@@ -289,8 +297,13 @@ class BagWriter:
     then (``tick`` does it when due), ``close`` at the end. The line's description goes into
     ``custom`` (custom_data)."""
 
-    def __init__(self, path: str | Path, custom: dict[str, str] | None = None, options: WriteOptions | None = None,
-                 flush_interval: float = FLUSH_INTERVAL):
+    def __init__(
+        self,
+        path: str | Path,
+        custom: dict[str, str] | None = None,
+        options: WriteOptions | None = None,
+        flush_interval: float = FLUSH_INTERVAL,
+    ):
         self.path = Path(path)
         self.options = (options or WriteOptions()).check()
         if self.path.exists():
@@ -438,8 +451,10 @@ class BagWriter:
             except OSError:
                 pass
         total = sum(f.count for f in self.files)
-        return BagWriteError(f"cannot write to {where}: {cause}. Recording stopped; the {total} messages "
-                             f"received before are in {self.path}, and {ended}")
+        return BagWriteError(
+            f"cannot write to {where}: {cause}. Recording stopped; the {total} messages "
+            f"received before are in {self.path}, and {ended}"
+        )
 
 
 def rosbag2_metadata(files: list[FileStats], topics: dict, custom: dict[str, str]) -> dict:
@@ -448,28 +463,36 @@ def rosbag2_metadata(files: list[FileStats], topics: dict, custom: dict[str, str
     store = typestore()
     start = min((f.start for f in files if f.count), default=0)
     end = max((f.end for f in files if f.count), default=start)
-    return {"rosbag2_bagfile_information": {
-        "version": 9,
-        "storage_identifier": "mcap",
-        "relative_file_paths": [f.path for f in files],
-        "duration": {"nanoseconds": end - start},
-        "starting_time": {"nanoseconds_since_epoch": start},
-        "message_count": sum(f.count for f in files),
-        "topics_with_message_count": [
-            {"topic_metadata": {"name": name, "type": t.msgtype, "serialization_format": "cdr",
-                                "offered_qos_profiles": yaml.safe_load(t.qos) or [],
-                                "type_description_hash": store.hash_rihs01(t.msgtype)
-                                if t.msgtype in store.fielddefs else ""},
-             "message_count": t.count}
-            for name, t in topics.items()],
-        # Chunk compression is the storage's own (as rosbag2's MCAP plugin with a zstd preset):
-        # rosbag2's file/message compression is not used.
-        "compression_format": "",
-        "compression_mode": "",
-        "files": [f.rosbag2() for f in files],
-        "custom_data": custom or None,
-        "ros_distro": "jazzy",
-    }}
+    return {
+        "rosbag2_bagfile_information": {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "relative_file_paths": [f.path for f in files],
+            "duration": {"nanoseconds": end - start},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": sum(f.count for f in files),
+            "topics_with_message_count": [
+                {
+                    "topic_metadata": {
+                        "name": name,
+                        "type": t.msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": yaml.safe_load(t.qos) or [],
+                        "type_description_hash": store.hash_rihs01(t.msgtype) if t.msgtype in store.fielddefs else "",
+                    },
+                    "message_count": t.count,
+                }
+                for name, t in topics.items()
+            ],
+            # Chunk compression is the storage's own (as rosbag2's MCAP plugin with a zstd preset):
+            # rosbag2's file/message compression is not used.
+            "compression_format": "",
+            "compression_mode": "",
+            "files": [f.rosbag2() for f in files],
+            "custom_data": custom or None,
+            "ros_distro": "jazzy",
+        }
+    }
 
 
 def write_metadata(path: Path, metadata: dict) -> None:
@@ -488,8 +511,12 @@ def write_metadata(path: Path, metadata: dict) -> None:
         os.close(fd)
 
 
-def rewrite_bag(src: str | Path, dst: str | Path, change: Callable[[BagMessage], object | None] = lambda m: None,
-                options: WriteOptions | None = None) -> int:
+def rewrite_bag(
+    src: str | Path,
+    dst: str | Path,
+    change: Callable[[BagMessage], object | None] = lambda m: None,
+    options: WriteOptions | None = None,
+) -> int:
     """Copies bag ``src`` to ``dst`` (custom_data included), written as ``options`` say (split,
     compressed). ``change(message)`` may return a new message object (a rosbags message of the
     same type) to store instead; returns how many were changed. For tests (a tampered golden bag,

@@ -62,8 +62,14 @@ EVOLUTIONS_DIR = Path(__file__).resolve().parent.parent / "evolutions"
 READY_SCHEDULES = tuple(sorted(p.stem for p in EVOLUTIONS_DIR.glob("*.yaml")))
 
 #: The settings an EvolutionEvent carries, and how a changed value's text reads.
-_SETTINGS = {"obs_noise": float, "action_penalty": float, "threshold": float, "input": str,
-             "sort_modes": lambda v: v == "true", "ratio_sensor": lambda v: v == "true"}
+_SETTINGS = {
+    "obs_noise": float,
+    "action_penalty": float,
+    "threshold": float,
+    "input": str,
+    "sort_modes": lambda v: v == "true",
+    "ratio_sensor": lambda v: v == "true",
+}
 
 
 def schedule_file(evolution: str | Path) -> Path:
@@ -72,8 +78,10 @@ def schedule_file(evolution: str | Path) -> Path:
         return EVOLUTIONS_DIR / f"{evolution}.yaml"
     path = Path(evolution)
     if not path.is_file():
-        raise ValueError(f"evolution = {str(evolution)!r} is not a schedule file: allowed a YAML file or one of "
-                         f"{', '.join(READY_SCHEDULES)}")
+        raise ValueError(
+            f"evolution = {str(evolution)!r} is not a schedule file: allowed a YAML file or one of "
+            f"{', '.join(READY_SCHEDULES)}"
+        )
     return path.resolve()
 
 
@@ -95,8 +103,12 @@ def settings_of(message) -> dict:
 
 
 def event_info(message) -> dict:
-    return {"at_reset": bool(message.at_reset), "episode": int(message.episode), "tick": int(message.tick),
-            "changed": dict(zip(message.changed, message.values, strict=False))}
+    return {
+        "at_reset": bool(message.at_reset),
+        "episode": int(message.episode),
+        "tick": int(message.tick),
+        "changed": dict(zip(message.changed, message.values, strict=False)),
+    }
 
 
 class SortingLineEvolvingEnv(gym.Env):
@@ -114,12 +126,20 @@ class SortingLineEvolvingEnv(gym.Env):
         startup_timeout: float = 20.0,
     ):
         if node not in ("spawn", "attach"):
-            raise ValueError(f"node = {node!r} is not valid for the evolving line: allowed 'spawn' or 'attach' "
-                             "(a shared line server's lines do not evolve)")
+            raise ValueError(
+                f"node = {node!r} is not valid for the evolving line: allowed 'spawn' or 'attach' "
+                "(a shared line server's lines do not evolve)"
+            )
         self.schedule = schedule_file(evolution)
         options = LineOptions(
-            setup=setup, variant="advanced", namespace=namespace, node=node, max_episode_steps=max_episode_steps,
-            step_timeout=step_timeout, startup_timeout=startup_timeout, evolution=str(self.schedule),
+            setup=setup,
+            variant="advanced",
+            namespace=namespace,
+            node=node,
+            max_episode_steps=max_episode_steps,
+            step_timeout=step_timeout,
+            startup_timeout=startup_timeout,
+            evolution=str(self.schedule),
         )
         self.observation_space = observation_space("advanced")
         self.action_space = action_space("advanced")

@@ -251,9 +251,7 @@ def _build_figure(frame: DashboardFrame, width_px: int, height_px: int) -> Figur
     dpi = _BASE_DPI * scale
     fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor="white")
 
-    fig.text(
-        0.5, 0.975, frame.title, ha="center", va="top", fontsize=_FS_SUPTITLE, fontweight="bold", parse_math=False
-    )
+    fig.text(0.5, 0.975, frame.title, ha="center", va="top", fontsize=_FS_SUPTITLE, fontweight="bold", parse_math=False)
 
     top = fig.add_gridspec(1, 4, left=0.035, right=0.985, top=0.875, bottom=0.575, wspace=0.28)
     bottom = fig.add_gridspec(
@@ -308,13 +306,27 @@ def _key(ax, x: float, y: float, items, *, fontsize: float = _FS_LEGEND, gap_pt:
         for text, col, offset in ((symbol, color, gap_pt), (label, "#222222", 2.5)):
             if prev is None:
                 prev = ax.annotate(
-                    text, (x, y), xycoords="axes fraction", ha="left", va="center", fontsize=fontsize,
-                    color=col, annotation_clip=False,
+                    text,
+                    (x, y),
+                    xycoords="axes fraction",
+                    ha="left",
+                    va="center",
+                    fontsize=fontsize,
+                    color=col,
+                    annotation_clip=False,
                 )
             else:
                 prev = ax.annotate(
-                    text, (1.0, 0.5), xycoords=prev, xytext=(offset, 0), textcoords="offset points",
-                    ha="left", va="center", fontsize=fontsize, color=col, annotation_clip=False,
+                    text,
+                    (1.0, 0.5),
+                    xycoords=prev,
+                    xytext=(offset, 0),
+                    textcoords="offset points",
+                    ha="left",
+                    va="center",
+                    fontsize=fontsize,
+                    color=col,
+                    annotation_clip=False,
                 )
 
 
@@ -344,8 +356,14 @@ def _finite(v: float) -> float:
 def _fig_title(fig: Figure, x_in: float, top_in: float, text: str) -> None:
     """A panel title for a figure-level panel, placed like an Axes title (baseline 6 pt above the top)."""
     fig.text(
-        x_in, top_in + 6 / 72, text, transform=fig.dpi_scale_trans, ha="center", va="baseline",
-        fontsize=_FS_TITLE, parse_math=False,
+        x_in,
+        top_in + 6 / 72,
+        text,
+        transform=fig.dpi_scale_trans,
+        ha="center",
+        va="baseline",
+        fontsize=_FS_TITLE,
+        parse_math=False,
     )
 
 
@@ -385,15 +403,24 @@ def _panel_input(fig: Figure, box, frame: DashboardFrame) -> None:
                 mid = math.radians((start + end) / 2)
                 d = 0.55 * r if share < 0.999 else 0.0
                 fig.text(
-                    cx + d * math.cos(mid), cy + d * math.sin(mid), f"{name}\n{100 * share:.0f}%", transform=inch,
-                    ha="center", va="center", fontsize=_FS_ANNOT + 1, color="white", fontweight="bold",
+                    cx + d * math.cos(mid),
+                    cy + d * math.sin(mid),
+                    f"{name}\n{100 * share:.0f}%",
+                    transform=inch,
+                    ha="center",
+                    va="center",
+                    fontsize=_FS_ANNOT + 1,
+                    color="white",
+                    fontweight="bold",
                 )
             start = end
     ty = cy - r - 0.2
-    fig.text(cx - 0.1, ty, f"\u25a0 A: {a}", transform=inch, ha="right", va="center", fontsize=_FS_ANNOT + 0.5,
-             color=COLOR_A)
-    fig.text(cx + 0.1, ty, f"\u25a0 B: {b}", transform=inch, ha="left", va="center", fontsize=_FS_ANNOT + 0.5,
-             color=COLOR_B)
+    fig.text(
+        cx - 0.1, ty, f"\u25a0 A: {a}", transform=inch, ha="right", va="center", fontsize=_FS_ANNOT + 0.5, color=COLOR_A
+    )
+    fig.text(
+        cx + 0.1, ty, f"\u25a0 B: {b}", transform=inch, ha="left", va="center", fontsize=_FS_ANNOT + 0.5, color=COLOR_B
+    )
 
 
 # --- (2) belt and (3) sorting machine
@@ -415,8 +442,15 @@ def _panel_belt(ax, frame: DashboardFrame) -> None:
     _style(ax, f"Conveyor belt: {a + b} units")
     _material_bars(ax, a, b)
     ax.text(
-        0.99, 0.99, f"occupancy {_pct(frame.occupancy)}", transform=ax.transAxes, ha="right", va="top",
-        fontsize=_FS_ANNOT, color=COLOR_OCCUPANCY, fontweight="bold",
+        0.99,
+        0.99,
+        f"occupancy {_pct(frame.occupancy)}",
+        transform=ax.transAxes,
+        ha="right",
+        va="top",
+        fontsize=_FS_ANNOT,
+        color=COLOR_OCCUPANCY,
+        fontweight="bold",
     )
 
 
@@ -425,8 +459,15 @@ def _panel_machine(ax, frame: DashboardFrame) -> None:
     _style(ax, f"Sorting machine: {a + b} units")
     _material_bars(ax, a, b)
     ax.text(
-        0.99, 0.99, f"sorted with accuracy {_pct(frame.sorter_accuracy)}", transform=ax.transAxes, ha="right",
-        va="top", fontsize=_FS_ANNOT, color=COLOR_ACCURACY, fontweight="bold",
+        0.99,
+        0.99,
+        f"sorted with accuracy {_pct(frame.sorter_accuracy)}",
+        transform=ax.transAxes,
+        ha="right",
+        va="top",
+        fontsize=_FS_ANNOT,
+        color=COLOR_ACCURACY,
+        fontweight="bold",
     )
 
 
@@ -447,8 +488,15 @@ def _panel_containers(ax, frame: DashboardFrame) -> None:
     foreign = (b_wrong, a_wrong)
     ax.bar(x, correct, width=0.6, color=(COLOR_A, COLOR_B), edgecolor="white", linewidth=0.8)
     ax.bar(
-        x, foreign, bottom=correct, width=0.6, color=(COLOR_B, COLOR_A), alpha=0.55, hatch="///",
-        edgecolor="white", linewidth=0.8,
+        x,
+        foreign,
+        bottom=correct,
+        width=0.6,
+        color=(COLOR_B, COLOR_A),
+        alpha=0.55,
+        hatch="///",
+        edgecolor="white",
+        linewidth=0.8,
     )
     ymax = max(10.0, max(in_a, in_b) * 1.45)
     ax.set_ylim(0, ymax)
@@ -462,7 +510,9 @@ def _panel_containers(ax, frame: DashboardFrame) -> None:
         label = f"purity {_pct(ok / held)}\n{ok} / {held}" if held else "empty"
         ax.text(xi, held + ymax * 0.015, label, ha="center", va="bottom", fontsize=_FS_ANNOT)
     _key(
-        ax, 0.02, 0.95,
+        ax,
+        0.02,
+        0.95,
         (("\u25a0", COLOR_A, "A"), ("\u25a0", COLOR_B, "B"), ("\u25a8", "#777777", "foreign (other material)")),
     )
 
@@ -490,7 +540,11 @@ def _panel_status(ax, frame: DashboardFrame) -> None:
     ax.axhline(1.0, color=COLOR_LIMIT, linewidth=1.5, linestyle="--")
     for bar, v in zip(bars, values, strict=False):
         ax.text(
-            bar.get_x() + bar.get_width() / 2, min(v, 1.0) + 0.03, f"{v:.2f}", ha="center", va="bottom",
+            bar.get_x() + bar.get_width() / 2,
+            min(v, 1.0) + 0.03,
+            f"{v:.2f}",
+            ha="center",
+            va="bottom",
             fontsize=_FS_ANNOT,
         )
     ax.set_xlim(-0.6, 2.6)
@@ -606,8 +660,14 @@ def _panel_kpis(fig: Figure, box, frame: DashboardFrame) -> None:
     _fig_title(fig, x0 + w / 2, y0 + h, "KPIs")
     fig.add_artist(
         FancyBboxPatch(
-            (x0, y0), w, h, boxstyle="round,pad=0,rounding_size=0.08", transform=inch, facecolor="#f5f5f5",
-            edgecolor="#cccccc", linewidth=1.0,
+            (x0, y0),
+            w,
+            h,
+            boxstyle="round,pad=0,rounding_size=0.08",
+            transform=inch,
+            facecolor="#f5f5f5",
+            edgecolor="#cccccc",
+            linewidth=1.0,
         )
     )
     # One text per cell on a shared baseline per row (multi-line texts in two weights drift apart).
@@ -616,6 +676,4 @@ def _panel_kpis(fig: Figure, box, frame: DashboardFrame) -> None:
     for i, (name, value) in enumerate(rows):
         y = y0 + h - pad - (i + 0.7) * row_h
         fig.text(x0 + pad, y, name, transform=inch, ha="left", va="baseline", fontsize=_FS_KPI, color="#444444")
-        fig.text(
-            x0 + w - pad, y, value, transform=inch, ha="right", va="baseline", fontsize=_FS_KPI, fontweight="bold"
-        )
+        fig.text(x0 + w - pad, y, value, transform=inch, ha="right", va="baseline", fontsize=_FS_KPI, fontweight="bold")

@@ -44,8 +44,13 @@ from .line_supervisor import held, server_info, server_running, try_lock
 from .process import find_node_binary
 
 #: Environment variables that decide which DDS graph a node joins.
-_GRAPH_ENV = ("ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",
-              "FASTRTPS_DEFAULT_PROFILES_FILE")
+_GRAPH_ENV = (
+    "ROS_DOMAIN_ID",
+    "RMW_IMPLEMENTATION",
+    "ROS_AUTOMATIC_DISCOVERY_RANGE",
+    "ROS_STATIC_PEERS",
+    "FASTRTPS_DEFAULT_PROFILES_FILE",
+)
 
 
 def server_directory(options: dict[str, object]) -> Path:
@@ -132,12 +137,15 @@ def _start_server(directory: Path, index: int, options: dict[str, object], deadl
     # A session of its own: the server serves every process of the host, and a Ctrl-C meant for
     # the script that happened to start it must not stop the others' lines.
     with open(directory / f"s{index}.log", "ab") as log:
-        process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                   start_new_session=True)
+        process = subprocess.Popen(
+            command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+        )
     while server_info(directory, index) is None:
         if process.poll() is not None:
-            raise BridgeError(f"the line server {directory}/s{index} exited with {process.returncode} at start "
-                              f"(log {directory}/s{index}.log)")
+            raise BridgeError(
+                f"the line server {directory}/s{index} exited with {process.returncode} at start "
+                f"(log {directory}/s{index}.log)"
+            )
         if time.monotonic() > deadline:
             process.kill()
             raise BridgeTimeout(f"timed out waiting for the line server {directory}/s{index} to start")

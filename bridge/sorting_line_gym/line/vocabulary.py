@@ -154,8 +154,20 @@ def sim_seconds(sec, nanosec):
 
 #: The info keys of a step, in order (docs/gymnasium.md lists them); ``containers`` is (a, a_false, b, b_false).
 INFO_KEYS = (
-    "accuracy", "purity", "recall_a", "recall_b", "speed", "speed_index", "mode", "occupancy", "containers",
-    "speed_changes", "cumulative_reward", "step", "sim_time", "seed",
+    "accuracy",
+    "purity",
+    "recall_a",
+    "recall_b",
+    "speed",
+    "speed_index",
+    "mode",
+    "occupancy",
+    "containers",
+    "speed_changes",
+    "cumulative_reward",
+    "step",
+    "sim_time",
+    "seed",
 )
 
 

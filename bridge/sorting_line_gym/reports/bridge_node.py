@@ -116,5 +116,6 @@ def main(argv: list[str] | None = None) -> int:
         env.close()
     return 0
 
+
 if __name__ == "__main__":
     sys.exit(main())

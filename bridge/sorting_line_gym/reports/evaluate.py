@@ -159,7 +159,10 @@ def evaluate(
     agent = make_agent(agent_spec, setup, variant, seed)
     per_episode = []
     env = SortingLineEnv(  # a node of its own, which stops with the evaluation
-        setup=setup, variant=variant, max_episode_steps=steps, render_mode="rgb_array" if dashboard else None,
+        setup=setup,
+        variant=variant,
+        max_episode_steps=steps,
+        render_mode="rgb_array" if dashboard else None,
         node="spawn",
     )
     try:
@@ -241,8 +244,14 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         result = evaluate(
-            args.agent, args.setup, args.variant, episodes=args.episodes, seed=args.seed, steps=args.steps,
-            dashboard=dashboard, on_episode=show,
+            args.agent,
+            args.setup,
+            args.variant,
+            episodes=args.episodes,
+            seed=args.seed,
+            steps=args.steps,
+            dashboard=dashboard,
+            on_episode=show,
         )
     except ValueError as e:
         print(f"sorting-line-eval: {e}", file=sys.stderr)

@@ -213,7 +213,7 @@ def interval_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Path
         ax.invert_yaxis()
         ax.set_title(_line_label(setup, variant))
         ax.grid(axis="x", alpha=0.3)
-    for ax in axes[len(lines):]:
+    for ax in axes[len(lines) :]:
         ax.set_visible(False)
     fig.supxlabel("held-out episode reward: IQM (dot), 95% CI (bar), mean (x), oracle (dashed)", fontsize=9)
     return _save(fig, stem)

@@ -96,8 +96,14 @@ def stratified_bootstrap(
         return statistic(np.concatenate(parts, axis=-1))
 
     result = stats.bootstrap(
-        tuple(strata[i] for i in free), pooled, n_resamples=resamples, vectorized=True, paired=False,
-        confidence_level=confidence, method="percentile", rng=np.random.default_rng(seed),
+        tuple(strata[i] for i in free),
+        pooled,
+        n_resamples=resamples,
+        vectorized=True,
+        paired=False,
+        confidence_level=confidence,
+        method="percentile",
+        rng=np.random.default_rng(seed),
     )
     low, high = result.confidence_interval
     # scipy gives nan when every resample is the same value: then that value is the interval.

@@ -41,8 +41,15 @@ class LineBank:
     ``batch=True`` through the node's ``batch/cmd`` and ``batch/state`` (:class:`BatchTransport`,
     :meth:`step_batch`)."""
 
-    def __init__(self, options: LineOptions, *, lines: int = 1, watch_sensors: bool = False, batch: bool = False,
-                 watch: dict | None = None):
+    def __init__(
+        self,
+        options: LineOptions,
+        *,
+        lines: int = 1,
+        watch_sensors: bool = False,
+        batch: bool = False,
+        watch: dict | None = None,
+    ):
         if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
         if not 1 <= lines <= 64:
@@ -155,8 +162,7 @@ class LineBank:
     def _connect(self, deadline: float) -> None:
         self.waiter.until_deadline(
             lambda: (
-                not self.transport.missing(self.node)
-                and all(sub.get_publisher_count() > 0 for sub in self._watched)
+                not self.transport.missing(self.node) and all(sub.get_publisher_count() > 0 for sub in self._watched)
             ),
             deadline,
             self.startup_timeout,

@@ -145,7 +145,7 @@ class NodeFleet:
             bank.check_usable()
             bank.batch.check_started()
         for b, bank in enumerate(self.banks):
-            bank.batch.send(speed_indices[b * n:(b + 1) * n], modes[b * n:(b + 1) * n])
+            bank.batch.send(speed_indices[b * n : (b + 1) * n], modes[b * n : (b + 1) * n])
         pending = set(range(len(self.banks)))
 
         def arrived() -> bool:
@@ -170,4 +170,3 @@ class NodeFleet:
     def close(self) -> None:
         for bank in self.banks:
             bank.close()
-

@@ -106,8 +106,10 @@ class LineLink:
         self.namespace = namespace.rstrip("/") or ""
         self.advanced = advanced
         self.node = node
+
         def name(rel):
             return f"{self.namespace}/{rel}"
+
         self.state_topic = name("state")
         self.speed_pub = self.mode_pub = self.state_sub = self.reset_client = None
         # States arrive in order; keep a short backlog so nothing is lost while we publish.

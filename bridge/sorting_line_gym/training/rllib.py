@@ -102,9 +102,13 @@ def where_envs_live(algo) -> list[dict[str, Any]]:
         from sorting_line_gym.workarounds import participant_deletion_hang
 
         envs = getattr(runner.env.unwrapped, "envs", [])  # RLlib wraps Gymnasium's SyncVectorEnv
-        return {"node_ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
-                "worker_index": runner.worker_index, "lines": [e.unwrapped.namespace for e in envs],
-                "keeps_participant": participant_deletion_hang.keeps_participant()}
+        return {
+            "node_ip": ray.util.get_node_ip_address(),
+            "pid": os.getpid(),
+            "worker_index": runner.worker_index,
+            "lines": [e.unwrapped.namespace for e in envs],
+            "keeps_participant": participant_deletion_hang.keeps_participant(),
+        }
 
     return algo.env_runner_group.foreach_env_runner(report, local_env_runner=False)
 

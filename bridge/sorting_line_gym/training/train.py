@@ -153,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="sorting-line-train",
         description="Train Stable-Baselines3 PPO, DQN or A2C on a sorting line through ROS 2"
-                    " (the paper's settings by default).",
+        " (the paper's settings by default).",
     )
     p.add_argument("--algo", required=True, choices=hyperparams.ALGOS, help="the Stable-Baselines3 algorithm")
     p.add_argument(

@@ -61,4 +61,3 @@ def joining_graph(timeout: float):
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
-
