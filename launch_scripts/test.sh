@@ -44,8 +44,9 @@ else
   echo "test.sh: rustfmt is not installed (rustup component add rustfmt): formatting not checked"
 fi
 
-step "Python lint (ruff.toml)"
+step "Python lint and formatting (ruff.toml)"
 .venv/bin/ruff check --no-cache . || { echo "test.sh: fix what \`.venv/bin/ruff check\` reports above (\`--fix\` fixes the ones marked [*])" >&2; exit 1; }
+.venv/bin/ruff format --check --no-cache . || { echo "test.sh: run \`.venv/bin/ruff format\` (it would reformat the files above)" >&2; exit 1; }
 
 step "Rust lints (clippy, warnings are errors; with and without the ros feature)"
 # About 2 CPU-minutes: a metadata-only check of every dependency (clippy cannot reuse the release
