@@ -156,33 +156,45 @@ def main() -> int:
     log = work / "record.log"
     recorder = _recorder(args, out, log)
     try:
-        _wait_for(log, "recording", recorder, 120.0)
-        started, samples = time.monotonic(), []
-        statuses.clear()  # the window starts once the recorder records
-        _sample(recorder, started, samples)
-        cpu_start = cpu_seconds(recorder.pid)
-        next_sample, minute = started + args.every, None
-        while (now := time.monotonic()) < started + 60 * args.minutes:
-            session.spin_for(0.5)
-            if minute is None and now >= started + 60:
-                minute = rss_mb(recorder.pid)
-            if now >= next_sample:
-                next_sample += args.every
-                _sample(recorder, started, samples)
-        _sample(recorder, started, samples)
-        end_rss = samples[-1][1]
-        cpu = cpu_seconds(recorder.pid) - cpu_start
-        # The reports up to now: the recorder stops listening after SIGINT (and its drain).
-        statuses = {ns: list(values) for ns, values in statuses.items()}
-        recorder.send_signal(signal.SIGINT)
-        session.spin_until(lambda: recorder.poll() is not None, 120.0, "the recorder to stop")
+        samples, minute, cpu, statuses = _measure(args, session, recorder, log, statuses)
     finally:
         if recorder.poll() is None:
             recorder.kill()
         node.stop(signal.SIGINT, timeout=10.0)
         session.destroy_node(probe)
         session.shutdown()
-    figures = _compare(out, statuses, args.lines)
+    _print_figures(args, out, log, _compare(out, statuses, args.lines), samples, minute, cpu)
+    return 0
+
+
+def _measure(args, session, recorder, log: Path, statuses: dict[str, list[dict]]):
+    """Samples the recorder's RSS for ``args.minutes`` once it records, then stops it with SIGINT:
+    the RSS samples (s, MB), the RSS after the first minute (None if shorter), its CPU seconds and
+    the node's reports over the window."""
+    _wait_for(log, "recording", recorder, 120.0)
+    started, samples = time.monotonic(), []
+    statuses.clear()  # the window starts once the recorder records
+    _sample(recorder, started, samples)
+    cpu_start = cpu_seconds(recorder.pid)
+    next_sample, minute = started + args.every, None
+    while (now := time.monotonic()) < started + 60 * args.minutes:
+        session.spin_for(0.5)
+        if minute is None and now >= started + 60:
+            minute = rss_mb(recorder.pid)
+        if now >= next_sample:
+            next_sample += args.every
+            _sample(recorder, started, samples)
+    _sample(recorder, started, samples)
+    cpu = cpu_seconds(recorder.pid) - cpu_start
+    # The reports up to now: the recorder stops listening after SIGINT (and its drain).
+    statuses = {ns: list(values) for ns, values in statuses.items()}
+    recorder.send_signal(signal.SIGINT)
+    session.spin_until(lambda: recorder.poll() is not None, 120.0, "the recorder to stop")
+    return samples, minute, cpu, statuses
+
+
+def _print_figures(args, out: Path, log: Path, figures: dict, samples: list, minute: float | None, cpu: float) -> None:
+    end_rss = samples[-1][1]
     size = sum(f.stat().st_size for f in out.glob("*.mcap"))
     seconds = 60 * args.minutes
     print(
@@ -211,7 +223,6 @@ def main() -> int:
     summary = log.read_text(errors="replace").strip().splitlines()
     print(f"  the recorder's own summary: {summary[-2].split(' (')[0]} | {summary[-1]}")
     print(f"  RSS samples (s, MB): {[(round(t), round(m, 1)) for t, m in samples]}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -69,17 +69,10 @@ def check_controller(
     verdict = Verdict(str(bag), closed_loop=closed_loop, namespace=namespace or "")
     started = time.monotonic()
     try:
-        tolerances = {
-            f: Tolerance.parse(v, f"--max-{f}-drop")
-            for f, v in zip(FIGURES, (max_reward_drop, max_accuracy_drop, max_purity_drop), strict=True)
-        }
+        drops = (max_reward_drop, max_accuracy_drop, max_purity_drop)
+        tolerances = {f: Tolerance.parse(v, f"--max-{f}-drop") for f, v in zip(FIGURES, drops, strict=True)}
         verdict.tolerances = {f: str(t) for f, t in tolerances.items()} if closed_loop else {}
-        if answer_timeout <= 0:
-            raise ValueError(f"--answer-timeout {answer_timeout}: must be > 0 (seconds)")
-        if record is not None and not closed_loop:
-            raise ValueError("--record records the closed-loop run: add --closed-loop")
-        if record is not None and Path(record).exists():
-            raise ValueError(f"--record {record}: exists already: choose a new output directory")
+        _check_options(closed_loop, record, answer_timeout)
         loaded = usable_bag(bag, closed_loop)
         verdict.namespace = valid_namespace(namespace or line_namespace(loaded))
     except (BagError, ValueError) as e:
@@ -90,40 +83,30 @@ def check_controller(
             process = ControllerProcess(controller, verdict.namespace)
             verdict.controller = process.command
         wait = wait if wait is not None else (WAIT_STARTED if process else WAIT_RUNNING)
+        run = dict(answer_timeout=answer_timeout, wait=wait, process=process, stop=stop, progress=progress)
         if closed_loop:
             from .check_closed import run_closed_loop
 
-            run_closed_loop(
-                loaded,
-                verdict,
-                tolerances,
-                answer_timeout=answer_timeout,
-                wait=wait,
-                process=process,
-                overrides=overrides,
-                record=record,
-                stop=stop,
-                progress=progress,
-            )
+            run_closed_loop(loaded, verdict, tolerances, overrides=overrides, record=record, **run)
         else:
             from .check_open import run_open_loop
 
-            run_open_loop(
-                loaded,
-                verdict,
-                namespace=namespace,
-                answer_timeout=answer_timeout,
-                wait=wait,
-                period_ns=tick_period_ns(loaded),
-                process=process,
-                stop=stop,
-                progress=progress,
-            )
+            run_open_loop(loaded, verdict, namespace=namespace, period_ns=tick_period_ns(loaded), **run)
     except (FileNotFoundError, ValueError, BagError) as e:
         return _ended(verdict, EXIT_BAD_INPUT, str(e), started, process)
     except (BridgeError, TimeoutError) as e:
         return _ended(verdict, EXIT_RUN_FAILED, str(e), started, process)
     return _ended(verdict, None, None, started, process)
+
+
+def _check_options(closed_loop: bool, record: str | Path | None, answer_timeout: float) -> None:
+    """ValueError naming the flag, for options that contradict each other or are out of range."""
+    if answer_timeout <= 0:
+        raise ValueError(f"--answer-timeout {answer_timeout}: must be > 0 (seconds)")
+    if record is not None and not closed_loop:
+        raise ValueError("--record records the closed-loop run: add --closed-loop")
+    if record is not None and Path(record).exists():
+        raise ValueError(f"--record {record}: exists already: choose a new output directory")
 
 
 def _ended(

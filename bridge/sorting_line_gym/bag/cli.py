@@ -60,7 +60,22 @@ def _parser() -> argparse.ArgumentParser:
         epilog="docs/bags.md describes what a bag contains.",
     )
     sub = p.add_subparsers(dest="command", required=True)
+    _record_parser(sub)
+    _replay_parser(sub)
+    _play_parser(sub)
+    i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
+    i.add_argument("bag", help="the bag directory")
+    _check_parser(sub)
+    x = sub.add_parser(
+        "reindex",
+        help="recover a bag whose recorder was killed: rebuild metadata.yaml (and the "
+        "MCAP summary of a cut file) from what is on disk, as `ros2 bag reindex`",
+    )
+    x.add_argument("bag", help="the bag directory")
+    return p
 
+
+def _record_parser(sub) -> None:
     r = sub.add_parser(
         "record", help="record a running line's topics into a bag directory", description=RECORD_DESCRIPTION
     )
@@ -80,12 +95,16 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--wait", type=float, default=10.0, help="how long to wait for the line to show up (s)")
     _add_write_options(r)
 
+
+def _replay_parser(sub) -> None:
     rp = sub.add_parser("replay", help="replay a bag's resets and commands into a fresh lock-step node and compare")
     rp.add_argument("bag", help="the bag directory to replay")
     _add_node_options(rp, "")
     rp.add_argument("--step-timeout", type=float, default=5.0, help="longest wait for one tick or reset (s)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
+
+def _play_parser(sub) -> None:
     pl = sub.add_parser("play", help="publish a bag's recorded node data again, with its timing")
     pl.add_argument("bag", help="the bag directory to play")
     pl.add_argument("--rate", type=float, default=1.0, help="speed factor: 2 = twice as fast, 0 = no waiting")
@@ -113,17 +132,6 @@ def _parser() -> argparse.ArgumentParser:
         "on cmd/speed (when the bag shows an answer), as a lock-step node would",
     )
     pl.add_argument("--answer-timeout", type=float, default=5.0, help="--lockstep: longest wait for an answer (s)")
-
-    i = sub.add_parser("info", help="the topics, types, counts and line description of a bag")
-    i.add_argument("bag", help="the bag directory")
-    _check_parser(sub)
-    x = sub.add_parser(
-        "reindex",
-        help="recover a bag whose recorder was killed: rebuild metadata.yaml (and the "
-        "MCAP summary of a cut file) from what is on disk, as `ros2 bag reindex`",
-    )
-    x.add_argument("bag", help="the bag directory")
-    return p
 
 
 def _check_parser(sub) -> None:
@@ -164,6 +172,13 @@ def _check_parser(sub) -> None:
         metavar="FILE",
         help="write the verdict as JUnit XML to FILE (a test case per episode, one for missing answers)",
     )
+    _add_check_limits(c)
+    _add_node_options(c, "--closed-loop: ")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
+
+
+def _add_check_limits(c: argparse.ArgumentParser) -> None:
+    """check's waits and closed-loop tolerances."""
     c.add_argument(
         "--answer-timeout",
         type=float,
@@ -186,8 +201,6 @@ def _check_parser(sub) -> None:
             help=f"--closed-loop: how much lower than the bag's an episode's {figure} may be, absolute "
             "or as a percentage of the bag's (default 0: equal or better)",
         )
-    _add_node_options(c, "--closed-loop: ")
-    c.add_argument("--no-progress", action="store_true", help="no progress bar (there is none when stderr is no tty)")
 
 
 #: Node options a fresh node for a bag takes from flags (replay, closed-loop check), named as `sorting_line node`.
@@ -273,22 +286,26 @@ def _add_write_options(r: argparse.ArgumentParser) -> None:
         check_max_bag_size,
     )
 
-    r.add_argument(
-        "--max-bag-size",
-        type=_option(check_max_bag_size, int),
-        default=0,
-        metavar="BYTES",
-        help=f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "
-        f"the default; else >= {MIN_SPLIT_SIZE}), as `ros2 bag record --max-bag-size`",
+    splits = (
+        (
+            "--max-bag-size",
+            _option(check_max_bag_size, int),
+            0,
+            "BYTES",
+            f"start a new MCAP file in the bag once the current one holds this many bytes (0: never, "
+            f"the default; else >= {MIN_SPLIT_SIZE}), as `ros2 bag record --max-bag-size`",
+        ),
+        (
+            "--max-bag-duration",
+            _option(check_max_bag_duration, float),
+            0.0,
+            "S",
+            f"start a new MCAP file once the current one spans this many seconds (0: never, the "
+            f"default; else >= {MIN_SPLIT_DURATION:g})",
+        ),
     )
-    r.add_argument(
-        "--max-bag-duration",
-        type=_option(check_max_bag_duration, float),
-        default=0.0,
-        metavar="S",
-        help=f"start a new MCAP file once the current one spans this many seconds (0: never, the "
-        f"default; else >= {MIN_SPLIT_DURATION:g})",
-    )
+    for flag, kind, default, metavar, text in splits:
+        r.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     r.add_argument(
         "--compression",
         type=_option(check_compression, str),
@@ -300,76 +317,82 @@ def _add_write_options(r: argparse.ArgumentParser) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
+    run = COMMANDS.get(args.command)
+    if run is None:
+        raise AssertionError(f"unhandled command {args.command}")
     try:
-        if args.command == "info":
-            print(describe(open_bag(args.bag)))
-            return 0
-        if args.command == "reindex":
-            from .recovery import reindex
-
-            print(reindex(args.bag).summary())
-            return 0
-        if args.command == "record":
-            from .record import record
-            from .writer import WriteOptions
-
-            options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
-            with _Stop() as stop:
-                result = record(
-                    args.namespace,
-                    args.output,
-                    args.topics,
-                    duration=args.duration,
-                    max_ticks=args.max_ticks,
-                    wait=args.wait,
-                    stop=stop,
-                    on_ready=lambda s: print(s, flush=True),
-                    diagnostics=args.diagnostics,
-                    options=options,
-                )
-            print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
-            return 0
-        if args.command == "replay":
-            from .replay import replay
-
-            result = replay(
-                args.bag,
-                _node_options(args),
-                step_timeout=args.step_timeout,
-                progress=not args.no_progress and sys.stderr.isatty(),
-            )
-            print(result.report(), flush=True)
-            return 0 if result.identical else EXIT_DIFFERENT
-        if args.command == "check":
-            return _check(args)
-        if args.command == "play":
-            from .play import play
-
-            with _Stop() as stop:
-                result = play(
-                    args.bag,
-                    rate=args.rate,
-                    topics=args.topics,
-                    namespace=args.namespace,
-                    wait_for=[] if args.no_wait else args.wait_for,
-                    wait=args.wait,
-                    stop=stop,
-                    on_ready=lambda s: print(s, flush=True),
-                    lockstep=args.lockstep,
-                    answer_timeout=args.answer_timeout,
-                )
-            print(result.summary(), flush=True)
-            return 0
-    except BagWriteError as e:
+        return run(args)
+    except (BagError, BridgeError, TimeoutError) as e:
         print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
-        return EXIT_FAILED
-    except BagError as e:
-        print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except (BridgeError, TimeoutError) as e:
-        print(f"sorting-line-bag {args.command}: {e}", file=sys.stderr)
-        return EXIT_FAILED
-    raise AssertionError(f"unhandled command {args.command}")
+        # A bag that cannot be written (a full disk) failed the run; any other BagError is bad input.
+        return EXIT_BAD_INPUT if isinstance(e, BagError) and not isinstance(e, BagWriteError) else EXIT_FAILED
+
+
+def _info(args) -> int:
+    print(describe(open_bag(args.bag)))
+    return 0
+
+
+def _reindex(args) -> int:
+    from .recovery import reindex
+
+    print(reindex(args.bag).summary())
+    return 0
+
+
+def _record(args) -> int:
+    from .record import record
+    from .writer import WriteOptions
+
+    options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
+    with _Stop() as stop:
+        result = record(
+            args.namespace,
+            args.output,
+            args.topics,
+            duration=args.duration,
+            max_ticks=args.max_ticks,
+            wait=args.wait,
+            stop=stop,
+            on_ready=lambda s: print(s, flush=True),
+            diagnostics=args.diagnostics,
+            options=options,
+        )
+    print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
+    return 0
+
+
+def _replay(args) -> int:
+    from .replay import replay
+
+    result = replay(
+        args.bag,
+        _node_options(args),
+        step_timeout=args.step_timeout,
+        progress=not args.no_progress and sys.stderr.isatty(),
+    )
+    print(result.report(), flush=True)
+    return 0 if result.identical else EXIT_DIFFERENT
+
+
+def _play(args) -> int:
+    from .play import play
+
+    with _Stop() as stop:
+        result = play(
+            args.bag,
+            rate=args.rate,
+            topics=args.topics,
+            namespace=args.namespace,
+            wait_for=[] if args.no_wait else args.wait_for,
+            wait=args.wait,
+            stop=stop,
+            on_ready=lambda s: print(s, flush=True),
+            lockstep=args.lockstep,
+            answer_timeout=args.answer_timeout,
+        )
+    print(result.summary(), flush=True)
+    return 0
 
 
 def _check(args) -> int:
@@ -402,6 +425,9 @@ def _check(args) -> int:
             Path(path).write_text(text())
     return verdict.exit_code
 
+
+#: What each subcommand runs: its exit code (errors that end it are main's).
+COMMANDS = {"info": _info, "reindex": _reindex, "record": _record, "replay": _replay, "check": _check, "play": _play}
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -22,22 +22,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from ..line.vocabulary import SETUPS, THRESHOLD
-from .schema import LINE_TYPES, join, stamp_ns
+from .schema import LINE_OPTIONS, LINE_TYPES, join, stamp_ns
 
-#: The node's options a line's description holds (`sorting_line node` flags, underscores).
-OPTIONS = (
-    "variant",
-    "input",
-    "obs_noise",
-    "action_penalty",
-    "threshold",
-    "max_steps",
-    "seed",
-    "mode",
-    "tick_period",
-    "lines",
-    "evolution_file",
-)
 #: The options a fresh node for a bag needs (replay, closed-loop check): from the bag or from flags.
 REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
 #: The options a setup (``--setup A..D``) stands for.
@@ -104,7 +90,7 @@ def flags_for(missing: list[str]) -> str:
 def describe_sources(info) -> list[str]:
     """``info``'s lines for a bag of another recorder: each option with its source, and what is
     not in the bag (the flags a replay needs)."""
-    known = ", ".join(f"{k}={info.node[k]} ({info.sources[k]})" for k in OPTIONS if k in info.sources)
+    known = ", ".join(f"{k}={info.node[k]} ({info.sources[k]})" for k in LINE_OPTIONS if k in info.sources)
     lines = [
         f"  line {info.namespace} (recorded by another tool, no sorting_line custom_data); from its topics: "
         f"{known or 'no options'}"
@@ -137,7 +123,7 @@ def _from_parameter_events(namespace: str, messages: Messages) -> dict:
     if not nodes:
         return {}
     node = max(nodes, key=len)
-    values = {k: v for k, v in announced[node].items() if k in OPTIONS}
+    values = {k: v for k, v in announced[node].items() if k in LINE_OPTIONS}
     if "seed" in values:
         values["seed"] = int(values["seed"]) + _line_index(namespace, values.get("lines"))
     return values

@@ -38,24 +38,11 @@ from ..workarounds.late_matching import retried_handshake
 from .bagfile import META_KEY, BagError, LineInfo
 from .losses import LossCounter, describe_losses
 from .rosnode import ToolNode
-from .schema import CLOCK, GLOBAL_TYPES, HARDWARE, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
+from .schema import CLOCK, GLOBAL_TYPES, HARDWARE, LINE_OPTIONS, LINE_TYPES, PUBLISHED, join, line_topics, relative_to
 from .writer import BagWriter, WriteOptions
 
-#: The node's parameters that describe a line (and thus a replay's node).
-NODE_PARAMETERS = (
-    "variant",
-    "input",
-    "obs_noise",
-    "action_penalty",
-    "threshold",
-    "max_steps",
-    "seed",
-    "mode",
-    "rate",
-    "lines",
-    "tick_period",
-    "evolution_file",
-)
+#: The node's parameters the recorder asks for: the line's options and the node's publishing rate.
+NODE_PARAMETERS = (*LINE_OPTIONS, "rate")
 #: Seconds the recorder lets messages queue up (in DDS) before it takes them all.
 BATCH_PAUSE = 0.01
 #: Parameters a node may lack (older nodes): recorded as "" then.
@@ -215,19 +202,7 @@ def record(
             namespace, list(types), info.node.get("variant"), evolving, float(info.node.get("tick_period") or 1.0)
         )
         diag = _line_reports(tool, namespace, counter)
-        states = [0]
-        state = join(namespace, "state")
-
-        def keep(name):
-            def on(data: bytes, received: int):
-                writer.write(name, received, data)
-                counter.on_message(name, data)
-                if name == state:
-                    states[0] += 1
-
-            return on
-
-        subs = {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}
+        subs, states = _subscribe(tool, writer, counter, types, join(namespace, "state"))
         _await_matched(tool, namespace, subs, wait, evolving=evolving)
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
@@ -241,6 +216,25 @@ def record(
         if writer is not None:
             writer.close(state="stopped by an error")
         tool.close()
+
+
+def _subscribe(
+    tool: ToolNode, writer: BagWriter, counter: LossCounter, types: dict[str, str], state: str
+) -> tuple[dict, list[int]]:
+    """A subscription per topic, each storing what arrives and counting it for the loss report; and
+    the number of ``state`` messages so far (in a one-item list the callbacks update)."""
+    states = [0]
+
+    def keep(name):
+        def on(data: bytes, received: int):
+            writer.write(name, received, data)
+            counter.on_message(name, data)
+            if name == state:
+                states[0] += 1
+
+        return on
+
+    return {name: tool.raw_subscription(name, msgtype, keep(name)) for name, msgtype in types.items()}, states
 
 
 def _compare_and_close(tool: ToolNode, writer: BagWriter, counter: LossCounter, diag) -> dict:

@@ -33,6 +33,22 @@ COMMANDS = ("cmd/sort_mode", "cmd/speed")
 #: Node-wide topics a bag of a line records by default.
 CLOCK = "/clock"
 
+#: The node's options that describe a line, as `sorting_line node` flags name them (underscores): what
+#: a bag's line description holds, whoever recorded it.
+LINE_OPTIONS = (
+    "variant",
+    "input",
+    "obs_noise",
+    "action_penalty",
+    "threshold",
+    "max_steps",
+    "seed",
+    "mode",
+    "tick_period",
+    "lines",
+    "evolution_file",
+)
+
 #: The type of every topic a line has (relative names), and the node-wide ones.
 LINE_TYPES = {
     "input": f"{INTERFACES}/msg/MaterialInput",
