@@ -175,23 +175,17 @@ def show_ns(ns: int) -> str:
 # The node process
 
 
-class NodeProcess:
-    """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
+class _LoggedProcess:
+    """A subprocess whose stdout and stderr go to `log_path`, with a parent-death signal: a test
+    run that is killed does not leave it behind. What NodeProcess and ScriptProcess share."""
 
-    def __init__(self, args: Iterable[str], log_path: Path, env: dict[str, str] | None = None):
-        self.args = [str(a) for a in args]
+    def _start(self, argv: list[str], log_path: Path, env: dict[str, str]) -> None:
+        self.argv = argv
         self.log_path = Path(log_path)
-        self.argv = [str(node_binary()), "node", *self.args]
-        full_env = dict(os.environ)
-        if env:
-            full_env.update(env)
         self._log = open(self.log_path, "wb")
-        # With a parent-death signal: a test run that is killed does not leave nodes behind.
         self.proc = subprocess.Popen(
-            with_parent_death_signal(self.argv), stdout=self._log, stderr=subprocess.STDOUT, env=full_env
+            with_parent_death_signal(argv), stdout=self._log, stderr=subprocess.STDOUT, env=env
         )
-        self.pid = self.proc.pid
-        self.stopped_by_test = False
 
     def running(self) -> bool:
         return self.proc.poll() is None
@@ -199,8 +193,24 @@ class NodeProcess:
     def log(self) -> str:
         if not self._log.closed:
             self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+
+class NodeProcess(_LoggedProcess):
+    """`sorting_line node ARGS` as a subprocess; stderr (and stdout) go to `log_path`."""
+
+    def __init__(self, args: Iterable[str], log_path: Path, env: dict[str, str] | None = None):
+        self.args = [str(a) for a in args]
+        full_env = dict(os.environ)
+        if env:
+            full_env.update(env)
+        self._start([str(node_binary()), "node", *self.args], log_path, full_env)
+        self.pid = self.proc.pid
+        self.stopped_by_test = False
+
+    def log(self) -> str:
         try:
-            return self.log_path.read_text(errors="replace")
+            return super().log()
         except OSError:
             return ""
 
@@ -235,7 +245,7 @@ class NodeProcess:
         self._log.close()
 
 
-class ScriptProcess:
+class ScriptProcess(_LoggedProcess):
     """A console script of the bridge (`sorting-line-controller`, `sorting-line-bag`, ...) as a
     subprocess, run as a user runs it: stdout and stderr into `log_path`, SORTING_LINE_BIN set to
     the node binary of the tests, a parent-death signal as for NodeProcess."""
@@ -249,22 +259,9 @@ class ScriptProcess:
             "(.venv/bin/pip install --no-deps --no-build-isolation -e bridge)"
         )
         self.label = label or name
-        self.log_path = Path(log_path)
-        self.argv = [str(script), *[str(a) for a in args]]
-        self._log = open(self.log_path, "wb")
         env = dict(os.environ, SORTING_LINE_BIN=str(node_binary()), PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen(
-            with_parent_death_signal(self.argv), stdout=self._log, stderr=subprocess.STDOUT, env=env
-        )
+        self._start([str(script), *[str(a) for a in args]], log_path, env)
         self.returncode = None
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def log(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors="replace")
 
     def describe(self) -> str:
         state = "running" if self.running() else f"exited with {self.proc.returncode}"

@@ -121,6 +121,13 @@ def installed(workspace: Path, package: str, *rel: str) -> Path:
     return workspace / "install" / package / Path(*rel)
 
 
+def ros2_run_node(ns: str, *args: str) -> list[str]:
+    """`ros2 run` arguments of the installed node: a realtime line at 10 Hz (steps enough to outlast
+    the test) in namespace `ns`, with the node options `args` besides."""
+    node = ["--mode", "realtime", "--rate", "10", "--max-steps", "1000000"]
+    return ["run", "sorting_line", "sorting_line", "node", *args, *node, "--ros-args", "-r", f"__ns:={ns}"]
+
+
 def test_plain_colcon_build_found_and_installed_all_three_packages(workspace):
     venv = colcon_ws.venv_dir()
     listed = subprocess.run(
@@ -177,29 +184,7 @@ def test_ros2_pkg_and_interface_see_the_installed_packages(ros2, workspace):
 def test_ros2_run_the_node(ros2, workspace, namespace, tmp_path):
     """`ros2 run sorting_line sorting_line node ...`: the installed binary, its topics with their types."""
     ns = namespace("run")
-    node = Started(
-        ros2,
-        [
-            "run",
-            "sorting_line",
-            "sorting_line",
-            "node",
-            "--variant",
-            "advanced",
-            "--mode",
-            "realtime",
-            "--rate",
-            "10",
-            "--max-steps",
-            "1000000",
-            "--seed",
-            "3",
-            "--ros-args",
-            "-r",
-            f"__ns:={ns}",
-        ],
-        tmp_path / "run.log",
-    )
+    node = Started(ros2, ros2_run_node(ns, "--variant", "advanced", "--seed", "3"), tmp_path / "run.log")
     try:
         want = {h.join_ns(ns, rel): f"[{t}]" for rel, t in LINE_TYPES.items()}
 
@@ -257,25 +242,7 @@ def test_ros2_run_the_bridge_entries(ros2, namespace, tmp_path):
         out = ros2.run("run", "sorting_line", name, "--help", timeout=60).stdout
         assert out.startswith(f"usage: {name}"), out
     ns = namespace("controller")
-    node = Started(
-        ros2,
-        [
-            "run",
-            "sorting_line",
-            "sorting_line",
-            "node",
-            "--mode",
-            "realtime",
-            "--rate",
-            "10",
-            "--max-steps",
-            "1000000",
-            "--ros-args",
-            "-r",
-            f"__ns:={ns}",
-        ],
-        tmp_path / "node.log",
-    )
+    node = Started(ros2, ros2_run_node(ns), tmp_path / "node.log")
     decisions = tmp_path / "decisions.jsonl"
     controller = Started(
         ros2,

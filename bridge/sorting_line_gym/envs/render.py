@@ -305,29 +305,12 @@ def _key(ax, x: float, y: float, items, *, fontsize: float = _FS_LEGEND, gap_pt:
     for symbol, color, label in items:
         for text, col, offset in ((symbol, color, gap_pt), (label, "#222222", 2.5)):
             if prev is None:
-                prev = ax.annotate(
-                    text,
-                    (x, y),
-                    xycoords="axes fraction",
-                    ha="left",
-                    va="center",
-                    fontsize=fontsize,
-                    color=col,
-                    annotation_clip=False,
-                )
+                where = {"xy": (x, y), "xycoords": "axes fraction"}
             else:
-                prev = ax.annotate(
-                    text,
-                    (1.0, 0.5),
-                    xycoords=prev,
-                    xytext=(offset, 0),
-                    textcoords="offset points",
-                    ha="left",
-                    va="center",
-                    fontsize=fontsize,
-                    color=col,
-                    annotation_clip=False,
-                )
+                where = {"xy": (1.0, 0.5), "xycoords": prev, "xytext": (offset, 0), "textcoords": "offset points"}
+            prev = ax.annotate(
+                text, **where, ha="left", va="center", fontsize=fontsize, color=col, annotation_clip=False
+            )
 
 
 def _pair(values: Sequence[int]) -> tuple[int, int]:
@@ -438,35 +421,28 @@ def _material_bars(ax, a: int, b: int) -> None:
 
 
 def _panel_belt(ax, frame: DashboardFrame) -> None:
-    a, b = _pair(frame.belt_ab)
-    _style(ax, f"Conveyor belt: {a + b} units")
-    _material_bars(ax, a, b)
-    ax.text(
-        0.99,
-        0.99,
-        f"occupancy {_pct(frame.occupancy)}",
-        transform=ax.transAxes,
-        ha="right",
-        va="top",
-        fontsize=_FS_ANNOT,
-        color=COLOR_OCCUPANCY,
-        fontweight="bold",
-    )
+    _panel_stage(ax, "Conveyor belt", frame.belt_ab, f"occupancy {_pct(frame.occupancy)}", COLOR_OCCUPANCY)
 
 
 def _panel_machine(ax, frame: DashboardFrame) -> None:
-    a, b = _pair(frame.machine_ab)
-    _style(ax, f"Sorting machine: {a + b} units")
+    note = f"sorted with accuracy {_pct(frame.sorter_accuracy)}"
+    _panel_stage(ax, "Sorting machine", frame.machine_ab, note, COLOR_ACCURACY)
+
+
+def _panel_stage(ax, name: str, ab: Sequence[int], note: str, color: str) -> None:
+    """A stage of the line (belt or sorting machine): its A/B units as bars, `note` top right in `color`."""
+    a, b = _pair(ab)
+    _style(ax, f"{name}: {a + b} units")
     _material_bars(ax, a, b)
     ax.text(
         0.99,
         0.99,
-        f"sorted with accuracy {_pct(frame.sorter_accuracy)}",
+        note,
         transform=ax.transAxes,
         ha="right",
         va="top",
         fontsize=_FS_ANNOT,
-        color=COLOR_ACCURACY,
+        color=color,
         fontweight="bold",
     )
 
