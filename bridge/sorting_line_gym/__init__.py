@@ -4,10 +4,10 @@
     env = gymnasium.make("sorting_line_gym:SortingLine-v0", setup="B")          # basic line
     env = gymnasium.make("sorting_line_gym:SortingLineAdvanced-v0", setup="D")  # speed x sort mode
 
-By default a single-line environment leases a line of this host's line server (``node="shared"``:
-started when needed, stopped 8 s after its last env); ``node="spawn"`` starts, owns and stops a
-node process of its own (the vector environments' default: N lines of one node);
-``node="attach"`` uses a node already serving ``namespace``. Nothing starts before the
+By default each environment starts, owns and stops its own node process (``node="spawn"``) in a
+namespace of its own; ``node="shared"`` leases a line of this host's line server (started when
+needed, stopped 8 s after its last env: many envs per host); ``node="attach"`` uses a node already
+serving ``namespace``. Nothing starts before the
 first ``reset()``. Under the hood every step is a lock-step round trip over ROS 2 topics (see
 ``ros.links``).
 

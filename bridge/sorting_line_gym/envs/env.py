@@ -40,10 +40,10 @@ of 50 steps (`max_episode_steps=250` for training); constructing the class direc
 `max_episode_steps=N` makes the node truncate at N.
 
 ## Arguments
-`setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "shared" (default: lease a
-line of this host's line server, `line_server`, started when none has a free line and stopped 8 s
-after its last env; 64 envs start in seconds), "spawn" (start, own and stop a node process in a
-namespace of its own) or "attach" (use the node serving `namespace`);
+`setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "spawn" (default: start,
+own and stop a node process in a namespace of its own), "shared" (lease a line of this host's line
+server, `line_server`, started when none has a free line and stopped 8 s after its last env; 64
+envs start in seconds) or "attach" (use the node serving `namespace`);
 `step_timeout` seconds per round trip (an error names the namespace, topic and tick);
 `startup_timeout`; `render_mode` "rgb_array" or "human"; `input`, `obs_noise`, `action_penalty` (instead of the
 setup's) and `threshold` (0.7), as the node's options of the same name, with their ranges.
@@ -98,7 +98,7 @@ class SortingLineEnv(gym.Env):
         setup: str = "A",
         variant: str = "basic",
         namespace: str | None = None,
-        node: str = "shared",
+        node: str = "spawn",
         max_episode_steps: int | None = None,
         step_timeout: float = 2.0,
         startup_timeout: float = 20.0,
