@@ -20,6 +20,7 @@ from pathlib import Path
 
 import ros_harness as h
 from line_client import LineClient
+from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 
 DATA = h.ROOT / "tests" / "data" / "bags"
 MAX_STEPS = 50
@@ -77,19 +78,25 @@ def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda:
     episode to its end. The controller's first answer can be lost while endpoints still match:
     then nothing moves and the reset is repeated (the bag records both; replay does the same)."""
     for seed in plan:
-        for attempt in range(1, 4):
-            response = client.reset(seed)
-            episode = response.episode
 
-            def reached(step: int):
-                return any(s.episode == episode and s.step >= step for s in client.msgs["state"])
-
+        def attempt(_k: int, seed=seed) -> tuple[int, bool]:
+            episode = client.reset(seed).episode
             try:
-                session.spin_until(lambda: reached(1), 3.0, f"{client.ns}: the controller's first step", context)
-                break
+                session.spin_until(
+                    lambda: any(s.episode == episode and s.step >= 1 for s in client.msgs["state"]),
+                    3.0,
+                    f"{client.ns}: the controller's first step",
+                    context,
+                )
+                return episode, True
             except h.WaitTimeout:
-                print(f"attempt {attempt}: nobody answered the tick of the reset; resetting again", file=sys.stderr)
-        else:
+                return episode, False
+
+        def again(_result) -> None:
+            print("nobody answered the tick of the reset; resetting again", file=sys.stderr)
+
+        episode, answered = repeated_while_unanswered(attempt, lambda r: not r[1], 3, before_repeat=again)
+        if not answered:
             raise AssertionError(f"the controller never answered a reset's tick\n{context()}")
         session.spin_until(
             lambda: any(s.episode == episode and s.truncated for s in client.msgs["state"]),

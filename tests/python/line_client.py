@@ -8,6 +8,7 @@ import functools
 import sys
 import time
 from collections import defaultdict
+from typing import Any
 
 from ros_harness import (
     NS_PER_S,
@@ -20,6 +21,7 @@ from ros_harness import (
     show_ns,
     stamp_ns,
 )
+from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 
 
 class LineClient:
@@ -218,6 +220,29 @@ class LineClient:
             message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}",
         )
 
+    def _call_reset(self, request, what: str, attempt: int) -> tuple[str, Any]:
+        """One call of the reset service: ("reply", the response), or, without a reply within 3 s,
+        what the evidence says happened ("event", the index of its events/reset; "diag-reset" or
+        "diag-same", the number of events/reset before the call)."""
+        events_before = len(self.msgs["events/reset"])
+        episodes_before = self.diagnostics[-1][1].get("episodes") if self.diagnostics else None
+        called = time.monotonic()
+        future = self.reset_client.call_async(request)
+        try:
+            return "reply", self.session.wait_future(
+                future, 3.0, f"a reply from {what} (attempt {attempt}/3)", self.context, self.node_gone
+            )
+        except WaitTimeout:
+            pass
+        # No reply. Did the reset happen? Look for evidence before calling again.
+        evidence = functools.partial(self._reset_evidence, events_before, episodes_before, called)
+        found = self._until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics")
+        if future.done():
+            return "reply", future.result()
+        self.reset_client.remove_pending_request(future)
+        print(f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}", file=sys.stderr)
+        return found, events_before
+
     def reset(self, seed: int | None = None, timeout: float = 10.0, wait_tick: bool = True):
         """Calls `reset` and returns its response; waits for the new tick's state.
 
@@ -229,40 +254,19 @@ class LineClient:
         what = f"{self.name('reset')} (seed {seed})"
         request = self._ResetLine.Request(has_seed=seed is not None, seed=seed or 0)
         self._until(self.reset_client.service_is_ready, timeout, f"service {what} to be available")
-        response = None
-        for attempt in range(1, 4):
-            events_before = len(self.msgs["events/reset"])
-            episodes_before = self.diagnostics[-1][1].get("episodes") if self.diagnostics else None
-            called = time.monotonic()
-            future = self.reset_client.call_async(request)
-            try:
-                response = self.session.wait_future(
-                    future, 3.0, f"a reply from {what} (attempt {attempt}/3)", self.context, self.node_gone
-                )
-                break
-            except WaitTimeout:
-                pass
-            # No reply. Did the reset happen? Look for evidence before calling again.
-            evidence = functools.partial(self._reset_evidence, events_before, episodes_before, called)
-            found = self._until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics")
-            if future.done():
-                response = future.result()
-                break
-            self.reset_client.remove_pending_request(future)
-            print(
-                f"ros_harness: no reply from {what} within 3 s (attempt {attempt}/3); evidence: {found}",
-                file=sys.stderr,
+        outcome, value = repeated_while_unanswered(
+            functools.partial(self._call_reset, request, what), lambda result: result[0] == "diag-same", 3
+        )
+        if outcome == "reply":
+            response = value
+        elif outcome == "event":
+            response = self._rebuilt_reset_response(self.msgs["events/reset"][value])
+        elif outcome == "diag-reset":
+            raise WaitTimeout(
+                f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
+                f"events/reset nor the state arrived\n{self.context()}"
             )
-            if found == "event":
-                response = self._rebuilt_reset_response(self.msgs["events/reset"][events_before])
-                break
-            if found == "diag-reset":
-                raise WaitTimeout(
-                    f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
-                    f"events/reset nor the state arrived\n{self.context()}"
-                )
-            # "diag-same": the request never reached the node; calling again is safe.
-        if response is None:
+        else:  # "diag-same" three times: the request never reached the node
             raise WaitTimeout(f"no reply from {what} after 3 attempts\n{self.context()}")
         assert response.success, f"{self.name('reset')} failed: {response.message}"
         self.stamp = stamp_ns(response.stamp)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from ..line.errors import BridgeTimeout
 from ..ros.links import LineLink
+from ..workarounds.late_matching import repeated_while_unanswered
 from .bagfile import Bag
 from .check_verdict import Answer, EpisodeResult, Figures, Tolerance, Verdict
 from .compare import first_field_difference, show_ns
@@ -187,21 +188,25 @@ class _Run:
     def _episode(self, recorded: dict, target: int, bar) -> None:
         seed = int(recorded["seed"]) if recorded.get("seeded", True) else None
         first_act = not self.episodes  # the bag's first reset: the node's first act
-        for attempt in range(1, RESET_ATTEMPTS + 1):
+
+        def attempt(_k: int) -> tuple[int, int | None]:
             self.link.send_reset(seed)
             self.tool.until(self.link.reset_done, max(5.0, self.answer_timeout), f"the reply of {self.namespace}/reset")
             episode = self.link.finish_reset().episode
             self.episodes[int(recorded["episode"])] = episode
-            stalled = self._follow(episode, target, bar)
-            if stalled is None:
-                return
-            if stalled > 0 or (seed is None and not first_act) or attempt == RESET_ATTEMPTS:
-                self._stalled(recorded, episode, stalled)
-                return
-            # The first tick got no answer: a seeded reset again is the same episode again; the
-            # node's first reset without a seed needs a fresh node.
-            if seed is None:
-                self.restart_node()
+            return episode, self._follow(episode, target, bar)
+
+        # A first tick without an answer may be the controller still matching the node: a seeded
+        # reset again is the same episode again; the node's first reset without a seed needs a
+        # fresh node; a later unseeded reset cannot be repeated.
+        episode, stalled = repeated_while_unanswered(
+            attempt,
+            lambda result: result[1] == 0,
+            RESET_ATTEMPTS if seed is not None or first_act else 1,
+            before_repeat=(lambda _result: self.restart_node()) if seed is None else None,
+        )
+        if stalled is not None:
+            self._stalled(recorded, episode, stalled)
 
     def _follow(self, episode: int, target: int, bar) -> int | None:
         """Waits while the controller drives ``episode`` to step ``target`` (or its end): None

@@ -50,11 +50,13 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's,
     the bag replayer's, the recorder's parameter query and the pytest plugin's first answer of a
     controller (a controller that is still discovering the node misses its first tick the same
-    way). ``bag.check_closed`` repeats a reset whose first tick got no answer in its own loop, as
-    it restarts the node when the reset had no seed; the tests' harness (tests/python/line_client.py,
-    bag_golden.py) repeats resets only when /diagnostics shows they did not happen. Delete when: a
-    service client can tell that the server matched its reply reader, and no test sees a lost
-    first reply.
+    way). Where a timeout alone cannot tell a lost exchange from one that happened,
+    ``repeated_while_unanswered`` repeats it only while the caller's evidence says nothing
+    happened: ``bag.check_closed`` (a reset whose first tick got no answer; a fresh node first when
+    the reset had no seed) and the tests' harness (tests/python/line_client.py: a reset that
+    /diagnostics shows did not happen; bag_golden.py: a golden recording's reset nobody answered).
+    Delete when: a service client can tell that the server matched its reply reader, and no test
+    sees a lost first reply.
 
 ``orphaned_processes`` -- what a process starts is not told when it dies.
     Defect: Linux leaves a dead process's children running, a SIGKILLed Python runs no cleanup,
