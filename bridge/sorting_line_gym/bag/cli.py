@@ -15,6 +15,10 @@ use), 3 the graph, the replay node or the disk failed (a wait timed out, the nod
 filled while recording). SIGINT/SIGTERM end `record` and `play` cleanly (the bag is closed with
 its metadata); a recorder killed outright leaves a bag `reindex` recovers, with everything received
 up to about half a second before the kill (docs/reliability.md, "Recording").
+
+Each subcommand is a front for a library function (record, replay, play, check_controller) and
+calls it with ``call_with_flags``: the function's keyword-only parameters take the flags of the
+same name, the call names the rest.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import signal
 import sys
 
 from ..line.errors import BridgeError
+from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS
 from .bagfile import BagError, describe, open_bag
 from .writer import BagWriteError
@@ -328,6 +333,16 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT if isinstance(e, BagError) and not isinstance(e, BagWriteError) else EXIT_FAILED
 
 
+def _say(text: str) -> None:
+    """What a subcommand reports while it runs (ready, waiting for ...), at once."""
+    print(text, flush=True)
+
+
+def _progress(args) -> bool:
+    """A progress bar unless --no-progress, and only on a terminal."""
+    return not args.no_progress and sys.stderr.isatty()
+
+
 def _info(args) -> int:
     print(describe(open_bag(args.bag)))
     return 0
@@ -346,17 +361,8 @@ def _record(args) -> int:
 
     options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
     with _Stop() as stop:
-        result = record(
-            args.namespace,
-            args.output,
-            args.topics,
-            duration=args.duration,
-            max_ticks=args.max_ticks,
-            wait=args.wait,
-            stop=stop,
-            on_ready=lambda s: print(s, flush=True),
-            diagnostics=args.diagnostics,
-            options=options,
+        result = call_with_flags(
+            record, args, args.namespace, args.output, args.topics, stop=stop, on_ready=_say, options=options
         )
     print(("stopped by " + stop.signal + ": " if stop.signal else "") + result.summary(), flush=True)
     return 0
@@ -365,12 +371,7 @@ def _record(args) -> int:
 def _replay(args) -> int:
     from .replay import replay
 
-    result = replay(
-        args.bag,
-        _node_options(args),
-        step_timeout=args.step_timeout,
-        progress=not args.no_progress and sys.stderr.isatty(),
-    )
+    result = call_with_flags(replay, args, args.bag, _node_options(args), progress=_progress(args))
     print(result.report(), flush=True)
     return 0 if result.identical else EXIT_DIFFERENT
 
@@ -378,19 +379,9 @@ def _replay(args) -> int:
 def _play(args) -> int:
     from .play import play
 
+    wait_for = [] if args.no_wait else args.wait_for
     with _Stop() as stop:
-        result = play(
-            args.bag,
-            rate=args.rate,
-            topics=args.topics,
-            namespace=args.namespace,
-            wait_for=[] if args.no_wait else args.wait_for,
-            wait=args.wait,
-            stop=stop,
-            on_ready=lambda s: print(s, flush=True),
-            lockstep=args.lockstep,
-            answer_timeout=args.answer_timeout,
-        )
+        result = call_with_flags(play, args, args.bag, wait_for=wait_for, stop=stop, on_ready=_say)
     print(result.summary(), flush=True)
     return 0
 
@@ -402,20 +393,8 @@ def _check(args) -> int:
 
     overrides = _node_options(args)
     with _Stop() as stop:
-        verdict = check_controller(
-            args.bag,
-            namespace=args.namespace,
-            controller=args.controller,
-            closed_loop=args.closed_loop,
-            record=args.record,
-            answer_timeout=args.answer_timeout,
-            wait=args.wait,
-            max_reward_drop=args.max_reward_drop,
-            max_accuracy_drop=args.max_accuracy_drop,
-            max_purity_drop=args.max_purity_drop,
-            overrides=overrides,
-            stop=stop,
-            progress=not args.no_progress and sys.stderr.isatty(),
+        verdict = call_with_flags(
+            check_controller, args, args.bag, overrides=overrides, stop=stop, progress=_progress(args)
         )
     print(verdict.summary(), flush=True)
     if verdict.error:

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..agents.policies import Agent
+from ..line.flags import call_with_flags
 from ..line.vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
 from ..training.trained_agent import make_agent
 
@@ -243,15 +244,8 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     try:
-        result = evaluate(
-            args.agent,
-            args.setup,
-            args.variant,
-            episodes=args.episodes,
-            seed=args.seed,
-            steps=args.steps,
-            dashboard=dashboard,
-            on_episode=show,
+        result = call_with_flags(
+            evaluate, args, args.agent, args.setup, args.variant, dashboard=dashboard, on_episode=show
         )
     except ValueError as e:
         print(f"sorting-line-eval: {e}", file=sys.stderr)

@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS, VARIANTS, check_setup
 from . import hyperparams
 
@@ -213,17 +214,15 @@ def main(argv: list[str] | None = None) -> int:
         f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}",
         file=sys.stderr,
     )
-    run = train(
+    run = call_with_flags(
+        train,
+        args,
         args.algo,
         args.setup,
         args.variant,
-        seed=args.seed,
-        out=args.out,
         params=params,
         tensorboard=tensorboard,
         progress=not args.no_progress,
-        torch_threads=args.torch_threads,
-        verbose=args.verbose,
     )
     print(
         f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s"
