@@ -70,6 +70,11 @@ _FS_ANNOT = 9.5
 _FS_LEGEND = 8.5
 _FS_KPI = 11
 
+# Text styles: a panel's title (the figure-level panels' are placed like the Axes titles and look the
+# same; no mathtext, a "$" stays a "$") and a note a panel shows next to its plot.
+_TITLE_STYLE = {"fontsize": _FS_TITLE, "parse_math": False}
+_NOTE_STYLE = {"fontsize": _FS_ANNOT, "fontweight": "bold"}
+
 
 @dataclass
 class DashboardFrame:
@@ -281,7 +286,7 @@ def _fit(rgb: np.ndarray, height: int, width: int) -> np.ndarray:
 
 def _style(ax, title: str) -> None:
     # A fixed title position: matplotlib's automatic one measures every tick label of the Axes.
-    ax.set_title(title, fontsize=_FS_TITLE, pad=6, y=1.0, parse_math=False)
+    ax.set_title(title, pad=6, y=1.0, **_TITLE_STYLE)
     ax.tick_params(labelsize=_FS_TICK)
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
@@ -338,16 +343,7 @@ def _finite(v: float) -> float:
 
 def _fig_title(fig: Figure, x_in: float, top_in: float, text: str) -> None:
     """A panel title for a figure-level panel, placed like an Axes title (baseline 6 pt above the top)."""
-    fig.text(
-        x_in,
-        top_in + 6 / 72,
-        text,
-        transform=fig.dpi_scale_trans,
-        ha="center",
-        va="baseline",
-        fontsize=_FS_TITLE,
-        parse_math=False,
-    )
+    fig.text(x_in, top_in + 6 / 72, text, transform=fig.dpi_scale_trans, ha="center", va="baseline", **_TITLE_STYLE)
 
 
 def _inches(fig: Figure, box) -> tuple[float, float, float, float]:
@@ -434,17 +430,7 @@ def _panel_stage(ax, name: str, ab: Sequence[int], note: str, color: str) -> Non
     a, b = _pair(ab)
     _style(ax, f"{name}: {a + b} units")
     _material_bars(ax, a, b)
-    ax.text(
-        0.99,
-        0.99,
-        note,
-        transform=ax.transAxes,
-        ha="right",
-        va="top",
-        fontsize=_FS_ANNOT,
-        color=color,
-        fontweight="bold",
-    )
+    ax.text(0.99, 0.99, note, transform=ax.transAxes, ha="right", va="top", color=color, **_NOTE_STYLE)
 
 
 # --- (4) containers
