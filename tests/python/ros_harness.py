@@ -351,14 +351,17 @@ def decode_action(variant: str, action: int) -> tuple[float, int | None]:
     return SPEEDS[speed_index], (mode if variant == "advanced" else None)
 
 
+def trace_observation_view(observation: dict) -> dict:
+    """A trace entry's observation as LineState's observation fields."""
+    return {
+        "observation_quantity": observation["quantity"],
+        "observation_category": CATEGORIES[observation["category"]],
+    }
+
+
 def trace_reset_view(entry: dict) -> dict:
     r = entry["reset"]
-    return {
-        "seed": r["seed"],
-        "episode": r["episode"],
-        "observation_quantity": r["observation"]["quantity"],
-        "observation_category": CATEGORIES[r["observation"]["category"]],
-    }
+    return {"seed": r["seed"], "episode": r["episode"], **trace_observation_view(r["observation"])}
 
 
 def state_reset_view(state) -> dict:
@@ -370,8 +373,14 @@ def state_reset_view(state) -> dict:
     }
 
 
+#: The four container counts in the order of the env's info["containers"]: a trace entry's
+#: "containers" keys, and LineState's fields with a "container_" prefix.
+CONTAINERS = ("a", "a_false", "b", "b_false")
+
+
 def trace_step_view(entry: dict) -> dict:
-    s, c = entry["step"], entry["containers"]
+    """A trace step entry as the flat fields of the node's LineState (see state_step_view)."""
+    s = entry["step"]
     return {
         "episode": entry["episode"],
         "step": s["step"],
@@ -382,13 +391,9 @@ def trace_step_view(entry: dict) -> dict:
         "reward": s["reward"],
         "cumulative_reward": entry["cumulative_reward"],
         "purity": entry["purity"],
-        "container_a": c["a"],
-        "container_a_false": c["a_false"],
-        "container_b": c["b"],
-        "container_b_false": c["b_false"],
+        **{f"container_{k}": entry["containers"][k] for k in CONTAINERS},
         "speed_changes": entry["speed_changes"],
-        "observation_quantity": s["observation"]["quantity"],
-        "observation_category": CATEGORIES[s["observation"]["category"]],
+        **trace_observation_view(s["observation"]),
         "terminated": s["terminated"],
         "truncated": s["truncated"],
     }

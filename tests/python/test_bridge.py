@@ -34,6 +34,7 @@ import gymnasium
 import numpy as np
 import pytest
 
+import ros_harness as h
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineSB3VecEnv
 from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
@@ -91,31 +92,14 @@ def assert_obs(obs, variant: str, observation: dict, where: str) -> None:
 def assert_step(variant: str, obs, reward, info: dict, entry: dict, where: str) -> None:
     """One env step (obs, reward, info KPIs) against one trace step entry, exactly."""
     assert "step" in entry, f"{where}: the library has a reset here: {entry}"
-    s, c = entry["step"], entry["containers"]
-    assert_obs(obs, variant, s["observation"], where)
-    assert reward == s["reward"], f"{where}: reward {reward!r} != library {s['reward']!r}"
-    got = {
-        "accuracy": info["accuracy"],
-        "purity": info["purity"],
-        "containers": tuple(int(x) for x in info["containers"]),
-        "speed_changes": int(info["speed_changes"]),
-        "occupancy": info["occupancy"],
-        "cumulative_reward": info["cumulative_reward"],
-        "speed_index": int(info["speed_index"]),
-        "mode": int(info["mode"]),
-        "step": int(info["step"]),
-    }
-    want = {
-        "accuracy": s["accuracy"],
-        "purity": entry["purity"],
-        "containers": (c["a"], c["a_false"], c["b"], c["b_false"]),
-        "speed_changes": entry["speed_changes"],
-        "occupancy": s["occupancy"],
-        "cumulative_reward": entry["cumulative_reward"],
-        "speed_index": s["action"]["speed_index"],
-        "mode": CATEGORY[s["action"]["mode"]],
-        "step": s["step"],
-    }
+    library = h.trace_step_view(entry)
+    assert_obs(obs, variant, entry["step"]["observation"], where)
+    assert reward == library["reward"], f"{where}: reward {reward!r} != library {library['reward']!r}"
+    got = {k: info[k] for k in ("accuracy", "purity", "occupancy", "cumulative_reward")}
+    got |= {k: int(info[k]) for k in ("speed_changes", "speed_index", "mode", "step")}
+    want = {k: library[k] for k in got}
+    got["containers"] = tuple(int(x) for x in info["containers"])
+    want["containers"] = tuple(library[f"container_{k}"] for k in h.CONTAINERS)
     diff = {k: (got[k], want[k]) for k in want if got[k] != want[k]}
     assert not diff, f"{where}: info differs from the library (env, library): {diff}"
 
