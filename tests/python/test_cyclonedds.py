@@ -31,12 +31,14 @@ cyclonedds = pytest.importorskip("cyclonedds", reason="cyclonedds (launch_script
 
 from cyclonedds.core import Policy, Qos  # noqa: E402
 from cyclonedds.domain import DomainParticipant  # noqa: E402
-from cyclonedds.idl import IdlStruct  # noqa: E402
+from cyclonedds.idl import IdlStruct, make_idl_struct  # noqa: E402
 from cyclonedds.idl import types as t  # noqa: E402
 from cyclonedds.pub import DataWriter  # noqa: E402
 from cyclonedds.sub import DataReader  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
+from rosbags.typesys import get_types_from_msg  # noqa: E402
+from rosbags.typesys.base import Nodetype  # noqa: E402
 
 # Loopback only; participant indices let the node's unicast discovery (ports of indices 0..) reach us.
 CYCLONE_CONFIG = """<CycloneDDS><Domain Id="any">
@@ -46,7 +48,8 @@ CYCLONE_CONFIG = """<CycloneDDS><Domain Id="any">
 </Domain></CycloneDDS>"""
 
 
-# ---- The ROS types as DDS sees them (field order = .msg order)
+# ---- The ROS types as DDS sees them: ours built from the repository's .msg/.srv files (fields in
+# file order), so the node is checked against the definitions; the standard ones they nest written out.
 
 
 @dataclass
@@ -61,60 +64,43 @@ class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
     frame_id: str
 
 
-@dataclass
-class LineState(IdlStruct, typename="sorting_line_interfaces::msg::dds_::LineState_"):
-    header: Header
-    episode: t.uint32
-    step: t.uint32
-    seed: t.uint64
-    speed: t.float64
-    speed_index: t.uint8
-    mode: t.uint8
-    occupancy: t.float64
-    accuracy: t.float64
-    reward: t.float64
-    cumulative_reward: t.float64
-    purity: t.float64
-    recall_a: t.float64
-    recall_b: t.float64
-    container_a: t.uint32
-    container_a_false: t.uint32
-    container_b: t.uint32
-    container_b_false: t.uint32
-    speed_changes: t.uint32
-    observation_quantity: t.float64
-    observation_category: t.uint8
-    terminated: bool
-    truncated: bool
+#: The field types our definitions use (a base type, or a nested message by name), as Cyclone's.
+IDL_TYPES = {
+    "bool": bool,
+    "string": str,
+    "uint8": t.uint8,
+    "uint32": t.uint32,
+    "uint64": t.uint64,
+    "float64": t.float64,
+    "std_msgs/msg/Header": Header,
+    "builtin_interfaces/msg/Time": Time,
+}
 
 
-@dataclass
-class SpeedCommand(IdlStruct, typename="sorting_line_interfaces::msg::dds_::SpeedCommand_"):
-    header: Header
-    speed: t.float64
+def idl_struct(ros_type: str, definition: str) -> type[IdlStruct]:
+    """The DDS type of ``pkg/kind/Name`` (``pkg::kind::dds_::Name_``) with the fields of ``definition``
+    (a .msg file's text or one half of a .srv's), in order; constants and comments are no fields."""
+    ((_constants, fields),) = get_types_from_msg(definition, ros_type).values()
+    types = {field: IDL_TYPES[spec[0] if node is Nodetype.BASE else spec] for field, (node, spec) in fields}
+    package, kind, name = ros_type.split("/")
+    return make_idl_struct(name, f"{package}::{kind}::dds_::{name}_", types)
 
 
-@dataclass
-class SortModeCommand(IdlStruct, typename="sorting_line_interfaces::msg::dds_::SortModeCommand_"):
-    header: Header
-    mode: t.uint8
+def message(name: str) -> type[IdlStruct]:
+    return idl_struct(f"sorting_line_interfaces/msg/{name}", (h.ROOT / "msg" / "msg" / f"{name}.msg").read_text())
 
 
-@dataclass
-class ResetLineRequest(IdlStruct, typename="sorting_line_interfaces::srv::dds_::ResetLine_Request_"):
-    has_seed: bool
-    seed: t.uint64
+def service(name: str) -> tuple[type[IdlStruct], type[IdlStruct]]:
+    """The request and the response type of a service."""
+    request, response = (h.ROOT / "msg" / "srv" / f"{name}.srv").read_text().split("\n---\n")
+    ros_type = f"sorting_line_interfaces/srv/{name}"
+    return idl_struct(f"{ros_type}_Request", request), idl_struct(f"{ros_type}_Response", response)
 
 
-@dataclass
-class ResetLineResponse(IdlStruct, typename="sorting_line_interfaces::srv::dds_::ResetLine_Response_"):
-    success: bool
-    message: str
-    seed: t.uint64
-    episode: t.uint32
-    stamp: Time
-    quantity: t.float64
-    category: t.uint8
+LineState = message("LineState")
+SpeedCommand = message("SpeedCommand")
+SortModeCommand = message("SortModeCommand")
+ResetLineRequest, ResetLineResponse = service("ResetLine")
 
 
 ROS_QOS = Qos(
