@@ -19,12 +19,18 @@ import subprocess
 import ros_harness as h
 from ros_harness import NS_PER_S, stamp_ns
 
-# Advanced B with the hardware of basic B until the upgrades; tick and episode events of every kind.
-SCHEDULE = """\
+# Both schedules run the advanced line (as built, episode 0) with basic hardware: no sort modes, no
+# ratio sensor, until their upgrades.
+BASIC_HARDWARE_AS_BUILT = """\
 events:
   - at: {episode: 0}
     sort_modes: false
     ratio_sensor: false
+"""
+# Advanced B with the hardware of basic B until the upgrades; tick and episode events of every kind.
+SCHEDULE = (
+    BASIC_HARDWARE_AS_BUILT
+    + """\
   - at: {tick: 4}
     obs_noise: 0.2
     threshold: 0.8
@@ -35,6 +41,7 @@ events:
   - at: {tick: 14}
     sort_modes: true
 """
+)
 UPGRADE_TICK = 14
 SEED = 42
 # Advanced actions (speed index * 3 + mode), modes other than 0 before the upgrade included.
@@ -271,17 +278,16 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
 # Gymnasium: SortingLineEvolving-v0
 
 # Basic hardware until episode 3 (the third reset), then both upgrades; a drift mid-episode 3.
-ENV_SCHEDULE = """\
-events:
-  - at: {episode: 0}
-    sort_modes: false
-    ratio_sensor: false
+ENV_SCHEDULE = (
+    BASIC_HARDWARE_AS_BUILT
+    + """\
   - at: {episode: 3}
     sort_modes: true
     ratio_sensor: true
   - at: {tick: 25}
     obs_noise: 0.1
 """
+)
 ENV_EPISODE_STEPS = 10
 
 
