@@ -26,6 +26,7 @@ from ..line.options import LineOptions
 from ..line.process import NodeProcess, private_namespace
 from ..workarounds.fork_unsafe_dds import fork_error
 from ..workarounds.late_matching import HANDSHAKE_TIMEOUTS, retried_handshake
+from ..workarounds.participant_deletion_hang import retire_node
 from ..workarounds.simultaneous_discovery import joining_graph
 from .context import acquire_rclpy, release_rclpy
 from .links import QOS, BatchLink, LineLink, stamp_key
@@ -279,7 +280,7 @@ class LineBank:
         node = getattr(self, "node", None)
         if node is not None:
             self.executor.remove_node(node)
-            node.destroy_node()
+            retire_node(node)
             self.executor.shutdown(timeout_sec=0.5)
         if self.process is not None:
             # A node killed from outside (a fault test) is not an error of close().

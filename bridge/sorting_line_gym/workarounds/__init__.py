@@ -27,7 +27,9 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     hogs 2 hangs in 16 runs before, 0 in 8 after; SCHED_IDLE priority did not help (1 hang in 5).
     Seen in: Fast DDS 2.14.5. Workaround: forked children and processes ended by being killed (Ray's
     EnvRunners, ``keep_participant_until_killed``) keep a never-destroyed node, so the participant
-    is never deleted. Delete when: with a Fast DDS release that fixes the deadlock, the
+    is never deleted, and keep the nodes their closed envs leave (``retire_node``): a SubprocVecEnv-16
+    worker with the participant kept still hung 240 s in ``destroy_node`` (a quiet fresh-clone suite
+    run, 2026-11-26). Delete when: with a Fast DDS release that fixes the deadlock, the
     SubprocVecEnv-16 test (launch_scripts/reliability.sh) and test_rllib pass repeatedly under load
     without the anchor node.
 

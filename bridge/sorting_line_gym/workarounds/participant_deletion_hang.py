@@ -14,7 +14,11 @@ So a process that ends without deleting its participant anyway keeps it, as a no
 own that is never destroyed (:func:`keep_participant`): closing an env then never deletes the
 participant, and rclpy is never shut down. That is a forked child (it ends with ``os._exit``) and a
 process its host ends by killing it (:func:`keep_participant_until_killed`: Ray's EnvRunners). The
-others drop the participant when its lease expires, as for a killed process. Other processes
+others drop the participant when its lease expires, as for a killed process. Such a process keeps
+the nodes its envs close as well (:func:`retire_node`): destroying one hung the same way with the
+participant kept (a SubprocVecEnv-16 worker (fork) in ``destroy_node``, in ``rcl_node_fini``, for the
+test's 240 s, in a quiet fresh-clone run of the suite on 2026-11-26), and the process is about to
+end. Other processes
 delete their participant: they may fork after their envs are closed, which needs rclpy shut down
 (``fork_unsafe_dds.fork_error``), and they end through interpreter finalisation.
 """
@@ -29,6 +33,8 @@ from .fork_unsafe_dds import in_forked_child
 _killed_at_end = False
 #: In a forked child or one killed at its end, once rclpy is up: a node never destroyed.
 _participant_anchor = None
+#: The nodes closed envs left to such a process (retire_node): never destroyed either.
+_retired_nodes: list = []
 
 
 def keep_participant() -> None:
@@ -63,3 +69,13 @@ def keep_participant_until_killed() -> None:
 def keeps_participant() -> bool:
     """Whether this process's DDS participant outlives its envs."""
     return _participant_anchor is not None
+
+
+def retire_node(node) -> None:
+    """Ends the use of ``node`` (already out of its executor): destroys it, or, in a process that
+    keeps its participant, keeps it undestroyed until the process ends (its entities' deletion can
+    hang as the participant's does; a closed env's node is never spun again)."""
+    if keeps_participant():
+        _retired_nodes.append(node)
+    else:
+        node.destroy_node()
