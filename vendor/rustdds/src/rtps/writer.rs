@@ -749,8 +749,8 @@ impl Writer {
         self.next_heartbeat_count(),
         self.endianness,
         EntityId::UNKNOWN, // to all readers
-        self.piggyback_heartbeat_final(),
-        false, // liveliness_flag
+        false,             // final_flag: request ACKNACK
+        false,             // liveliness_flag
       );
     }
 
@@ -1713,16 +1713,6 @@ impl Writer {
     self.send_buffer.remove_changes_before(first_keeper);
   }
 
-  /// [sorting_line patch] The FINAL flag of the HEARTBEAT that rides with a user writer's
-  /// DATA: set, so a reader that has everything does not answer it (RTPS 8.3.7.5: a reader
-  /// answers a final HEARTBEAT only when it misses samples). Unset, every sample cost its reader
-  /// an ACKNACK, one more datagram for each side of every lock-step round trip. The periodic
-  /// HEARTBEAT stays non-final, so readers still acknowledge (at most HEARTBEAT_PERIOD_FAST
-  /// behind) and the history is still cleaned; built-in (discovery) writers keep asking at once.
-  pub(crate) fn piggyback_heartbeat_final(&self) -> bool {
-    !self.my_guid.entity_id.kind().is_built_in()
-  }
-
   pub(crate) fn next_heartbeat_count(&self) -> i32 {
     self
       .heartbeat_message_counter
@@ -2541,7 +2531,7 @@ impl<'a> Iterator for FragmentationIter<'a> {
 
             // Add HEARTBEAT message if needed
             if send_heartbeat && !writer.like_stateless {
-              let final_flag = writer.piggyback_heartbeat_final();
+              let final_flag = false; // false = request that readers acknowledge with ACKNACK.
               let liveliness_flag = false; // This is not a manual liveliness assertion (DDS API call), but side-effect of
                                            // writing new data.
               let hb_msg = MessageBuilder::new()
@@ -2600,7 +2590,7 @@ impl<'a> Iterator for FragmentationIter<'a> {
 
         // Add HEARTBEAT if needed
         if send_heartbeat && !writer.like_stateless {
-          let final_flag = writer.piggyback_heartbeat_final();
+          let final_flag = false; // false = request that readers acknowledge with ACKNACK.
           let liveliness_flag = false; // This is not a manual liveliness assertion (DDS API call), but side-effect of
                                        // writing new data.
           message_builder = message_builder.heartbeat_msg(
