@@ -52,13 +52,18 @@ def ros():
 
 @pytest.fixture(scope="session")
 def ros2(tmp_path_factory):
-    """The real `ros2` command line (tests/python/ros2_cli.py); skips with the reason when there is none."""
+    """The real `ros2` command line (tests/python/ros2_cli.py); skips with the reason when there is none.
+
+    A graph command (`ros2 topic echo`, `list`, ...) starts a ros2 daemon of its domain when none
+    runs, and that daemon outlives pytest; the session stops the one of its domain at the end (a
+    test that uses another domain stops that domain's itself)."""
     base = tmp_path_factory.mktemp("ros2cli")
     cli, origin = ros2_cli.locate(base / "overlay", base / "log")
     if cli is None:
         print(f"\n{origin}", file=sys.stderr)
         pytest.skip(origin)
-    return cli
+    yield cli
+    cli.run("daemon", "stop", timeout=30, check=False)
 
 
 @pytest.fixture(scope="module")

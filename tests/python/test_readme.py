@@ -93,7 +93,10 @@ def test_ros_controller_drives_the_node(quickstart_node, tmp_path):
 def test_ros2_topic_echo_shows_rewards(quickstart_node, ros2):
     argv = shell_command("ros2")
     cli = dataclasses.replace(ros2, env=dict(ros2.env, ROS_DOMAIN_ID=quickstart_domain()))
-    out = cli.run(*argv[1:], "--once", timeout=60.0).stdout
+    try:
+        out = cli.run(*argv[1:], "--once", timeout=60.0).stdout
+    finally:  # the echo started a daemon in this domain: it would outlive the suite
+        cli.run("daemon", "stop", timeout=30, check=False)
     assert re.search(r"^-?\d+\.\d+$", out, re.M), f"`{' '.join(argv)} --once` printed no reward:\n{out}"
 
 
