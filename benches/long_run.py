@@ -35,19 +35,6 @@ SLOW_S = 0.030
 EPISODE_STEPS = 250
 
 
-def node_rss_mb() -> float | None:
-    """Resident memory of the `sorting_line` process(es) of this run (MB), from /proc."""
-    total = 0
-    for status in Path("/proc").glob("[0-9]*/status"):
-        try:
-            text = status.read_text()
-        except OSError:
-            continue
-        if "\nName:\tsorting_line\n" in "\n" + text:
-            total += next(int(line.split()[1]) for line in text.splitlines() if line.startswith("VmRSS:"))
-    return total / 1024 if total else None
-
-
 def run(steps: int, seed: int) -> None:
     import numpy as np
 
@@ -57,6 +44,7 @@ def run(steps: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     try:
         env.reset(seed=seed)
+        node_pid = env.bank.process.process.pid  # the env's own node (node="spawn")
         window, slow, first, resets = [], [], 0, 1
         print(f"{'ticks':>14} | median ms | slowest ms | node RSS MB", flush=True)
         for i in range(steps):
@@ -73,10 +61,9 @@ def run(steps: int, seed: int) -> None:
                 env.reset()
                 resets += 1
             if len(window) == WINDOW or i == steps - 1:
-                rss = node_rss_mb()
                 print(
                     f"{first:>6}-{tick:<7} | {statistics.median(window) * 1e3:9.2f} | "
-                    f"{max(window) * 1e3:10.1f} | {'?' if rss is None else f'{rss:.1f}'}",
+                    f"{max(window) * 1e3:10.1f} | {h.rss_mb(node_pid):.1f}",
                     flush=True,
                 )
                 window = []

@@ -69,14 +69,6 @@ def progress(msg: str) -> None:
 # /proc
 
 
-def proc_status(pid: int, key: str) -> float:
-    """A `kB` field of /proc/PID/status, in MB."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(key + ":"):
-            return int(line.split()[1]) / 1024
-    raise KeyError(key)
-
-
 def cpu_seconds(pid: int) -> float:
     """utime + stime of a process (all its threads), in seconds."""
     stat = Path(f"/proc/{pid}/stat").read_text()
@@ -310,7 +302,7 @@ def measure(
     client = LockstepClient(session, line_namespaces(ns, lines), pattern, lean)
     try:
         client.connect_and_reset()
-        rss_start = proc_status(node.pid, "VmRSS")
+        rss_start = h.proc_status_mb(node.pid, "VmRSS")
         warmup = min(500, max(50, ticks // 10))
         for _ in range(warmup):
             client.round_trip()
@@ -331,8 +323,8 @@ def measure(
             progress(f"  {tag}: run {run + 1}/{runs}: {ticks / elapsed:,.0f} round trips/s")
         latencies.sort()
         steal = steal_percent(cpu_before, cpu_times())
-        rss = proc_status(node.pid, "VmRSS")
-        hwm = proc_status(node.pid, "VmHWM")
+        rss = h.proc_status_mb(node.pid, "VmRSS")
+        hwm = h.proc_status_mb(node.pid, "VmHWM")
         idle = None
         if idle_s > 0:
             progress(f"  {tag}: idle CPU over {idle_s:.0f} s ...")

@@ -36,7 +36,6 @@ sys.path.insert(0, str(ROOT / "benches"))
 
 import ros_harness as h  # noqa: E402
 from node_lockstep import cpu_seconds  # noqa: E402
-from soak import rss_mb  # noqa: E402
 
 LINE_TOPICS = ("input", "belt/occupancy", "state", "events/reset")
 NAMESPACE = "/recbench"
@@ -135,7 +134,7 @@ def _diagnostics(session, statuses: dict[str, list[dict]]):
 
 
 def _sample(proc, started: float, samples: list) -> None:
-    samples.append((time.monotonic() - started, rss_mb(proc.pid)))
+    samples.append((time.monotonic() - started, h.rss_mb(proc.pid)))
     print(f"  t = {samples[-1][0]:6.0f} s  recorder RSS {samples[-1][1]:7.1f} MB", file=sys.stderr, flush=True)
 
 
@@ -180,7 +179,7 @@ def _measure(args, session, recorder, log: Path, statuses: dict[str, list[dict]]
     while (now := time.monotonic()) < started + 60 * args.minutes:
         session.spin_for(0.5)
         if minute is None and now >= started + 60:
-            minute = rss_mb(recorder.pid)
+            minute = h.rss_mb(recorder.pid)
         if now >= next_sample:
             next_sample += args.every
             _sample(recorder, started, samples)

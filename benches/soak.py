@@ -47,17 +47,6 @@ def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def rss_mb(pid: int) -> float:
-    """VmRSS of a process in MB (0 if it is gone)."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
-
-
 # ------------------------------------------------------------------------------------------
 # Checking one line's stream
 
@@ -228,8 +217,8 @@ class _Window:
                 "ticks": result.ticks,
                 "seconds": round(now - self.t0, 3),
                 "ticks_per_s": round(self.ticks / (now - self.opened), 1),
-                "rss_node_mb": round(rss_mb(self.node_pid), 2),
-                "rss_bridge_mb": round(rss_mb(os.getpid()), 2),
+                "rss_node_mb": round(h.rss_mb(self.node_pid), 2),
+                "rss_bridge_mb": round(h.rss_mb(os.getpid()), 2),
                 "load": loadavg(),
                 "steal": round(steal_percent(self.cpu, cpu_times()), 1),
             }
@@ -312,12 +301,12 @@ def run_soak(
         # The node the env spawned at its first reset (none when it attached to others' nodes).
         spawned = getattr(env._lines.bank, "process", None)
         node_pid = spawned.process.pid if spawned is not None else -1
-        result.rss_node_start, result.rss_bridge_start = rss_mb(node_pid), rss_mb(os.getpid())
+        result.rss_node_start, result.rss_bridge_start = h.rss_mb(node_pid), h.rss_mb(os.getpid())
         bar = _progress_bar(ticks, show_progress)
         measured = _Window(node_pid)
         _drive(env, expected, result, measured, bar, ticks, window, seed)
         result.seconds = time.perf_counter() - measured.t0
-        result.rss_node_end, result.rss_bridge_end = rss_mb(node_pid), rss_mb(os.getpid())
+        result.rss_node_end, result.rss_bridge_end = h.rss_mb(node_pid), h.rss_mb(os.getpid())
         for ledger in expected.ledgers:  # what is left, including episodes still running
             expected.verify(result, ledger)
     finally:

@@ -56,18 +56,6 @@ def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def rss_mb(pids) -> float:
-    total = 0
-    for pid in pids:
-        try:
-            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    total += int(line.split()[1])
-        except OSError:
-            pass
-    return total / 1024
-
-
 def descendants(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-e", "-o", "pid=,ppid="], capture_output=True, text=True).stdout
     children: dict[int, list[int]] = {}
@@ -138,7 +126,7 @@ def measure_here(key: str, steps: int, raw_steps: int) -> dict:
             env.step(actions[i % 10])
         rate = steps * n / (time.perf_counter() - t0)
         me = os.getpid()
-        memory = rss_mb(sorted({me, *descendants(me), *server_pids()}))  # servers may be our descendants too
+        memory = h.rss_mb(*sorted({me, *descendants(me), *server_pids()}))  # servers may be our descendants too
     finally:
         env.close()
     return {"rate": rate, "envs": n, "start_s": start_s, "rss_mb": memory}

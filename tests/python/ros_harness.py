@@ -141,6 +141,22 @@ def machine_conditions(steal_window: float = 0.5) -> str:
     return f"load {'/'.join(f'{x:.2f}' for x in os.getloadavg())}, steal {steal:.1f} %"
 
 
+def proc_status_mb(pid: int, key: str = "VmRSS") -> float:
+    """A `kB` field of /proc/PID/status (VmRSS, VmHWM, ...) in MB; 0 if the process is gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+def rss_mb(*pids: int) -> float:
+    """The resident memory of these processes together, in MB (a process that is gone counts 0)."""
+    return sum(proc_status_mb(pid) for pid in pids)
+
+
 def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]:
     """Sets (if unset) what launch_scripts/env.sh sets, plus ROS_DOMAIN_ID; returns the values.
 

@@ -55,10 +55,6 @@ def same_binary_for_the_bridge(monkeypatch):
     monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
 
 
-def rss_mb(pid: int) -> float:
-    return soak.rss_mb(pid)
-
-
 # --------------------------------------------------------------------------------------------
 # Soak
 
@@ -234,7 +230,7 @@ def test_killed_bridges_leave_the_node_serving_without_growth(ros, start_node, c
         for t, a in enumerate(actions, start=1):
             state = client.act(a)
             assert state.reward == want[t]["step"]["reward"], f"cycle {cycle}, step {t}"
-        rss.append(rss_mb(node.pid))
+        rss.append(h.rss_mb(node.pid))
     assert node.running()
     wait_diagnostics_where(diag, ns, lambda v: v["owner"] != "none", 5.0, client.context)
     assert rss[-1] < rss[0] + 8, f"node RSS after each bridge killed: {rss} MB"
