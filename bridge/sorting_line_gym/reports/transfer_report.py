@@ -236,7 +236,8 @@ def _panel(ax, records: list[dict], summary: dict[str, Any], scenario: str, algo
             continue
         curves = np.array([moving(r[curve_key]) for r in runs])
         x = np.arange(curves.shape[1]) - offset
-        ax.plot(x, curves.mean(axis=0), color=colour, label=f"{label}: mean of {len(runs)} seeds")
+        seeds = f"mean of {len(runs)} seeds, band min-max" if len(runs) > 1 else "1 seed"
+        ax.plot(x, curves.mean(axis=0), color=colour, label=f"{label}: {seeds}")
         ax.fill_between(x, curves.min(axis=0), curves.max(axis=0), color=colour, alpha=0.2, lw=0)
     s = summary[scenario]
     frozen = s["algos"][algo]["strategies"].get("frozen")
