@@ -154,3 +154,35 @@ def test_transfer_keeps_the_runs_of_its_earlier_format(tmp_path, capsys):
     assert transfer.main([*SMOKE, "--out", str(tmp_path)]) == 2
     assert "holds the runs of the earlier sorting-line-transfer" in capsys.readouterr().err
     assert earlier.read_text() == '{"runs": [], "baselines": {}}\n' and not (tmp_path / "cells").exists()
+
+
+def test_ppo_settings_are_part_of_the_key_and_the_default_key_is_unchanged(tmp_path, capsys):
+    """`--ppo-settings paper` trains PPO with the paper's gamma, learning rate and entropy on the
+    study's rollouts, is its own configuration (refused into a --out of the default's cells), and
+    leaves the default key as studies saved before the option have it; no node."""
+    from sorting_line_gym.reports.cell_store import CellStore
+    from sorting_line_gym.training import transfer
+    from sorting_line_gym.training import transfer_cells as tc
+
+    study = tc.Settings(2000, 2000, 100).key()
+    assert "ppo_settings" not in study
+    assert study["hyperparameters"]["ppo"] == {"n_steps": 500, "batch_size": 100, "n_epochs": 5}
+    paper = tc.Settings(2000, 2000, 100, "paper").key()
+    assert paper["hyperparameters"]["ppo"] == {
+        "gamma": 0.85,
+        "learning_rate": 0.0007,
+        "ent_coef": 0.03,
+        "n_steps": 500,
+        "batch_size": 100,
+        "n_epochs": 5,
+    }
+    assert paper["hyperparameters"]["a2c"] == study["hyperparameters"]["a2c"]
+
+    args = transfer.options([*SMOKE, "--out", str(tmp_path)])
+    CellStore(tmp_path, args.settings.key()).begin(["a study with the default PPO settings"])
+    assert transfer.main([*SMOKE, "--ppo-settings", "paper", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "holds cells of another configuration (hyperparameters: saved" in err and "'gamma': 0.85" in err
+    with pytest.raises(SystemExit) as exit_:
+        transfer.main([*SMOKE, "--ppo-settings", "tuned", "--out", str(tmp_path / "t")])
+    assert exit_.value.code == 2 and "--ppo-settings: invalid choice: 'tuned'" in capsys.readouterr().err

@@ -220,6 +220,9 @@ def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
         "",
         "Runs: training seeds. A run that does not reach the target within its budget counts as the whole "
         "budget, so such an IQM is a lower bound. Baselines are deterministic: one run, exact on these seeds.",
+        "Hyperparameters (SB3's defaults otherwise): "
+        + "; ".join(f"{algo} {params}" for algo, params in key.get("hyperparameters", {}).items())
+        + ".",
     ]
     return "\n".join(lines) + "\n"
 

@@ -17,7 +17,8 @@ What a cell runs: ``transfer_cells``; the statistics: ``reports.transfer_report`
 
 Each finished cell is saved at once in `<out>/cells/` (whole or not at all); a rerun of the same
 command skips the finished cells and goes on, and a run with other result-changing options
-(`--before`, `--after`, `--evaluations`, the hyperparameters, the schedules) into the same `--out`
+(`--before`, `--after`, `--evaluations`, `--ppo-settings` and the other hyperparameters, the schedules)
+into the same `--out`
 is refused. `--max-cells N` stops after N cells (to split a study into sittings); Ctrl-C keeps the
 finished cells. A progress bar (plain lines when stderr is not a terminal) projects the end time.
 Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfer.png`/`.svg`.
@@ -49,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
     preset.add_argument("--smoke", action="store_true", help=f"CI size: {SMOKE} (options given override it)")
     p.add_argument("--scenarios", nargs="+", choices=tc.SCENARIOS, default=list(tc.SCENARIOS), help="default: both")
     p.add_argument("--algos", nargs="+", choices=tc.ALGOS, default=list(tc.ALGOS), help="default: ppo a2c")
+    p.add_argument(
+        "--ppo-settings",
+        choices=tc.PPO_SETTINGS,
+        default="study",
+        help="PPO's hyperparameters: study (SB3's defaults on 10-episode rollouts; default) or paper "
+        "(the paper's gamma, learning rate and entropy coefficient on the same rollouts)",
+    )
     p.add_argument("--seeds", type=int, nargs="+", help=f"training seeds (default {DEFAULTS['seeds']})")
     p.add_argument("--before", type=int, help=f"episodes before the change (default {DEFAULTS['before']})")
     p.add_argument("--after", type=int, help=f"episodes after it, and from scratch (default {DEFAULTS['after']})")
@@ -89,7 +97,7 @@ def options(argv: list[str] | None):
         parser.error(f"--jobs = {args.jobs} is not valid: allowed 1 or more")
     if args.max_cells is not None and args.max_cells < 1:
         parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
-    args.settings = tc.Settings(args.before, args.after, args.evaluations)
+    args.settings = tc.Settings(args.before, args.after, args.evaluations, args.ppo_settings)
     return args
 
 

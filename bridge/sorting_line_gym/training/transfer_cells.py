@@ -46,6 +46,10 @@ WINDOW = 10
 EVAL_SEED = 10_000
 #: MaskablePPO as the study ran it from the start (10-episode rollouts; SB3's defaults otherwise).
 PPO_PARAMS = {"n_steps": 10 * EPISODE_STEPS, "batch_size": 100, "n_epochs": 5}
+#: --ppo-settings: "study" is PPO_PARAMS; "paper" adds the paper's gamma, learning rate and entropy
+#: coefficient (the benchmark's `hyperparams/ppo.yml`) on the same rollouts, which must stay whole
+#: episodes dividing --before so that the frozen snapshot is taken exactly at the change.
+PPO_SETTINGS = ("study", "paper")
 
 
 @dataclass(frozen=True)
@@ -74,14 +78,17 @@ def plan(scenarios, algos, seeds) -> list[Cell]:
     return cells
 
 
-def hyperparameters(algo: str) -> dict[str, Any]:
-    """The constructor arguments of ``algo`` in this study: PPO as above, A2C the paper's (the
-    benchmark's `hyperparams/a2c.yml`)."""
-    if algo == "ppo":
-        return dict(PPO_PARAMS)
+def hyperparameters(algo: str, ppo_settings: str = "study") -> dict[str, Any]:
+    """The constructor arguments of ``algo`` in this study: PPO by ``ppo_settings`` (above), A2C the
+    paper's (the benchmark's `hyperparams/a2c.yml`)."""
     from . import hyperparams
 
-    return hyperparams.split(hyperparams.load(algo, "advanced"))[1]
+    if algo != "ppo":
+        return hyperparams.split(hyperparams.load(algo, "advanced"))[1]
+    if ppo_settings == "study":
+        return dict(PPO_PARAMS)
+    paper = hyperparams.split(hyperparams.load("ppo", "advanced"))[1]
+    return {**paper, **PPO_PARAMS}
 
 
 def schedule_digest(scenario: str) -> str:
@@ -97,14 +104,18 @@ class Settings:
     before: int
     after: int
     evaluations: int
+    ppo_settings: str = "study"
 
     def key(self, algos=ALGOS, scenarios=SCENARIOS) -> dict[str, Any]:
+        # ppo_settings enters the key through the hyperparameters it gives, so that studies saved
+        # before the option existed keep their key.
+        fields = {k: v for k, v in asdict(self).items() if k != "ppo_settings"}
         return {
-            **asdict(self),
+            **fields,
             "episode_steps": EPISODE_STEPS,
             "eval_seed": EVAL_SEED,
             "window": WINDOW,
-            "hyperparameters": {a: hyperparameters(a) for a in algos},
+            "hyperparameters": {a: hyperparameters(a, self.ppo_settings) for a in algos},
             "schedules": {s: schedule_digest(s) for s in scenarios},
         }
 
@@ -158,8 +169,9 @@ def algorithm_class(algo: str):
     return A2C
 
 
-def new_model(algo: str, env, seed: int):
-    return algorithm_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **hyperparameters(algo))
+def new_model(algo: str, env, seed: int, settings: Settings):
+    params = hyperparameters(algo, settings.ppo_settings)
+    return algorithm_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **params)
 
 
 def act(model, algo: str, obs, masks: np.ndarray) -> int:
@@ -193,7 +205,7 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
     started = time.monotonic()
     env = make_env(evolving)
     try:
-        model = new_model(cell.algo, env, cell.seed)
+        model = new_model(cell.algo, env, cell.seed, settings)
         model.learn(settings.before * EPISODE_STEPS)
         snapshot = models / f"{cell.name}-at-the-change.zip"
         model.save(snapshot)
@@ -218,7 +230,7 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
     started = time.monotonic()
     env = make_env(changed)
     try:
-        model = new_model(cell.algo, env, cell.seed)
+        model = new_model(cell.algo, env, cell.seed, settings)
         model.learn(settings.after * EPISODE_STEPS)
         curve = [float(r) for r in env.get_episode_rewards()]
     finally:
