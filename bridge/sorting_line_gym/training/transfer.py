@@ -17,10 +17,10 @@ What a cell runs: ``transfer_cells``; the statistics: ``reports.transfer_report`
 
 Each finished cell is saved at once in `<out>/cells/` (whole or not at all); a rerun of the same
 command skips the finished cells and goes on, and a run with other result-changing options
-(`--before`, `--after`, `--evaluations`, `--ppo-settings` and the other hyperparameters, the schedules)
-into the same `--out`
-is refused. `--max-cells N` stops after N cells (to split a study into sittings); Ctrl-C keeps the
-finished cells. A progress bar (plain lines when stderr is not a terminal) projects the end time.
+(`--before`, `--after`, `--evaluations`, `--ppo-settings` and the other hyperparameters, the
+schedules) into the same `--out` is refused. `--max-cells N` stops after N cells (to split a study
+into sittings); Ctrl-C keeps the finished cells. A progress bar (plain lines when stderr is not a
+terminal) projects the end time.
 Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfer.png`/`.svg`.
 """
 

@@ -83,12 +83,10 @@ def hyperparameters(algo: str, ppo_settings: str = "study") -> dict[str, Any]:
     paper's (the benchmark's `hyperparams/a2c.yml`)."""
     from . import hyperparams
 
+    paper = hyperparams.split(hyperparams.load(algo, "advanced"))[1]
     if algo != "ppo":
-        return hyperparams.split(hyperparams.load(algo, "advanced"))[1]
-    if ppo_settings == "study":
-        return dict(PPO_PARAMS)
-    paper = hyperparams.split(hyperparams.load("ppo", "advanced"))[1]
-    return {**paper, **PPO_PARAMS}
+        return paper
+    return dict(PPO_PARAMS) if ppo_settings == "study" else {**paper, **PPO_PARAMS}
 
 
 def schedule_digest(scenario: str) -> str:
