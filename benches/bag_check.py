@@ -49,10 +49,11 @@ def progress(msg: str) -> None:
 
 def record_bag(out: Path, ticks: int) -> None:
     """One episode of ``ticks`` steps, driven by sorting-line-controller, recorded into ``out``."""
-    from sorting_line_gym.bag.check_closed import _Recorder, _Watch
-    from sorting_line_gym.bag.check_controller_process import ControllerProcess
-    from sorting_line_gym.bag.rosnode import ToolNode
-    from sorting_line_gym.bag.schema import LINE_TYPES, decode, join
+    from sorting_line_gym.bag.check.closed_loop import CheckRecorder, Watch
+    from sorting_line_gym.bag.check.controller_process import ControllerProcess
+    from sorting_line_gym.bag.format.topics import LINE_TYPES, join
+    from sorting_line_gym.bag.storage.schema import decode
+    from sorting_line_gym.bag.transport.rosnode import ToolNode
     from sorting_line_gym.line.process import NodeProcess
     from sorting_line_gym.ros.links import LineLink
 
@@ -61,7 +62,7 @@ def record_bag(out: Path, ticks: int) -> None:
     controller = ControllerProcess(CONTROLLER, ns)
     tool = recorder = None
     try:
-        tool = ToolNode("bench_bag_check", _Watch(node, controller))
+        tool = ToolNode("bench_bag_check", Watch(node, controller))
         link = LineLink(tool.node, ns, advanced=False)
         steps: list[int] = [-1]
         tool.raw_subscription(
@@ -75,7 +76,7 @@ def record_bag(out: Path, ticks: int) -> None:
             f"the node and the controller in {ns}",
         )
         speed = join(ns, "cmd/speed")
-        recorder = _Recorder(ns, out, 30, {speed: tool.node.count_publishers(speed)})
+        recorder = CheckRecorder(ns, out, 30, {speed: tool.node.count_publishers(speed)})
         tool.spin_for(1.0)
         for _attempt in range(3):
             link.send_reset(7)
@@ -109,7 +110,7 @@ def lean_controller(bag: str) -> int:
     from sorting_line_interfaces.msg import MaterialInput, SpeedCommand
 
     from sorting_line_gym.bag import open_bag
-    from sorting_line_gym.bag.schema import stamp_ns
+    from sorting_line_gym.bag.storage.schema import stamp_ns
     from sorting_line_gym.ros.links import QOS
     from sorting_line_gym.ros.waits import Waiter
 
@@ -154,7 +155,7 @@ def raw_round_trips(ticks: int, runs: int, log_dir: Path) -> dict:
 
 
 def checks(bag: Path, runs: int, controller: str | list[str], tag: str) -> list[dict]:
-    from sorting_line_gym.bag.check import check_controller
+    from sorting_line_gym.bag.check.checker import check_controller
 
     out = []
     for run in range(runs):

@@ -6,7 +6,7 @@ It prints the recorder's RSS at the start (once it says ``recording``), after th
 and at the end (target: the end within 20 % of the first minute's: memory does not grow with the
 recording), a sample every ``--every`` seconds, the messages the recorder stored against those
 the node published (each line's ``messages_published`` on /diagnostics, compared over the window
-between the first and last report with :class:`sorting_line_gym.bag.losses.LossCounter`, the
+between the first and last report with :class:`sorting_line_gym.bag.storage.losses.LossCounter`, the
 recorder's own check, for every line), and the bag's bytes per message. Figures only, no
 assertion (the machine may be shared: load average and steal are printed too).
 
@@ -93,7 +93,7 @@ def _compare(bag_path: Path, statuses: dict[str, list[dict]], lines: int) -> dic
     """Per line, the recorder's own check (LossCounter) over the bag, streamed; summed."""
     from rosbags.rosbag2 import Reader
 
-    from sorting_line_gym.bag.losses import LossCounter
+    from sorting_line_gym.bag.storage.losses import LossCounter
 
     namespaces = [f"{NAMESPACE}/line_{k}" for k in range(lines)]
     counters = {}

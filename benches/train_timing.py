@@ -50,14 +50,8 @@ def progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path) -> float:
-    """Seconds of ``model.learn`` on the reference env, trained as its utils/benchmark.py does."""
-    import torch
-    from stable_baselines3.common.env_checker import check_env
-    from stable_baselines3.common.monitor import Monitor
-
-    from sorting_line_gym.training import hyperparams
-
+def import_reference_env(ref_dir: Path, variant: str):
+    """The reference's env class of ``variant``, imported unmodified from its checkout."""
     sys.path.insert(0, str(ref_dir))
     # The reference's env modules import cv2 and seaborn at top level for plotting only; where they
     # are not installed, stand-ins let the env import (training never plots).
@@ -68,11 +62,23 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
             sys.modules[name] = MagicMock(name=name)
     try:
         if variant == "advanced":
-            from src.env_2_adv import SortingEnvironmentAdv as Env
+            from src.env_2_adv import SortingEnvironmentAdv as Env  # noqa: N813
         else:
-            from src.env_1_simple import SortingEnvironment as Env
+            from src.env_1_simple import SortingEnvironment as Env  # noqa: N813
     except ImportError as e:
         sys.exit(f"train_timing.py: cannot import the reference env from {ref_dir} ({e})")
+    return Env
+
+
+def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path) -> float:
+    """Seconds of ``model.learn`` on the reference env, trained as its utils/benchmark.py does."""
+    import torch
+    from stable_baselines3.common.env_checker import check_env
+    from stable_baselines3.common.monitor import Monitor
+
+    from sorting_line_gym.training import hyperparams
+
+    Env = import_reference_env(ref_dir, variant)
     own, kwargs = hyperparams.split(hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}"]))
     torch.set_num_threads(threads)
     env = Env(max_steps=own["episode_steps"], threshold=THRESHOLD, **REFERENCE_SETUPS[setup])
@@ -86,14 +92,31 @@ def time_reference(ref_dir: Path, algo: str, setup: str, variant: str, timesteps
 
 
 def time_ours(
-    algo: str, setup: str, variant: str, timesteps: int, threads: int, tb: Path, out: Path, n_envs: int = 1
+    algo: str,
+    setup: str,
+    variant: str,
+    timesteps: int,
+    threads: int,
+    tb: Path,
+    out: Path,
+    n_envs: int = 1,
+    backend: str = "ros",
 ) -> float:
     from sorting_line_gym.training import hyperparams
     from sorting_line_gym.training.train import train
 
     params = hyperparams.load(algo, variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={n_envs}"])
     run = train(
-        algo, setup, variant, seed=42, out=out, params=params, tensorboard=tb, progress=True, torch_threads=threads
+        algo,
+        setup,
+        variant,
+        seed=42,
+        out=out,
+        params=params,
+        tensorboard=tb,
+        progress=True,
+        torch_threads=threads,
+        backend=backend,
     )
     return run.wall_s
 

@@ -1,6 +1,7 @@
 # shellcheck shell=bash
 # Source me (bash or zsh):   source launch_scripts/env.sh
-# Activates the project's .venv (made by launch_scripts/setup.sh) and sets the ROS 2 environment the
+# Activates the project's .venv (made by launch_scripts/setup.sh; another one if SORTING_LINE_VENV names it,
+# as setup.sh takes it) and sets the ROS 2 environment the
 # project uses without a ROS install:
 #   RMW_IMPLEMENTATION=rmw_fastrtps_cpp          the only RMW in the wheels (asking for cyclonedds kills rclpy)
 #   FASTRTPS_DEFAULT_PROFILES_FILE=<this dir>/fastdds_profile.xml   100 ms writer heartbeat
@@ -19,12 +20,13 @@ else
 fi
 _sl_scripts="$(cd "$(dirname "$_sl_env_file")" && pwd)"
 _sl_root="$(dirname "$_sl_scripts")"
+_sl_venv="${SORTING_LINE_VENV:-$_sl_root/.venv}"
 
-if [ ! -f "$_sl_root/.venv/bin/activate" ]; then
-  echo "env.sh: $_sl_root/.venv missing; run launch_scripts/setup.sh first" >&2
+if [ ! -f "$_sl_venv/bin/activate" ]; then
+  echo "env.sh: $_sl_venv missing; run launch_scripts/setup.sh first" >&2
 else
   # shellcheck disable=SC1091
-  . "$_sl_root/.venv/bin/activate"
+  . "$_sl_venv/bin/activate"
 fi
 
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
@@ -38,4 +40,4 @@ case ":$PATH:" in
   *) export PATH="$_sl_root/target/release:$PATH" ;;
 esac
 
-unset _sl_env_file _sl_scripts _sl_root
+unset _sl_env_file _sl_scripts _sl_root _sl_venv

@@ -10,7 +10,7 @@
 # loopback-only network namespace, otherwise with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 #
 # Usage: launch_scripts/run.sh [--quick-steps N] [--full|--smoke [--jobs J] [--train-seeds S...] [--timesteps N]
-#                               [--n-envs N] [--lines-mapping M] [--heldout-episodes N]] [--out DIR]
+#                               [--n-envs N] [--lines-mapping M] [--heldout-episodes N]] [--backend ros|native] [--out DIR]
 #   --quick-steps N   PPO budget of step 2 (default 20000)
 #   --full            instead: the whole study of docs/benchmark.md (Table 1: 8 lines x random, rba,
 #                     rba-hold, and DQN, PPO, A2C at 100k steps for each of 5 training seeds on 8 lines
@@ -27,6 +27,8 @@
 #   --lines-mapping M how the one-line hyperparameters go to N lines: same-rollout (default) or
 #                     same-line-rollout (see bridge/sorting_line_gym/training/hyperparams.py)
 #   --heldout-episodes N  held-out evaluation seeds from 10000 (default 100; --smoke 5)
+#   --backend B       ros (default: every agent drives a node over DDS) or native (the line in-process,
+#                     docs/native.md: the same cells, without the round trips)
 #   --out DIR         results directory (default results)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -41,6 +43,7 @@ N_ENVS=""
 MAPPING=same-rollout
 HELDOUT=""
 OUT=results
+BACKEND=ros
 usage() { sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -54,8 +57,9 @@ while [[ $# -gt 0 ]]; do
     --jobs) JOBS="$2"; shift 2 ;;
     --train-seeds) shift; SEEDS=(); while [[ $# -gt 0 && "$1" != --* ]]; do SEEDS+=("$1"); shift; done ;;
     --out) OUT="$2"; shift 2 ;;
+    --backend) BACKEND="$2"; shift 2 ;;
     -h|--help) usage; exit 0 ;;
-    *) echo "run.sh: unknown argument '$1' (allowed: --quick-steps N, --full, --smoke, --jobs J, --train-seeds S..., --timesteps N, --n-envs N, --lines-mapping M, --heldout-episodes N, --out DIR)" >&2; exit 2 ;;
+    *) echo "run.sh: unknown argument '$1' (allowed: --quick-steps N, --full, --smoke, --jobs J, --train-seeds S..., --timesteps N, --n-envs N, --lines-mapping M, --heldout-episodes N, --backend B, --out DIR)" >&2; exit 2 ;;
   esac
 done
 if [[ $FULL == 1 && $SMOKE == 1 ]]; then echo "run.sh: --full and --smoke exclude each other" >&2; exit 2; fi
@@ -66,6 +70,10 @@ else
   [[ ${#SEEDS[@]} -gt 0 ]] || SEEDS=(42 43 44 45 46)
   TIMESTEPS="${TIMESTEPS:-100000}" N_ENVS="${N_ENVS:-8}" HELDOUT="${HELDOUT:-100}"
 fi
+case "$BACKEND" in
+  ros|native) ;;
+  *) echo "run.sh: --backend '$BACKEND' is not valid: allowed ros, native" >&2; exit 2 ;;
+esac
 case "$MAPPING" in
   same-rollout|same-line-rollout) ;;
   *) echo "run.sh: --lines-mapping '$MAPPING' is not valid: allowed same-rollout, same-line-rollout" >&2; exit 2 ;;
@@ -74,7 +82,8 @@ for value in "$QUICK_STEPS" "$JOBS" "$TIMESTEPS" "$N_ENVS" "$HELDOUT" "${SEEDS[@
   if ! [[ "$value" =~ ^[0-9]+$ ]]; then echo "run.sh: '$value' is not valid: allowed a whole number" >&2; exit 2; fi
 done
 
-bash launch_scripts/setup.sh
+# Every mode trains (PPO, DQN, A2C): the training stack too (setup.sh --train).
+bash launch_scripts/setup.sh --train
 mkdir -p "$OUT"
 OUT="$(cd "$OUT" && pwd)"
 
@@ -92,15 +101,16 @@ job() {
     fi
     local start=$SECONDS
     sorting-line-benchmark --out "$dir" --jobs "$JOBS" --train-seeds "${seeds[@]}" --timesteps "$TIMESTEPS" \
-      --n-envs "$N_ENVS" --lines-mapping "$MAPPING" --check-n-envs --heldout-episodes "$HELDOUT" "${selection[@]}"
+      --n-envs "$N_ENVS" --lines-mapping "$MAPPING" --check-n-envs --heldout-episodes "$HELDOUT" --backend "$BACKEND" \
+      "${selection[@]}"
     echo "run.sh: the study took $(( (SECONDS - start) / 60 )) min $(( (SECONDS - start) % 60 )) s (cells already done were not rerun) -> $dir" >&2
     return
   fi
   echo "== 1/2: random, rba, rba-hold on the 8 setups through ROS" >&2
-  sorting-line-benchmark --agents random rba rba-hold --out "$OUT/baselines" > /dev/null
+  sorting-line-benchmark --agents random rba rba-hold --out "$OUT/baselines" --backend "$BACKEND" > /dev/null
   echo "== 2/2: PPO on setup B advanced, $QUICK_STEPS steps, beside the rule-based agents" >&2
   sorting-line-benchmark --setups B --variants advanced --agents rba rba-hold ppo --timesteps "$QUICK_STEPS" \
-    --out "$OUT/quick_ppo" > /dev/null
+    --out "$OUT/quick_ppo" --backend "$BACKEND" > /dev/null
   {
     echo "# sorting_line: the default job of launch_scripts/run.sh"
     echo

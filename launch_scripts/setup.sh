@@ -1,26 +1,39 @@
 #!/usr/bin/env bash
-# Idempotent set-up of sorting_line on a machine WITHOUT a ROS install (Debian 12, Python 3.11):
-#   1. .venv/ at the repository root (python3.11)
-#   2. the pinned ros-jazzy-* wheels of launch_scripts/requirements-ros.txt (rclpy + Fast DDS, messages,
-#      and the rosidl/ament build tools)
+# Idempotent set-up of sorting_line on a machine WITHOUT a ROS install (Debian 12; CPython 3.11 or 3.12):
+#   1. .venv/ at the repository root (python3.12 where present, else python3.11)
+#   2. the pinned wheels: ros-jazzy-* of launch_scripts/requirements-ros.txt (rclpy + Fast DDS, messages,
+#      and the rosidl/ament build tools) and the core of requirements-bridge.txt (bags, ONNX runtime,
+#      pytest, the checks); with --train also requirements-train.txt (torch, SB3, RL Zoo, tensorboard)
 #   3. msg/ (ROS package sorting_line_interfaces) and msg/simulation_interfaces/ (the standard's
 #      simulator-control interfaces, which no wheel provides) compiled with plain CMake and installed INTO .venv/,
 #      so `.venv/bin/python -c "from sorting_line_interfaces.msg import LineState"` works with nothing
 #      sourced (the ros-wheels-bootstrapper .pth in the venv sets LD_LIBRARY_PATH by re-executing python)
-#   4. bridge/ (Python package sorting_line_gym) installed editable into .venv/
+#   4. bridge/ (Python package sorting_line_gym, with its native extension built by maturin from native/)
+#      installed editable into .venv/
 #   5. `cargo build --release` (cargo's own checks make it a no-op when nothing changed), started first,
 #      in the background, as it needs nothing of steps 1-4
-#   6. only with --rllib: Ray RLlib (launch_scripts/requirements-rllib.txt; test.sh and reliability.sh ask for it)
+#   6. only with --train: the training stack (requirements-train.txt, ~5 GB: torch and its CUDA libraries);
+#      only with --rllib: that and Ray RLlib (requirements-rllib.txt; test.sh and reliability.sh ask for it)
 # Steps 2-4 and 6 already done are skipped (stamps in .venv/.sorting_line/, keyed on hashes of the inputs).
+# Without --train the venv (the core: node tools, bridge, bag tools, controller, pytest plugin) stays
+# under 1.5 GB; its size is printed at the end.
 #
-# Usage: launch_scripts/setup.sh [--force] [--no-cargo] [--rllib]
+# Usage: launch_scripts/setup.sh [--force] [--no-cargo] [--train] [--rllib] | --find-python
 #   --force      redo steps 2, 3 and 4 even if their stamps match
 #   --no-cargo   skip step 5 (same as SORTING_LINE_SKIP_CARGO=1)
-#   --rllib      also install Ray RLlib (655 MB; ~1 min from a warm pip cache, ~6 min cold on a loaded machine;
+#   --train      also install the training stack (sorting-line-train, -benchmark's RL agents, -transfer,
+#                -export, a controller's --policy MODEL.zip; run.sh and test.sh ask for it)
+#   --rllib      --train and Ray RLlib (655 MB; ~1 min from a warm pip cache, ~6 min cold on a loaded machine;
 #                test.sh asks for it in the background, next to the Rust tests; run.sh does not need it)
+#   --find-python  only print the interpreter a new venv would be made with (exit 3 if there is none)
 # Environment (all optional):
-#   SORTING_LINE_PYTHON      interpreter for a new venv (default: python3.11; must be CPython 3.11 with
-#                            its headers, e.g. Debian packages python3.11-venv python3.11-dev)
+#   SORTING_LINE_PYTHON      interpreter for a new venv: a command or path, or a version (3.11, 3.12),
+#                            looked up as pythonX.Y on PATH and in pyenv's versions (default: 3.12, else
+#                            3.11). CPython 3.11 or 3.12 with its headers and venv (Debian: pythonX.Y-dev
+#                            pythonX.Y-venv). An existing venv of either version is kept unless this asks
+#                            for the other one.
+#   SORTING_LINE_VENV        the venv to set up (default: .venv at the repository root; test.sh makes a
+#                            second one for the other Python version)
 #   SORTING_LINE_KEEP_BUILD  1 = keep the CMake build tree (.venv/.sorting_line/build) for debugging
 # Afterwards: `source launch_scripts/env.sh` (venv + Fast DDS profile + RMW settings).
 set -euo pipefail
@@ -29,26 +42,32 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 source "$ROOT/launch_scripts/jobs.sh"
 
-VENV="$ROOT/.venv"
+VENV="${SORTING_LINE_VENV:-$ROOT/.venv}"
 STATE="$VENV/.sorting_line"
 REQ="$ROOT/launch_scripts/requirements-ros.txt"
 REQ_BRIDGE="$ROOT/launch_scripts/requirements-bridge.txt"
+REQ_TRAIN="$ROOT/launch_scripts/requirements-train.txt"
 REQ_RLLIB="$ROOT/launch_scripts/requirements-rllib.txt"
 BRIDGE="$ROOT/bridge"
 MSG_DIR="$ROOT/msg"
-PYTHON="${SORTING_LINE_PYTHON:-python3.11}"
 # Bump when the recipe below changes in a way that needs a rebuild of existing venvs.
 RECIPE=3
+# The CPython versions the pinned wheels (ros-jazzy-* included) exist for, the preferred one first.
+PYTHON_VERSIONS=(3.12 3.11)
 
 FORCE=0
 CARGO=1
+TRAIN=0
 RLLIB=0
+FIND_ONLY=0
 [[ "${SORTING_LINE_SKIP_CARGO:-0}" == 1 ]] && CARGO=0
 for arg in "$@"; do
   case "$arg" in
     --force) FORCE=1 ;;
     --no-cargo) CARGO=0 ;;
-    --rllib) RLLIB=1 ;;
+    --train) TRAIN=1 ;;
+    --rllib) RLLIB=1 TRAIN=1 ;;
+    --find-python) FIND_ONLY=1 ;;
     -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "setup.sh: unknown argument: $arg (see --help)" >&2; exit 2 ;;
   esac
@@ -57,12 +76,6 @@ done
 T0=$SECONDS
 say() { printf '[setup %3ds] %s\n' "$((SECONDS - T0))" "$*"; }
 die() { printf '[setup] ERROR: %s\n' "$*" >&2; exit 1; }
-
-# Serialise concurrent runs (run.sh and test.sh may both call this): lock on this script file.
-if command -v flock >/dev/null 2>&1; then
-  exec 9<"${BASH_SOURCE[0]}"
-  flock -x 9
-fi
 
 sha() { sha256sum | cut -c1-16; }
 
@@ -79,32 +92,88 @@ write_stamp() { # NAME KEY
 # ---------------------------------------------------------------------------------------------
 # 1. venv
 # ---------------------------------------------------------------------------------------------
+# The X.Y of an interpreter that is CPython 3.11 or 3.12, else nothing.
+python_version() { # PYTHON
+  "$1" -c 'import sys, platform
+v = "%d.%d" % sys.version_info[:2]
+print(v if platform.python_implementation() == "CPython" and v in ("3.11", "3.12") else "")' 2>/dev/null
+}
+
+# Candidates for Python X.Y: pythonX.Y on PATH (a pyenv shim fails unless the version is active, which
+# the check above catches), then pyenv's installs of it.
+python_candidates() { # X.Y
+  echo "python$1"
+  local root
+  root="$(pyenv root 2>/dev/null || true)"
+  [[ -n "$root" ]] && ls -d "$root/versions/$1".*/bin/"python$1" 2>/dev/null | sort -V -r
+  return 0
+}
+
+# Sets PYTHON to the interpreter for a new venv and WANTED to the version SORTING_LINE_PYTHON names (empty:
+# any supported one).
+find_python() {
+  local wanted="${SORTING_LINE_PYTHON:-}" versions=("${PYTHON_VERSIONS[@]}") v c
+  WANTED=""
+  if [[ -n "$wanted" && ! "$wanted" =~ ^3\.[0-9]+$ ]]; then # a command or path
+    PYTHON="$wanted"
+    WANTED="$(python_version "$PYTHON")"
+    [[ -n "$WANTED" ]] ||
+      die "SORTING_LINE_PYTHON=$wanted is not CPython ${PYTHON_VERSIONS[*]} (the pinned wheels exist for those)"
+    return
+  fi
+  if [[ -n "$wanted" ]]; then
+    [[ " ${PYTHON_VERSIONS[*]} " == *" $wanted "* ]] ||
+      die "SORTING_LINE_PYTHON=$wanted: allowed ${PYTHON_VERSIONS[*]} (the pinned wheels exist for those)"
+    versions=("$wanted")
+    WANTED="$wanted"
+  fi
+  for v in "${versions[@]}"; do
+    while IFS= read -r c; do
+      if [[ "$(python_version "$c")" == "$v" ]]; then
+        PYTHON="$c"
+        return
+      fi
+    done < <(python_candidates "$v")
+  done
+  PYTHON=""
+}
+
 venv_ok() {
-  [[ -x "$VENV/bin/python" ]] &&
-    "$VENV/bin/python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' >/dev/null 2>&1
+  local v
+  [[ -x "$VENV/bin/python" ]] || return 1
+  v="$(python_version "$VENV/bin/python")"
+  [[ -n "$v" && ( -z "$WANTED" || "$v" == "$WANTED" ) ]]
 }
 
 make_venv() {
+  find_python
   if venv_ok; then
-    say "venv: $VENV (exists)"
+    say "venv: $VENV (exists, Python $(python_version "$VENV/bin/python"))"
     return
   fi
-  command -v "$PYTHON" >/dev/null 2>&1 || die "$PYTHON not found (set SORTING_LINE_PYTHON)"
-  "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' ||
-    die "$PYTHON is not Python 3.11 (the ros-jazzy-* wheels are cp311)"
+  [[ -n "$PYTHON" ]] ||
+    die "no CPython ${WANTED:-${PYTHON_VERSIONS[*]}} found (pythonX.Y on PATH or in pyenv; or set SORTING_LINE_PYTHON)"
   if [[ -e "$VENV" ]]; then
-    say "venv: $VENV is broken or not Python 3.11, recreating it"
+    say "venv: $VENV is broken or not Python ${WANTED:-${PYTHON_VERSIONS[*]}}, recreating it"
     rm -rf "$VENV"
   fi
   say "venv: creating $VENV with $("$PYTHON" -c 'import sys; print(sys.executable, sys.version.split()[0])')"
-  "$PYTHON" -m venv "$VENV" || die "python -m venv failed (Debian: apt-get install python3.11-venv)"
+  "$PYTHON" -m venv "$VENV" || die "python -m venv failed (Debian: apt-get install python$(python_version "$PYTHON")-venv)"
 }
+
+if [[ $FIND_ONLY == 1 ]]; then
+  find_python
+  [[ -n "$PYTHON" ]] || { echo "setup.sh: no CPython ${WANTED:-${PYTHON_VERSIONS[*]}} found" >&2; exit 3; }
+  command -v "$PYTHON"
+  exit 0
+fi
 
 # ---------------------------------------------------------------------------------------------
 # 2. pinned wheels
 # ---------------------------------------------------------------------------------------------
 PY_ID=""
 pip_key() { { echo "recipe=$RECIPE"; echo "python=$PY_ID"; cat "$REQ" "$REQ_BRIDGE"; } | sha; }
+PIP=(pip install --no-input --disable-pip-version-check -q)
 
 install_wheels() {
   local key
@@ -113,24 +182,27 @@ install_wheels() {
     say "wheels: up to date (requirements-ros.txt, requirements-bridge.txt unchanged)"
     return
   fi
-  say "wheels: installing requirements-ros.txt and requirements-bridge.txt (torch brings ~4 GB of CUDA libraries)"
+  say "wheels: installing requirements-ros.txt and requirements-bridge.txt (the core)"
   rm -f "$STATE/pip.stamp"
-  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" ||
-    die "pip install -r $REQ -r $REQ_BRIDGE failed"
+  "$VENV/bin/python" -m "${PIP[@]}" -r "$REQ" -r "$REQ_BRIDGE" || die "pip install -r $REQ -r $REQ_BRIDGE failed"
   write_stamp pip "$key"
 }
 
-install_rllib() {
-  local key
-  key="$( { pip_key; cat "$REQ_RLLIB"; } | sha)"
-  if stamp_matches rllib "$key"; then
-    say "rllib: up to date (requirements-rllib.txt unchanged)"
+# The training stack (--train), and Ray RLlib on top of it (--rllib): NAME, its requirements files.
+install_extra() { # NAME WHAT REQUIREMENTS...
+  local name="$1" what="$2" key
+  shift 2
+  key="$( { pip_key; cat "$@"; } | sha)"
+  if stamp_matches "$name" "$key"; then
+    say "$name: up to date ($(basename -a "$@" | paste -sd' '))"
     return
   fi
-  say "rllib: installing requirements-rllib.txt (Ray; ~1 min from a warm pip cache, minutes cold)"
-  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q -r "$REQ" -r "$REQ_BRIDGE" -r "$REQ_RLLIB" ||
-    die "pip install -r $REQ_RLLIB failed"
-  write_stamp rllib "$key"
+  say "$name: installing $what"
+  local -a reqs=()
+  local f
+  for f in "$REQ" "$REQ_BRIDGE" "$@"; do reqs+=(-r "$f"); done
+  "$VENV/bin/python" -m "${PIP[@]}" "${reqs[@]}" || die "pip install ${reqs[*]} failed"
+  write_stamp "$name" "$key"
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -138,20 +210,23 @@ install_rllib() {
 # ---------------------------------------------------------------------------------------------
 # Trap: the wheels' exported CMake files (share/*/cmake/*.cmake, the *__rosidl_generator_pyExport
 # ones) hard-code the include dirs of the interpreter that built the wheels
-# (/opt/python/cp311-cp311/...). Point them at this venv's Python and numpy include dirs.
+# (/opt/python/cp311-cp311/... for the cp311 wheels, cp312-cp312 for the cp312 ones). Point them at this
+# venv's Python and numpy include dirs.
 fix_wheel_cmake_paths() {
-  local py_inc np_inc files
+  local py_inc np_inc files v tag
+  v="$(python_version "$VENV/bin/python")"
+  tag="cp${v/./}-cp${v/./}"
   py_inc="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
   np_inc="$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')"
   [[ -f "$py_inc/Python.h" ]] ||
-    die "Python headers missing ($py_inc/Python.h); Debian: apt-get install python3.11-dev"
-  files="$(grep -rlF --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" || true)"
+    die "Python headers missing ($py_inc/Python.h); Debian: apt-get install python$v-dev"
+  files="$(grep -rlF --include='*.cmake' "/opt/python/$tag" "$VENV/share" || true)"
   if [[ -n "$files" ]]; then
     say "interfaces: rewriting build-machine include paths in $(wc -l <<<"$files") wheel CMake files"
     # numpy first: its path contains the Python prefix.
     xargs -d "\n" sed -i \
-      -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
-      -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g" <<<"$files"
+      -e "s#/opt/python/$tag/lib/python$v/site-packages/numpy/_core/include#${np_inc}#g" \
+      -e "s#/opt/python/$tag/include/python$v#${py_inc}#g" <<<"$files"
     if grep -rlF --include='*.cmake' '/opt/python/' "$VENV/share" >/dev/null; then
       die "unexpected /opt/python/ paths left in $VENV/share/*/cmake (new wheel versions?)"
     fi
@@ -177,7 +252,7 @@ iface_key() { # NAME DIR
 }
 
 iface_installed() { # NAME
-  [[ -f "$VENV/lib/python3.11/site-packages/$1/msg/__init__.py" ]]
+  [[ -f "$SITE/$1/msg/__init__.py" ]]
 }
 
 # Remove the files of a previous install (a deleted .msg must not survive in site-packages).
@@ -190,7 +265,7 @@ uninstall_interfaces() { # NAME
   while IFS= read -r f; do
     [[ "$f" == "$VENV"/* ]] && rm -f -- "$f"
   done <"$manifest"
-  rm -rf "$VENV/lib/python3.11/site-packages/$1"
+  rm -rf "${SITE:?}/$1"
   rm -f "$manifest"
 }
 
@@ -260,13 +335,18 @@ build_interfaces() { # NAME DIR IMPORT_CHECK
 # ---------------------------------------------------------------------------------------------
 install_bridge() {
   local key
-  key="$( { echo "$ROOT"; cat "$BRIDGE/pyproject.toml"; } | sha)"
+  # The editable install builds the native extension (native/, with maturin) into the package
+  # directory: a change of its Rust sources (or of the line model's) builds it again.
+  key="$( { echo "$ROOT"; cat "$BRIDGE/pyproject.toml" "$ROOT/Cargo.toml" "$ROOT/Cargo.lock";
+            find "$ROOT/native" "$ROOT/src" -name '*.rs' -o -name Cargo.toml | LC_ALL=C sort | xargs cat; } | sha)"
   if stamp_matches bridge "$key"; then
     say "bridge: up to date"
     return
   fi
-  say "bridge: pip install -e bridge (dependencies come from the pinned requirements)"
-  "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q --no-deps --no-build-isolation -e "$BRIDGE" ||
+  say "bridge: pip install -e bridge, building its native extension (dependencies come from the pinned requirements)"
+  # maturin's build hooks run the `maturin` command: the venv's, on PATH.
+  PATH="$VENV/bin:$PATH" "$VENV/bin/python" -m pip install --no-input --disable-pip-version-check -q --no-deps \
+    --no-build-isolation -e "$BRIDGE" ||
     die "pip install -e $BRIDGE failed"
   write_stamp bridge "$key"
 }
@@ -294,16 +374,35 @@ build_rust() {
 }
 
 # ---------------------------------------------------------------------------------------------
+# Serialise concurrent runs on one venv (run.sh and test.sh may both call this): lock on this script
+# file for .venv, on a file beside the venv for another one (test.sh sets up both at once).
+if command -v flock >/dev/null 2>&1; then
+  if [[ "$VENV" == "$ROOT/.venv" ]]; then
+    exec 9<"${BASH_SOURCE[0]}"
+  else
+    exec 9>"$VENV.lock"
+  fi
+  flock -x 9
+fi
+
 start_rust
 make_venv
 PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.implementation.cache_tag)')"
+SITE="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 mkdir -p "$STATE"
 install_wheels
-[[ $RLLIB == 1 ]] && install_rllib
+[[ $TRAIN == 1 ]] && install_extra train "requirements-train.txt (torch, SB3, RL Zoo, tensorboard: ~5 GB, most of it torch's CUDA libraries)" "$REQ_TRAIN"
+[[ $RLLIB == 1 ]] && install_extra rllib "requirements-rllib.txt (Ray; ~1 min from a warm pip cache, minutes cold)" "$REQ_TRAIN" "$REQ_RLLIB"
 build_interfaces simulation_interfaces "$MSG_DIR/simulation_interfaces" \
   'from simulation_interfaces.srv import StepSimulation; from simulation_interfaces.action import SimulateSteps'
 build_interfaces sorting_line_interfaces "$MSG_DIR" \
   'from sorting_line_interfaces.msg import LineState; from sorting_line_interfaces.srv import ResetLine'
 install_bridge
 build_rust
+if "$VENV/bin/python" -c 'import importlib.util, sys; sys.exit(importlib.util.find_spec("torch") is None)'; then
+  stack="with the training stack"
+else
+  stack="the core, without the training stack: setup.sh --train adds it"
+fi
+say "venv: $(du -sh "$VENV" | cut -f1) ($stack; Python $(python_version "$VENV/bin/python"))"
 say "done (source launch_scripts/env.sh to use the venv with the project's ROS settings)"

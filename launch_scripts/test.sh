@@ -5,6 +5,10 @@
 # this machine and parallel runs cannot cross-talk over the network. (Not over shared memory,
 # which namespaces do not separate: every rclpy participant in LOCALHOST mode opens Fast DDS's
 # /dev/shm port 7000, whatever its domain, besides ports derived from its domain id.)
+# Two Pythons: the whole suite runs in .venv (with the training stack; a fresh clone's is CPython
+# 3.11), and the README's snippets and a subset (OTHER_PYTHON_TESTS) run again in a core venv
+# (setup.sh without --train) of the other supported version, .venv-3.12 (or .venv-3.11), set up in
+# the background beside the Rust tests. Without that interpreter the subset is skipped, loudly.
 #
 # Usage: launch_scripts/test.sh [--rust-only] [PYTEST_ARGS...]
 set -euo pipefail
@@ -17,11 +21,37 @@ if [[ "${1:-}" == "--rust-only" ]]; then RUST_ONLY=1; shift; fi
 
 step() { printf '\n== %s\n' "$*"; }
 
-step "set-up (venv, interfaces, release build)"
-bash launch_scripts/setup.sh
+# The subset of the suite that runs on the other Python version: the README's snippets, the env,
+# the vector env, bags, bag check, the controllers and the pytest plugin (tests needing the training
+# stack skip there: tests/python/training_stack.py), less the two longest, which test nothing of the
+# Python version (a throughput benchmark; the plugin's examples in a pytest of their own), which took 113
+# of 388 s at load 9-13. What it costs: docs/installing.md, "Python 3.11 and 3.12".
+OTHER_PYTHON_TESTS=(test_readme.py test_bridge.py test_bridge_vector.py test_bags.py test_bag_check.py
+  test_controller.py test_learned_controller.py test_pytest_plugin.py
+  --deselect test_bridge.py::test_throughput_benchmark_runs_and_reports_the_targets
+  --deselect test_pytest_plugin.py::test_the_examples_pass_and_a_changed_controller_fails)
+OTHER_PYTHON_TESTS=("${OTHER_PYTHON_TESTS[@]/#test_/tests/python/test_}")
 
-# The real ros2 CLI for tests/python/test_ros2cli.py: built (or found in its cache) here, outside the
-# test network namespace, because it needs PyPI; in the background, next to the Rust tests.
+step "set-up (venv with the training stack, interfaces, release build)"
+# A fresh clone's .venv is CPython 3.11 unless SORTING_LINE_PYTHON says otherwise; an existing one keeps
+# its version (3.11 or 3.12). (Not exported: launch_scripts/ros2cli.sh reads SORTING_LINE_PYTHON as a command.)
+MAIN_CHOICE="${SORTING_LINE_PYTHON:-}"
+[[ -x .venv/bin/python || -n "$MAIN_CHOICE" ]] || MAIN_CHOICE=3.11
+SORTING_LINE_PYTHON="$MAIN_CHOICE" bash launch_scripts/setup.sh --train
+MAIN_PYTHON="$(.venv/bin/python -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+OTHER_PYTHON=3.12
+[[ $MAIN_PYTHON == 3.12 ]] && OTHER_PYTHON=3.11
+OTHER_VENV="$ROOT/.venv-$OTHER_PYTHON"
+other_missing() {
+  printf '\n!! test.sh: WARNING: no CPython %s found (python%s on PATH or in pyenv; or set SORTING_LINE_PYTHON):\n' \
+    "$OTHER_PYTHON" "$OTHER_PYTHON" >&2
+  printf '!! the README snippets and the subset of the suite on Python %s are SKIPPED; only %s was tested.\n\n' \
+    "$OTHER_PYTHON" "$MAIN_PYTHON" >&2
+}
+
+# The real ros2 CLI for the CLI tests (test_ros2cli.py, test_launch_testing.py, ...): launch_scripts/ros2cli.sh
+# builds it (or finds it current in its cache) from the folder of source archives beside the clone, here,
+# outside the test network namespace, because it needs PyPI; in the background, next to the Rust tests.
 # Ray RLlib for tests/python/test_rllib.py: ~1 min warm, more cold, mostly download, so
 # also in the background next to the Rust tests; the Python tests start once it is in (pip must not
 # write into the venv while they import from it).
@@ -29,7 +59,16 @@ bash launch_scripts/setup.sh
 # PyPI in a cached venv of its own, then a plain `colcon build` against .venv that reuses the release
 # build's target/ (about 1 min of CPU, the interface packages' C/C++/Python generation): also in the
 # background. A failed build is recorded for the test, which then fails showing the log.
+# The core venv of the other Python version (about 2 min from a warm pip cache; its native extension
+# build waits for the Rust steps' cargo lock): in the background too.
 if [[ $RUST_ONLY == 0 ]]; then
+  if SORTING_LINE_PYTHON=$OTHER_PYTHON bash launch_scripts/setup.sh --find-python >/dev/null; then
+    job_start other env SORTING_LINE_PYTHON="$OTHER_PYTHON" SORTING_LINE_VENV="$OTHER_VENV" \
+      bash launch_scripts/setup.sh --no-cargo
+  else
+    OTHER_VENV=""
+    other_missing
+  fi
   job_start ros2cli .venv/bin/python tests/python/ros2_cli.py --build
   job_start rllib bash launch_scripts/setup.sh --rllib --no-cargo
   SORTING_LINE_COLCON_WS="$(mktemp -d /tmp/sorting_line_colcon_ws.XXXXXX)"
@@ -39,7 +78,8 @@ fi
 
 step "Rust formatting (rustfmt.toml)"
 if cargo fmt --version >/dev/null 2>&1; then
-  cargo fmt --check || { echo "test.sh: run \`cargo fmt\` (the diff above is what it would change)" >&2; exit 1; }
+  # --all: the workspace's native/ crate (the Python extension) too.
+  cargo fmt --all --check || { echo "test.sh: run \`cargo fmt --all\` (the diff above is what it would change)" >&2; exit 1; }
 else
   echo "test.sh: rustfmt is not installed (rustup component add rustfmt): formatting not checked"
 fi
@@ -48,15 +88,29 @@ step "Python lint and formatting (ruff.toml)"
 .venv/bin/ruff check --no-cache . || { echo "test.sh: fix what \`.venv/bin/ruff check\` reports above (\`--fix\` fixes the ones marked [*])" >&2; exit 1; }
 .venv/bin/ruff format --check --no-cache . || { echo "test.sh: run \`.venv/bin/ruff format\` (it would reformat the files above)" >&2; exit 1; }
 
+step "Python types (mypy: the bridge modules without rclpy, [tool.mypy] in bridge/pyproject.toml)"
+# About 11 CPU-seconds from a cold cache (bridge/.mypy_cache), under 1 warm; prints its verdict only.
+(cd bridge && ../.venv/bin/mypy) || { echo "test.sh: fix the type errors above (\`cd bridge && ../.venv/bin/mypy\`)" >&2; exit 1; }
+
+step "Python dependencies declared (deptry: bridge/pyproject.toml against the imports of sorting_line_gym)"
+(cd bridge && ../.venv/bin/deptry .) || { echo "test.sh: declare what deptry reports above in bridge/pyproject.toml (dependencies or an extra), or drop what is not imported" >&2; exit 1; }
+
 step "Rust lints (clippy, warnings are errors; with and without the ros feature)"
 # About 2 CPU-minutes: a metadata-only check of every dependency (clippy cannot reuse the release
 # build), then seconds for the crate without the ros feature.
 if cargo clippy --version >/dev/null 2>&1; then
   cargo clippy --locked --all-targets -- -D warnings
   cargo clippy --locked --all-targets --no-default-features -- -D warnings
+  # The Python extension (native/, PyO3): seconds beyond the lines above; PyO3 asks the venv's
+  # Python for its configuration.
+  PYO3_PYTHON="$PWD/.venv/bin/python" cargo clippy --locked -p sorting_line_native --all-targets -- -D warnings
 else
   echo "test.sh: clippy is not installed (rustup component add clippy): lints not checked"
 fi
+
+step "Rust docs (rustdoc, warnings are errors: a broken intra-doc link fails)"
+# Seconds after clippy: the dependencies are checked already, only the crate's own docs are built.
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked
 
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
@@ -77,10 +131,27 @@ job_join rllib "test.sh: installing Ray RLlib (setup.sh --rllib, launch_scripts/
 export SORTING_LINE_RLLIB=1
 
 step "ros2 CLI for the CLI tests"
-job_join ros2cli "test.sh: building the ros2 CLI venv from shared/tools/ros2cli"
+job_join ros2cli "test.sh: building the ros2 CLI venv (launch_scripts/ros2cli.sh)"
 
 step "colcon workspace for the ROS 2 package test"
 job_join colcon "test.sh: tests/python/colcon_ws.py --build"
+
+step "core venv of Python $OTHER_PYTHON for the subset"
+# Joined before the suite: its editable install builds the native extension into bridge/.
+if [[ -n "$OTHER_VENV" ]]; then
+  job_join other "test.sh: setting up $OTHER_VENV (SORTING_LINE_VENV=$OTHER_VENV setup.sh --no-cargo)"
+  if "$OTHER_VENV/bin/python" -c 'import importlib.util, sys; sys.exit(importlib.util.find_spec("torch") is None)'; then
+    echo "test.sh: $OTHER_VENV is to be a core venv, but torch is installed in it" >&2
+    exit 1
+  fi
+  # The core stays under 1.5 GB (docs/installing.md): a new dependency that pulls in a large one shows here.
+  size_mb="$(du -sm "$OTHER_VENV" | cut -f1)"
+  if ((size_mb >= 1536)); then
+    echo "test.sh: the core venv $OTHER_VENV is $size_mb MB, over 1.5 GB: what of requirements-bridge.txt grew it?" >&2
+    exit 1
+  fi
+  echo "test.sh: core venv $OTHER_VENV: $size_mb MB, no torch"
+fi
 
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
@@ -111,5 +182,20 @@ unshare -n bash -c '
   python -m pytest tests/python -q -rs -p no:cacheprovider --durations=12 "$@"
 ' test.sh "$@" || status=$?
 shm_clean
+
+step "Python $OTHER_PYTHON, core venv: the README's snippets and a subset of the suite"
+if [[ -n "$OTHER_VENV" ]]; then
+  start=$SECONDS
+  unshare -n env SORTING_LINE_VENV="$OTHER_VENV" SORTING_LINE_CORE_VENV=1 bash -c '
+    set -euo pipefail
+    ip link set lo up
+    source launch_scripts/env.sh
+    python -m pytest "$@" -q -rs -p no:cacheprovider --durations=5
+  ' test.sh "${OTHER_PYTHON_TESTS[@]}" || status=$?
+  echo "test.sh: Python $OTHER_PYTHON subset: $((SECONDS - start)) s; $OTHER_VENV is $(du -sh "$OTHER_VENV" | cut -f1)"
+  shm_clean
+else
+  other_missing
+fi
 rm -rf "$SORTING_LINE_COLCON_WS"
 exit "$status"

@@ -9,16 +9,18 @@ namespace of its own; ``node="shared"`` leases a line of this host's line server
 needed, stopped 8 s after its last env: many envs per host); ``node="attach"`` uses a node already
 serving ``namespace``. Nothing starts before the
 first ``reset()``. Under the hood every step is a lock-step round trip over ROS 2 topics (see
-``ros.links``).
+``ros.links``). ``backend="native"`` (every id, and ``make_vec``) runs the line in this process
+instead, through the extension ``_native`` (``envs.native``): no node, no ROS, the same trajectories.
 
-Subpackages, by what they depend on (each builds only on those before it):
-``line`` (nothing ROS: the vocabulary, options, the node process, line servers), ``ros`` (rclpy:
-context, waits, links, the batch codec, the bank of lines), ``envs`` (the Gymnasium and SB3
-environments, the dashboard), ``agents``, ``training`` (SB3), ``reports`` (evaluation, benchmark,
-plots), ``bag`` (record, play, replay). ``workarounds`` holds every workaround for a defect
-outside this repository (Fast DDS, rclpy, DDS discovery, orphaned processes), one module each, its
-docstring the list; each module imports only what its defect needs. ``zoo`` holds RL Zoo conf
-files, ``evolutions`` ready schedules of the evolving line.
+Subpackages, by what they depend on (each builds only on those before it; docs/layout.md's
+"Layers" lists the order the tests check): ``line`` (nothing ROS: the vocabulary, options, the
+node process, line servers), ``workarounds`` (every workaround for a defect outside this
+repository: Fast DDS, rclpy, DDS discovery, orphaned processes; one module each, its docstring the
+list), ``ros`` (rclpy: context, waits, links, the batch codec, the bank of lines), ``bag``
+(record, play, replay), ``envs`` (the Gymnasium and SB3 environments, the dashboard), ``agents``,
+``training`` (SB3), ``zoo`` (RL Zoo conf files), ``reports`` (tables, statistics and plots of
+saved results) and ``studies`` (the runs behind them: evaluation, the benchmark, the transfer
+study). ``evolutions`` holds ready schedules of the evolving line.
 
 ``import sorting_line_gym`` registers the Gymnasium ids and imports neither rclpy nor SB3: the
 environment classes below load on first use.
@@ -54,13 +56,13 @@ def __getattr__(name: str):
 for _variant, _env_id in ENV_IDS.items():
     register(
         id=_env_id,
-        entry_point="sorting_line_gym.envs.env:SortingLineEnv",
+        entry_point="sorting_line_gym.envs.backends:line_env",
         kwargs={"variant": _variant},
         max_episode_steps=EPISODE_STEPS,
         vector_entry_point="sorting_line_gym.envs.vector:SortingLineVectorEnv",
     )
 register(
     id="SortingLineEvolving-v0",
-    entry_point="sorting_line_gym.envs.evolving:SortingLineEvolvingEnv",
+    entry_point="sorting_line_gym.envs.backends:evolving_env",
     max_episode_steps=EPISODE_STEPS,
 )

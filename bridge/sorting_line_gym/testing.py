@@ -22,7 +22,7 @@ Fixtures (everything they start is stopped after the test; a node that died fail
 - ``sorting_line_recorder(out=..., topics=None)`` -> :class:`Recording`: `sorting-line-bag record`
   of the test's line (started once it records); ``recording.stop()`` closes the bag;
 - ``sorting_line_bag_player(bag, lockstep=True, ...)``: `sorting-line-bag play` of a bag into the
-  test's namespace (the keyword arguments of :func:`sorting_line_gym.bag.play.play`);
+  test's namespace (the keyword arguments of :func:`sorting_line_gym.bag.transport.play.play`);
 - ``sorting_line_check(bag, controller=..., closed_loop=..., ...)`` -> the verdict
   `sorting-line-bag check` prints (:func:`check_controller`, with the test's namespace).
 
@@ -53,7 +53,7 @@ READY_TIMEOUT, FIRST_ANSWER_TIMEOUT = 30.0, 3.0
 def __getattr__(name: str):
     # check_controller imports rclpy: only when asked for.
     if name == "check_controller":
-        from .bag.check import check_controller
+        from .bag.check.checker import check_controller
 
         return check_controller
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -167,6 +167,7 @@ class LineNode:
         self.states: list = []
         self._tool = None
         self._reset_client = None
+        self._input_matches = None
 
     def wait_ready(self, timeout: float = READY_TIMEOUT) -> None:
         """Until the node's reset service and state topic are discovered (TimeoutError, with the
@@ -174,7 +175,7 @@ class LineNode:
         from sorting_line_interfaces.msg import LineState
         from sorting_line_interfaces.srv import ResetLine
 
-        from .bag.rosnode import DEEP_QOS, ToolNode
+        from .bag.transport.rosnode import DEEP_QOS, ToolNode
 
         self._tool = tool = ToolNode("sorting_line_test", self.process)
         self._reset_client = tool.node.create_client(ResetLine, f"{self.namespace}/reset")
@@ -199,9 +200,14 @@ class LineNode:
 
     def run_episode(self, seed: int | None = None, timeout: float = 60.0, attempts: int = 3) -> list:
         """Resets the line and waits until the controller driving it has ended the episode
-        (a state with ``truncated`` or ``terminated``); returns the episode's states. A reset
-        whose first tick nobody answers within a few seconds (a controller still discovering the
-        node) is repeated, up to ``attempts`` times (a seeded reset repeated is the same episode)."""
+        (a state with ``truncated`` or ``terminated``); returns the episode's states.
+
+        A reset whose first tick nobody answers within a few seconds (a controller still
+        discovering the node misses the tick's readings) is repeated, up to ``attempts`` times: a
+        seeded reset repeated is the same episode. Not on an evolving line (``evolution=``
+        option), where each reset is the schedule's next episode: there the reset waits (up to
+        ``timeout``) until a controller's publisher and subscription on the line are seen, and is
+        sent once."""
 
         def first_answer(limit: float) -> int:
             episode = self.reset(seed).episode
@@ -212,13 +218,39 @@ class LineNode:
             )
             return episode
 
-        episode = retried_handshake(first_answer, [FIRST_ANSWER_TIMEOUT] * attempts, TimeoutError)
+        if self.options.get("evolution") is None:
+            episode = retried_handshake(first_answer, [FIRST_ANSWER_TIMEOUT] * attempts, TimeoutError)
+        else:
+            self._until_controller(timeout)
+            episode = first_answer(FIRST_ANSWER_TIMEOUT * attempts)
         self._until_state(
             lambda s: s.episode == episode and (s.truncated or s.terminated),
             timeout,
             f"the end of episode {episode} of {self.namespace}",
         )
         return [s for s in self.states if s.episode == episode]
+
+    def _until_controller(self, timeout: float) -> None:
+        """Until a controller reads the line's input and writes its speed commands, and the node
+        has matched its input reader."""
+        from .bag.transport.rosnode import InputMatches, controller_seen
+
+        self._tool.until(
+            lambda: controller_seen(self._tool.node, self.namespace),
+            timeout,
+            f"a controller of {self.namespace} (a reader of input, a writer of cmd/speed)",
+        )
+        # Seen here is not yet matched by the node, which sends a tick's input only to the readers
+        # it has matched: a reset whose input the controller missed is never answered, and here it
+        # is not repeated. So wait for the node's word (a fresh-clone run, and a 1 s settle under
+        # load 7, failed without it).
+        matches = self._input_matches or InputMatches(self._tool.node)
+        self._input_matches = matches
+        self._tool.until(
+            lambda: matches.all_matched(self.namespace),
+            timeout,
+            f"the node serving {self.namespace} to match every reader of its input (input_readers on /diagnostics)",
+        )
 
     def _until_state(self, wanted, timeout: float, what: str) -> None:
         self._tool.until(lambda: any(wanted(s) for s in self.states), timeout, what)
@@ -273,7 +305,7 @@ class Recording:
             raise AssertionError(f"the recorder of {namespace} did not start: {self._error or 'no answer'}")
 
     def _run(self, topics, wait) -> None:
-        from .bag.record import record
+        from .bag.transport.record import record
 
         def said(line: str) -> None:
             self.lines.append(line)
@@ -337,7 +369,7 @@ def sorting_line_bag_player(sorting_line_graph):
     when it is played."""
 
     def play_bag(bag: str | Path, namespace: str | None = None, **options):
-        from .bag.play import play
+        from .bag.transport.play import play
 
         options.setdefault("on_ready", lambda _line: None)
         return play(bag, namespace=namespace or sorting_line_graph.namespace, **options)
@@ -352,7 +384,7 @@ def sorting_line_check(sorting_line_graph):
     test's graph and namespace."""
 
     def check(bag: str | Path, **options):
-        from .bag.check import check_controller
+        from .bag.check.checker import check_controller
 
         options.setdefault("namespace", sorting_line_graph.namespace)
         return check_controller(bag, **options)

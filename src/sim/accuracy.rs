@@ -72,7 +72,7 @@ pub fn with_noise(noiseless: f64, noise: f64) -> f64 {
 /// `c - N >= threshold` that decides whether a step earns more than the flat -0.1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AccuracyLaw {
-    /// E[accuracy].
+    /// E\[accuracy\].
     pub mean: f64,
     /// P(accuracy >= threshold).
     pub p_above: f64,

@@ -407,6 +407,32 @@ pub struct Settings {
     pub input_fault: Option<ActiveFault>,
 }
 
+/// A fault's name as events and messages spell it.
+pub fn fault_name(kind: FaultKind) -> &'static str {
+    match kind {
+        FaultKind::Stuck => "stuck",
+        FaultKind::Dropped => "dropped",
+    }
+}
+
+/// The fields an event sets, with their new values as YAML scalars, in the message's order.
+pub fn event_changes(event: &Event) -> Vec<(&'static str, String)> {
+    let mut out = Vec::new();
+    let mut put = |field, value: Option<String>| {
+        if let Some(value) = value {
+            out.push((field, value));
+        }
+    };
+    put("obs_noise", event.obs_noise.map(|v| v.to_string()));
+    put("action_penalty", event.action_penalty.map(|v| v.to_string()));
+    put("threshold", event.threshold.map(|v| v.to_string()));
+    put("input", event.input.map(|v| v.to_string()));
+    put("sort_modes", event.sort_modes.map(|v| v.to_string()));
+    put("ratio_sensor", event.ratio_sensor.map(|v| v.to_string()));
+    put("input_fault", event.input_fault.map(|f| format!("{} {}", fault_name(f.kind), f.ticks)));
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -150,7 +150,7 @@ impl RbaTable {
 /// How many steps a reading's regime is expected to last, counting the current one: the horizon
 /// over which `rba-hold` lets a change of speed pay back its penalty. Random input is fresh every
 /// step (1). A seasonal pattern lasts L = 10, 11 or 12 steps (uniform); seen at a random step, its
-/// expected rest including that step is E[L^2] / (2 E[L]) + 1/2 (length-biased sampling).
+/// expected rest including that step is E\[L^2\] / (2 E\[L\]) + 1/2 (length-biased sampling).
 pub fn hold_horizon(input: InputKind) -> f64 {
     match input {
         InputKind::Random => 1.0,

@@ -1,12 +1,14 @@
 """The golden bags (tests/data/bags/) and how they are made: with the tool itself.
 
-    bash tests/data/bags/record_golden.sh      # re-records both bags (in a loopback-only netns)
+    bash tests/data/bags/record_golden.sh      # re-records the bags (in a loopback-only netns)
+    bash tests/data/bags/record_golden.sh ppo_advanced_b   # one of them
 
 For each bag a lock-step node (a seasonal setup, --max-steps 50), `sorting-line-bag record` on its
 namespace, `sorting-line-controller` driving the line (rule-based: it switches speeds, and on the
-advanced line sort modes), and this module resetting it: a plan of seeded and unseeded resets
-(the same seed twice in a row, and continuing streams, on purpose), each episode run until the
-node reports `truncated`. About 255 ticks per bag.
+advanced line sort modes; ``ppo_advanced_b``: a learned policy, the ONNX file of
+tests/data/policies/, which make_policies.sh trains and exports), and this module resetting it:
+a plan of seeded and unseeded resets (the same seed twice in a row, and continuing streams, on
+purpose), each episode run until the node reports `truncated`. About 255 ticks per bag.
 
 `BagProcess` runs the `sorting-line-bag` console script as a user would (also used by test_bags).
 """
@@ -34,7 +36,21 @@ GOLDEN = {
         "agent": "rba-hold",
         "plan": [11, None, 11, 5, None],
     },
+    "ppo_advanced_b": {
+        "variant": "advanced",
+        "setup": "B",
+        "seed": 9,
+        "policy": str(h.ROOT / "tests" / "data" / "policies" / "ppo_B_advanced_seed42.onnx"),
+        "plan": [11, None, 11, 5, None],
+    },
 }
+
+
+def agent_flags(spec: dict) -> list[str]:
+    """The controller's flags for a golden bag's agent: a rule-based one or a learned policy."""
+    if "policy" in spec:
+        return ["--policy", spec["policy"]]
+    return ["--setup", spec["setup"], "--variant", spec["variant"], "--agent", spec["agent"]]
 
 
 class BagProcess(h.ScriptProcess):
@@ -134,16 +150,7 @@ def record_golden(name: str, out: Path, session: h.RosSession, workdir: Path, na
         controller = ControllerProcess(
             workdir,
             name,
-            [
-                "--namespace",
-                namespace,
-                "--setup",
-                spec["setup"],
-                "--variant",
-                spec["variant"],
-                "--agent",
-                spec["agent"],
-            ],
+            ["--namespace", namespace, *agent_flags(spec)],
         )
         recorder = BagProcess(["record", "--namespace", namespace, "-o", out], workdir / f"record_{name}.log")
 
@@ -176,7 +183,7 @@ def main() -> int:
     session = h.RosSession()
     try:
         with tempfile.TemporaryDirectory(prefix="golden_bags_") as tmp:
-            for name in GOLDEN:
+            for name in sys.argv[1:] or GOLDEN:
                 out = DATA / name
                 if out.exists():
                     shutil.rmtree(out)

@@ -83,7 +83,8 @@ def build_venv(log) -> Path:
         shutil.rmtree(venv, ignore_errors=True)
         build_log = venv.parent / (venv.name + ".build.log")
         t0 = time.monotonic()
-        python = shutil.which("python3.11") or sys.executable
+        # The project venv's version (this script runs in it): the workspace builds against that venv.
+        python = getattr(sys, "_base_executable", sys.executable)
         env = {k: v for k, v in os.environ.items() if k not in ROS_VARIABLES}
         with open(build_log, "wb") as out:
             for argv in (

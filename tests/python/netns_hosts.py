@@ -89,7 +89,7 @@ class Hosts:
 
     def argv(self, host: str, argv: list[str]) -> list[str]:
         """`argv` run inside `host` (ip and setpriv exec it: same pid, dies with the test process)."""
-        from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
+        from sorting_line_gym.line.process import with_parent_death_signal
 
         return ["ip", "netns", "exec", self.names[host], *with_parent_death_signal(argv)]
 

@@ -21,7 +21,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from sorting_line_gym.bag import open_bag
-from sorting_line_gym.bag.schema import NODE_QOS, typestore
+from sorting_line_gym.bag.storage.schema import NODE_QOS, typestore
 
 CELL_STATUS = "factory_msgs/msg/CellStatus"
 CELL_STATUS_MSG = "string cell\nfloat64 temperature\n"

@@ -46,8 +46,8 @@ from pathlib import Path
 from typing import Any
 
 from sorting_line_gym.line import vocabulary
+from sorting_line_gym.line.process import with_parent_death_signal
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
-from sorting_line_gym.workarounds.orphaned_processes import with_parent_death_signal
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"

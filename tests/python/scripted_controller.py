@@ -24,7 +24,7 @@ from sorting_line_interfaces.msg import LineCommands, MaterialInput, SortModeCom
 from std_msgs.msg import Header
 
 from sorting_line_gym.bag import open_bag
-from sorting_line_gym.bag.schema import stamp_ns
+from sorting_line_gym.bag.storage.schema import stamp_ns
 
 QOS = QoSProfile(
     depth=10,

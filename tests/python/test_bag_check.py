@@ -28,10 +28,11 @@ import pytest
 
 import ros_harness as h
 from bag_golden import DATA, GOLDEN, BagProcess
-from sorting_line_gym.bag.bagfile import META_KEY, open_bag
-from sorting_line_gym.bag.check import check_controller
-from sorting_line_gym.bag.schema import typestore
-from sorting_line_gym.bag.writer import BagWriter
+from sorting_line_gym.bag import open_bag
+from sorting_line_gym.bag.check.checker import check_controller
+from sorting_line_gym.bag.format.description import META_KEY
+from sorting_line_gym.bag.storage.schema import typestore
+from sorting_line_gym.bag.storage.writer import BagWriter
 
 SCRIPT = Path(__file__).with_name("scripted_controller.py")
 
@@ -145,7 +146,7 @@ def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loo
     )
     assert episode.run.reward < episode.bag.reward and "reward" in episode.failures[0], closed.summary()
     # The tolerances decide: the same episodes pass within loose ones (rba loses up to ~30% here).
-    from sorting_line_gym.bag.check_verdict import Tolerance
+    from sorting_line_gym.bag.check.verdict import Tolerance
 
     loose = {
         "reward": Tolerance.parse("35%", "r"),
@@ -224,7 +225,7 @@ def test_no_controller_fails_the_run_after_the_wait(namespace):
 
 
 def test_our_controller_passes_closed_loop_and_the_recorded_run_replays(namespace, tmp_path):
-    from sorting_line_gym.bag.replay import replay
+    from sorting_line_gym.bag.transport.replay import replay
 
     out = tmp_path / "run"
     verdict = check_controller(

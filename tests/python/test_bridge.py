@@ -36,8 +36,9 @@ import pytest
 
 import ros_harness as h
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
-from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineSB3VecEnv
+from sorting_line_gym import BridgeError, BridgeTimeout
 from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
+from training_stack import needs_training
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -181,6 +182,7 @@ def test_step_info_does_not_depend_on_earlier_episodes(make_env):
     )
 
 
+@needs_training
 @pytest.mark.parametrize("variant", ["basic", "advanced"])
 def test_sb3_check_env(variant, make_env):
     from stable_baselines3.common.env_checker import check_env
@@ -421,10 +423,13 @@ def test_make_max_episode_steps_250(make_env):
 # Training
 
 
+@needs_training
 def test_short_ppo_run(make_vec):
     """PPO on 4 advanced lines for 2048 steps: completes, and the policy predicts valid actions."""
     import torch
     from stable_baselines3 import PPO
+
+    from sorting_line_gym import SortingLineSB3VecEnv
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)

@@ -11,7 +11,7 @@ import gymnasium
 import numpy as np
 import pytest
 
-from sorting_line_gym import SortingLineSB3VecEnv, SortingLineVectorEnv
+from sorting_line_gym import SortingLineVectorEnv
 from test_bridge import (
     ADVANCED,
     BASIC,
@@ -24,6 +24,7 @@ from test_bridge import (
     strip_node_counters,
     trace,
 )
+from training_stack import needs_training
 
 
 def _run_vector(env: SortingLineVectorEnv, seed: int, actions: np.ndarray) -> dict:
@@ -124,9 +125,12 @@ def test_vector_env_same_seed_same_run_including_autoresets(make_vec):
     assert same(fa, fc), "same env, reset(seed) again: runs differ at " + first_difference(fa, fc)
 
 
+@needs_training
 def test_sb3_vec_env_matches_the_library_across_autoreset(make_vec):
     """SortingLineSB3VecEnv(seed=S): line k == `trace --seed S+k`; at truncation SB3's conventions
     (done, terminal_observation, TimeLimit.truncated) and the new episode's observation."""
+    from sorting_line_gym import SortingLineSB3VecEnv
+
     n, seed, steps = 3, 21, 55
     env = make_vec(SortingLineSB3VecEnv, num_envs=n, setup="B", variant="advanced", seed=seed)
     env.seed(seed)
@@ -163,8 +167,11 @@ def test_sb3_vec_env_matches_the_library_across_autoreset(make_vec):
             assert infos[k]["accuracy"] == entry["step"]["accuracy"] and infos[k]["purity"] == entry["purity"]
 
 
+@needs_training
 def test_sb3_vec_env_constructor_seed_reproduces(make_vec):
     """SortingLineSB3VecEnv(seed=S) without a later seed(): two envs give the same run."""
+    from sorting_line_gym import SortingLineSB3VecEnv
+
     runs = []
     actions = np.stack([fixed_actions(10, 2, seed=900 + t) for t in range(60)])
     for _ in range(2):
@@ -219,9 +226,12 @@ def test_record_episode_statistics_vector(make_vec):
     assert truncated.all() and list(infos["episode"]["l"]) == [50, 50]
 
 
+@needs_training
 def test_sb3_infos_keep_sb3s_episode_convention(make_vec):
     """Every step's info["episode"], if present, must be SB3's episode-statistics dict: PPO/A2C/DQN
     feed it into their ep_info_buffer and crash on anything else (see test_short_ppo_run)."""
+    from sorting_line_gym import SortingLineSB3VecEnv
+
     env = make_vec(SortingLineSB3VecEnv, num_envs=2, setup="A", variant="basic", seed=1)
     env.reset()
     env.step_async(np.array([3, 4]))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -25,6 +26,8 @@ import ros_harness as h
 from ros_harness import LINE_TYPES
 from test_ros2cli import poll, yaml_docs
 
+# The workspace installs Python modules for the project venv's version (this interpreter's).
+PYTHON_DIR = f"python{sys.version_info.major}.{sys.version_info.minor}"
 EXECUTABLES = {"sorting_line", "sorting-line-bridge", "sorting-line-controller", "sorting-line-bag"}
 
 
@@ -152,7 +155,7 @@ def test_plain_colcon_build_found_and_installed_all_three_packages(workspace):
             h.ROOT / "launch_scripts" / name if name != "package.xml" else h.ROOT / name
         ).read_bytes(), name
     python = installed(
-        workspace, "sorting_line_interfaces", "lib", "python3.11", "site-packages", "sorting_line_interfaces"
+        workspace, "sorting_line_interfaces", "lib", PYTHON_DIR, "site-packages", "sorting_line_interfaces"
     )
     assert (python / "msg" / "_line_state.py").is_file() and (python / "srv" / "_reset_line.py").is_file()
     # .venv provides simulation_interfaces: our copy builds and installs nothing, so it shadows nothing.

@@ -3,6 +3,8 @@
 - ``input``, ``obs_noise``, ``action_penalty`` and ``threshold`` are accepted by ``gymnasium.make`` (as the
   node's options of the same name, on top of the setup); an out-of-range value fails at once naming the value
   and the range, before any node starts; an unknown keyword names itself in the error.
+- A ROS_DOMAIN_ID that DDS cannot use fails at the first reset naming it (rmw_fastrtps would end the process
+  without a word).
 - Stepping or resetting a closed env raises our ``BridgeError`` saying the env is closed, not rclpy's
   ``InvalidHandle`` of a destroyed node.
 
@@ -10,6 +12,8 @@ Real node, real rclpy: about 10 s.
 """
 
 from __future__ import annotations
+
+import inspect
 
 import gymnasium
 import pytest
@@ -59,9 +63,75 @@ def test_bad_settings_fail_at_make_naming_value_and_range(kwargs, message):
             make()
 
 
-def test_unknown_keyword_is_named():
-    with pytest.raises(TypeError, match="noise"):
-        gymnasium.make(BASIC, noise=0.3)
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda **kw: gymnasium.make(BASIC, **kw),
+        lambda **kw: gymnasium.make(BASIC, backend="native", **kw),
+        lambda **kw: gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", **kw),
+        lambda **kw: gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", backend="native", **kw),
+        lambda **kw: gymnasium.make_vec(BASIC, num_envs=2, vectorization_mode="vector_entry_point", **kw),
+        lambda **kw: SortingLineSB3VecEnv(2, **kw),
+    ],
+    ids=["make", "make-native", "evolving", "evolving-native", "make_vec", "sb3"],
+)
+def test_unknown_keyword_is_named_with_the_allowed_ones(make):
+    """A misspelt keyword fails at once on every face, naming itself, the keyword meant and the allowed ones."""
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'setpu' \(did you mean 'setup'\?\): allowed .*"):
+        make(setpu="B")
+    with pytest.raises(TypeError, match="'noise'.*allowed .*step_timeout"):
+        make(noise=0.3)
+
+
+#: A value other than the default for every line option (with node="attach", the namespace it needs).
+NOT_DEFAULTS = {
+    "setup": "D",
+    "variant": "advanced",
+    "namespace": "/elsewhere",
+    "node": "attach",
+    "max_episode_steps": 7,
+    "step_timeout": 3.5,
+    "startup_timeout": 21.0,
+    "threshold": 0.6,
+    "input": "seasonal3",
+    "obs_noise": 0.1,
+    "action_penalty": 0.2,
+}
+
+
+def test_every_keyword_reaches_the_line_options():
+    """Each face hands every line option it takes to its bank as given: none falls back to its
+    default (what the constructors' locals() allowed when a name changed on one side only). Making
+    an env starts nothing, so no node is needed."""
+    from sorting_line_gym import SortingLineEnv
+    from sorting_line_gym.envs.evolving import SortingLineEvolvingEnv
+
+    for face, bank in (
+        (SortingLineEnv, lambda env: env.bank),
+        (SortingLineEvolvingEnv, lambda env: env.bank),
+        (SortingLineVectorEnv, lambda env: env._lines.bank),
+        (SortingLineSB3VecEnv, lambda env: env._lines.bank),
+    ):
+        given = {k: v for k, v in NOT_DEFAULTS.items() if k in inspect.signature(face).parameters}
+        options = bank(face(**given)).options
+        assert {k: getattr(options, k) for k in given} == given, face.__name__
+        assert len(given) >= 6, f"{face.__name__} takes only {sorted(given)}"
+
+
+def test_help_shows_each_keyword_with_its_default_and_meaning():
+    """``help()`` of each env class lists every keyword it takes, with its default, in the signature
+    and in the docstring (written there from ``line/options.py`` and ``envs/keywords.py``)."""
+    import pydoc
+
+    from sorting_line_gym import SortingLineEnv
+    from sorting_line_gym.envs.evolving import SortingLineEvolvingEnv
+
+    for face in (SortingLineEnv, SortingLineEvolvingEnv, SortingLineVectorEnv, SortingLineSB3VecEnv):
+        text = pydoc.render_doc(face, renderer=pydoc.plaintext)
+        for name, parameter in inspect.signature(face).parameters.items():
+            assert f"{name}: " in text.split("__init__", 1)[1], f"help({face.__name__}) shows no {name} in __init__"
+            assert f"- `{name}={parameter.default!r}`: " in text, f"help({face.__name__}) lists no {name} default"
+    assert "action_penalty: float | None = None" in pydoc.render_doc(SortingLineEnv, renderer=pydoc.plaintext)
 
 
 def test_closed_env_raises_our_error(make_env):
@@ -72,3 +142,18 @@ def test_closed_env_raises_our_error(make_env):
     for use in (lambda: env.step(3), lambda: env.reset(seed=1)):
         with pytest.raises(BridgeError, match="the environment is closed"):
             use()
+
+
+@pytest.mark.parametrize("domain", ["233", "1000", "-1", "abc"])
+def test_a_domain_id_dds_cannot_use_fails_naming_it(monkeypatch, domain):
+    """rmw_fastrtps ends the whole process (exit code 1, no message) when asked for a participant on a
+    ROS_DOMAIN_ID beyond 232: the env refuses it first, naming the value and the range, before any
+    node or rclpy starts."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    env = gymnasium.make(BASIC, setup="B")
+    try:
+        expected = rf"ROS_DOMAIN_ID = '{domain}' is out of range: allowed an integer 0 \.\.= 232"
+        with pytest.raises(BridgeError, match=expected):
+            env.reset(seed=1)
+    finally:
+        env.close()

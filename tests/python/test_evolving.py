@@ -402,6 +402,112 @@ def test_maskable_ppo_never_picks_a_masked_action(tmp_path):
     assert not any(before) and all(modes for _, modes in picks[2 * ENV_EPISODE_STEPS :]), "the upgrade at episode 3"
 
 
+# The first reset: episode 1 of the schedule whatever the handshake meets (a slow or lost first
+# exchange). Episode 1 announces a change, so that its number shows; episode 2 upgrades.
+FIRST_RESET_SCHEDULE = (
+    BASIC_HARDWARE_AS_BUILT
+    + """\
+  - at: {episode: 1}
+    threshold: 0.75
+  - at: {episode: 2}
+    sort_modes: true
+    ratio_sensor: true
+"""
+)
+
+
+def check_first_episode_is_the_schedules_first(env, schedule) -> None:
+    """Two episodes of ``env``: the first announces episode 1 and has basic hardware, the second
+    the upgrade of episode 2; the trajectory is the trace's."""
+    import numpy as np
+
+    seeds = [7, 8]
+    actions = np.random.default_rng(5).integers(0, 30, (len(seeds), ENV_EPISODE_STEPS)).tolist()
+    got, tokens = [], []
+    for episode, (seed, acts) in enumerate(zip(seeds, actions, strict=True), start=1):
+        obs, info = env.reset(seed=seed)
+        tokens.append(f"r{seed}")
+        upgraded = episode == 2
+        assert [e["episode"] for e in info["evolution"] if e["at_reset"]] == [episode], (episode, info)
+        assert env.unwrapped.action_masks().tolist() == [upgraded or a % 3 == 0 for a in range(30)], episode
+        assert info["settings"]["threshold"] == 0.75 and info["settings"]["sort_modes"] == upgraded
+        got.append(("reset", obs.tolist()))
+        for action in acts:
+            obs, reward, _, _, info = env.step(action)
+            tokens.append(str(action))
+            got.append(("step", obs.tolist(), reward, info["mode"]))
+    expected = env_rows_of_the_trace(schedule, tokens, seeds[0])
+    assert [(r[0], *np.float32(r[1]).tolist(), *r[2:]) for r in got] == [
+        (r[0], *np.float32(r[1]).tolist(), *r[2:]) for r in expected
+    ]
+
+
+def test_a_slow_first_reply_is_waited_for_not_a_second_episode(tmp_path, monkeypatch):
+    """Handshake attempts far shorter than any reply (as a reply slower than 0.2 s under load):
+    the first reset is still the schedule's episode 1, not a repeated reset's episode 2."""
+    import sorting_line_gym.ros.bank as bank
+
+    monkeypatch.setattr(bank, "HANDSHAKE_TIMEOUTS", (1e-4, 1e-4, 1e-4, 1e-4, 2.0))
+    schedule = tmp_path / "first.yaml"
+    schedule.write_text(FIRST_RESET_SCHEDULE)
+    env = make_env(schedule)
+    try:
+        check_first_episode_is_the_schedules_first(env, schedule)
+    finally:
+        env.close()
+
+
+def test_a_node_paused_at_the_first_reset_still_starts_episode_1(tmp_path):
+    """The node stopped (SIGSTOP) for 0.7 s once discovered, so the first reply comes after the
+    first two handshake attempts' time (0.2 + 0.4 s): the env's first episode is episode 1."""
+    import os
+    import signal
+    import threading
+
+    schedule = tmp_path / "first.yaml"
+    schedule.write_text(FIRST_RESET_SCHEDULE)
+    env = make_env(schedule)
+    bank = env.unwrapped.bank
+    connect, resumes = bank._connect, []
+
+    def connect_then_pause(deadline):
+        connect(deadline)
+        pid = bank.process.process.pid
+        os.kill(pid, signal.SIGSTOP)
+        resumes.append(threading.Timer(0.7, os.kill, (pid, signal.SIGCONT)))
+        resumes[-1].start()
+
+    bank._connect = connect_then_pause
+    try:
+        check_first_episode_is_the_schedules_first(env, schedule)
+    finally:
+        for timer in resumes:
+            timer.join()
+        env.close()
+    assert len(resumes) == 1
+
+
+def test_a_lost_first_exchange_goes_to_a_fresh_node(tmp_path):
+    """A first exchange that does not complete in time (here: a step timeout no reply can meet,
+    for the first node only) puts the reset to a fresh node, never a second time to the same one."""
+    schedule = tmp_path / "first.yaml"
+    schedule.write_text(FIRST_RESET_SCHEDULE)
+    env = make_env(schedule)
+    bank = env.unwrapped.bank
+    first_namespace, fresh_node = bank.namespace, bank._fresh_node
+
+    def restore_then_fresh_node():
+        bank.step_timeout = 2.0
+        fresh_node()
+
+    bank.step_timeout, bank._fresh_node = 1e-4, restore_then_fresh_node
+    try:
+        check_first_episode_is_the_schedules_first(env, schedule)
+        assert env.unwrapped.namespace != first_namespace
+    finally:
+        env.close()
+
+
 # --------------------------------------------------------------------------------------------
 # Bags: record an evolving run, replay it exactly
 
@@ -412,8 +518,8 @@ def check_a_tampered_event_is_named(out, tmp_path) -> None:
     import dataclasses
 
     from sorting_line_gym.bag import rewrite_bag
-    from sorting_line_gym.bag.replay import replay
-    from sorting_line_gym.bag.schema import typestore
+    from sorting_line_gym.bag.storage.schema import typestore
+    from sorting_line_gym.bag.transport.replay import replay
 
     store = typestore()
 
@@ -436,7 +542,7 @@ def check_a_tampered_event_is_named(out, tmp_path) -> None:
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
     from bag_golden import BagProcess, wait_for_command_writers
     from sorting_line_gym.bag import open_bag
-    from sorting_line_gym.bag.replay import replay
+    from sorting_line_gym.bag.transport.replay import replay
 
     schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("bag"))
     c.wait_connected()

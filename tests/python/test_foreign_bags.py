@@ -26,7 +26,7 @@ from bag_golden import DATA, GOLDEN
 from ros2_bags import CELL_STATUS, write_ros2_bag
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.cli import main
-from sorting_line_gym.bag.replay import replay
+from sorting_line_gym.bag.transport.replay import replay
 
 #: The node serving /plant/line_2 hosted three lines with seed 7: line 2 has seed 9, advanced_b's.
 PLANT_PARAMETERS = {
@@ -138,7 +138,7 @@ def test_a_bag_of_other_types_only_is_refused(tmp_path, capsys):
 def test_open_loop_check_passes_the_controller_that_drove_the_line(ros2_bags, storage):
     """The bag's node side played tick by tick in its own namespace to `sorting-line-controller`:
     its answers are the recorded ones (the extra topics are neither played nor in the way)."""
-    from sorting_line_gym.bag.check import check_controller
+    from sorting_line_gym.bag.check.checker import check_controller
 
     name = "basic_d" if storage == "mcap" else "advanced_b"
     spec = GOLDEN[name]
@@ -153,7 +153,7 @@ def test_open_loop_check_passes_the_controller_that_drove_the_line(ros2_bags, st
 
 
 def test_closed_loop_check_names_the_missing_flags_then_passes_with_them(ros2_bags):
-    from sorting_line_gym.bag.check import check_controller
+    from sorting_line_gym.bag.check.checker import check_controller
 
     spec = GOLDEN["basic_d"]
     verdict = check_controller(ros2_bags["mcap"], closed_loop=True, wait=1.0)

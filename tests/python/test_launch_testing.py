@@ -1,7 +1,7 @@
 """The launch_testing example (tests/launch/test_line_with_controller.launch.py) under `launch_test`,
 the runner of ROS's own integration-test framework, from the ros2 CLI venv (tests/python/ros2_cli.py;
-`launch_test` on PATH after its ros2cli_env.sh), so that test.sh runs it: the node and
-`sorting-line-controller` started by a launch description, WaitForTopics on their topics, and the
+`launch_test` beside its `ros2`, as after sourcing launch_scripts/ros2cli.sh's env.sh), so that test.sh
+runs it: the node and `sorting-line-controller` started by a launch description, WaitForTopics on their topics, and the
 post-shutdown exit-code check, all passing, as the JUnit file launch_test writes says.
 """
 

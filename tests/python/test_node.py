@@ -496,12 +496,16 @@ def answer_one_tick_amid_bad_commands(noisy, diag, ns_noisy: str, expected: dict
 def test_bad_command_flood_leaves_the_state_stream_identical(ros, start_node, client_factory, probe, namespace):
     variant, setup, seed = "advanced", "B", 21
     ns_clean, ns_noisy = namespace("clean"), namespace("noisy")
-    node_clean = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--seed", str(seed), *ns_args(ns_clean))
-    node_noisy = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--seed", str(seed), *ns_args(ns_noisy))
     diag = diagnostics_recorder(ros, probe)
+    # One node joins the graph at a time: two started together announce their endpoints to our
+    # participant in one burst, and on a busy machine part of it was lost for good (the clean
+    # line's state writer and cmd/speed reader never matched in 4 of 7 runs at load 15;
+    # workarounds/simultaneous_discovery.py).
+    node_clean = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--seed", str(seed), *ns_args(ns_clean))
     clean = client_factory(ns_clean, variant, node_proc=node_clean)
-    noisy = client_factory(ns_noisy, variant, node_proc=node_noisy)
     clean.wait_connected()
+    node_noisy = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--seed", str(seed), *ns_args(ns_noisy))
+    noisy = client_factory(ns_noisy, variant, node_proc=node_noisy)
     noisy.wait_connected()
     actions = [(0.5, 1), (0.9, 2), (0.1, 0), (0.3, 2), (1.0, 1), (0.6, 0), (0.6, 2), (0.2, 1), (0.8, 0), (0.4, 2)]
 

@@ -43,14 +43,15 @@ def test_two_node_processes_and_the_library_agree(variant, setup, start_node, cl
         *[(5 * k + 1) % n_actions for k in range(6)],
     ]
     clients = []
-    for tag in ["a", "b"]:  # two node processes, started together
+    # Two node processes, joining the graph one at a time: two started together announce their
+    # endpoints to our participant in one burst, and on a busy machine part of it can be lost for
+    # good (workarounds/simultaneous_discovery.py; test_node's flood test lost it so).
+    for tag in ["a", "b"]:
         ns = namespace(tag)
         node = start_node(*h.SETUP_FLAGS[setup], "--variant", variant, "--seed", str(seed), *ns_args(ns))
         clients.append(client_factory(ns, variant, node_proc=node))
-    runs = []
-    for c in clients:
-        c.wait_connected()
-        runs.append((c, run_tokens(c, tokens)))
+        clients[-1].wait_connected()
+    runs = [(c, run_tokens(c, tokens)) for c in clients]
     (a, states_a), (b, states_b) = runs
     for topic in ["state", "input", "belt/occupancy", "sensors/ratio", "events/reset"]:
         assert [h.msg_to_dict(m) for m in a.since_reset(topic)] == [h.msg_to_dict(m) for m in b.since_reset(topic)], (

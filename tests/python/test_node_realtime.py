@@ -124,6 +124,7 @@ def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reade
         values = wait_diagnostics(diag, f"{ns}/line_1", {"ticks": "5", "messages_published": "0"})
         episodes = int(values["episodes"])
         assert int(values["messages_unread_skipped"]) == 3 + 4 * episodes + 3 * 5, values
+        assert values["input_readers"] == "0", values
 
         line1 = f"{ns}/line_1"
         states = h.TopicRecorder(ros, probe, f"{line1}/state", LineState)
@@ -146,7 +147,8 @@ def test_topics_without_a_reader_are_skipped_counted_and_resume_for_a_late_reade
             ros.spin_until(lambda: any(m.step == step for m in inputs.msgs), 2.0, f"{line1}/input of step {step}")
         values = wait_diagnostics(diag, line1, {"ticks": str(int(info["step"][1]))})
         assert int(values["messages_published"]) >= 2 * 10, values
+        assert values["input_readers"] == "1", values  # the node's own count of the reader above
         untouched = wait_diagnostics(diag, f"{ns}/line_0", {"ticks": values["ticks"]})
-        assert untouched["messages_published"] == "0", untouched
+        assert untouched["messages_published"] == "0" and untouched["input_readers"] == "0", untouched
     finally:
         env.close()

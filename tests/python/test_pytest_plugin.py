@@ -62,6 +62,31 @@ def test_warns(sorting_line_graph):
 """
 
 
+#: A controller that starts later than a reset's first answer is waited for, on an evolving line.
+EVOLVING_TEST = """
+import subprocess
+from pathlib import Path
+
+import sorting_line_gym
+
+UPGRADE = Path(sorting_line_gym.__file__).parent / "evolutions" / "upgrade.yaml"
+CONTROLLER = "sorting-line-controller --setup B --variant basic --agent rba"
+
+
+def test_a_late_controller_plays_the_schedules_first_episode(sorting_line_node):
+    line = sorting_line_node(setup="B", variant="basic", evolution=str(UPGRADE), max_steps=20)
+    late = f"sleep 4; exec {CONTROLLER} --ros-args -r __ns:={line.namespace}"
+    controller = subprocess.Popen(["sh", "-c", late])
+    try:
+        states = line.run_episode(7, attempts=10)
+    finally:
+        controller.terminate()
+        controller.wait(10)
+    assert states[-1].truncated
+    assert {s.episode for s in states} == {1}, "the reset was repeated: the schedule moved on"
+"""
+
+
 def run_pytest(directory: Path, *args: str, timeout: float = 240.0) -> tuple[subprocess.CompletedProcess, dict]:
     """pytest in ``directory`` as a user runs it; returns the process and {"module::test": outcome}."""
     junit = directory / "junit.xml"
@@ -152,4 +177,14 @@ def test_pytest_finds_the_plugin_by_its_entry_point():
     assert _entry_point(), (
         f"no pytest11 entry point {PLUGIN!r} in this environment: the bridge was installed "
         "from an older bridge/pyproject.toml; run launch_scripts/setup.sh"
+    )
+
+
+def test_an_evolving_lines_reset_is_never_repeated(tmp_path):
+    """run_episode repeats a reset nobody answered (a seeded reset repeated is the same episode),
+    but not on an evolving line, where each reset is the schedule's next episode."""
+    (tmp_path / "test_evolving_line.py").write_text(EVOLVING_TEST)
+    proc, outcomes = run_pytest(tmp_path)
+    assert outcomes == {"test_evolving_line::test_a_late_controller_plays_the_schedules_first_episode": "passed"}, (
+        proc.stdout[-6000:] + proc.stderr[-2000:]
     )

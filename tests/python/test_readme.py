@@ -21,6 +21,9 @@ from pathlib import Path
 
 import pytest
 
+import ros2_cli
+from training_stack import needs_training
+
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 FIRST_SCREEN = 60
@@ -100,11 +103,40 @@ def test_ros2_topic_echo_shows_rewards(quickstart_node, ros2):
     assert re.search(r"^-?\d+\.\d+$", out, re.M), f"`{' '.join(argv)} --once` printed no reward:\n{out}"
 
 
+def test_the_cli_line_makes_an_env_script_that_runs_ros2(quickstart_node, ros2):
+    """The README's line that builds the ros2 CLI and sources its env.sh, run as written but on the CLI venv the
+    tests use (current, so the build is instant), then its `ros2 topic echo` in that shell: the second terminal."""
+    lines = [line for line in snippet("ros-shell").splitlines() if "launch_scripts/ros2cli.sh" in line]
+    assert len(lines) == 1, (
+        "the README's ros-shell snippet needs one line that builds the CLI: launch_scripts/ros2cli.sh"
+    )
+    venv = ros2_cli.built_venv()
+    if ros2.origin.startswith("ros2 on PATH") or venv is None:
+        pytest.skip(f"the CLI is not one launch_scripts/ros2cli.sh built: {ros2.origin}")
+    command = lines[0].split("#")[0].strip()
+    default = ros2_cli.recipe.DEFAULT_VENV.relative_to(ROOT)
+    assert f"source {default}/env.sh" in command, f"the README's CLI line must source {default}/env.sh: {command}"
+    own = f"launch_scripts/ros2cli.sh --venv {venv} --interfaces-from {ros2_cli.PROJECT_VENV}"
+    command = command.replace("launch_scripts/ros2cli.sh", own).replace(f"{default}/env.sh", f"{venv}/env.sh")
+    echo = shlex.join([*shell_command("ros2"), "--once"])
+    env = dict(os.environ, ROS_DOMAIN_ID=quickstart_domain(), ROS_LOG_DIR=ros2.env["ROS_LOG_DIR"])
+    # The echo starts a daemon in its domain: it would outlive the suite.
+    script = f"set -e; {command}; set +e; {echo}; status=$?; ros2 daemon stop >/dev/null 2>&1; exit $status"
+    try:
+        done = subprocess.run(["bash", "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired as e:
+        raise AssertionError(f"the README's CLI lines did not finish within 120 s\n{e.stdout}\n{e.stderr}") from None
+    assert done.returncode == 0, f"`{script}` exited with {done.returncode}\n{done.stdout}\n{done.stderr}"
+    assert "is up to date" in done.stdout, done.stdout
+    assert re.search(r"^-?\d+\.\d+$", done.stdout, re.M), f"`{echo}` printed no reward:\n{done.stdout}"
+
+
 def test_gymnasium_episode(tmp_path):
     done = run_python(snippet("gymnasium"), tmp_path, "episode.py", timeout=120.0)
     assert re.search(r"episode reward -?\d+\.\d\d, purity \d\.\d{3}", done.stdout), done.stdout
 
 
+@needs_training
 def test_ppo(tmp_path):
     # A tiny budget: 4 rollouts of 64 steps instead of the snippet's 20,000 steps in rollouts of 2,048.
     code, budget = re.subn(r"total_timesteps=[\d_]+", "total_timesteps=256", snippet("ppo"))
@@ -140,3 +172,44 @@ def test_links_in_readme_and_docs_resolve():
                 if anchor not in _anchors(linked_text):
                     broken.append(f"{page.relative_to(ROOT)}: {target} (no such heading)")
     assert not broken, "broken links:\n" + "\n".join(broken)
+
+
+def test_the_docs_index_lists_every_doc():
+    """docs/README.md (the index: where each user starts, every file by subject) links every page of docs/."""
+    index = (ROOT / "docs" / "README.md").read_text()
+    linked = set(re.findall(r"\]\(([^)#\s]+\.md)(?:#[^)]*)?\)", index))
+    pages = {p.name for p in (ROOT / "docs").glob("*.md")} - {"README.md"}
+    assert not pages - linked, f"docs/README.md does not list: {sorted(pages - linked)}"
+
+
+def _keyword_table() -> dict[str, str]:
+    """The README's table of the Gymnasium ids' keyword arguments: each keyword its row names (the
+    backticked names before any parenthesis) -> that row's default cell."""
+    table = README.read_text().split("| kwarg | default | allowed |", 1)[1].split("\n\n", 1)[0]
+    rows = {}
+    for line in table.strip().splitlines()[1:]:
+        names, default = line.strip("|").split("|")[:2]
+        for name in re.findall(r"`(\w+)`", re.sub(r"\(.*?\)", "", names)):
+            rows[name] = default
+    return rows
+
+
+def test_keyword_table_is_the_envs_keywords():
+    """The README's keyword table names exactly the keywords the Gymnasium ids take (the faces'
+    ``keywords.Keywords`` and the entry points' ``backend``), each with its defaults."""
+    import inspect
+
+    from sorting_line_gym.envs import backends, env, evolving
+
+    faces = [env.KEYWORDS, evolving.KEYWORDS]
+    defaults: dict[str, set[object]] = {"backend": {inspect.signature(backends.line_env).parameters["backend"].default}}
+    for face in faces:
+        for name in face.allowed:
+            own = face.own.get(name)
+            defaults.setdefault(name, set()).add(own.default if own else face.defaults[name])
+    table = _keyword_table()
+    assert sorted(table) == sorted(defaults), "README.md's keyword table and the envs' keywords differ"
+    for name, values in defaults.items():
+        for value in values - {None}:
+            shown = f'`"{value}"`' if isinstance(value, str) else str(value)
+            assert shown in table[name], f"README.md's default of {name} ({table[name].strip()}) lacks {shown}"

@@ -28,9 +28,9 @@ import yaml
 import ros_harness as h
 from bag_golden import DATA, BagProcess
 from sorting_line_gym.bag import open_bag, rewrite_bag
-from sorting_line_gym.bag.losses import header_stamp
-from sorting_line_gym.bag.schema import PUBLISHED, relative_to
-from sorting_line_gym.bag.writer import WriteOptions
+from sorting_line_gym.bag.format.options import WriteOptions
+from sorting_line_gym.bag.format.topics import PUBLISHED, relative_to
+from sorting_line_gym.bag.storage.losses import header_stamp
 
 #: The killed recorder must hold everything the node published up to this long before the kill
 #: (it fsyncs every 0.5 s; the rest is slack for a busy 2-core machine).
@@ -239,7 +239,7 @@ def _cdr_with_stamp(stamp_ns: int) -> bytes:
 
 def test_the_loss_counter_names_what_the_node_published_and_the_recorder_missed():
     """No ROS: the node's reports (sim_time, messages_published) against the stamps received."""
-    from sorting_line_gym.bag.losses import LossCounter, describe_losses
+    from sorting_line_gym.bag.storage.losses import LossCounter, describe_losses
 
     ns, s = "/l", 10**9
     topics = [f"{ns}/{t}" for t in ("input", "belt/occupancy", "state", "events/reset", "cmd/speed")]
@@ -285,8 +285,8 @@ def test_a_recording_says_it_missed_nothing(ros, start_node, namespace, tmp_path
 def test_a_bag_being_recorded_is_named_so_and_reindex_leaves_it_alone(tmp_path):
     """No ROS: a writer of this process, mid-recording (its metadata.yaml names this live pid)."""
     from sorting_line_gym.bag import BagError
-    from sorting_line_gym.bag.recovery import reindex
-    from sorting_line_gym.bag.writer import BagWriter
+    from sorting_line_gym.bag.storage.recovery import reindex
+    from sorting_line_gym.bag.storage.writer import BagWriter
 
     golden = open_bag(DATA / "basic_d")
     writer = BagWriter(tmp_path / "live", golden.custom)

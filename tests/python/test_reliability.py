@@ -35,9 +35,9 @@ import pytest
 import ros_harness as h
 from bag_golden import BagProcess, wait_for_command_writers
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv, SortingLineVectorEnv
-from sorting_line_gym.bag.bagfile import open_bag
-from sorting_line_gym.bag.replay import replay
-from sorting_line_gym.bag.schema import stamp_ns
+from sorting_line_gym.bag import open_bag
+from sorting_line_gym.bag.storage.schema import stamp_ns
+from sorting_line_gym.bag.transport.replay import replay
 from test_controller import ControllerProcess
 from test_node import diagnostics_recorder, ns_args, wait_diagnostics
 

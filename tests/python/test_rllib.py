@@ -33,6 +33,7 @@ import pytest
 
 import netns_hosts
 import ros_harness as h
+from sorting_line_gym.training.rllib import RAY_ENVIRONMENT
 
 REQUIRED = os.environ.get("SORTING_LINE_RLLIB") == "1"
 INSTALLED = importlib.util.find_spec("ray") is not None
@@ -48,7 +49,8 @@ TRAIN = [sys.executable, "-m", "sorting_line_gym.training.rllib"]
 
 
 def ray_env(**values: str) -> dict[str, str]:
-    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0", PYTHONUNBUFFERED="1", SORTING_LINE_BIN=str(h.node_binary()))
+    env = dict(os.environ, PYTHONUNBUFFERED="1", SORTING_LINE_BIN=str(h.node_binary()))
+    env.update(RAY_ENVIRONMENT)  # as docs/rllib.md tells a user of `ray start`
     env.update(values)
     return env
 

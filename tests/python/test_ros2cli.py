@@ -586,12 +586,9 @@ def stop_launch(launch: subprocess.Popen) -> int | str:
         return "killed after 15 s"
 
 
-def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, namespace):
-    ns = namespace("launch")
-    params = tmp_path / "line.yaml"
-    params.write_text(
-        "/**:\n  ros__parameters:\n    variant: advanced\n    obs_noise: 0.3\n    max_steps: 20\n    seed: 7\n"
-    )
+def start_launch(ros2, log_path, *launch_args: str) -> subprocess.Popen:
+    """`ros2 launch` of the clone's launch file with ``launch_args`` (realtime lines at RATE, the
+    tests' node binary), in a session of its own (stop_launch), its output into ``log_path``."""
     argv = [
         "setsid",
         "env",
@@ -599,18 +596,25 @@ def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, n
         *ros2.argv(
             "launch",
             str(h.ROOT / "launch_scripts" / "sorting_line.launch.py"),
-            f"namespace:={ns}",
-            "lines:=2",
-            f"params_file:={params}",
-            "max_steps:=9",
-            "mode:=realtime",
+            *launch_args,
             f"rate:={RATE}",
             f"sorting_line_bin:={h.node_binary()}",
         ),
     ]
-    log_path = tmp_path / "launch.log"
     with open(log_path, "wb") as log:
-        launch = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=ros2.env, stdin=subprocess.DEVNULL)
+        return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=ros2.env, stdin=subprocess.DEVNULL)
+
+
+def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, namespace):
+    ns = namespace("launch")
+    params = tmp_path / "line.yaml"
+    params.write_text(
+        "/**:\n  ros__parameters:\n    variant: advanced\n    obs_noise: 0.3\n    max_steps: 20\n    seed: 7\n"
+    )
+    log_path = tmp_path / "launch.log"
+    launch = start_launch(
+        ros2, log_path, f"namespace:={ns}", "lines:=2", f"params_file:={params}", "max_steps:=9", "mode:=realtime"
+    )
     fqn = f"{ns}/sorting_line"
     try:
         poll(ros2, ["node", "list"], lambda out: fqn in out.split(), f"node {fqn}", timeout=30)
@@ -640,3 +644,37 @@ def test_ros2_launch_params_file_namespace_lines_and_overrides(ros2, tmp_path, n
     log = log_path.read_text(errors="replace")
     assert code == 0, f"ros2 launch exited with {code} after SIGINT:\n{log}"
     assert "shut down cleanly" in log and "process has finished cleanly" in log, log
+
+
+def test_ros2_launch_policy_starts_a_learned_controller_beside_the_node(ros2, tmp_path, namespace):
+    """`policy:=POLICY.onnx` (docs/deploying-a-policy.md): the controller runs beside the node in its
+    namespace, reads the node's parameters, decides on the realtime line and stops with the launch."""
+    ns = namespace("launch_policy")
+    policy = h.ROOT / "tests" / "data" / "policies" / "ppo_B_advanced_seed42.onnx"
+    log_path = tmp_path / "launch.log"
+    launch = start_launch(
+        ros2, log_path, f"namespace:={ns}", "setup:=B", "variant:=advanced", "mode:=realtime", f"policy:={policy}"
+    )
+    try:
+        deadline = time.monotonic() + 90
+        while "first decision" not in log_path.read_text(errors="replace") and time.monotonic() < deadline:
+            assert launch.poll() is None, log_path.read_text(errors="replace")
+            time.sleep(0.5)
+        assert "first decision" in log_path.read_text(errors="replace"), (
+            f"no 'first decision' from the controller within 90 s:\n{log_path.read_text(errors='replace')}"
+        )
+        # One `ros2 node list` can answer before the CLI's participant has discovered the controller's
+        # (CI saw only the node's): discovery is eventually consistent, so ask until it shows.
+        poll(
+            ros2,
+            ["node", "list"],
+            lambda out: f"{ns}/sorting_line_controller" in out.split(),
+            f"node {ns}/sorting_line_controller",
+            timeout=30,
+        )
+    finally:
+        code = stop_launch(launch)
+    log = log_path.read_text(errors="replace")
+    assert code == 0, f"ros2 launch exited with {code} after SIGINT:\n{log}"
+    assert f"line: setup B advanced (parameters of {ns}/sorting_line)" in log, log
+    assert "first decision" in log and "SIGINT: stopping" in log, log

@@ -65,7 +65,7 @@ def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
 
 @pytest.mark.parametrize("agent,setup,variant", [("rba", "D", "basic"), ("rba-hold", "B", "advanced")])
 def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, capsys):
-    from sorting_line_gym.reports import evaluate
+    from sorting_line_gym.studies import evaluate
 
     assert evaluate.main([*eval_flags(agent, setup, variant, 3), "--out", str(tmp_path)]) == 0
     ours = json.loads(capsys.readouterr().out)
@@ -91,7 +91,7 @@ def test_eval_through_ros_equals_the_library(agent, setup, variant, tmp_path, ca
     ],
 )
 def test_eval_rejects_bad_arguments(argv, names, capsys):
-    from sorting_line_gym.reports import evaluate
+    from sorting_line_gym.studies import evaluate
 
     assert evaluate.main(argv) == 2  # before any node is started
     assert names in capsys.readouterr().err
@@ -153,7 +153,7 @@ def test_training_writes_model_kpis_and_is_deterministic(tmp_path):
     second = tiny_training("ppo", tmp_path / "b")
     assert policy_weights(Path(second["model_path"])) == policy_weights(model)
 
-    from sorting_line_gym.reports.evaluate import evaluate
+    from sorting_line_gym.studies.evaluate import evaluate
 
     evals = [evaluate(f"ppo:{model}", "B", "advanced", episodes=2) for _ in range(2)]
     assert evals[0].per_episode == evals[1].per_episode
@@ -254,11 +254,37 @@ def test_console_scripts_are_installed(tmp_path):
         assert "usage: " + name in run([script(name), "--help"], tmp_path).stdout
 
 
+@pytest.mark.parametrize(
+    "module, argv, says",
+    [
+        (
+            "studies.benchmark",
+            ["--agents", "rba", "ppo", "--setups", "A", "--variants", "basic"],
+            "--agents random rba",
+        ),
+        ("studies.transfer", ["--smoke"], "sorting-line-transfer: needs stable_baselines3"),
+    ],
+)
+def test_studies_without_the_training_stack_fail_naming_setup_train(module, argv, says, tmp_path):
+    """A core install (setup.sh without --train) has no SB3: the benchmark's RL agents and the transfer
+    study fail at start with exit code 2 naming the install command, no traceback, nothing written.
+    (SB3 is hidden from the process, so this holds with the training stack installed too.)"""
+    code = (
+        "import sys; sys.modules['stable_baselines3'] = sys.modules['sb3_contrib'] = None\n"
+        f"from sorting_line_gym.{module} import main\n"
+        f"sys.exit(main({[*argv, '--out', str(tmp_path / 'out')]!r}))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "bash launch_scripts/setup.sh --train" in r.stderr and says in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "out" / "cells").exists(), r.stderr
+
+
 def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     """Baselines on B advanced: the paper's seeds and 5 held-out seeds through ROS equal the
     library's `sorting_line eval --gap` (agent, oracle and gap), and the statistics and figures
     are drawn; a rerun skips the finished cells."""
-    from sorting_line_gym.reports import benchmark
+    from sorting_line_gym.studies import benchmark
 
     out = tmp_path / "bench"
     argv = [
@@ -313,7 +339,7 @@ def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
     a few hundred steps each: the RL row has 2 runs and an IQM interval, P(dqn > rba-hold) is
     reported, the one-line cells go to the agreement check only, and the 2-line trainings ran with
     the mapped hyperparameters (one gradient step per 4 transitions)."""
-    from sorting_line_gym.reports import benchmark
+    from sorting_line_gym.studies import benchmark
 
     out = tmp_path / "bench"
     flags = "--setups D --variants basic --agents rba-hold dqn --train-seeds 42 43 --timesteps 200 --n-envs 2"

@@ -36,7 +36,7 @@ def snapshot(cells) -> dict[str, tuple[int, bytes]]:
 
 
 def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp_path, capsys):
-    from sorting_line_gym.training import transfer
+    from sorting_line_gym.studies import transfer
 
     out = tmp_path / "transfer"
     argv = [*SMOKE, "--out", str(out)]
@@ -99,7 +99,7 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
     ],
 )
 def test_transfer_rejects_bad_arguments(argv, names, tmp_path, capsys):
-    from sorting_line_gym.training import transfer
+    from sorting_line_gym.studies import transfer
 
     with pytest.raises(SystemExit) as exit_:
         transfer.main([*argv, "--out", str(tmp_path / "t")])
@@ -147,7 +147,7 @@ def test_transfer_statistics_on_known_records():
 
 def test_transfer_keeps_the_runs_of_its_earlier_format(tmp_path, capsys):
     """A --out holding the earlier sorting-line-transfer's transfer.json (a list of runs) is left alone."""
-    from sorting_line_gym.training import transfer
+    from sorting_line_gym.studies import transfer
 
     earlier = tmp_path / "transfer.json"
     earlier.write_text('{"runs": [], "baselines": {}}\n')
@@ -160,9 +160,9 @@ def test_ppo_settings_are_part_of_the_key_and_the_default_key_is_unchanged(tmp_p
     """`--ppo-settings paper` trains PPO with the paper's gamma, learning rate and entropy on the
     study's rollouts, is its own configuration (refused into a --out of the default's cells), and
     leaves the default key as studies saved before the option have it; no node."""
-    from sorting_line_gym.reports.cell_store import CellStore
-    from sorting_line_gym.training import transfer
-    from sorting_line_gym.training import transfer_cells as tc
+    from sorting_line_gym.studies import transfer
+    from sorting_line_gym.studies import transfer_cells as tc
+    from sorting_line_gym.studies.cell_store import CellStore
 
     study = tc.Settings(2000, 2000, 100).key()
     assert "ppo_settings" not in study

@@ -549,39 +549,53 @@ def state():
     return {"rclpy_ok": rclpy.ok(), "anchor": participant_deletion_hang.keeps_participant()}
 
 
-def worker(env_id, queue):
+def worker(env_id, queue, exit_with):
     env = gym.make(env_id, setup="B")
     env.reset(seed=1)
     env.step(0)
     env.close()
     queue.put(state())
+    if exit_with == "exception":
+        raise RuntimeError("the worker ends on an exception")
+    sys.exit(exit_with)
 
 
 if __name__ == "__main__":
-    fork = multiprocessing.get_context("fork")
-    queue = fork.Queue()
-    child = fork.Process(target=worker, args=(sys.argv[1], queue))
-    child.start()
-    in_child = queue.get(timeout=120)
-    child.join(60)
+    context = multiprocessing.get_context(sys.argv[2])
+    queue = context.Queue()
+    children = {}
+    for exit_with in (0, 3, "exception"):
+        child = context.Process(target=worker, args=(sys.argv[1], queue, exit_with))
+        child.start()
+        in_child = queue.get(timeout=120)
+        child.join(60)
+        children[str(exit_with)] = {"after_close": in_child, "exit_code": child.exitcode}
     env = gym.make(sys.argv[1], setup="B")
     env.reset(seed=1)
     env.close()
-    print(json.dumps({"forked_child_after_close": in_child, "parent_after_close": state(),
-                      "child_exit": child.exitcode}))
+    print(json.dumps({"workers": children, "parent_after_close": state()}))
 """
 
 
-def test_a_forked_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp_path):
-    """In a forked worker, closing the last env neither deletes the DDS participant nor shuts
-    rclpy down (workarounds.participant_deletion_hang: deleting it while the other workers close can hang
-    for minutes in Fast DDS 2.14); elsewhere rclpy is shut down when the last env closes, so that
-    the process may fork afterwards."""
-    out = run_script(tmp_path, "keeps_participant", KEEPS_ITS_PARTICIPANT, [BASIC], timeout=180)
+@pytest.mark.parametrize("start_method", ["fork", "forkserver", "spawn"])
+def test_a_worker_keeps_its_participant_and_a_parent_shuts_rclpy_down(tmp_path, start_method):
+    """In a multiprocessing worker of every start method, closing the last env neither deletes the
+    DDS participant nor shuts rclpy down (workarounds.participant_deletion_hang: deleting it while
+    the other workers close can spin for minutes in Fast DDS 2.14), and the worker ends without DDS
+    teardown with the exit code it would have had (0, sys.exit(3), 1 on an exception; a spawn
+    worker's end goes through the workaround's os._exit); elsewhere rclpy is shut down when the
+    last env closes, so that the process may fork afterwards."""
+    out = run_script(
+        tmp_path, f"keeps_participant_{start_method}", KEEPS_ITS_PARTICIPANT, [BASIC, start_method], timeout=240
+    )
+    kept = {"rclpy_ok": True, "anchor": True}
     assert out == {
-        "forked_child_after_close": {"rclpy_ok": True, "anchor": True},
+        "workers": {
+            "0": {"after_close": kept, "exit_code": 0},
+            "3": {"after_close": kept, "exit_code": 3},
+            "exception": {"after_close": kept, "exit_code": 1},
+        },
         "parent_after_close": {"rclpy_ok": False, "anchor": False},
-        "child_exit": 0,
     }
 
 

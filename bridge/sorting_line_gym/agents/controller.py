@@ -1,4 +1,5 @@
-"""`sorting-line-controller`: the rule-based agent as an rclpy node that drives a line live.
+"""The controller node behind `sorting-line-controller` (its command line: ``controller_cli``): an
+agent (rule-based, or a learned policy) as an rclpy node that drives a line live.
 
     sorting_line node --mode realtime --rate 10 --variant advanced --input seasonal \\
         --action-penalty 0.5 --ros-args -r __ns:=/plant &
@@ -20,6 +21,14 @@ tick's stamp.
   as fast as the round trip allows. It answers every tick it sees, also the last of an episode,
   which a lock-step node refuses (``episode_over``) until someone calls ``reset``.
 
+A learned policy (``learned_policy.LearnedAgent``) gets the observation the env would give and, on
+an evolving line (``evolving``), the env's action mask: the controller follows the line's hardware
+through ``events/evolution`` (``sort_modes``, ``ratio_sensor``; a ``sensors/ratio`` message also
+says the sensor is fitted); without a ratio sensor a tick needs no category and the observation
+reads it as unknown. Where the agent fails on a tick, ``fallback`` answers it (logged, counted on
+``/diagnostics``: ``controller_diagnostics``); without one the node sets ``failure`` and the
+command line stops.
+
 ``--setup`` and ``--variant`` must describe the node's line (the table depends on the input
 generator, the sensor noise and the penalty). QoS is the node's: reliable, volatile, keep-last 10.
 ``--ros-args`` (e.g. ``-r __ns:=/plant``) is handed to rclpy; a ``__ns`` remap sets the namespace as
@@ -29,25 +38,26 @@ or SIGTERM stops it cleanly (within 0.1 s), logging how many decisions it made.
 
 from __future__ import annotations
 
-import argparse
 import json
-import signal
-import sys
 import time
 from collections import deque
 from dataclasses import dataclass
 from typing import IO
 
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
-from sorting_line_interfaces.msg import BeltOccupancy, MaterialInput, MaterialRatio, SortModeCommand, SpeedCommand
+from sorting_line_interfaces.msg import (
+    BeltOccupancy,
+    EvolutionEvent,
+    MaterialInput,
+    MaterialRatio,
+    SortModeCommand,
+    SpeedCommand,
+)
 
-from ..line.vocabulary import SETUPS, SPEEDS, VARIANTS, speed_index_of
+from ..line.vocabulary import CATEGORY_UNKNOWN_CODE, SPEEDS, speed_index_of
 from ..ros.links import QOS, publish_commands
-from .policies import Agent, RuleBasedAgent
+from .controller_diagnostics import ControllerDiagnostics
+from .policies import Agent
 
 NS_PER_S = 1_000_000_000
 #: Ticks whose readings are still incomplete that the controller keeps; older ones are dropped.
@@ -68,6 +78,7 @@ class _Readings:
 
     stamp: object  # builtin_interfaces/Time, echoed in the commands
     first_seen: float  # time.monotonic() of the first reading
+    last_seen: float = 0.0  # ... and of the reading that completed the tick
     quantity: float | None = None
     category: int | None = None
     speed_index: int | None = None
@@ -79,7 +90,8 @@ class ControllerNode(Node):
     """Answers every tick of one line with ``agent``'s decision (see the module's docstring).
 
     ``decision_log``: an open text file that gets one JSON line per decision (stamp, episode, step,
-    readings, decision, and ``latency_ms`` from the tick's first reading to the publication)."""
+    readings, decision, ``latency_ms`` from the tick's first reading to the publication and
+    ``decision_ms`` from its last reading, the one that completed it)."""
 
     def __init__(
         self,
@@ -88,12 +100,17 @@ class ControllerNode(Node):
         namespace: str | None = None,
         node_name: str = "sorting_line_controller",
         decision_log: IO[str] | None = None,
+        fallback: Agent | None = None,
+        evolving: bool = False,
     ):
         super().__init__(node_name, namespace=namespace)
-        self.agent, self.variant = agent, variant
+        self.agent, self.variant, self.fallback = agent, variant, fallback
         self.advanced = variant == "advanced"
-        self.needs_speed = bool(getattr(agent, "hold", False))
+        self.needs_speed = any(getattr(a, "hold", False) for a in (agent, fallback))
         self.decision_log = decision_log
+        # The evolving line's hardware, as its events say (a fixed line has all of it).
+        self.evolving, self.ratio_sensor = evolving, not evolving
+        self.failure: str | None = None  # why the policy could not answer, without a fallback
         self.decisions = 0
         self.skipped = 0  # ticks whose readings never became complete before a newer tick's
         self.stale = 0  # readings for ticks already answered or skipped
@@ -112,6 +129,10 @@ class ControllerNode(Node):
             self.subs.append(self.create_subscription(MaterialRatio, "sensors/ratio", self._on_ratio, QOS))
         if self.needs_speed:
             self.subs.append(self.create_subscription(BeltOccupancy, "belt/occupancy", self._on_belt, QOS))
+        if evolving:
+            self.events = self.create_subscription(EvolutionEvent, "events/evolution", self._on_evolution, QOS)
+            self._hardware(sort_modes=False, ratio_sensor=False)
+        self.diagnostics = ControllerDiagnostics(self, agent, fallback)
         self._connect_timer = self.create_timer(0.1, self._check_connected)
         topics = ", ".join(s.topic_name for s in self.subs)
         self.get_logger().info(
@@ -126,7 +147,12 @@ class ControllerNode(Node):
         """Logs once that every topic has a peer (a hint for users and scripts, not a guarantee
         that the node has matched us too)."""
         pubs = [self.speed_pub] + ([self.mode_pub] if self.mode_pub else [])
-        if all(p.get_subscription_count() > 0 for p in pubs) and all(s.get_publisher_count() > 0 for s in self.subs):
+        subs = self.subs
+        if self.evolving:
+            # The ratio sensor and sort modes come and go with the hardware: not there is no fault.
+            pubs = [self.speed_pub]
+            subs = [s for s in self.subs if not s.topic_name.endswith("/sensors/ratio")]
+        if all(p.get_subscription_count() > 0 for p in pubs) and all(s.get_publisher_count() > 0 for s in subs):
             self.get_logger().info("connected: every sensor topic has a publisher and every command topic a subscriber")
             self._connect_timer.cancel()
             self.destroy_timer(self._connect_timer)
@@ -146,7 +172,19 @@ class ControllerNode(Node):
         self._newest_input = key
         self._reading(msg.header.stamp, msg.episode, msg.step, quantity=float(msg.quantity))
 
+    def _on_evolution(self, msg) -> None:
+        """The evolving line's setup changed: follow its hardware (the ratio sensor, sort modes)."""
+        self._hardware(sort_modes=bool(msg.sort_modes), ratio_sensor=bool(msg.ratio_sensor))
+
+    def _hardware(self, sort_modes: bool, ratio_sensor: bool) -> None:
+        self.ratio_sensor = ratio_sensor
+        for agent in (self.agent, self.fallback):
+            if hasattr(agent, "sort_modes"):
+                agent.sort_modes = sort_modes
+
     def _on_ratio(self, msg: MaterialRatio) -> None:
+        if self.evolving:
+            self.ratio_sensor = True  # it publishes: it is fitted (whether or not we saw the event)
         if msg.category > 2:
             self.invalid += 1
             self.get_logger().warning(
@@ -177,6 +215,7 @@ class ControllerNode(Node):
                 self._drop(min(self._pending), persistent=True)
         for name, value in values.items():
             setattr(tick, name, value)
+        tick.last_seen = time.monotonic()
         if self._complete(tick):
             self._answer(key, tick)
 
@@ -184,7 +223,7 @@ class ControllerNode(Node):
         missing = []
         if tick.quantity is None:
             missing.append("input")
-        if self.advanced and tick.category is None:
+        if self.advanced and self.ratio_sensor and tick.category is None:
             missing.append("sensors/ratio")
         if self.needs_speed and tick.speed_index is None:
             missing.append("belt/occupancy")
@@ -215,8 +254,11 @@ class ControllerNode(Node):
             self._drop(older)
         self._newest_answered = key
         current = tick.speed_index if tick.speed_index is not None else 0
-        category = tick.category if tick.category is not None else 0
-        speed_index, mode = self.agent.act(tick.quantity, category, current)
+        category = tick.category if tick.category is not None else (0 if self.ratio_sensor else CATEGORY_UNKNOWN_CODE)
+        decision = self._decide(key, tick, category, current)
+        if decision is None:
+            return
+        speed_index, mode = decision
         publish_commands(self.speed_pub, self.mode_pub, tick.stamp, speed_index, mode)
         published = time.monotonic()
         self.decisions += 1
@@ -238,10 +280,27 @@ class ControllerNode(Node):
                 "speed_index": speed_index,
                 "mode": mode,
                 "latency_ms": round(latency_ms, 3),
+                "decision_ms": round((published - tick.last_seen) * 1e3, 3),
+                "first_seen_monotonic": tick.first_seen,
                 "published_monotonic": published,
             }
             self.decision_log.write(json.dumps(record) + "\n")
             self.decision_log.flush()
+
+    def _decide(self, key: int, tick: _Readings, category: int, current: int) -> tuple[int, int] | None:
+        """The agent's decision; where it fails, the fallback's (logged and counted), else None
+        with ``failure`` set (the controller stops)."""
+        try:
+            return self.agent.act(tick.quantity, category, current)
+        except Exception as e:  # noqa: BLE001 - a policy runtime fails in its own ways
+            reason = f"the policy could not answer the tick stamped {key / NS_PER_S:.3f} s: {type(e).__name__}: {e}"
+        if self.fallback is None:
+            self.failure = f"{reason}; stopping (--fallback rba-hold answers such ticks instead)"
+            self.get_logger().error(self.failure)
+            return None
+        self.diagnostics.fallbacks += 1
+        self.get_logger().warning(f"{reason}; {self.fallback.name} answers it (fallback {self.diagnostics.fallbacks})")
+        return self.fallback.act(tick.quantity, min(category, 2), current)
 
     def summary(self) -> str:
         lat = sorted(self.latencies)
@@ -253,66 +312,6 @@ class ControllerNode(Node):
                 timing += f" (last {LATENCY_WINDOW} decisions)"
         return (
             f"{self.decisions} decisions, {self.skipped} ticks skipped (incomplete readings), "
-            f"{self.stale} stale readings, {self.invalid} invalid readings{timing}"
+            f"{self.stale} stale readings, {self.invalid} invalid readings, "
+            f"{self.diagnostics.fallbacks} fallbacks{timing}"
         )
-
-
-def main(argv: list[str] | None = None) -> int:
-    full = ["sorting-line-controller", *(sys.argv[1:] if argv is None else argv)]
-    p = argparse.ArgumentParser(
-        prog="sorting-line-controller",
-        description=__doc__.split("\n\n")[0],
-        epilog="ROS arguments go after --ros-args (e.g. --ros-args -r __ns:=/plant).",
-    )
-    p.add_argument(
-        "--namespace", default=None, help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)"
-    )
-    p.add_argument("--setup", choices=list(SETUPS), required=True, help="the setup of the node's line (A..D)")
-    p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
-    p.add_argument(
-        "--agent", choices=["rba", "rba-hold"], default="rba", help="the rule-based policy (default %(default)s)"
-    )
-    p.add_argument("--node-name", default="sorting_line_controller", help="this ROS node's name (default %(default)s)")
-    p.add_argument(
-        "--decision-log",
-        default=None,
-        metavar="FILE",
-        help="write one JSON line per decision (readings, decision, latency) to FILE",
-    )
-    args = p.parse_args(remove_ros_args(full)[1:])
-    # The table first: a missing binary fails before anything joins the graph.
-    try:
-        agent = RuleBasedAgent(args.setup, args.variant, hold=args.agent == "rba-hold")
-    except Exception as e:  # noqa: BLE001 - reported as a usage error
-        print(f"sorting-line-controller: cannot load the rule table: {e}", file=sys.stderr)
-        return 2
-    log = open(args.decision_log, "w") if args.decision_log else None
-    # Our own SIGINT/SIGTERM handling: the signal only sets a flag, and the loop below ends at the
-    # next wake-up (at most SPIN_PERIOD later), with the context still up. rclpy's handlers would
-    # shut the context down from another thread while a callback may be taking or publishing a
-    # message, which then fails at random.
-    stop: list[str] = []
-    rclpy.init(args=full, signal_handler_options=SignalHandlerOptions.NO)
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, _frame: stop.append(signal.Signals(signum).name))
-    executor = SingleThreadedExecutor()
-    node = None
-    try:
-        node = ControllerNode(agent, args.variant, namespace=args.namespace, node_name=args.node_name, decision_log=log)
-        executor.add_node(node)
-        while not stop and rclpy.ok():
-            executor.spin_once(timeout_sec=SPIN_PERIOD)
-        if node is not None:
-            node.get_logger().info(f"{stop[0] if stop else 'shutdown'}: stopping: {node.summary()}")
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        if log is not None:
-            log.close()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

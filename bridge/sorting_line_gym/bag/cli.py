@@ -16,9 +16,11 @@ filled while recording). SIGINT/SIGTERM end `record` and `play` cleanly (the bag
 its metadata); a recorder killed outright leaves a bag `reindex` recovers, with everything received
 up to about half a second before the kill (docs/reliability.md, "Recording").
 
-Each subcommand is a front for a library function (record, replay, play, check_controller) and
-calls it with ``call_with_flags``: the function's keyword-only parameters take the flags of the
-same name, the call names the rest.
+Each subcommand is one function here, a front for a library function (record, replay, play,
+check_controller) that it calls with ``call_with_flags``: the function's keyword-only parameters
+take the flags of the same name, the call names the rest. The verbs that talk to a ROS graph
+(record, replay, play, check) import their tool when they run: those import rclpy (most of a
+second to start), which ``info`` and ``reindex``, reading bags from disk, do without.
 """
 
 from __future__ import annotations
@@ -26,12 +28,24 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
+from typing import get_args, get_type_hints
 
 from ..line.errors import BridgeError
 from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS
-from .bagfile import BagError, describe, open_bag
-from .writer import BagWriteError
+from .format.errors import BagError, BagWriteError
+from .format.options import (
+    MIN_SPLIT_DURATION,
+    MIN_SPLIT_SIZE,
+    NodeOverrides,
+    WriteOptions,
+    check_compression,
+    check_max_bag_duration,
+    check_max_bag_size,
+)
+from .storage.reader import describe, open_bag
+from .storage.recovery import reindex
 
 EXIT_DIFFERENT, EXIT_BAD_INPUT, EXIT_FAILED = 1, 2, 3
 
@@ -208,16 +222,12 @@ def _add_check_limits(c: argparse.ArgumentParser) -> None:
         )
 
 
-#: Node options a fresh node for a bag takes from flags (replay, closed-loop check), named as `sorting_line node`.
+#: Node options a fresh node for a bag takes from flags (replay, closed-loop check), named as
+#: `sorting_line node` names them, each with its type: NodeOverrides' fields but ``setup``.
 NODE_OPTIONS = [
-    ("variant", str),
-    ("input", str),
-    ("obs-noise", float),
-    ("action-penalty", float),
-    ("threshold", float),
-    ("max-steps", int),
-    ("seed", int),
-    ("tick-period", float),
+    (name.replace("_", "-"), next(t for t in get_args(hint) if t is not type(None)))
+    for name, hint in get_type_hints(NodeOverrides).items()
+    if name != "setup"
 ]
 
 
@@ -239,8 +249,8 @@ def _add_node_options(parser, scope: str) -> None:
     )
 
 
-def _node_options(args) -> dict:
-    return {k: getattr(args, k) for k in [name.replace("-", "_") for name, _ in NODE_OPTIONS] + ["setup"]}
+def _node_options(args) -> NodeOverrides:
+    return NodeOverrides(**{k: getattr(args, k) for k in get_type_hints(NodeOverrides)})
 
 
 CHECK_EPILOG = """\
@@ -283,14 +293,6 @@ def _option(check, kind):
 
 
 def _add_write_options(r: argparse.ArgumentParser) -> None:
-    from .writer import (
-        MIN_SPLIT_DURATION,
-        MIN_SPLIT_SIZE,
-        check_compression,
-        check_max_bag_duration,
-        check_max_bag_size,
-    )
-
     splits = (
         (
             "--max-bag-size",
@@ -349,15 +351,12 @@ def _info(args) -> int:
 
 
 def _reindex(args) -> int:
-    from .recovery import reindex
-
     print(reindex(args.bag).summary())
     return 0
 
 
 def _record(args) -> int:
-    from .record import record
-    from .writer import WriteOptions
+    from .transport.record import record  # rclpy: see the module's docstring
 
     options = WriteOptions(args.max_bag_size, args.max_bag_duration, args.compression)
     with _Stop() as stop:
@@ -369,7 +368,7 @@ def _record(args) -> int:
 
 
 def _replay(args) -> int:
-    from .replay import replay
+    from .transport.replay import replay  # rclpy: see the module's docstring
 
     result = call_with_flags(replay, args, args.bag, _node_options(args), progress=_progress(args))
     print(result.report(), flush=True)
@@ -377,7 +376,7 @@ def _replay(args) -> int:
 
 
 def _play(args) -> int:
-    from .play import play
+    from .transport.play import play  # rclpy: see the module's docstring
 
     wait_for = [] if args.no_wait else args.wait_for
     with _Stop() as stop:
@@ -387,9 +386,7 @@ def _play(args) -> int:
 
 
 def _check(args) -> int:
-    from pathlib import Path
-
-    from .check import check_controller
+    from .check.checker import check_controller  # rclpy: see the module's docstring
 
     overrides = _node_options(args)
     with _Stop() as stop:

@@ -40,13 +40,12 @@ of 50 steps (`max_episode_steps=250` for training); constructing the class direc
 `max_episode_steps=N` makes the node truncate at N.
 
 ## Arguments
-`setup` "A".."D"; `variant` "basic"/"advanced" (set by the id); `node` "spawn" (default: start,
-own and stop a node process in a namespace of its own), "shared" (lease a line of this host's line
-server, `line_server`, started when none has a free line and stopped 8 s after its last env; 64
-envs start in seconds) or "attach" (use the node serving `namespace`);
-`step_timeout` seconds per round trip (an error names the namespace, topic and tick);
-`startup_timeout`; `render_mode` "rgb_array" or "human"; `input`, `obs_noise`, `action_penalty` (instead of the
-setup's) and `threshold` (0.7), as the node's options of the same name, with their ranges.
+The line options (`line/options.py`) as keyword arguments, and `render_mode`: listed with their
+defaults and meanings at the end of the class docstring (`help(SortingLineEnv)`). `node="shared"`
+leases a line of this host's line server, `line_server`, started when none has a free line and
+stopped 8 s after its last env (64 envs start in seconds); a wait that outlasts `step_timeout`
+fails naming the namespace, topic and tick; `input`, `obs_noise`, `action_penalty` and `threshold`
+are the node's options of the same name, with their ranges.
 
 ## Info
 accuracy, purity (correct / all sorted), recall_a, recall_b, speed, speed_index, mode, occupancy,
@@ -56,22 +55,24 @@ seconds since the reset), seed.
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..line.options import LineOptions
 from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,
     ENV_IDS,
-    THRESHOLD,
+    action_mask,
     check_variant,
     decode_action,
     observations,
     sim_seconds,
     state_info,
 )
+from .keywords import Keywords
 
 #: Largest seed the bridge draws for the node when reset() gets none.
 SEED_BOUND = 2**63
@@ -89,32 +90,23 @@ def action_space(variant: str) -> spaces.Discrete:
     return spaces.Discrete(ACTION_COUNTS[check_variant(variant)])
 
 
+#: The keywords of SortingLineEnv (and of the ids SortingLine-v0, SortingLineAdvanced-v0).
+KEYWORDS = Keywords(exclude=("evolution",))
+
+
+@KEYWORDS
 class SortingLineEnv(gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
 
-    def __init__(
-        self,
-        setup: str = "A",
-        variant: str = "basic",
-        namespace: str | None = None,
-        node: str = "spawn",
-        max_episode_steps: int | None = None,
-        step_timeout: float = 2.0,
-        startup_timeout: float = 20.0,
-        render_mode: str | None = None,
-        input: str | None = None,
-        obs_noise: float | None = None,
-        action_penalty: float | None = None,
-        threshold: float = THRESHOLD,
-    ):
+    def __init__(self, *, render_mode: str | None = None, **keywords: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r} is not valid: allowed {self.metadata['render_modes']}")
-        options = LineOptions.among(locals())
-        self.variant = variant
+        options = KEYWORDS.line_options(keywords)
+        self.variant = options.variant
         self.render_mode = render_mode
-        self.observation_space = observation_space(variant)
-        self.action_space = action_space(variant)
+        self.observation_space = observation_space(options.variant)
+        self.action_space = action_space(options.variant)
         # rclpy loads with the first env made, not with `import sorting_line_gym` (registration,
         # RL Zoo's --gym-packages); the bank itself connects only at the first reset().
         from ..ros.bank import LineBank
@@ -131,7 +123,7 @@ class SortingLineEnv(gym.Env):
     def action_masks(self) -> np.ndarray:
         """Which actions are valid now (sb3-contrib's MaskablePPO reads this): all of them on
         today's lines."""
-        return np.ones(self.action_space.n, dtype=bool)
+        return action_mask(self.variant)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -27,7 +27,9 @@ As the fixed lines', with the threshold and switching penalty the schedule has s
 ## Episodes and the schedule
 The schedule's episode E starts at the line's E-th reset: with `node="spawn"` (the default) this
 env's E-th `reset()`. Its tick T is the line's T-th step since the node started, across episodes.
-The line's episode 0 is the node's start-up state, before the first `reset()`.
+The line's episode 0 is the node's start-up state, before the first `reset()`. The first reset
+is never repeated to the node (a slow reply is waited out; a lost first exchange means a fresh
+node): `workarounds.late_matching`.
 
 ## Info
 The fixed lines' keys, plus `evolution`: the events announced since the last step or reset (each
@@ -37,25 +39,25 @@ runs with: obs_noise, action_penalty, threshold, input, sort_modes, ratio_sensor
 `line_tick`.
 
 ## Arguments
-`evolution`: a schedule file, or `"upgrade"` / `"drift"` for the ready schedules in
-`sorting_line_gym/evolutions/` (the paper's upgrade after 2000 episodes; noise and threshold
-drift); `setup` "A".."D" (the line before the schedule changes it; default "B"); `node` "spawn"
-or "attach" (with `namespace`); `max_episode_steps`; `step_timeout`, `startup_timeout` seconds.
+`evolution` and the line options it leaves to the user (`line/options.py`: the schedule sets the
+rest), listed with their defaults and meanings at the end of the class docstring
+(`help(SortingLineEvolvingEnv)`): the ready schedules are in `sorting_line_gym/evolutions/` (the
+paper's upgrade after 2000 episodes; noise and threshold drift); `setup` is the line before the
+schedule changes it; `node` is "spawn" or "attach" (with `namespace`).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import yaml
-from sorting_line_interfaces.msg import EvolutionEvent
 
-from ..line.options import LineOptions
-from ..line.vocabulary import MODE_COUNT, decode_action, line_infos, observations, sim_seconds, state_info
-from ..ros.bank import LineBank
+from ..line.vocabulary import action_mask, decode_action, line_infos, observations, sim_seconds, state_info
 from .env import SEED_BOUND, action_space, observation_space
+from .keywords import Keywords
 
 #: The ready schedules, by name.
 EVOLUTIONS_DIR = Path(__file__).resolve().parent.parent / "evolutions"
@@ -111,44 +113,42 @@ def event_info(message) -> dict:
     }
 
 
+#: The keywords of SortingLineEvolvingEnv (and SortingLineEvolving-v0): the schedule sets the line's
+#: variant and settings; the setup it starts from is B.
+KEYWORDS = Keywords(exclude=("variant", "input", "obs_noise", "action_penalty", "threshold", "evolution"), setup="B")
+
+
+@KEYWORDS
 class SortingLineEvolvingEnv(gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": []}
 
-    def __init__(
-        self,
-        evolution: str | Path = "upgrade",
-        setup: str = "B",
-        namespace: str | None = None,
-        node: str = "spawn",
-        max_episode_steps: int | None = None,
-        step_timeout: float = 2.0,
-        startup_timeout: float = 20.0,
-    ):
-        if node not in ("spawn", "attach"):
+    def __init__(self, evolution: str | Path = "upgrade", **keywords: Any):
+        self.schedule = schedule_file(evolution)
+        options = KEYWORDS.line_options(keywords, variant="advanced", evolution=str(self.schedule))
+        if options.node not in ("spawn", "attach"):
             raise ValueError(
-                f"node = {node!r} is not valid for the evolving line: allowed 'spawn' or 'attach' "
+                f"node = {options.node!r} is not valid for the evolving line: allowed 'spawn' or 'attach' "
                 "(a shared line server's lines do not evolve)"
             )
-        self.schedule = schedule_file(evolution)
-        options = LineOptions(
-            setup=setup,
-            variant="advanced",
-            namespace=namespace,
-            node=node,
-            max_episode_steps=max_episode_steps,
-            step_timeout=step_timeout,
-            startup_timeout=startup_timeout,
-            evolution=str(self.schedule),
-        )
         self.observation_space = observation_space("advanced")
         self.action_space = action_space("advanced")
         self._ticks = tick_points(self.schedule)
+        # rclpy loads with the env, not the module (the native backend's evolving line reads schedule_file).
+        from sorting_line_interfaces.msg import EvolutionEvent
+
+        from ..ros.bank import LineBank
+
         self._inbox: list = []
         # One line through the batch topics, which are there whatever the hardware (cmd/sort_mode
-        # comes and goes with the machine upgrade); events/evolution is watched beside them.
+        # comes and goes with the machine upgrade); events/evolution is watched beside them. A
+        # first reset whose exchange was lost goes to a fresh node (its events replace the old's).
         self.bank = LineBank(
-            options, lines=1, batch=True, watch={"events/evolution": (EvolutionEvent, self._inbox.append)}
+            options,
+            lines=1,
+            batch=True,
+            watch={"events/evolution": (EvolutionEvent, self._inbox.append)},
+            on_fresh_node=self._inbox.clear,
         )
         self._settings: dict | None = None
         self._line_tick: int | None = None
@@ -167,8 +167,7 @@ class SortingLineEvolvingEnv(gym.Env):
 
     def action_masks(self) -> np.ndarray:
         """Valid actions now: all 30 with sort modes, the ten with mode 0 before the machine upgrade."""
-        modes = self._settings is not None and self._settings["sort_modes"]
-        return np.array([modes or a % MODE_COUNT == 0 for a in range(self.action_space.n)], dtype=bool)
+        return action_mask("advanced", sort_modes=self._settings is not None and self._settings["sort_modes"])
 
     # -- the events ----------------------------------------------------------------------------
     def _take(self, match, what: str):

@@ -3,7 +3,7 @@
 ``TimeLimit.truncated`` in each line's info, as SB3's own VecEnvs report them.
 
 A module of its own because it imports SB3, and so torch (about 500 MB and seconds of start-up),
-which users of the Gymnasium faces never need.
+which users of the Gymnasium faces never need. ``backend="native"`` runs it on lines in this process.
 """
 
 from __future__ import annotations
@@ -11,36 +11,39 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
 
-from ..line.options import LineOptions
-from ..line.vocabulary import EPISODE_STEPS, THRESHOLD, line_infos
+try:
+    from stable_baselines3.common.vec_env import VecEnv
+except ImportError as e:  # a core install: say where SB3 comes from rather than only that it is missing
+    raise ImportError(
+        f"SortingLineSB3VecEnv needs stable-baselines3 (the training stack; missing: {e.name}): "
+        "bash launch_scripts/setup.sh --train"
+    ) from e
+
+from ..line.vocabulary import line_infos
 from .env import action_space, observation_space
-from .vector import Lines, node_namespaces
+from .vector import make_lines, node_namespaces, vector_keywords
+
+KEYWORDS = vector_keywords()
 
 
+@KEYWORDS
 class SortingLineSB3VecEnv(VecEnv):
     """Stable-Baselines3 VecEnv over the lines of one node (see the module docstring)."""
 
     def __init__(
         self,
         num_envs: int = 4,
-        setup: str = "A",
-        variant: str = "basic",
+        *,
         namespace: str | list[str] | None = None,
-        node: str = "spawn",
-        max_episode_steps: int | None = EPISODE_STEPS,
-        step_timeout: float = 2.0,
-        startup_timeout: float = 20.0,
         seed: int | None = None,
-        input: str | None = None,
-        obs_noise: float | None = None,
-        action_penalty: float | None = None,
-        threshold: float = THRESHOLD,
+        backend: str = "ros",
+        **keywords: Any,
     ):
         namespaces = node_namespaces(namespace)
-        options = LineOptions.among(locals(), namespace=namespaces[0] if namespaces else None)
-        self._lines = Lines(num_envs, options, namespaces)
+        options = KEYWORDS.line_options(keywords, namespace=namespaces[0] if namespaces else None)
+        variant = options.variant
+        self._lines = make_lines(backend, num_envs, options, namespaces)
         self.render_mode = None
         super().__init__(num_envs, observation_space(variant), action_space(variant))
         self._actions = None

@@ -10,6 +10,9 @@ all in flight at once (``ros/fleet.py``). Two faces over the same bank of lines:
 - ``sb3_vec_env.SortingLineSB3VecEnv``, a Stable-Baselines3 ``VecEnv`` with SB3's conventions
   (a module of its own: it imports SB3 and torch).
 
+``backend="native"`` runs the same faces on N lines in this process (``native.NativeLines``: no node,
+no rclpy), with the same seeding, autoreset and info.
+
 Seeding: ``reset(seed=s)`` seeds line k with s + k (as the node seeds line k of ``--seed s``);
 every later reset of a line draws its node seed from that line's generator, so one seed reproduces
 the whole run.
@@ -27,16 +30,16 @@ from gymnasium.vector.utils import batch_space
 from ..line.options import LineOptions
 from ..line.vocabulary import (
     EPISODE_STEPS,
-    THRESHOLD,
+    check,
     decode_actions,
-    line_infos,
     observations,
     sim_seconds,
     state_info,
 )
-from ..ros.bank import LineBank
-from ..ros.fleet import NodeFleet, split_lines
-from .env import SEED_BOUND, action_space, observation_space
+from .env import action_space, observation_space
+from .keywords import Keywords
+from .native import BACKENDS, ros_backend
+from .seeding import SeededLines
 
 
 def node_namespaces(namespace: str | Sequence[str] | None) -> list[str] | None:
@@ -49,29 +52,22 @@ def node_namespaces(namespace: str | Sequence[str] | None) -> list[str] | None:
     return namespaces
 
 
-class Lines:
+class Lines(SeededLines):
     """The bank plus per-line seed generators: what both vector faces share."""
 
     def __init__(self, num_envs: int, options: LineOptions, namespaces: list[str] | None = None):
+        # rclpy loads here, not with the module: the native backend's vector envs never need it.
+        from ..ros.bank import LineBank
+        from ..ros.fleet import NodeFleet, split_lines
+
+        super().__init__(num_envs)
         self.variant = options.variant
         if namespaces is not None and len(namespaces) > 1:
             self.bank = NodeFleet(options, namespaces, split_lines(num_envs, len(namespaces)))
         else:
             self.bank = LineBank(options, lines=num_envs, batch=True)
-        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         # Simulated time of each line's last reset: info["sim_time"] counts from there.
         self.episode_start = np.zeros(num_envs)
-
-    def seed_lines(self, seed: int | None) -> None:
-        if seed is not None:
-            self.rngs = [np.random.default_rng(seed + k) for k in range(len(self.rngs))]
-
-    def next_seed(self, k: int) -> int:
-        return int(self.rngs[k].integers(0, SEED_BOUND))
-
-    def restart(self, lines: list[int]) -> dict[int, np.ndarray]:
-        """Autoreset: resets ``lines`` with seeds drawn from their generators."""
-        return self.reset({k: self.next_seed(k) for k in lines})
 
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
         responses = self.bank.reset(seeds)
@@ -92,6 +88,48 @@ class Lines:
         self.bank.close()
 
 
+def make_lines(backend: str, num_envs: int, options: LineOptions, namespaces: list[str] | None):
+    """The lines of a vector env: over ROS (:class:`Lines`) or in this process (``native.NativeLines``)."""
+    if check("backend", backend, BACKENDS) == "native":
+        from .native import NativeLines
+
+        return NativeLines(num_envs, options)
+    return ros_backend(lambda: Lines(num_envs, options, namespaces))
+
+
+def final_entries(num_envs: int, done: list[int], obs: np.ndarray, info: dict[str, np.ndarray]) -> dict[str, Any]:
+    """``final_obs``, ``final_info`` and their ``_`` masks for the lines ``done``: what
+    ``VectorEnv._add_info`` builds from each line's last observation and (single-line) info, line by
+    line, made here in one pass per key (256 lines ending together cost one pass, not 256)."""
+    mask = np.zeros(num_envs, dtype=bool)
+    mask[done] = True
+    final_obs = np.full(num_envs, None, dtype=object)
+    for k in done:
+        final_obs[k] = obs[k].copy()
+    final_info: dict[str, Any] = {}
+    for key, column in info.items():
+        values = column[done].tolist()
+        if key == "containers":  # a tuple per line, as line_infos gives it: an object array
+            array = np.full(num_envs, None, dtype=object)
+            for k, v in zip(done, values, strict=True):
+                array[k] = tuple(v)
+        else:
+            array = np.zeros(num_envs, dtype=type(values[0]))
+            array[done] = values
+        final_info[key], final_info[f"_{key}"] = array, mask.copy()
+    return {"final_obs": final_obs, "_final_obs": mask.copy(), "final_info": final_info, "_final_info": mask.copy()}
+
+
+def vector_keywords() -> Keywords:
+    """The keywords of a vector face: the line options but ``namespace`` (a face's own parameter:
+    one node's or a list of nodes'), with episodes of EPISODE_STEPS."""
+    return Keywords(exclude=("evolution", "namespace"), max_episode_steps=EPISODE_STEPS)
+
+
+KEYWORDS = vector_keywords()
+
+
+@KEYWORDS
 class SortingLineVectorEnv(VectorEnv):
     """Gymnasium VectorEnv over the lines of one node (see the module docstring)."""
 
@@ -100,30 +138,24 @@ class SortingLineVectorEnv(VectorEnv):
     def __init__(
         self,
         num_envs: int = 4,
-        setup: str = "A",
-        variant: str = "basic",
+        *,
         namespace: str | Sequence[str] | None = None,
-        node: str = "spawn",
-        max_episode_steps: int | None = EPISODE_STEPS,
-        step_timeout: float = 2.0,
-        startup_timeout: float = 20.0,
         render_mode: str | None = None,
-        input: str | None = None,
-        obs_noise: float | None = None,
-        action_penalty: float | None = None,
-        threshold: float = THRESHOLD,
+        backend: str = "ros",
+        **keywords: Any,
     ):
         if render_mode is not None:
             raise ValueError("the vector environment does not render; use SortingLineEnv for the dashboard")
         namespaces = node_namespaces(namespace)
-        options = LineOptions.among(locals(), namespace=namespaces[0] if namespaces else None)
+        options = KEYWORDS.line_options(keywords, namespace=namespaces[0] if namespaces else None)
+        variant = options.variant
         self.num_envs = num_envs
         self.single_observation_space = observation_space(variant)
         self.single_action_space = action_space(variant)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
-        self._lines = Lines(num_envs, options, namespaces)
+        self._lines = make_lines(backend, num_envs, options, namespaces)
         # Every line reports every key, so each ``_key`` mask is all true: one shared, read-only array.
         self._all_lines = np.ones(num_envs, dtype=bool)
         self._all_lines.flags.writeable = False
@@ -150,9 +182,8 @@ class SortingLineVectorEnv(VectorEnv):
         done = np.flatnonzero(truncated).tolist()
         if done:
             fresh = self._lines.restart(done)
-            final_infos = line_infos(info)
+            infos.update(final_entries(self.num_envs, done, obs, info))
             for k in done:
-                infos = self._add_info(infos, {"final_obs": obs[k].copy(), "final_info": final_infos[k]}, k)
                 obs[k] = fresh[k]
         return obs, rewards, terminated, truncated, infos
 

@@ -35,13 +35,13 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
-from ..workarounds.orphaned_processes import with_parent_death_signal
 from . import line_supervisor
 from .errors import BridgeError, BridgeTimeout
 from .host import host_state_directory, network_namespace
 from .line_supervisor import held, server_info, server_running, try_lock
-from .process import find_node_binary
+from .process import find_node_binary, with_parent_death_signal
 
 #: Environment variables that decide which DDS graph a node joins.
 _GRAPH_ENV = (
@@ -72,7 +72,8 @@ class Lease:
     directory: Path
     index: int
     line: int
-    _file: object
+    #: The open file whose lock holds the line (None once released).
+    _file: IO[str] | None
     _checked_at: float = 0.0
     _alive: bool = True
 

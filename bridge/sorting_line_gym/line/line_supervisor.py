@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import IO
 
 #: Lines per server node: a node of 16 lines steps as fast per line as one of 1
 #: (benches/bridge_throughput.py), and 64 envs take 4 servers.
@@ -34,7 +35,7 @@ LINES = 16
 IDLE_EXIT = 8.0
 
 
-def try_lock(path: Path, shared: bool = False):
+def try_lock(path: Path, shared: bool = False) -> IO[str] | None:
     """An open file holding a flock on ``path``, or None if another process holds it."""
     f = open(path, "a+")
     try:

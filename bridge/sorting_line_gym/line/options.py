@@ -1,15 +1,16 @@
 """What a user chooses about the line(s) an environment drives, as one checked, frozen object.
 
-Each environment face (``SortingLineEnv``, ``SortingLineVectorEnv``, ``SortingLineSB3VecEnv``)
-keeps its public keyword arguments (``gymnasium.make`` passes them; the README's tables
-name them), turns them into a :class:`LineOptions` once, and hands that to its bank of lines: the
+Each environment face (``SortingLineEnv``, ``SortingLineVectorEnv``, ``SortingLineSB3VecEnv``,
+``SortingLineEvolvingEnv``, and the native backend's through the Gymnasium ids) takes these
+fields as its keyword arguments (``gymnasium.make`` passes them; ``envs/keywords.py`` checks them
+and writes them into the constructors' signatures and docstrings), turns them into a
+:class:`LineOptions` once, and hands that to its bank of lines: the names, defaults, meanings,
 checks and the node's options are written here only. No ROS: constructing options starts nothing.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from .vocabulary import INPUTS, MAX_EPISODE_STEPS, SETUPS, THRESHOLD, check, check_setup, check_variant
@@ -24,34 +25,37 @@ NODE_MODES = ("spawn", "shared", "attach")
 SETTING_RANGES = {"obs_noise": (0.0, 1.0, True), "action_penalty": (0.0, 10.0, True), "threshold": (0.0, 1.0, False)}
 
 
+def option(default: Any, meaning: str) -> Any:
+    """A field of :class:`LineOptions`: its default and what it means (the env constructors'
+    signatures and docstrings show both)."""
+    return field(default=default, metadata={"meaning": meaning})
+
+
 @dataclass(frozen=True, kw_only=True)
 class LineOptions:
     """The line's setup and variant, how the node is reached, its episode length and the
     bridge's timeouts (seconds). Invalid values raise ValueError naming the value and the allowed
-    ones when the object is made."""
+    ones when the object is made. The env constructors take these fields as keyword arguments
+    (``envs/keywords.py``): a field renamed here is renamed for all of them."""
 
-    setup: str = "A"
-    variant: str = "basic"
-    namespace: str | None = None
-    node: str = "spawn"
-    #: None: the node never truncates (its longest episode); a TimeLimit wrapper does.
-    max_episode_steps: int | None = None
-    step_timeout: float = 2.0
-    startup_timeout: float = 20.0
-    threshold: float = THRESHOLD
-    #: The setup's input generator, sensor noise and switching penalty, unless given here.
-    input: str | None = None
-    obs_noise: float | None = None
-    action_penalty: float | None = None
-    #: An evolution schedule file the node runs the line by (``--evolution``), or None.
-    evolution: str | None = None
-
-    @classmethod
-    def among(cls, arguments: dict[str, object], **overrides: object) -> LineOptions:
-        """The options among an env constructor's ``arguments`` (its ``locals()``: the parameters of
-        the same names as the fields), with ``overrides``; the others keep their defaults."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in arguments.items() if k in names and k not in overrides}, **overrides)
+    setup: str = option("A", '"A".."D", the paper\'s setups: the input generator, sensor noise and switching penalty')
+    variant: str = option("basic", '"basic" or "advanced" (ratio sensor and sort modes; set by the Gymnasium id)')
+    namespace: str | None = option(None, 'the node\'s namespace (needed with node="attach")')
+    node: str = option(
+        "spawn",
+        '"spawn" (start, own and stop a node in a namespace of its own), "shared" (lease a line of this '
+        'host\'s line server) or "attach" (use the node serving namespace)',
+    )
+    max_episode_steps: int | None = option(
+        None, "the node truncates each episode after this many steps (None: it never does; a TimeLimit may)"
+    )
+    step_timeout: float = option(2.0, "seconds a step's round trip may take (the error names the topic and tick)")
+    startup_timeout: float = option(20.0, "seconds the node may take to start or answer the first reset")
+    threshold: float = option(THRESHOLD, "the accuracy below which a batch is rewarded -0.1 (0.0 ..< 1.0)")
+    input: str | None = option(None, '"random", "seasonal" or "seasonal3" instead of the setup\'s input generator')
+    obs_noise: float | None = option(None, "the input sensor's relative noise instead of the setup's (0.0 ..= 1.0)")
+    action_penalty: float | None = option(None, "the switching penalty instead of the setup's (0.0 ..= 10.0)")
+    evolution: str | None = option(None, "an evolution schedule file the node runs the line by (--evolution)")
 
     def __post_init__(self) -> None:
         check_variant(self.variant)

@@ -1,5 +1,6 @@
 """The `sorting_line` node as a child process: finding the binary, a private namespace per node,
-starting it with its options, its log, and stopping it."""
+starting it with its options (and the parent-death signal: what the bridge starts dies with it),
+its log, and stopping it."""
 
 from __future__ import annotations
 
@@ -13,8 +14,17 @@ import warnings
 from pathlib import Path
 from typing import Protocol
 
-from ..workarounds.orphaned_processes import with_parent_death_signal
 from .errors import BridgeError
+
+
+def with_parent_death_signal(argv: list[str], sig: str = "TERM") -> list[str]:
+    """``argv`` behind ``setpriv --pdeathsig SIG --`` where setpriv (util-linux) is installed:
+    setpriv execs ``argv`` (same pid) after asking the kernel for ``sig`` when the process that
+    started it dies, so a killed bridge, supervisor or test run leaves no node behind. (The signal
+    follows the thread that started the process: start it from a thread that lives as long.)"""
+    if shutil.which("setpriv"):
+        return ["setpriv", "--pdeathsig", sig, "--", *argv]
+    return list(argv)
 
 
 def find_node_binary() -> str:

@@ -147,6 +147,16 @@ def observations(variant: str, quantity, category) -> np.ndarray:
     return q[..., None]
 
 
+def action_mask(variant: str, sort_modes: bool = True) -> np.ndarray:
+    """Which Gymnasium actions the line takes now, as ``action_masks()`` gives them (and what a
+    deployed policy is masked with): all of them, but on an advanced line whose machine has no
+    sort modes yet (an evolving line before its upgrade) only the ten with mode 0."""
+    n = ACTION_COUNTS[check_variant(variant)]
+    if variant == "basic" or sort_modes:
+        return np.ones(n, dtype=bool)
+    return np.arange(n) % MODE_COUNT == 0
+
+
 def sim_seconds(sec, nanosec):
     """Simulated seconds of a stamp (or of arrays of stamps)."""
     return sec + nanosec * 1e-9

@@ -1,5 +1,7 @@
-"""Results people read: `sorting-line-eval` (``evaluate``, the paper's protocol), the Table 1
-benchmark (``benchmark``), its figures (``plots``), the published figures it compares with
-(``paper``), and `sorting-line-bridge` (``bridge_node``: episodes through the bridge, their KPIs
-and dashboard), and the benchmark's statistics (``stats``: IQM, stratified bootstrap intervals,
-probability of improvement)."""
+"""Results people read, from results already saved: the benchmark's numbers (``benchmark_summary``)
+and its Table 1 as markdown (``benchmark_tables``), its figures (``plots``), the published figures
+it compares with (``paper``), the transfer study's report (``transfer_report``), and the
+statistics both use (``stats``: IQM, stratified bootstrap intervals, probability of improvement).
+
+Pure analysis: no training and no rclpy here. The runs that produce the results are ``studies``'.
+"""

@@ -7,7 +7,7 @@ from typing import Any
 
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
-from .benchmark import AGENTS, AGREEMENT_RUNS, TABLE_ORDER, Heldout, Key, agreement_by_algorithm
+from .benchmark_summary import AGENTS, AGREEMENT_RUNS, TABLE_ORDER, Heldout, Key, agreement_by_algorithm
 
 TABLE_HEADER = [
     "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"

@@ -68,7 +68,7 @@ def _runs_by_task(scores) -> np.ndarray:
 
 def stratified_bootstrap(
     strata: Sequence[np.ndarray],
-    statistic: Callable[[np.ndarray], np.ndarray],
+    statistic: Callable[[np.ndarray], float | np.ndarray],
     *,
     confidence: float = CONFIDENCE,
     resamples: int = RESAMPLES,

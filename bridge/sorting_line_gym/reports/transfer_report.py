@@ -1,5 +1,5 @@
 """The transfer study's report (`sorting-line-transfer`): statistics, tables and the plot, from
-the saved cells (see ``training.transfer_cells`` for what a cell holds).
+the saved cells (see ``studies.transfer_cells`` for what a cell holds).
 
 Statistics are the benchmark's (``reports.stats``, rliable's method): a *run* is a training seed,
 the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
@@ -99,7 +99,9 @@ def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any])
 
 def baseline_summary(record: dict[str, Any]) -> dict[str, Any]:
     """Means of the deterministic baselines (one run each: exact on these seeds)."""
-    summary = {side: {agent: float(np.mean(v)) for agent, v in record[side].items()} for side in ("before", "after")}
+    summary: dict[str, Any] = {
+        side: {agent: float(np.mean(v)) for agent, v in record[side].items()} for side in ("before", "after")
+    }
     summary["oracle_after_missing"] = record.get("oracle_after_missing")
     return summary
 

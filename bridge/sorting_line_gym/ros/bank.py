@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -25,7 +25,12 @@ from ..line.line_server import Lease
 from ..line.options import LineOptions
 from ..line.process import NodeProcess, private_namespace
 from ..workarounds.fork_unsafe_dds import fork_error
-from ..workarounds.late_matching import HANDSHAKE_TIMEOUTS, retried_handshake
+from ..workarounds.late_matching import (
+    FRESH_NODE_ATTEMPTS,
+    HANDSHAKE_TIMEOUTS,
+    repeated_while_unanswered,
+    retried_handshake,
+)
 from ..workarounds.participant_deletion_hang import retire_node
 from ..workarounds.simultaneous_discovery import joining_graph
 from .context import acquire_rclpy, release_rclpy
@@ -50,6 +55,7 @@ class LineBank:
         watch_sensors: bool = False,
         batch: bool = False,
         watch: dict | None = None,
+        on_fresh_node: Callable[[], None] | None = None,
     ):
         if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
@@ -74,6 +80,12 @@ class LineBank:
         #: Extra topics of line 0 to subscribe to when the bank opens, {relative topic: (type,
         #: callback)}; the first reset waits until each is matched with a publisher (e.g. events/evolution).
         self._watch = dict(watch or {})
+        #: Called when the first reset's node is replaced by a fresh one (see _counted_handshake),
+        #: e.g. to drop what the watch callbacks kept from the old node.
+        self._on_fresh_node = on_fresh_node
+        #: Whether each reset is an event for the node (an evolving line: its schedule's next
+        #: episode), so that the handshake must not repeat one (workarounds.late_matching).
+        self.resets_count = options.evolution is not None
         self.transport: Transport | None = None
         self.links: list[LineLink] = []
         #: The batch topics (with ``batch=True``), for a fleet that steps several banks together.
@@ -201,20 +213,62 @@ class LineBank:
 
     def _handshake(self, seeds: dict[int, int | None], deadline: float):
         self._connect(deadline)
-
-        def attempt(limit: float):
-            timeout = min(limit, self.step_timeout)
-            responses = self._reset_once(seeds, timeout=timeout)
-            self.waiter.until(
-                lambda: self.transport.saw_first_states(seeds),
-                timeout,
-                lambda: f"the first state of {self.namespace} after reset",
-            )
-            return responses
-
+        if self.resets_count:
+            return self._counted_handshake(seeds)
         return retried_handshake(
-            attempt, HANDSHAKE_TIMEOUTS, BridgeError, hopeless=lambda: bool(self.process and not self.process.alive())
+            lambda limit: self._first_exchange(seeds, min(limit, self.step_timeout)),
+            HANDSHAKE_TIMEOUTS,
+            BridgeError,
+            hopeless=self._node_died,
         )
+
+    def _first_exchange(self, seeds: dict[int, int | None], timeout: float):
+        """One reset whose reply and step-0 state must both arrive within ``timeout`` each."""
+        responses = self._reset_once(seeds, timeout=timeout)
+        self.waiter.until(
+            lambda: self.transport.saw_first_states(seeds),
+            timeout,
+            lambda: f"the first state of {self.namespace} after reset",
+        )
+        return responses
+
+    def _counted_handshake(self, seeds: dict[int, int | None]):
+        """The first reset of a line whose resets count: sent once to each node, its reply and
+        step-0 state waited for as any reset's (a slow reply is waited out, never repeated: the
+        repetition would be the schedule's next episode). A node whose first exchange did not
+        complete is replaced (``node="spawn"``) by a fresh one, which has had no reset; an
+        attached node cannot be, so the error goes on."""
+
+        def attempt(_k: int):
+            try:
+                return self._first_exchange(seeds, self.step_timeout)
+            except BridgeError as error:
+                return error
+
+        def unanswered(result) -> bool:
+            return isinstance(result, BridgeError) and not self._node_died()
+
+        attempts = FRESH_NODE_ATTEMPTS if self._node_mode == "spawn" else 1
+        result = repeated_while_unanswered(attempt, unanswered, attempts, before_repeat=lambda _: self._fresh_node())
+        if isinstance(result, BridgeError):
+            raise result
+        return result
+
+    def _fresh_node(self) -> None:
+        """Replaces the node process and this bank's endpoints by new ones (in a new private
+        namespace unless one was given), discovered and ready for a first reset."""
+        deadline = time.monotonic() + self.startup_timeout
+        self._tear_down()
+        self._opened_in = None
+        if self.options.namespace is None:
+            self.namespace = private_namespace()
+        if self._on_fresh_node is not None:
+            self._on_fresh_node()
+        self.open()
+        self._connect(deadline)
+
+    def _node_died(self) -> bool:
+        return bool(self.process and not self.process.alive())
 
     def _reset_once(self, seeds: dict[int, int | None], timeout: float | None = None):
         timeout = self.step_timeout if timeout is None else timeout
@@ -277,15 +331,23 @@ class LineBank:
             return  # never opened: nothing was started
         if self._opened_in != os.getpid():
             return  # a forked copy: the rclpy entities and the node process belong to the parent
+        self._tear_down()
+
+    def _tear_down(self) -> None:
+        """Destroys this bank's rclpy node and stops its node process (see close())."""
         node = getattr(self, "node", None)
         if node is not None:
             self.executor.remove_node(node)
             retire_node(node)
             self.executor.shutdown(timeout_sec=0.5)
+            self.node = None
+        # The participant goes (if this bank was its last user) before the node process does: the
+        # node's departure is a discovery event, and one in flight when the participant is deleted
+        # can make the deletion spin (workarounds.participant_deletion_hang).
+        release_rclpy()
         if self.process is not None:
             # A node killed from outside (a fault test) is not an error of close().
             self.process.stop()
-        release_rclpy()
 
     def __del__(self):
         try:

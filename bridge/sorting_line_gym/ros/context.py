@@ -8,17 +8,20 @@ Python's own handler (KeyboardInterrupt), which the waits notice within one wait
 
 Three workarounds hook in here (``workarounds/`` says why and when each can go): a process forked
 from one where rclpy was live refuses to use it (``fork_unsafe_dds``); an env in a multiprocessing
-worker dies with the worker's parent (``orphaned_processes``); a forked process, or one its host
-ends by killing it, keeps its DDS participant until it exits (``participant_deletion_hang``).
+worker dies with the worker's parent (``orphaned_processes``); a worker process (forked, started by
+multiprocessing, or ended by being killed) keeps its DDS participant and ends without DDS teardown
+(``participant_deletion_hang``).
 """
 
 from __future__ import annotations
 
+import os
 import threading
 
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
+from ..line.errors import BridgeError
 from ..workarounds import participant_deletion_hang
 from ..workarounds.fork_unsafe_dds import check_not_forked, fork_error, watch_rclpy_users
 from ..workarounds.orphaned_processes import die_with_multiprocessing_parent
@@ -31,9 +34,25 @@ _rclpy_ours = False
 watch_rclpy_users(lambda: _rclpy_users)
 
 
+#: The highest DDS domain id: RTPS ports are 7400 + 250 * domain + offsets, below 65,536.
+MAX_DOMAIN_ID = 232
+
+
+def check_domain_id() -> None:
+    """Raises, naming the value and the allowed range, unless ``ROS_DOMAIN_ID`` is unset or an
+    integer 0 ..= 232: with one beyond, rmw_fastrtps ends the process (exit code 1, no message)
+    when rclpy makes its first node, and a vectorizer's worker then vanishes without a word."""
+    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if raw and not (raw.isdigit() and int(raw) <= MAX_DOMAIN_ID):
+        raise BridgeError(f"ROS_DOMAIN_ID = {raw!r} is out of range: allowed an integer 0 ..= {MAX_DOMAIN_ID}")
+
+
 def rclpy_is_ours() -> bool:
     """Whether this module initialised rclpy and someone still uses it (call with rclpy_lock held)."""
     return _rclpy_users > 0 and _rclpy_ours
+
+
+participant_deletion_hang.watch_rclpy_context(rclpy_lock, rclpy_is_ours)
 
 
 def acquire_rclpy() -> None:
@@ -41,6 +60,7 @@ def acquire_rclpy() -> None:
     blocking when this process was forked from one where rclpy was live (``fork_error``)."""
     global _rclpy_users, _rclpy_ours
     check_not_forked()
+    check_domain_id()
     with rclpy_lock:
         if _rclpy_users == 0 and not rclpy.ok():
             die_with_multiprocessing_parent()

@@ -82,13 +82,20 @@ def register(name: str = ENV_NAME) -> str:
     return name
 
 
+#: Environment variables for Ray's processes (set before ``ray.init`` / ``ray start``; Ray's own
+#: processes inherit them):
+#: - ``RAY_USAGE_STATS_ENABLED=0``: a Ray that talks to nobody outside the cluster.
+#: - ``RAY_worker_niceness=0``: Ray starts its workers at nice 15, but here an EnvRunner is what
+#:   its lock-step lines (node processes at nice 0) wait on every tick; at nice 15 any other work
+#:   on the machine starves the runner and with it the lines (two CPU hogs made the two-runner
+#:   PPO test take 6 min and then time out).
+RAY_ENVIRONMENT = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_worker_niceness": "0"}
+
+
 def quiet_ray_environment() -> dict[str, str]:
-    """Environment variables for a Ray that talks to nobody outside the cluster: no usage
-    statistics sent home. Set them before ``ray.init`` / ``ray start`` (they are inherited by
-    Ray's own processes)."""
-    values = {"RAY_USAGE_STATS_ENABLED": "0"}
-    os.environ.update(values)
-    return values
+    """Sets :data:`RAY_ENVIRONMENT` in this process's environment; returns it."""
+    os.environ.update(RAY_ENVIRONMENT)
+    return dict(RAY_ENVIRONMENT)
 
 
 def where_envs_live(algo) -> list[dict[str, Any]]:

@@ -26,6 +26,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
+from ..envs.native import BACKENDS
 from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS, VARIANTS, check_setup
 from . import hyperparams
@@ -56,22 +58,29 @@ def model_stem(algo: str, setup: str, variant: str, seed: int) -> str:
     return f"{algo}_{setup}_{variant}_seed{seed}"
 
 
-def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int):
+def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int, backend: str = "ros"):
     """The VecEnv SB3 trains on, wrapped in VecMonitor for episode statistics. One line is a
-    SortingLineEnv in a DummyVecEnv (the fastest round trip); N lines share one node."""
+    single-line env in a DummyVecEnv (the fastest round trip); N lines share one node (ROS) or one
+    batch (native). Either backend gives the same model for the same seed."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     if n_envs == 1:
-        from ..envs.env import SortingLineEnv
+        from ..envs.backends import line_env
 
         # node="spawn": the run owns its node, which stops with it (a stopped benchmark takes its nodes along).
         venv = DummyVecEnv(
-            [lambda: SortingLineEnv(setup=setup, variant=variant, max_episode_steps=episode_steps, node="spawn")]
+            [
+                lambda: line_env(
+                    backend=backend, setup=setup, variant=variant, max_episode_steps=episode_steps, node="spawn"
+                )
+            ]
         )
     else:
         from ..envs.sb3_vec_env import SortingLineSB3VecEnv
 
-        venv = SortingLineSB3VecEnv(num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps)
+        venv = SortingLineSB3VecEnv(
+            num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps, backend=backend
+        )
     return VecMonitor(venv)
 
 
@@ -100,6 +109,7 @@ def train(
     progress: bool = True,
     torch_threads: int = 1,
     verbose: int = 0,
+    backend: str = "ros",
 ) -> TrainingRun:
     """Trains ``algo`` on the line (setup, variant) with ``params`` (as ``hyperparams.load`` gives them,
     which checks them; default: the packaged hyperparameters) and saves the model; returns what it did."""
@@ -112,10 +122,9 @@ def train(
     own, kwargs = hyperparams.split(params)
     # Small MLPs on 2 cores: one torch thread leaves the other core to the node and the bridge.
     torch.set_num_threads(torch_threads)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    (out := Path(out)).mkdir(parents=True, exist_ok=True)
     stem = model_stem(algo, setup, variant, seed)
-    env = make_training_env(setup, variant, own["n_envs"], own["episode_steps"])
+    env = make_training_env(setup, variant, own["n_envs"], own["episode_steps"], backend)
     log_dir = None if tensorboard is None else str(tensorboard)
     try:
         model = hyperparams.algorithm_class(algo)(
@@ -186,6 +195,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--tensorboard", metavar="DIR", help="TensorBoard log directory (default <out>/tensorboard; 'none' to disable)"
     )
     p.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument(
+        "--backend",
+        default="ros",
+        choices=BACKENDS,
+        help="ros: lines of a sorting_line node over ROS 2; native: the line in-process (same model) (default ros)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", action="count", default=0, help="SB3's console log (-v)")
     return p
@@ -193,6 +208,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    missing = missing_training_stack()
+    if missing:
+        print(f"sorting-line-train: needs {' and '.join(missing)}, the training stack: {TRAIN_HINT}", file=sys.stderr)
+        return 2
     overrides = list(args.hp)
     if args.timesteps is not None:
         overrides.append(f"n_timesteps={args.timesteps}")

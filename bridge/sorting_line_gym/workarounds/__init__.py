@@ -18,20 +18,26 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     after the fork). Delete when: a child forked from a live context can make a node and step a
     line (drop ``check_not_forked`` and run that test expecting success).
 
-``participant_deletion_hang`` -- deleting a participant can hang for minutes.
+``participant_deletion_hang`` -- deleting a participant can spin for minutes.
     Defect: rmw_fastrtps' participant deletion calls ``DomainParticipant::set_listener(nullptr)``,
-    which waits for discovery callbacks in flight while Fast DDS's discovery thread waits for the
-    participant's mutex. Symptom: ``env.close()`` spinning at 78 % CPU with the GIL held when other
-    participants close at the same moment. Measured: gdb stacks of a SubprocVecEnv-16 worker stuck
-    4 min; CI's AsyncVectorEnv (fork) hung 240 s in close(); a Ray EnvRunner 400 s; under two CPU
-    hogs 2 hangs in 16 runs before, 0 in 8 after; SCHED_IDLE priority did not help (1 hang in 5).
-    Seen in: Fast DDS 2.14.5. Workaround: forked children and processes ended by being killed (Ray's
-    EnvRunners, ``keep_participant_until_killed``) keep a never-destroyed node, so the participant
-    is never deleted, and keep the nodes their closed envs leave (``retire_node``): a SubprocVecEnv-16
-    worker with the participant kept still hung 240 s in ``destroy_node`` (a quiet fresh-clone suite
-    run, 2026-11-26). Delete when: with a Fast DDS release that fixes the deadlock, the
-    SubprocVecEnv-16 test (launch_scripts/reliability.sh) and test_rllib pass repeatedly under load
-    without the anchor node.
+    which waits, with an infinite timeout and busy where libstdc++'s condition variable is not on
+    steady_clock (the manylinux wheels), for discovery callbacks in flight, while Fast DDS's
+    discovery thread waits for the participant's mutex (eProsima/Fast-DDS issue 6513, open, in
+    every release). Symptom: ``env.close()`` spinning at 78 % CPU with the GIL held when other
+    participants come or go at the same moment; deleting a node's entities hangs the same way.
+    Measured: gdb stacks of a SubprocVecEnv-16 worker stuck 4 min; CI's AsyncVectorEnv (fork) hung
+    240 s in close(); a Ray EnvRunner 400 s; a SubprocVecEnv-16 worker (fork) and an AsyncVectorEnv
+    (forkserver) worker in ``destroy_node`` (fresh-clone suite runs, 2026-11-26); SCHED_IDLE did not
+    help (1 hang in 5). Seen in: Fast DDS 2.14.5. Workaround: a worker (forked, a multiprocessing
+    worker of any start method, or a process ended by being killed: Ray's EnvRunners,
+    ``keep_participant_until_killed``) keeps a never-destroyed node, so its participant is never
+    deleted, keeps the nodes its closed envs leave (``retire_node``), and ends without DDS teardown
+    (fork and forkserver workers by ``os._exit`` already; a spawn worker's final ``sys.exit`` is
+    made an ``os._exit`` with the same code). Other processes delete their participant at their
+    last close, before stopping the node they started; the studies' cell pool, whose workers run
+    cell after cell, declares ``outlives_its_envs``. benches/close_stress.py counts hangs under CPU
+    hogs. Delete when: a Fast DDS wheel that fixes issue 6513 is what rclpy uses, and
+    benches/close_stress.py prints 0 hangs under two CPU hogs with every node destroyed.
 
 ``simultaneous_discovery`` -- participants that start together lose endpoint announcements.
     Defect: between Fast DDS 2.14 (rclpy) and RustDDS (the node), SEDP announcements exchanged while
@@ -49,12 +55,16 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     first reset's reply, or its step-0 state, never arrives. Measured: found by the node tests'
     harness; retrying after 0.2, 0.4, 0.8, ... s instead of 2 s brought 64 shared envs' start-up
     from about 25 s to 11.5 s (load 12). Seen in: rclpy 7.1 / Fast DDS 2.14 against RustDDS.
-    Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's,
-    the bag replayer's, the recorder's parameter query and the pytest plugin's first answer of a
+    Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's on
+    a fixed line, the recorder's parameter query and the pytest plugin's first answer of a
     controller (a controller that is still discovering the node misses its first tick the same
-    way). Where a timeout alone cannot tell a lost exchange from one that happened,
+    way). A line whose resets count (the evolving line: each is the schedule's next episode) gets
+    its first reset once per node, waited for as any reset, and a fresh node when that exchange was
+    lost (``ros.bank``); the bag replayer proves the bag's first reset the same way, on a fresh node
+    if its messages did not all arrive. Where a timeout alone cannot tell a lost exchange from one
+    that happened,
     ``repeated_while_unanswered`` repeats it only while the caller's evidence says nothing
-    happened: ``bag.check_closed`` (a reset whose first tick got no answer; a fresh node first when
+    happened: ``bag.check.closed_loop`` (a reset whose first tick got no answer; a fresh node first when
     the reset had no seed) and the tests' harness (tests/python/line_client.py: a reset that
     /diagnostics shows did not happen; bag_golden.py: a golden recording's reset nobody answered).
     Delete when: a service client can tell that the server matched its reply reader, and no test
@@ -68,12 +78,13 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     30 min, each holding a leased line; a SIGKILLed bridge orphaned its node. Measured: the
     orphaned-worker test in test_vectorizers failed on the old code ("outlived its killed parent
     by 30 s") and passes in 2 s, over fork, forkserver and spawn. Workaround: the kernel's
-    parent-death signal: ``with_parent_death_signal`` (the one ``setpriv --pdeathsig`` launcher,
-    for node processes, line servers' nodes, the checked controller and the tests' processes),
-    ``die_with_multiprocessing_parent`` (an env in a multiprocessing worker), ``die_with_parent``
-    (``reports.cell_pool``'s workers of the benchmark and the transfer study, SIGKILL). Delete
-    when: never for the node processes (the kernel's behaviour is by design); for workers, when
-    the vectorizers detect a dead parent themselves (the orphaned-worker test passes without it).
+    parent-death signal for workers: ``die_with_multiprocessing_parent`` (an env in a
+    multiprocessing worker), ``die_with_parent`` (``studies.cell_pool``'s workers of the benchmark
+    and the transfer study, SIGKILL). Delete when: the vectorizers detect a dead parent themselves
+    (the orphaned-worker test passes without it). The node processes get the same signal from
+    ``line.process.with_parent_death_signal`` (the one ``setpriv --pdeathsig`` launcher, for node
+    processes, line servers' nodes, the checked controller and the tests' processes): that one
+    stays, the kernel's behaviour being by design.
 
 Kept elsewhere, because they are not Python of the bridge:
 - launch_scripts/test.sh runs ``fastdds shm clean`` before and after the tests: processes killed
@@ -85,9 +96,10 @@ Kept elsewhere, because they are not Python of the bridge:
 Rules that need no code of their own: no ``spin_until_future_complete`` anywhere (it leaks a task
 per call in rclpy 7.1; every wait is ``ros.waits.Waiter``'s loop of ``spin_once`` or an rcl wait
 set), and bags compare values, never bytes (Fast DDS leaves garbage in CDR padding;
-``bag.compare``).
+``bag.transport.compare``).
 Designs shaped by these defects but not workarounds (they stay when the defects go): line servers
-(``line.line_server``: fewer participants per host), envs that connect at their first reset (a
+(``line.line_server``: fewer participants per host), the parent-death signal of every process the
+bridge starts (``line.process.with_parent_death_signal``), envs that connect at their first reset (a
 forked child never inherits a live context), and rclpy initialised without its signal handlers
 (``ros.context``: an env is a guest in its user's process).
 """

@@ -7,9 +7,25 @@ seed repeated gives the same episode, so the handshake (the first reset, whose r
 state must both arrive) is retried. Short first attempts (0.2, 0.4, 0.8, ... s instead of 2 s)
 brought 64 shared envs' start-up from about 25 s to 11.5 s (load 12).
 
-Where a timeout alone cannot tell a lost exchange from a slow one (a reset without a seed, or one
-that may have happened with only its reply lost), the caller looks for evidence and
-``repeated_while_unanswered`` repeats the exchange only while that evidence says nothing happened.
+A timeout alone cannot tell a lost exchange from a slow one: under load a reply slower than 0.2 s
+means the repeated reset is the node's second. That is harmless only where resets do not count.
+Who does what:
+
+- Fixed lines (``ros.bank.LineBank`` without a schedule, the bag recorder's parameter query, the
+  replay's handshake on a fixed line): ``retried_handshake`` with the short timeouts; a seeded
+  reset repeated is the same episode (the node's episode counter moves on, but no observation or
+  info depends on it).
+- Evolving lines (``LineBank`` with an evolution schedule, ``SortingLineEvolving-v0``): every
+  reset is the schedule's next episode, so the first reset goes once to each node and is waited
+  for as any reset (``step_timeout``), slow or not. If its reply or step-0 state still does not
+  come, a spawned node is replaced by a fresh one (``repeated_while_unanswered``, up to
+  ``FRESH_NODE_ATTEMPTS`` nodes), which has had no reset; an attached node is never reset twice,
+  the error goes on.
+- Bag replay (``bag.transport.replay``): the bag's first reset is judged by every message of its tick
+  arriving, and an unproven one goes to a fresh node (``repeated_while_unanswered``).
+- Where other evidence tells whether an exchange had any effect (nobody answered the reset's
+  tick, /diagnostics counts no new episode), the caller judges by it and
+  ``repeated_while_unanswered`` repeats the exchange only while that evidence says nothing happened.
 """
 
 from __future__ import annotations
@@ -20,6 +36,9 @@ from typing import TypeVar
 #: Time allowed to each attempt of a bank's first reset (reply, then step-0 state) before it is
 #: retried: a short first attempt keeps a lost exchange from costing every env seconds of start-up.
 HANDSHAKE_TIMEOUTS = (0.2, 0.4, 0.8, 1.6, 2.0)
+
+#: Nodes tried, each reset once, for a first reset that must not be repeated to the same node.
+FRESH_NODE_ATTEMPTS = 3
 
 T = TypeVar("T")
 R = TypeVar("R")

@@ -4,30 +4,20 @@ Linux does not end a process's children when it dies, and a process killed with 
 cleanup of its own; and a multiprocessing worker of a vectorizer (SB3's SubprocVecEnv,
 Gymnasium's AsyncVectorEnv) waits on its command pipe, whose write ends, with the fork start
 method, every sibling holds open too, so no EOF ever comes when the parent dies. The kernel's
-parent-death signal (``PR_SET_PDEATHSIG``) covers both: :func:`with_parent_death_signal` for the
-node processes (and test processes) we start, :func:`die_with_multiprocessing_parent` for an env
-in a multiprocessing worker, :func:`die_with_parent` for a pool that picks its own signal
-(``reports.cell_pool``).
+parent-death signal (``PR_SET_PDEATHSIG``) covers both: :func:`die_with_multiprocessing_parent`
+for an env in a multiprocessing worker, :func:`die_with_parent` for a pool that picks its own signal
+(``studies.cell_pool``). The node processes (and test processes) we start get the same signal from
+``line.process.with_parent_death_signal``: for them it is the design, not a workaround (the
+kernel's behaviour is by design), so it lives with the node process.
 
-Standard library only: ``line/`` (no ROS) uses it, and so do the tests' harness and the benchmarks.
+Standard library only.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import sys
-
-
-def with_parent_death_signal(argv: list[str], sig: str = "TERM") -> list[str]:
-    """``argv`` behind ``setpriv --pdeathsig SIG --`` where setpriv (util-linux) is installed:
-    setpriv execs ``argv`` (same pid) after asking the kernel for ``sig`` when the process that
-    started it dies, so a killed bridge, supervisor or test run leaves no node behind. (The signal
-    follows the thread that started the process: start it from a thread that lives as long.)"""
-    if shutil.which("setpriv"):
-        return ["setpriv", "--pdeathsig", sig, "--", *argv]
-    return list(argv)
 
 
 def die_with_parent(sig: int, keep_existing: bool = False) -> None:

@@ -1,122 +1,117 @@
-//! The SimulateSteps action (simulation_interfaces) in the node's private namespace: goals are
-//! step jobs like StepSimulation's, with feedback, cancel after the step in progress, and refused
-//! goals ending aborted with the reason.
+//! The SimulateSteps action (simulation_interfaces) in the node's private namespace, as endpoints:
+//! its server with rcl_action's QoS, the goals and cancel requests as inputs, feedback, and the
+//! results that go out beside the node's loop. What a goal does (a step job like
+//! StepSimulation's) is the stepping part's.
 
 use std::rc::Rc;
 
 use futures::future::{FutureExt, LocalBoxFuture};
+use futures::stream::{self, FuturesUnordered, StreamExt};
 use ros2_client::action::{
     ActionServerQosPolicies, AsyncActionServer, CancelHandle, ExecutingGoalHandle, GoalEndStatus, NewGoalHandle,
 };
 use ros2_client::{Node, ServiceMapping};
 
-use super::super::names::Names;
-use super::super::qos::{action_status_profile, default_profile};
-use super::super::simulation::{code, step_request};
-use super::super::simulation_interfaces::{action_type, SimResult, SimulateStepsFeedback, SimulateStepsGoal};
-use super::super::simulation_interfaces::{SimulateStepsResult, ACTION};
 use super::endpoints::topic_name;
-use super::log;
-use super::server::Server;
-use super::sim_services::ok;
-use super::stepping::StepReply;
+use super::events::{Event, Input};
+use super::log::log;
+use crate::ros::names::Names;
+use crate::ros::qos::{action_status_profile, default_profile};
+use crate::ros::simulation_interfaces::{action_type, SimResult, SimulateStepsFeedback, SimulateStepsGoal};
+use crate::ros::simulation_interfaces::{SimulateStepsResult, ACTION};
 
 /// The action's name in the private namespace.
 pub(super) const NAME: &str = ACTION.0;
 
-pub(super) type SimulateStepsServer = AsyncActionServer<SimulateStepsGoal, SimulateStepsResult, SimulateStepsFeedback>;
+type SimulateStepsServer = AsyncActionServer<SimulateStepsGoal, SimulateStepsResult, SimulateStepsFeedback>;
 pub(super) type StepsGoal = ExecutingGoalHandle<SimulateStepsGoal>;
 
-/// The SimulateSteps action server, in the node's private namespace (`~/simulate_steps`), with
-/// rcl_action's QoS (the status topic is transient-local).
-pub(super) fn simulate_steps_server(node: &mut Node, names: &Names) -> Result<SimulateStepsServer, String> {
-    let absolute = names.private(NAME);
-    let qos = ActionServerQosPolicies {
-        goal_service: default_profile(),
-        result_service: default_profile(),
-        cancel_service: default_profile(),
-        feedback_publisher: default_profile(),
-        status_publisher: action_status_profile(),
-    };
-    let server = node
-        .create_action_server(ServiceMapping::Enhanced, &topic_name(&absolute)?, &action_type(), qos)
-        .map_err(|e| format!("cannot serve the action {absolute}: {e:?}"))?;
-    Ok(AsyncActionServer::new(server))
-}
-
-/// Ends a SimulateSteps goal: the result goes out when the client asks for it (ros2-client's
-/// `send_result_response` waits for that request), so it runs beside the node's loop.
-pub(super) fn finish_goal(
+/// The action server, and the results on their way out.
+pub(super) struct SimulateSteps {
     server: Rc<SimulateStepsServer>,
-    goal: StepsGoal,
-    status: GoalEndStatus,
-    result: SimResult,
-) -> LocalBoxFuture<'static, ()> {
-    async move {
-        if let Err(e) = server.send_result_response(goal, status, SimulateStepsResult { result }).await {
-            log("WARN", format!("{NAME}: cannot send a goal's result: {e:?}"));
-        }
-    }
-    .boxed_local()
+    /// SimulateSteps results waiting for their client to ask for them.
+    pub(super) finishing: FuturesUnordered<LocalBoxFuture<'static, ()>>,
 }
 
-impl Server {
-    /// A new goal: accepted either way; a refused goal ends at once with the reason in its result.
-    pub(super) async fn on_goal(&mut self, handle: NewGoalHandle<SimulateStepsGoal>) {
-        let stepping = self.stepping();
-        let action = Rc::clone(&self.graph.simulate_steps);
-        let Some(goal) = action.get_new_goal(handle) else {
-            log("WARN", format!("{NAME}: a new goal vanished before it was read"));
-            return;
+impl SimulateSteps {
+    /// The server, in the node's private namespace (`~/simulate_steps`), with rcl_action's QoS
+    /// (the status topic is transient-local); its goals and cancel requests go to `inputs`.
+    pub(super) fn new(node: &mut Node, names: &Names, inputs: &mut Vec<Input>) -> Result<Self, String> {
+        let absolute = names.private(NAME);
+        let qos = ActionServerQosPolicies {
+            goal_service: default_profile(),
+            result_service: default_profile(),
+            cancel_service: default_profile(),
+            feedback_publisher: default_profile(),
+            status_publisher: action_status_profile(),
         };
-        let executing = match action.accept_goal(handle).await {
-            Ok(accepted) => action.start_executing_goal(accepted).await,
+        let server = node
+            .create_action_server(ServiceMapping::Enhanced, &topic_name(&absolute)?, &action_type(), qos)
+            .map_err(|e| format!("cannot serve the action {absolute}: {e:?}"))?;
+        let server = Rc::new(AsyncActionServer::new(server));
+        let err = |e| format!("{e:?}");
+        let (goals, cancels) = (Rc::clone(&server), Rc::clone(&server));
+        inputs.extend([
+            stream::unfold(goals, move |action| async move {
+                Some((Event::Goal(action.receive_new_goal().await.map_err(err)), action))
+            })
+            .boxed_local(),
+            stream::unfold(cancels, move |action| async move {
+                Some((Event::Cancel(action.receive_cancel_request().await.map_err(err)), action))
+            })
+            .boxed_local(),
+        ]);
+        Ok(SimulateSteps { server, finishing: FuturesUnordered::new() })
+    }
+
+    /// A new goal, accepted and executing (every goal is accepted; a refused one ends at once),
+    /// with what it asks; `None` (logged) if it vanished or could not be accepted.
+    pub(super) async fn accept(
+        &self,
+        handle: NewGoalHandle<SimulateStepsGoal>,
+    ) -> Option<(SimulateStepsGoal, StepsGoal)> {
+        let Some(goal) = self.server.get_new_goal(handle) else {
+            log("WARN", format!("{NAME}: a new goal vanished before it was read"));
+            return None;
+        };
+        let executing = match self.server.accept_goal(handle).await {
+            Ok(accepted) => self.server.start_executing_goal(accepted).await,
             Err(e) => Err(e),
         };
-        let executing = match executing {
-            Ok(executing) => executing,
+        match executing {
+            Ok(executing) => Some((goal, executing)),
             Err(e) => {
                 log("WARN", format!("{NAME}: cannot accept a goal: {e:?}"));
-                return;
-            }
-        };
-        match step_request(self.sim, goal.steps, stepping) {
-            Ok(0) => {
-                self.sim_counters.answered_ok += 1;
-                self.finishing.push(finish_goal(action, executing, GoalEndStatus::Succeeded, ok()));
-            }
-            Ok(steps) => self.start_job(StepReply::Action(executing), steps),
-            Err(refusal) => {
-                if let Some(line) = self.sim_counters.refuse(NAME, &format!("steps {}", goal.steps), &refusal) {
-                    log("WARN", line);
-                }
-                let result = SimResult { result: refusal.code, error_message: refusal.message };
-                self.finishing.push(finish_goal(action, executing, GoalEndStatus::Aborted, result));
+                None
             }
         }
     }
 
-    /// A cancel request: only the goal in progress can be canceled (every other one has ended);
-    /// it ends after the step in progress.
-    pub(super) async fn on_cancel(&mut self, cancel: CancelHandle) {
-        let current = match self.job.as_ref().map(|j| (j.reply, j.done, j.steps)) {
-            Some((StepReply::Action(goal), done, steps)) if cancel.contains_goal(&goal.goal_id()) => {
-                Some((goal, done, steps))
-            }
-            _ => None,
-        };
-        let action = Rc::clone(&self.graph.simulate_steps);
-        let canceling = current.map(|(goal, _, _)| goal.goal_id());
-        if let Err(e) = action.respond_to_cancel_requests(&cancel, canceling.into_iter()).await {
+    /// Answers a cancel request, canceling `goal` (the one in progress, if the request names it).
+    pub(super) async fn answer_cancel(&self, cancel: &CancelHandle, goal: Option<&StepsGoal>) {
+        let canceling = goal.map(|goal| goal.goal_id());
+        if let Err(e) = self.server.respond_to_cancel_requests(cancel, canceling.into_iter()).await {
             log("WARN", format!("{NAME}: cannot answer a cancel request: {e:?}"));
         }
-        if let Some((goal, done, steps)) = current {
-            self.end_job();
-            let result = SimResult {
-                result: code::OPERATION_FAILED,
-                error_message: format!("canceled after {done} of {steps} steps"),
-            };
-            self.finishing.push(finish_goal(action, goal, GoalEndStatus::Canceled, result));
+    }
+
+    pub(super) async fn feedback(&self, goal: StepsGoal, feedback: SimulateStepsFeedback) {
+        if let Err(e) = self.server.publish_feedback(goal, feedback).await {
+            log("WARN", format!("{NAME}: cannot publish feedback: {e:?}"));
         }
+    }
+
+    /// Ends a goal: the result goes out when the client asks for it (ros2-client's
+    /// `send_result_response` waits for that request), so it runs beside the node's loop.
+    pub(super) fn finish(&mut self, goal: StepsGoal, status: GoalEndStatus, result: SimResult) {
+        let server = Rc::clone(&self.server);
+        self.finishing.push(
+            async move {
+                if let Err(e) = server.send_result_response(goal, status, SimulateStepsResult { result }).await {
+                    log("WARN", format!("{NAME}: cannot send a goal's result: {e:?}"));
+                }
+            }
+            .boxed_local(),
+        );
     }
 }

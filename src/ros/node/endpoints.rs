@@ -12,8 +12,8 @@ use ros2_client::{
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-use super::super::messages::Typed;
-use super::super::qos::default_profile;
+use crate::ros::messages::Typed;
+use crate::ros::qos::default_profile;
 
 pub(super) fn topic_name(absolute: &str) -> Result<Name, String> {
     Name::parse(absolute).map_err(|e| format!("'{absolute}' is not a valid topic name: {e:?}"))

@@ -1,23 +1,30 @@
-//! One hosted line in the node: its simulation with the protocol and counters, its endpoints, and
-//! what it publishes for each tick and reset. The fixed endpoints live as long as the node; those
-//! of the line's hardware (ratio sensor, sort modes) come and go with it ([`Line::fit_hardware`]).
+//! One hosted line in the node: its simulation with the protocol and counters, its endpoints, the
+//! commands it takes, and what it publishes for each tick and reset. The fixed endpoints live as
+//! long as the node; those of the line's hardware (ratio sensor, sort modes) come and go with it
+//! ([`Line::fit_hardware`]).
 
 use std::rc::Rc;
 
 use futures::channel::oneshot;
-use futures::stream::{LocalBoxStream, StreamExt};
+use futures::stream::StreamExt;
 use ros2_client::{MessageInfo, Node, Publisher, Server as ServiceServer};
 
-use super::super::clock::SimClock;
-use super::super::diagnostics::LineCounters;
-use super::super::messages::*;
-use super::super::names::Names;
-use super::super::params::NodeParams;
-use super::super::protocol::{Command, HostedLine};
-use super::commands::client_of;
 use super::endpoints::{messages, publisher, requests, service, subscription};
-use super::{log, Event, Graph};
+use super::events::{client_of, Event, Input};
+use super::evolution::LineEvolution;
+use super::graph::Graph;
+use super::line_messages;
+use super::log::{log, show_client, show_stamp, show_topic};
+use crate::ros::clock::SimClock;
+use crate::ros::diagnostics::LineCounters;
+use crate::ros::messages::*;
+use crate::ros::names::Names;
+use crate::ros::params::NodeParams;
+use crate::ros::protocol::{Accepted, Client, Command, HostedLine, Rejection};
 use crate::sim::Observation;
+
+/// A rejected command: why, and what it said (for the log).
+pub(super) type Refusal = (Rejection, String);
 
 /// One line: the simulation with its protocol, its counters and evolution bookkeeping, and its
 /// endpoints.
@@ -27,20 +34,12 @@ pub(super) struct Line {
     pub(super) namespace: String,
     pub(super) host: HostedLine,
     pub(super) counters: LineCounters,
-    /// The tick whose pending evolution events were announced since the last reset (a reset
-    /// announces them again after its own, so a client that reset knows what its first step
-    /// brings).
-    pub(super) announced_tick: Option<u64>,
-    /// The newest tick whose events were counted (they are counted once however often announced).
-    pub(super) counted_tick: Option<u64>,
-    /// Evolution events announced so far.
-    pub(super) evolution_events: u64,
+    /// Its evolution announcements (`events/evolution`, on an evolving line).
+    pub(super) evolution: LineEvolution,
     input: Publisher<MaterialInput>,
     belt: Publisher<BeltOccupancy>,
     state: Publisher<LineState>,
     reset_event: Publisher<ResetEvent>,
-    /// `events/evolution`, on an evolving line.
-    pub(super) evolution: Option<Publisher<EvolutionEvent>>,
     /// The `reset` service (its requests come through the node's events).
     pub(super) reset: Rc<ServiceServer<ResetLineRequest, ResetLineResponse>>,
     /// `sensors/ratio`, while the line has its ratio sensor.
@@ -59,7 +58,7 @@ impl Line {
         names: &Names,
         params: &NodeParams,
         k: u32,
-    ) -> Result<(Self, Vec<LocalBoxStream<'static, Event>>), String> {
+    ) -> Result<(Self, Vec<Input>), String> {
         let namespace = names.line_namespace(k, params.lines);
         let t = |relative: &str| names.topic(&namespace, relative);
         let reset = service(node, &t("reset"), reset_service_type())?;
@@ -87,14 +86,11 @@ impl Line {
             index,
             counters: LineCounters::new(namespace.clone()),
             host,
-            announced_tick: None,
-            counted_tick: None,
-            evolution_events: 0,
+            evolution: LineEvolution::new(evolution, namespace.clone(), index == 0),
             input,
             belt,
             state,
             reset_event,
-            evolution,
             reset,
             ratio: None,
             mode_cmd: None,
@@ -105,8 +101,13 @@ impl Line {
         Ok((line, streams))
     }
 
+    /// How many readers the `input` writer has matched (a tick's input is sent only to these).
+    pub(super) fn input_readers(&self, node: &Node) -> usize {
+        self.input.get_subscription_count(node)
+    }
+
     pub(super) fn show(&self, relative: &str) -> String {
-        show(&self.namespace, relative)
+        show_topic(&self.namespace, relative)
     }
 
     /// Makes the hardware endpoints match the line: `sensors/ratio` while its observation comes
@@ -153,22 +154,25 @@ impl Line {
     /// events due at the start of the coming step are announced.
     pub(super) fn publish_tick(&mut self, graph: &mut Graph) {
         self.fit_hardware(graph);
-        self.announce_tick_events(graph);
+        self.evolution.announce_tick_events(&self.host, &mut self.counters, graph);
         let host = &self.host;
         let namespace = &self.namespace;
-        let topic = |relative: &'static str| move || show(namespace, relative);
+        let topic = |relative: &'static str| move || show_topic(namespace, relative);
         let counters = &mut self.counters;
-        counters.count_published(graph.offer(&self.input, &topic("input"), || MaterialInput::of(host)));
-        counters.count_published(graph.offer(&self.belt, &topic("belt/occupancy"), || BeltOccupancy::of(host)));
+        counters.count_published(graph.offer(&self.input, &topic("input"), || line_messages::material_input(host)));
+        counters
+            .count_published(graph.offer(&self.belt, &topic("belt/occupancy"), || line_messages::belt_occupancy(host)));
         if let Some(ratio) = &self.ratio {
-            counters.count_published(graph.offer(ratio, &topic("sensors/ratio"), || MaterialRatio::of(host)));
+            counters
+                .count_published(graph.offer(ratio, &topic("sensors/ratio"), || line_messages::material_ratio(host)));
         }
-        counters.count_published(graph.offer(&self.state, &topic("state"), || LineState::of(host)));
+        counters.count_published(graph.offer(&self.state, &topic("state"), || line_messages::line_state(host)));
     }
 
     /// `events/reset`, for bags: the line's new episode (`seeded`: whether the reset named a seed).
     pub(super) fn publish_reset_event(&mut self, graph: &Graph, seeded: bool) {
-        let sent = graph.offer(&self.reset_event, &|| self.show("events/reset"), || ResetEvent::of(&self.host, seeded));
+        let sent = graph
+            .offer(&self.reset_event, &|| self.show("events/reset"), || line_messages::reset_event(&self.host, seeded));
         self.counters.count_published(sent);
     }
 
@@ -176,7 +180,7 @@ impl Line {
     /// announces the setup the episode starts with, naming the episode's events (if any).
     pub(super) fn publish_reset_events(&mut self, graph: &mut Graph, seeded: bool) {
         self.publish_reset_event(graph, seeded);
-        self.announce_reset(graph);
+        self.evolution.announce_reset(&self.host, &mut self.counters, graph);
     }
 
     /// Resets the line and publishes its new tick (and the reset event, for bags).
@@ -187,20 +191,61 @@ impl Line {
         self.publish_tick(graph);
         observation
     }
+
+    /// On an evolving line: the announcement of the line as built (its episode-0 events).
+    pub(super) fn announce_start(&mut self, graph: &Graph) {
+        self.evolution.announce_start(&self.host, &mut self.counters, graph);
+    }
+
+    /// A command from `client` for the tick stamped `stamp`, through the protocol's rules.
+    pub(super) fn apply(&mut self, client: Client, stamp: Time, command: Command) -> Result<Accepted, Refusal> {
+        let result = self.host.command_from(client, stamp, command);
+        result.map_err(|reason| {
+            (reason, command_detail(&self.host, client, format!("{command} for stamp {}", show_stamp(stamp))))
+        })
+    }
+
+    /// Counts and logs a command's fate; publishes the new tick if it completed one. Returns
+    /// whether the line stepped.
+    pub(super) fn settle(&mut self, graph: &mut Graph, topic: &str, result: Result<Accepted, Refusal>) -> bool {
+        match result {
+            Ok(Accepted::Stored) => {
+                self.counters.accepted += 1;
+                false
+            }
+            Ok(Accepted::Stepped(_)) => {
+                self.counters.accepted += 1;
+                self.counters.ticks += 1;
+                self.publish_tick(graph);
+                true
+            }
+            Err((reason, detail)) => {
+                if let Some(line) = self.counters.reject(reason, topic, &detail) {
+                    log("WARN", line);
+                }
+                false
+            }
+        }
+    }
 }
 
-/// A topic of the line in `namespace`, for messages.
-fn show(namespace: &str, relative: &str) -> String {
-    format!("{}/{relative}", namespace.trim_end_matches('/'))
+/// What a rejected command said, and who sent it when that matters (ownership).
+fn command_detail(host: &HostedLine, client: Client, what: String) -> String {
+    match host.owner() {
+        Some(owner) if owner != client => {
+            format!(
+                "{what} from client {} (the episode's owner is {})",
+                show_client(Some(client)),
+                show_client(Some(owner))
+            )
+        }
+        _ => what,
+    }
 }
 
 /// Line k's `cmd/sort_mode` commands, from a stream that owns the subscription and ends (dropping
 /// it, so the subscription leaves the graph) when `stop` fires or its sender is dropped.
-fn mode_commands(
-    k: usize,
-    sub: ros2_client::Subscription<SortModeCommand>,
-    stop: oneshot::Receiver<()>,
-) -> LocalBoxStream<'static, Event> {
+fn mode_commands(k: usize, sub: ros2_client::Subscription<SortModeCommand>, stop: oneshot::Receiver<()>) -> Input {
     let mode =
         |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
     messages(sub)

@@ -8,60 +8,61 @@
 //! The line's hardware shows in the graph: `sensors/ratio` is published while the line has its
 //! ratio sensor, `cmd/sort_mode` subscribed while its machine has sort modes. On an evolving line
 //! (`--evolution FILE`) they appear and go with the upgrades of its schedule
-//! ([`lines::Line::fit_hardware`]); each point at which events apply is announced on
+//! (`lines::Line::fit_hardware`); each point at which events apply is announced on
 //! `events/evolution` before the state it concerns, and the parameters they change (line 0's) are
 //! updated through `/parameter_events`.
 //!
-//! - here: [`run`], the node's set-up, and [`Graph`], what the node holds of the ROS graph.
-//! - `server`: [`server::Server`], the node's state as fields and its loop, one method per kind of
-//!   event.
-//! - `endpoints`: creating publishers, subscriptions and servers, and the input streams that own them.
-//! - `lines`: one hosted line: its endpoints and state, its hardware endpoints at upgrades, what it
-//!   publishes per tick; `evolution`: its evolution announcements.
-//! - `commands`: speed and sort-mode commands (per-line topics, `batch/cmd`) and resets (per line,
-//!   `batch/reset`).
-//! - `sim_services`: the simulation_interfaces services; `stepping`: StepSimulation jobs, the
-//!   realtime tick, ResetSimulation and /clock; `action`: the SimulateSteps action.
-//! - `parameters`: the declared parameters and their updates by the evolution schedule.
+//! The node is a `server::Server` composed of owned parts, each with its state, endpoints and
+//! methods in its own module; the server only waits and dispatches. From the parts down to what
+//! they share (each module uses only those after it in this list; tests/layers.rs fails on any
+//! circle among them):
+//!
+//! - here: [`run`], the node's set-up.
+//! - `server`: the node's loop: what woke it, and which part handles it.
+//! - `stepping`: StepSimulation jobs and SimulateSteps goals, one step per turn of the loop;
+//!   `action`: the SimulateSteps action's server, feedback and results.
+//! - `control`: the simulation_interfaces state, the realtime timer, and what each request does;
+//!   `sim_services`: those services' servers, requests decoded and answers sent.
 //! - `diagnostics`: what the node publishes on /diagnostics.
+//! - `line_set`: every line with the batch topics and /clock: commands and resets (per line and
+//!   batched), every line's tick, ResetSimulation.
+//! - `lines`: one hosted line: its endpoints and state, the commands it takes, its hardware
+//!   endpoints at upgrades, what it publishes per tick; `evolution`: its evolution announcements.
+//! - `line_messages`: what a hosted line's tick looks like in each message (the wire types in
+//!   `ros::messages` are plain mirrors of the .msg files).
+//! - `graph`: what the parts share of the ROS graph: the ROS node, the inputs the node waits on,
+//!   publishing only to topics with a reader; `parameters`: the declared parameters and their
+//!   updates by the evolution schedule.
+//! - `events`: everything that can wake the node, as one type; `endpoints`: creating publishers,
+//!   subscriptions and servers, and the input streams that own them; `log`: the node's log lines.
 
 mod action;
-mod commands;
+mod control;
 mod diagnostics;
 mod endpoints;
+mod events;
 mod evolution;
+mod graph;
+mod line_messages;
+mod line_set;
 mod lines;
+mod log;
 mod parameters;
 mod server;
 mod sim_services;
 mod stepping;
 
-use std::rc::Rc;
-
 use async_signal::{Signal, Signals};
-use futures::stream::{LocalBoxStream, SelectAll};
-use ros2_client::action::{CancelHandle, NewGoalHandle};
-use ros2_client::{Context, Message, MessageInfo, Node, NodeName, Publisher, RmwRequestId, Server as ServiceServer};
-use serde::Serialize;
+use ros2_client::{Context, NodeName};
 
-use super::discovery::Discovery;
-use super::messages::{Clock, DiagnosticArray, LineCommands, LineStates, ResetLineRequest, ResetLinesRequest};
-use super::messages::{ResetLinesResponse, Time};
-use super::names::{Names, NODE_NAME};
-use super::options::{NodeArgs, TickMode};
-use super::params::NodeParams;
-use super::protocol::{Client, Command};
-use super::ros_args::RosArgs;
-use super::simulation_interfaces::SimulateStepsGoal;
-use action::SimulateStepsServer;
-use lines::Line;
-use parameters::{node_options, ParameterValues};
+use crate::ros::discovery::Discovery;
+use crate::ros::names::{Names, NODE_NAME};
+use crate::ros::options::{NodeArgs, TickMode};
+use crate::ros::params::NodeParams;
+use crate::ros::ros_args::RosArgs;
+use log::log;
+use parameters::node_options;
 use server::Server;
-use sim_services::{SimRequest, SimulationServers};
-
-fn log(level: &str, message: impl AsRef<str>) {
-    eprintln!("[{level}] [{NODE_NAME}]: {}", message.as_ref());
-}
 
 /// Runs the node until SIGINT or SIGTERM.
 pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
@@ -119,73 +120,4 @@ fn started_message(names: &Names, discovery: &Discovery, params: &NodeParams) ->
             format!(", evolving by {} ({} events)", params.evolution_file, params.evolution.events.len())
         }
     )
-}
-
-/// Everything from DDS that can wake the node.
-enum Event {
-    Batch(Result<(LineCommands, MessageInfo), String>),
-    BatchReset(Result<(RmwRequestId, ResetLinesRequest), String>),
-    /// A command on line k's own topic (named), with its sender and stamp.
-    Command(usize, &'static str, Result<(Client, Time, Command), String>),
-    Reset(usize, Result<(RmwRequestId, ResetLineRequest), String>),
-    /// A simulation_interfaces request.
-    Sim(Result<(RmwRequestId, SimRequest), String>),
-    /// A new SimulateSteps goal, or a request to cancel goals.
-    Goal(Result<NewGoalHandle<SimulateStepsGoal>, String>),
-    Cancel(Result<CancelHandle, String>),
-}
-
-/// The node's inputs, one stream per endpoint, each holding its endpoint.
-type Events = SelectAll<LocalBoxStream<'static, Event>>;
-
-/// What the node holds of the ROS graph: every input stream, the node-wide endpoints, and the ROS
-/// node they live on. `batch/cmd` and `batch/state` (in the node's namespace) carry every line at
-/// once: a vectorised client exchanges two messages per round trip instead of two per line, which
-/// is what lets one rclpy process drive many lines.
-struct Graph {
-    /// Every input the node waits on; endpoints created while serving (the line's hardware,
-    /// [`Line::fit_hardware`]) join it at once.
-    events: Events,
-    clock_pub: Publisher<Clock>,
-    diagnostics_pub: Publisher<DiagnosticArray>,
-    batch_state: Publisher<LineStates>,
-    batch_reset: Rc<ServiceServer<ResetLinesRequest, ResetLinesResponse>>,
-    sim: SimulationServers,
-    simulate_steps: Rc<SimulateStepsServer>,
-    parameter_values: ParameterValues,
-    /// Last: the endpoints above are dropped before the node.
-    node: Node,
-}
-
-impl Graph {
-    /// Publishes the message `build` makes if the publisher has a matched reader; returns whether
-    /// it did. Topics nobody reads are skipped: a node hosting 16 lines for a vectorised client
-    /// (which reads `batch/state` only) would otherwise build, serialise and queue 64 unread
-    /// per-line messages per round trip, most of the node's time per tick
-    /// (benches/bridge_throughput.py). Nothing is lost that a volatile reader could have had:
-    /// samples written before a reader matches never reach it anyway, and the node's count
-    /// follows the DDS writer's own matching (the spinner records each match the writer reports).
-    fn offer<M>(&self, publisher: &Publisher<M>, topic: &dyn Fn() -> String, build: impl FnOnce() -> M) -> bool
-    where
-        M: Message + Serialize + std::fmt::Debug,
-    {
-        if publisher.get_subscription_count(&self.node) == 0 {
-            return false;
-        }
-        if let Err(e) = publisher.publish(build()) {
-            log("WARN", format!("cannot publish {}: {e:?}", topic()));
-        }
-        true
-    }
-
-    /// `batch/state`, when a vectorised client reads it (per-line clients and realtime lines
-    /// without one would otherwise get every line's state built and sent each tick for nothing).
-    fn publish_batch_state(&self, lines: &[Line]) {
-        self.offer(&self.batch_state, &|| "batch/state".to_string(), || batch_states(lines));
-    }
-}
-
-/// Every line's current state, as arrays.
-fn batch_states(lines: &[Line]) -> LineStates {
-    LineStates::of(lines.iter().map(|line| &line.host))
 }

@@ -4,15 +4,15 @@
 
 use std::sync::{Arc, Mutex};
 
-use ros2_client::{NodeOptions, ParameterValue};
+use ros2_client::{Node, NodeOptions, ParameterValue};
 
-use super::super::param_descriptors::{descriptors, EVOLVING_PARAMETERS};
-use super::super::params::NodeParams;
-use super::{log, Graph};
+use super::log::log;
+use crate::ros::param_descriptors::{descriptors, EVOLVING_PARAMETERS};
+use crate::ros::params::NodeParams;
 use crate::sim::evolution::Settings;
 
 /// The values the parameter validator accepts: the current ones. The node itself moves them
-/// when its evolution schedule changes a setting ([`Graph::update_parameters`]).
+/// when its evolution schedule changes a setting ([`update_parameters`]).
 pub(super) type ParameterValues = Arc<Mutex<Vec<(&'static str, ParameterValue)>>>;
 
 /// Declares every parameter with its value. They are fixed for the run: changing the dynamics
@@ -50,34 +50,32 @@ pub(super) fn node_options(params: &NodeParams) -> (NodeOptions, ParameterValues
     (options, current)
 }
 
-impl Graph {
-    /// Moves the parameters an evolution event changed (line 0's settings) to their new values:
-    /// the validator accepts them first, then the node sets them, which publishes them on
-    /// `/parameter_events`.
-    pub(super) fn update_parameters(&self, settings: &Settings) {
-        let now = [
-            ("obs_noise", ParameterValue::Double(settings.obs_noise)),
-            ("action_penalty", ParameterValue::Double(settings.action_penalty)),
-            ("threshold", ParameterValue::Double(settings.threshold)),
-            ("input", ParameterValue::String(settings.input.to_string())),
-        ];
-        debug_assert!(now.iter().map(|(n, _)| *n).eq(EVOLVING_PARAMETERS));
-        let mut changed = Vec::new();
-        {
-            let mut values = self.parameter_values.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            for (name, value) in now {
-                if let Some(slot) = values.iter_mut().find(|(n, _)| *n == name) {
-                    if slot.1 != value {
-                        slot.1 = value.clone();
-                        changed.push((name, value));
-                    }
+/// Moves the parameters an evolution event changed (line 0's settings) to their new values: the
+/// validator (which reads `parameter_values`) accepts them first, then `node` sets them, which
+/// publishes them on `/parameter_events`.
+pub(super) fn update_parameters(node: &Node, parameter_values: &ParameterValues, settings: &Settings) {
+    let now = [
+        ("obs_noise", ParameterValue::Double(settings.obs_noise)),
+        ("action_penalty", ParameterValue::Double(settings.action_penalty)),
+        ("threshold", ParameterValue::Double(settings.threshold)),
+        ("input", ParameterValue::String(settings.input.to_string())),
+    ];
+    debug_assert!(now.iter().map(|(n, _)| *n).eq(EVOLVING_PARAMETERS));
+    let mut changed = Vec::new();
+    {
+        let mut values = parameter_values.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        for (name, value) in now {
+            if let Some(slot) = values.iter_mut().find(|(n, _)| *n == name) {
+                if slot.1 != value {
+                    slot.1 = value.clone();
+                    changed.push((name, value));
                 }
             }
         }
-        for (name, value) in changed {
-            if let Err(e) = self.node.set_parameter(name, value) {
-                log("WARN", format!("cannot update parameter {name}: {e}"));
-            }
+    }
+    for (name, value) in changed {
+        if let Err(e) = node.set_parameter(name, value) {
+            log("WARN", format!("cannot update parameter {name}: {e}"));
         }
     }
 }

@@ -1,52 +1,37 @@
-//! The node's one task as a type: [`Server`] holds everything the node knows and owns as fields,
-//! waits on every input at once and handles each event completely with the method for its kind,
-//! until a signal (or a SetSimulationState to QUITTING).
+//! The node's one task as a type: [`Server`] is composed of the node's parts (the lines, simulation
+//! control, stepping, diagnostics), each owning its state and endpoints; it waits on every input at
+//! once and hands each event to the part it concerns, until a signal (or a SetSimulationState to
+//! QUITTING).
 
 use std::ops::ControlFlow;
-use std::rc::Rc;
-use std::time::{Duration, Instant};
 
 use async_signal::{Signal, Signals};
 use futures::future::{FutureExt, LocalBoxFuture};
-use futures::stream::{self, Fuse, FuturesUnordered, LocalBoxStream, StreamExt};
+use futures::stream::{Fuse, StreamExt};
 use ros2_client::Node;
 
-use super::super::diagnostics::SimulationCounters;
-use super::super::messages::batch_reset_service_type;
-use super::super::names::Names;
-use super::super::params::NodeParams;
-use super::super::simulation::SimState;
-use super::action::simulate_steps_server;
-use super::endpoints::{messages, publisher, requests, service, subscription};
+use super::action::NAME;
+use super::control::{SimFlow, SimulationControl};
+use super::diagnostics::Diagnostics;
+use super::events::Event;
+use super::graph::Graph;
+use super::line_set::{ClockPublisher, LineSet};
 use super::lines::Line;
+use super::log::log;
 use super::parameters::ParameterValues;
-use super::sim_services::SimulationServers;
-use super::stepping::{ClockState, StepJob};
-use super::{log, Event, Graph};
+use super::stepping::{StepReply, Stepping};
+use crate::ros::names::Names;
+use crate::ros::params::NodeParams;
 
-/// How often /diagnostics is published (wall time).
-const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
-
-/// The running node: its lines, the simulation's state, its timers and what it owes clients.
+/// The running node: its parts, its signals, and the ROS graph they share.
 pub(super) struct Server {
-    pub(super) lines: Vec<Line>,
-    pub(super) params: NodeParams,
-    /// The simulation_interfaces state (PAUSED is lock-step, PLAYING realtime).
-    pub(super) sim: SimState,
-    /// The realtime tick period, and its timer (never fires unless PLAYING).
-    pub(super) period: Duration,
-    pub(super) timer: Fuse<smol::Timer>,
-    /// A StepSimulation (or SimulateSteps goal) in progress.
-    pub(super) job: Option<StepJob>,
-    pub(super) sim_counters: SimulationCounters,
-    pub(super) clock: ClockState,
-    diagnostics: Fuse<smol::Timer>,
-    pub(super) started: Instant,
+    lines: LineSet,
+    control: SimulationControl,
+    stepping: Stepping,
+    diagnostics: Diagnostics,
     signals: Fuse<Signals>,
-    /// SimulateSteps results waiting for their client to ask for them.
-    pub(super) finishing: FuturesUnordered<LocalBoxFuture<'static, ()>>,
-    /// Last: its endpoints and node outlive everything above.
-    pub(super) graph: Graph,
+    /// Last: its input streams and node outlive every endpoint above.
+    graph: Graph,
 }
 
 /// What woke the node.
@@ -63,7 +48,7 @@ enum Wake {
 
 impl Server {
     /// Creates every endpoint: each line's, then the node-wide ones (in that order, as announced
-    /// to the graph).
+    /// to the graph: /clock, /diagnostics, the batch topics, the simulation services, the action).
     pub(super) fn new(
         mut node: Node,
         names: &Names,
@@ -72,72 +57,20 @@ impl Server {
         signals: Signals,
     ) -> Result<Self, String> {
         let mut lines = Vec::new();
-        let mut inputs: Vec<LocalBoxStream<'static, Event>> = Vec::new();
+        let mut inputs = Vec::new();
         for k in 0..params.lines {
             let (line, streams) = Line::new(&mut node, names, params, k)?;
             lines.push(line);
             inputs.extend(streams);
         }
-        let graph = Self::graph(node, names, parameter_values, inputs)?;
-        let sim = SimState::initial(params.mode);
-        Ok(Server {
-            lines,
-            params: params.clone(),
-            sim,
-            period: Duration::from_secs_f64(1.0 / params.rate),
-            timer: StreamExt::fuse(smol::Timer::never()),
-            job: None,
-            sim_counters: SimulationCounters::new(names.fully_qualified()),
-            clock: ClockState::default(),
-            diagnostics: StreamExt::fuse(smol::Timer::never()),
-            started: Instant::now(),
-            signals: signals.fuse(),
-            finishing: FuturesUnordered::new(),
-            graph,
-        })
-    }
-
-    /// The node-wide endpoints, with every input stream.
-    fn graph(
-        mut node: Node,
-        names: &Names,
-        parameter_values: ParameterValues,
-        mut inputs: Vec<LocalBoxStream<'static, Event>>,
-    ) -> Result<Graph, String> {
-        let err = |e| format!("{e:?}");
-        let clock_pub = publisher(&mut node, &names.global("/clock"))?;
-        let diagnostics_pub = publisher(&mut node, &names.global("/diagnostics"))?;
-        let batch_cmd = subscription(&mut node, &names.topic(&names.namespace, "batch/cmd"))?;
-        let batch_state = publisher(&mut node, &names.topic(&names.namespace, "batch/state"))?;
-        let batch_reset =
-            service(&mut node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?;
-        let sim = SimulationServers::new(&mut node, names)?;
-        let simulate_steps = Rc::new(simulate_steps_server(&mut node, names)?);
-        let (goals, cancels) = (Rc::clone(&simulate_steps), Rc::clone(&simulate_steps));
-        inputs.extend([
-            messages(batch_cmd).map(move |r| Event::Batch(r.map_err(err))).boxed_local(),
-            requests(&batch_reset).map(move |r| Event::BatchReset(r.map_err(err))).boxed_local(),
-            stream::unfold(goals, move |action| async move {
-                Some((Event::Goal(action.receive_new_goal().await.map_err(err)), action))
-            })
-            .boxed_local(),
-            stream::unfold(cancels, move |action| async move {
-                Some((Event::Cancel(action.receive_cancel_request().await.map_err(err)), action))
-            })
-            .boxed_local(),
-        ]);
-        inputs.extend(sim.events());
-        Ok(Graph {
-            events: stream::select_all(inputs),
-            clock_pub,
-            diagnostics_pub,
-            batch_state,
-            batch_reset,
-            sim,
-            simulate_steps,
-            parameter_values,
-            node,
-        })
+        let clock = ClockPublisher::new(&mut node, names)?;
+        let diagnostics = Diagnostics::new(&mut node, names, params)?;
+        let lines = LineSet::new(&mut node, names, params, (lines, clock), &mut inputs)?;
+        let (control, sim_inputs) = SimulationControl::new(&mut node, names, params)?;
+        let stepping = Stepping::new(&mut node, names, &mut inputs)?;
+        inputs.extend(sim_inputs);
+        let graph = Graph::new(node, parameter_values, inputs);
+        Ok(Server { lines, control, stepping, diagnostics, signals: signals.fuse(), graph })
     }
 
     pub(super) fn spinner(&mut self) -> Result<ros2_client::Spinner, String> {
@@ -146,21 +79,24 @@ impl Server {
 
     /// Serves until a signal (or a SetSimulationState to QUITTING).
     pub(super) async fn serve(&mut self) {
-        self.start();
+        self.lines.start(&mut self.graph);
+        self.control.start();
+        self.diagnostics.start();
         loop {
             let flow = match self.next_wake().await {
                 Wake::Event(event) => self.on_event(event).await,
                 Wake::Step => {
-                    self.on_step().await;
+                    self.stepping.on_step((&mut self.lines, &mut self.graph), &mut self.control).await;
                     ControlFlow::Continue(())
                 }
                 Wake::Finished => ControlFlow::Continue(()),
                 Wake::Timer => {
-                    self.tick_all();
+                    self.lines.tick_all(&mut self.graph);
                     ControlFlow::Continue(())
                 }
                 Wake::Diagnostics => {
-                    self.publish_diagnostics();
+                    let simulation = self.control.status(self.stepping.progress());
+                    self.diagnostics.publish(&self.graph.node, &mut self.lines.lines, simulation);
                     ControlFlow::Continue(())
                 }
                 Wake::Signal(signal) => {
@@ -179,25 +115,10 @@ impl Server {
         }
     }
 
-    /// The lines as built: their episode-0 events applied (announced, and line 0's parameters
-    /// set, like those of any later reset) and their first tick out; the timers start.
-    fn start(&mut self) {
-        for line in &mut self.lines {
-            line.announce_start(&self.graph);
-            line.publish_tick(&mut self.graph);
-        }
-        self.publish_clock();
-        if self.sim == SimState::Playing {
-            self.timer = StreamExt::fuse(smol::Timer::interval(self.period));
-        }
-        self.diagnostics = StreamExt::fuse(smol::Timer::interval(DIAGNOSTICS_PERIOD));
-        self.started = Instant::now();
-    }
-
     async fn next_wake(&mut self) -> Wake {
         // A StepSimulation in progress runs one step per turn of the loop, so other requests,
         // commands and signals are served between its steps.
-        let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> = if self.job.is_some() {
+        let mut step_now: futures::future::Fuse<LocalBoxFuture<'static, ()>> = if self.stepping.progress().is_some() {
             futures::future::ready(()).boxed_local().fuse()
         } else {
             futures::future::pending().boxed_local().fuse()
@@ -207,30 +128,39 @@ impl Server {
         futures::select! {
             event = self.graph.events.select_next_some() => Wake::Event(event),
             () = step_now => Wake::Step,
-            () = self.finishing.select_next_some() => Wake::Finished,
-            _ = self.timer.select_next_some() => Wake::Timer,
-            _ = self.diagnostics.select_next_some() => Wake::Diagnostics,
+            () = self.stepping.action.finishing.select_next_some() => Wake::Finished,
+            _ = self.control.timer.select_next_some() => Wake::Timer,
+            _ = self.diagnostics.timer.select_next_some() => Wake::Diagnostics,
             signal = self.signals.select_next_some() => Wake::Signal(signal),
         }
     }
 
+    /// Hands an event to the part it concerns.
     async fn on_event(&mut self, event: Event) -> ControlFlow<()> {
+        let (lines, graph) = (&mut self.lines, &mut self.graph);
         match event {
-            Event::Batch(received) => self.on_batch(received),
-            Event::Command(k, topic, received) => self.on_command(k, topic, received),
-            Event::BatchReset(Ok((id, request))) => self.on_batch_reset(id, request).await,
+            Event::Batch(received) => lines.on_batch(graph, received),
+            Event::Command(k, topic, received) => lines.on_command(graph, (k, topic), received),
+            Event::BatchReset(Ok((id, request))) => lines.on_batch_reset(graph, id, request).await,
             Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
-            Event::Reset(k, Ok((id, request))) => self.on_reset(k, id, request).await,
+            Event::Reset(k, Ok((id, request))) => lines.on_reset(graph, k, id, request).await,
             Event::Reset(k, Err(error)) => {
-                log("WARN", format!("{}/reset: unreadable request: {error}", self.lines[k].namespace));
+                log("WARN", format!("{}/reset: unreadable request: {error}", lines.lines[k].namespace));
             }
-            Event::Sim(Ok((id, request))) => return self.on_sim_request(id, request).await,
+            Event::Sim(Ok(request)) => {
+                let stepping = self.stepping.progress();
+                match self.control.on_request((lines, graph), request, stepping).await {
+                    SimFlow::Answered => {}
+                    SimFlow::Steps(steps) => self.stepping.start(lines, StepReply::Service(request.0), steps),
+                    SimFlow::Quit => return ControlFlow::Break(()),
+                }
+            }
             Event::Sim(Err(error)) => log("WARN", format!("simulation_interfaces: unreadable request: {error}")),
-            Event::Goal(Ok(handle)) => self.on_goal(handle).await,
-            Event::Goal(Err(error)) => log("WARN", format!("{}: unreadable goal: {error}", super::action::NAME)),
-            Event::Cancel(Ok(cancel)) => self.on_cancel(cancel).await,
+            Event::Goal(Ok(handle)) => self.stepping.on_goal(lines, &mut self.control, handle).await,
+            Event::Goal(Err(error)) => log("WARN", format!("{}: unreadable goal: {error}", NAME)),
+            Event::Cancel(Ok(cancel)) => self.stepping.on_cancel(lines, cancel).await,
             Event::Cancel(Err(error)) => {
-                log("WARN", format!("{}: unreadable cancel request: {error}", super::action::NAME));
+                log("WARN", format!("{}: unreadable cancel request: {error}", NAME));
             }
         }
         ControlFlow::Continue(())

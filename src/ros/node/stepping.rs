@@ -1,20 +1,25 @@
-//! How the simulation moves outside lock-step commands: StepSimulation jobs (one step per turn of
-//! the node's loop), the realtime tick of every line, ResetSimulation, and /clock.
+//! Stepping as a part of the node: StepSimulation jobs and SimulateSteps goals, one step per turn
+//! of the node's loop (so other requests, commands and signals are served between steps), with
+//! the action's feedback, cancel after the step in progress, and refused goals ending aborted with
+//! the reason.
 
 use std::time::{Duration, Instant};
 
-use super::super::messages::{Clock, Time};
-use super::super::options::TickMode;
-use super::super::protocol::TimerTick;
-use super::super::simulation::ResetScope;
-use super::super::simulation_interfaces::SimulateStepsFeedback;
-use super::action::{finish_goal, StepsGoal, NAME};
-use super::server::Server;
-use super::sim_services::{ok, SimRequest};
-use super::{log, Graph, Line};
-use ros2_client::action::GoalEndStatus;
-use ros2_client::RmwRequestId;
-use std::rc::Rc;
+use ros2_client::action::{CancelHandle, GoalEndStatus, NewGoalHandle};
+use ros2_client::{Node, RmwRequestId};
+
+use super::action::{SimulateSteps, StepsGoal, NAME};
+use super::control::SimulationControl;
+use super::events::Input;
+use super::events::SimRequest;
+use super::graph::Graph;
+use super::line_set::LineSet;
+use super::log::log;
+use super::sim_services::ok;
+use crate::ros::names::Names;
+use crate::ros::options::TickMode;
+use crate::ros::simulation::{code, step_request};
+use crate::ros::simulation_interfaces::{SimResult, SimulateStepsFeedback, SimulateStepsGoal};
 
 /// Whom a finished StepSimulation answers: a service request, or a SimulateSteps goal.
 #[derive(Clone, Copy)]
@@ -24,10 +29,10 @@ pub(super) enum StepReply {
 }
 
 /// A StepSimulation (or SimulateSteps goal) in progress: whom to answer, steps done and asked.
-pub(super) struct StepJob {
-    pub(super) reply: StepReply,
-    pub(super) done: u64,
-    pub(super) steps: u64,
+struct StepJob {
+    reply: StepReply,
+    done: u64,
+    steps: u64,
     /// When the action's last feedback went out (see [`FEEDBACK_PERIOD`]).
     last_feedback: Option<Instant>,
 }
@@ -38,127 +43,109 @@ pub(super) struct StepJob {
 /// progress, not data: the first step, then at most one per period, and the last step always.
 const FEEDBACK_PERIOD: Duration = Duration::from_millis(10);
 
-/// /clock: follows the line that is furthest ahead and goes back only when the simulation's time
-/// is reset.
-#[derive(Default)]
-pub(super) struct ClockState {
-    last: Option<Time>,
+/// The step job in progress (if any) and the SimulateSteps action.
+pub(super) struct Stepping {
+    job: Option<StepJob>,
+    pub(super) action: SimulateSteps,
 }
 
-impl ClockState {
-    fn publish(&mut self, graph: &Graph, lines: &[Line]) {
-        let newest = lines.iter().map(|line| line.host.stamp()).max().unwrap_or_default();
-        if self.last.is_none_or(|last| newest > last) {
-            self.last = Some(newest);
-            graph.offer(&graph.clock_pub, &|| "/clock".to_string(), || Clock { clock: newest });
-        }
-    }
-}
-
-impl Server {
-    pub(super) fn publish_clock(&mut self) {
-        self.clock.publish(&self.graph, &self.lines);
+impl Stepping {
+    pub(super) fn new(node: &mut Node, names: &Names, inputs: &mut Vec<Input>) -> Result<Self, String> {
+        Ok(Stepping { job: None, action: SimulateSteps::new(node, names, inputs)? })
     }
 
     /// The step job in progress as (done, asked), for the rules and /diagnostics.
-    pub(super) fn stepping(&self) -> Option<(u64, u64)> {
+    pub(super) fn progress(&self) -> Option<(u64, u64)> {
         self.job.as_ref().map(|j| (j.done, j.steps))
     }
 
     /// Starts a StepSimulation (or SimulateSteps goal) of `steps` > 0. Realtime rules while
     /// stepping: a command updates the held command (the next step uses it) instead of completing
     /// a tick.
-    pub(super) fn start_job(&mut self, reply: StepReply, steps: u64) {
-        for line in &mut self.lines {
-            line.host.set_mode(TickMode::Realtime);
-        }
+    pub(super) fn start(&mut self, lines: &mut LineSet, reply: StepReply, steps: u64) {
+        lines.set_mode(TickMode::Realtime, None);
         self.job = Some(StepJob { reply, done: 0, steps, last_feedback: None });
     }
 
     /// Back to lock-step (PAUSED) after a step job.
-    pub(super) fn end_job(&mut self) {
-        for line in &mut self.lines {
-            line.host.set_mode(TickMode::Lockstep);
-        }
+    fn end(&mut self, lines: &mut LineSet) {
+        lines.set_mode(TickMode::Lockstep, None);
         self.job = None;
     }
 
     /// One step of the job in progress; feedback to a SimulateSteps client at most every
     /// [`FEEDBACK_PERIOD`]; the answer once the last step is done.
-    pub(super) async fn on_step(&mut self) {
+    pub(super) async fn on_step(
+        &mut self,
+        (lines, graph): (&mut LineSet, &mut Graph),
+        control: &mut SimulationControl,
+    ) {
         if self.job.is_none() {
             return;
         }
-        self.tick_all();
+        lines.tick_all(graph);
         let Some(job) = self.job.as_mut() else { return };
         job.done += 1;
-        self.sim_counters.steps += 1;
+        control.counters.steps += 1;
         let due = job.done == job.steps || job.last_feedback.is_none_or(|t| t.elapsed() >= FEEDBACK_PERIOD);
         if let (StepReply::Action(goal), true) = (job.reply, due) {
             job.last_feedback = Some(Instant::now());
             let feedback = SimulateStepsFeedback { completed_steps: job.done, remaining_steps: job.steps - job.done };
-            if let Err(e) = self.graph.simulate_steps.publish_feedback(goal, feedback).await {
-                log("WARN", format!("{NAME}: cannot publish feedback: {e:?}"));
-            }
+            self.action.feedback(goal, feedback).await;
         }
         if job.done == job.steps {
             let reply = job.reply;
-            self.end_job();
-            self.sim_counters.answered_ok += 1;
+            self.end(lines);
+            control.counters.answered_ok += 1;
             match reply {
-                StepReply::Service(id) => self.graph.sim.reply(id, SimRequest::Step(0), ok(), self.sim).await,
-                StepReply::Action(goal) => {
-                    let action = Rc::clone(&self.graph.simulate_steps);
-                    self.finishing.push(finish_goal(action, goal, GoalEndStatus::Succeeded, ok()));
-                }
+                StepReply::Service(id) => control.reply(id, SimRequest::Step(0), ok()).await,
+                StepReply::Action(goal) => self.action.finish(goal, GoalEndStatus::Succeeded, ok()),
             }
         }
     }
 
-    /// One tick of every line on its held command, as the realtime timer and StepSimulation run
-    /// it: a line at its time limit starts a new episode instead (its random streams carry on).
-    pub(super) fn tick_all(&mut self) {
-        for line in &mut self.lines {
-            match line.host.timer_tick() {
-                TimerTick::Stepped(_) => {
-                    line.counters.ticks += 1;
-                    line.publish_tick(&mut self.graph);
+    /// A new goal: accepted either way; a refused goal ends at once with the reason in its result.
+    pub(super) async fn on_goal(
+        &mut self,
+        lines: &mut LineSet,
+        control: &mut SimulationControl,
+        handle: NewGoalHandle<SimulateStepsGoal>,
+    ) {
+        let stepping = self.progress();
+        let Some((goal, executing)) = self.action.accept(handle).await else { return };
+        match step_request(control.state, goal.steps, stepping) {
+            Ok(0) => {
+                control.counters.answered_ok += 1;
+                self.action.finish(executing, GoalEndStatus::Succeeded, ok());
+            }
+            Ok(steps) => self.start(lines, StepReply::Action(executing), steps),
+            Err(refusal) => {
+                if let Some(line) = control.counters.refuse(NAME, &format!("steps {}", goal.steps), &refusal) {
+                    log("WARN", line);
                 }
-                TimerTick::Reset(_) => {
-                    line.counters.episodes += 1;
-                    line.publish_reset_events(&mut self.graph, false);
-                    line.publish_tick(&mut self.graph);
-                }
+                let result = SimResult { result: refusal.code, error_message: refusal.message };
+                self.action.finish(executing, GoalEndStatus::Aborted, result);
             }
         }
-        self.graph.publish_batch_state(&self.lines);
-        self.publish_clock();
     }
 
-    /// ResetSimulation (and stopping): every line back to how it was built (state), the stamps and
-    /// /clock back to 0 (time), or both; then each line's tick is published again (with the reset
-    /// event, seeded, when the state was reset).
-    pub(super) fn reset_simulation(&mut self, scope: ResetScope) {
-        for line in &mut self.lines {
-            if scope.state {
-                line.host.restart();
-                line.counters.episodes += 1;
-                // The line as built again: its schedule starts over.
-                (line.announced_tick, line.counted_tick, line.evolution_events) = (None, None, 0);
+    /// A cancel request: only the goal in progress can be canceled (every other one has ended);
+    /// it ends after the step in progress.
+    pub(super) async fn on_cancel(&mut self, lines: &mut LineSet, cancel: CancelHandle) {
+        let current = match self.job.as_ref().map(|j| (j.reply, j.done, j.steps)) {
+            Some((StepReply::Action(goal), done, steps)) if cancel.contains_goal(&goal.goal_id()) => {
+                Some((goal, done, steps))
             }
-            if scope.time {
-                line.host.rewind_time();
-            }
-            if scope.state {
-                line.publish_reset_event(&self.graph, true);
-                line.announce_start(&self.graph);
-            }
-            line.publish_tick(&mut self.graph);
+            _ => None,
+        };
+        self.action.answer_cancel(&cancel, current.as_ref().map(|(goal, _, _)| goal)).await;
+        if let Some((goal, done, steps)) = current {
+            self.end(lines);
+            let result = SimResult {
+                result: code::OPERATION_FAILED,
+                error_message: format!("canceled after {done} of {steps} steps"),
+            };
+            self.action.finish(goal, GoalEndStatus::Canceled, result);
         }
-        if scope.time {
-            self.clock = ClockState::default();
-        }
-        self.graph.publish_batch_state(&self.lines);
-        self.publish_clock();
     }
 }

@@ -13,5 +13,5 @@ unshare -n bash -c '
   ip link set lo up
   source launch_scripts/env.sh
   cd tests/python
-  python bag_golden.py
-'
+  python bag_golden.py "$@"
+' bash "$@"   # no names: every bag of bag_golden.GOLDEN

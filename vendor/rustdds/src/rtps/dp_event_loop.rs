@@ -315,6 +315,9 @@ impl DPEventLoop {
       let poll_timeout = timeout_until(ev_wrapper.shared_timer.borrow().next_deadline(), idle_cap);
       match ev_wrapper.poll.poll(&mut events, Some(poll_timeout)) {
         Ok(_) => {}
+        // A stopped and continued process (SIGSTOP/SIGCONT: Ctrl-Z, a debugger) gets EINTR here:
+        // poll again rather than leave the participant deaf (vendor/README.md, item 11).
+        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
         Err(e) => {
           error!("dp_event_loop poll failed: {e:?}");
           break;

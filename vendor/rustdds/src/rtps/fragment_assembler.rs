@@ -1,6 +1,7 @@
 use std::{
   collections::{btree_map::Entry, BTreeMap},
   fmt, iter,
+  sync::atomic::{AtomicUsize, Ordering},
 };
 
 use bit_vec::BitVec;
@@ -22,9 +23,34 @@ use crate::{
   },
 };
 
+// [sorting_line patch] A DATA_FRAG's sampleSize is whatever its sender writes, and every reader
+// took it at its word: one datagram of ~60 bytes to the SPDP reader with sampleSize 0xFFFFFFFF
+// made the node allocate and zero 4 GB (plus a 512 MB fragment bitmap), and a few more with other
+// sequence numbers or writer GUIDs (128 buffers per writer, any number of writers) took all of the
+// machine's memory. Now a sample may not exceed MAX_FRAGMENTED_SAMPLE_BYTES, all incomplete
+// reassemblies of the process together may not reserve more than MAX_REASSEMBLY_BYTES (a DATA_FRAG
+// beyond is dropped until the timeout or completion frees room), and a buffer is zeroed by the
+// allocator (untouched pages cost no memory) rather than written.
+pub(crate) const MAX_FRAGMENTED_SAMPLE_BYTES: usize = 64 << 20;
+pub(crate) const MAX_REASSEMBLY_BYTES: usize = 256 << 20;
+static REASSEMBLY_BYTES_RESERVED: AtomicUsize = AtomicUsize::new(0);
+
+/// Reserves `bytes` of the process-wide reassembly budget; false when it would be exceeded.
+fn reserve_reassembly(bytes: usize) -> bool {
+  REASSEMBLY_BYTES_RESERVED
+    .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |reserved| {
+      reserved
+        .checked_add(bytes)
+        .filter(|total| *total <= MAX_REASSEMBLY_BYTES)
+    })
+    .is_ok()
+}
+
 // This is for the assembly of a single object
 struct AssemblyBuffer {
   buffer_bytes: BytesMut,
+  // [sorting_line patch] what this buffer holds of the reassembly budget
+  reserved_bytes: usize,
   fragment_count: usize,
   received_bitmap: BitVec,
 
@@ -44,20 +70,28 @@ impl AssemblyBuffer {
       error!("Cannot create AssemblyBuffer: fragment_size={fragment_size} data_size={data_size}");
       return None;
     }
-
-    let mut buffer_bytes = BytesMut::with_capacity(data_size);
-    buffer_bytes.resize(data_size, 0);
+    // [sorting_line patch] bounded sample size and reassembly budget (see MAX_REASSEMBLY_BYTES)
+    if data_size > MAX_FRAGMENTED_SAMPLE_BYTES {
+      warn!("Cannot create AssemblyBuffer: data_size={data_size} > {MAX_FRAGMENTED_SAMPLE_BYTES}");
+      return None;
+    }
 
     let fragment_count = usize::from(datafrag.total_number_of_fragments());
     if fragment_count == 0 {
       error!("Cannot create AssemblyBuffer: zero fragment count");
       return None;
     }
+    if !reserve_reassembly(data_size) {
+      warn!("Cannot create AssemblyBuffer: data_size={data_size} exceeds the reassembly budget");
+      return None;
+    }
+    let buffer_bytes = BytesMut::zeroed(data_size);
 
     let now = Timestamp::now();
 
     Some(Self {
       buffer_bytes,
+      reserved_bytes: data_size,
       fragment_count,
       received_bitmap: BitVec::from_elem(fragment_count, false),
       created_time: now,
@@ -174,6 +208,13 @@ impl AssemblyBuffer {
   }
 }
 
+// [sorting_line patch] gives the buffer's bytes back to the reassembly budget
+impl Drop for AssemblyBuffer {
+  fn drop(&mut self) {
+    REASSEMBLY_BYTES_RESERVED.fetch_sub(self.reserved_bytes, Ordering::SeqCst);
+  }
+}
+
 // Upper bound on the number of concurrent (incomplete) reassembly buffers kept
 // per writer. Fragments belonging to one sample normally arrive back-to-back,
 // so only a handful of samples are ever mid-reassembly at once; this cap is far
@@ -246,10 +287,12 @@ impl FragmentAssembler {
 
     if assembly_buffer.is_complete() {
       debug!("new_datafrag: COMPLETED FRAGMENT");
-      if let Some(assembly_buffer) = self.assembly_buffers.remove(&writer_sn) {
+      if let Some(mut assembly_buffer) = self.assembly_buffers.remove(&writer_sn) {
         // Return what we have assembled.
+        // [sorting_line patch] taken, not moved: the buffer gives its budget back when dropped
+        let assembled = std::mem::take(&mut assembly_buffer.buffer_bytes).freeze();
         let serialized_data_or_key =
-          SerializedPayload::from_bytes(&assembly_buffer.buffer_bytes.freeze()).map_or_else(
+          SerializedPayload::from_bytes(&assembled).map_or_else(
             |e| {
               error!("Deserializing SerializedPayload from DATAFRAG: {:?}", e);
               None
@@ -409,6 +452,26 @@ mod tests {
     let mut ab = AssemblyBuffer::new(&bad).expect("buffer for valid data_size");
     assert!(!ab.insert_frags(&bad, frag_size));
     assert!(!ab.is_complete());
+  }
+
+  // [sorting_line patch] A DATA_FRAG announcing a 4 GB sample gets no buffer; a buffer holds its
+  // size of the process-wide budget until it is dropped, and the budget cannot be exceeded. (Other
+  // tests hold a few KB of the budget meanwhile: the checks leave room for them.)
+  #[test]
+  fn huge_samples_are_refused_and_buffers_hold_the_budget() {
+    use std::sync::atomic::Ordering;
+
+    use super::{reserve_reassembly, MAX_FRAGMENTED_SAMPLE_BYTES, MAX_REASSEMBLY_BYTES};
+
+    assert!(AssemblyBuffer::new(&datafrag(1, 1, 1, u32::MAX, vec![0u8])).is_none());
+    let most = MAX_FRAGMENTED_SAMPLE_BYTES as u32;
+    assert!(AssemblyBuffer::new(&datafrag(1, 1, 1024, most + 1, vec![0u8; 1024])).is_none());
+    let reserved = || super::REASSEMBLY_BYTES_RESERVED.load(Ordering::SeqCst);
+    let buffer = AssemblyBuffer::new(&datafrag(1, 1, 1024, most, vec![0u8; 1024])).unwrap();
+    assert!(reserved() >= MAX_FRAGMENTED_SAMPLE_BYTES);
+    drop(buffer);
+    assert!(reserved() < MAX_FRAGMENTED_SAMPLE_BYTES);
+    assert!(!reserve_reassembly(MAX_REASSEMBLY_BYTES + 1));
   }
 
   #[test]

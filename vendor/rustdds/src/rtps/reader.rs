@@ -156,6 +156,13 @@ pub(crate) struct Reader {
 // If we are assembling a fragment, but it does not receive any updates
 // for this time, the AssemblyBuffer is just dropped.
 const FRAGMENT_ASSEMBLY_TIMEOUT: Duration = Duration::from_secs(10);
+
+// [sorting_line patch] The highest sequence number a HEARTBEAT's lastSN or a GAP's gapList base may
+// name (2^62: a writer of a billion samples a second gets there in 146 years); a submessage that
+// names a higher one is ignored. Beyond it, the arithmetic that follows (ack_base + 1, gapList
+// base + bit) overflowed: a GAP with gapList base 2^63 - 1 wrapped the writer proxy's ack_base to
+// -2^63 (found by the wire fuzz), and every later GAP of that writer then marked ~2^63 numbers.
+const MAX_SANE_SEQUENCE_NUMBER: i64 = 1 << 62;
 // minimum interval (max frequency) of AssemblyBuffer GC
 const MIN_FRAGMENT_GC_INTERVAL: Duration = Duration::from_secs(2);
 
@@ -914,6 +921,11 @@ impl Reader {
         writer_guid, heartbeat.first_sn, heartbeat.last_sn
       );
     }
+    // [sorting_line patch] see MAX_SANE_SEQUENCE_NUMBER
+    if heartbeat.last_sn > SequenceNumber::new(MAX_SANE_SEQUENCE_NUMBER) {
+      warn!("HEARTBEAT from {writer_guid:?} with lastSN {:?}: ignored", heartbeat.last_sn);
+      return false;
+    }
 
     self
       .with_mutable_writer_proxy(writer_guid, |this, writer_proxy| {
@@ -1120,6 +1132,11 @@ impl Reader {
         return;
       }
       // TODO: check that maximum(gap_list) - minimum(gap_list) < 256 ?
+      // [sorting_line patch] see MAX_SANE_SEQUENCE_NUMBER
+      if gap.gap_list.base() > SequenceNumber::new(MAX_SANE_SEQUENCE_NUMBER) {
+        warn!("GAP from {writer_guid:?} with gapList base {:?}: ignored", gap.gap_list.base());
+        return;
+      }
 
       // Irrelevant sequence numbers communicated in the Gap message are
       // composed of two groups:

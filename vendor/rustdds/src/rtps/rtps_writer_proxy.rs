@@ -15,6 +15,10 @@ use crate::{
   },
 };
 
+// [sorting_line patch] The most missing sequence numbers missing_seqnums lists: what one ACKNACK's
+// SequenceNumberSet can carry.
+const MAX_MISSING_LISTED: usize = 256;
+
 #[derive(Debug)] // these are not cloneable, because contained data may be large
 pub(crate) struct RtpsWriterProxy {
   /// Identifies the remote matched Writer
@@ -132,7 +136,8 @@ impl RtpsWriterProxy {
     self.ack_base == SequenceNumber::new(0) && self.changes.is_empty()
   }
 
-  // Given an availability range from a HEARTBEAT, find out what we are missing.
+  // Given an availability range from a HEARTBEAT, find out what we are missing
+  // (the first MAX_MISSING_LISTED of it).
   //
   // Note: Heartbeat gives bounds only. Some samples within that range may
   // have been received already, or not really available, i.e. there may be GAPs
@@ -175,7 +180,14 @@ impl RtpsWriterProxy {
     let mut known_head = known_iter.next();
 
     // Iterate over all SequenceNumbers (indices) in the advertised range.
+    // [sorting_line patch] ... but stop at the first 256 missing ones, all that an ACKNACK can
+    // carry (its SequenceNumberSet, RTPS 9.4.2.6) and all the reader uses: the range is the
+    // sender's word, and a HEARTBEAT with lastSN 2^62 from a matched writer made the event loop
+    // list 2^62 numbers (stuck, and its memory growing until the machine ran out).
     for s in relevant_interval {
+      if missing_seqnums.len() >= MAX_MISSING_LISTED {
+        break;
+      }
       match known_head {
         None => missing_seqnums.push(s), // no known changes left => s is missing
         Some(known_sn) => {
@@ -281,10 +293,19 @@ impl RtpsWriterProxy {
         self.ack_base, remove_from, remove_until_before, self.remote_writer_guid
       );
     } else {
-      // TODO: This potentially generates a very large BTreeMap
-      for na in
-        SequenceNumber::range_inclusive(remove_from, remove_until_before - SequenceNumber::new(1))
-      {
+      // [sorting_line patch] The range is the sender's word: a GAP spanning 2^61 numbers from a
+      // matched writer made this loop insert them one by one (the event loop stuck, its memory
+      // growing until the machine ran out) before the cap below could apply. Only the newest
+      // MAX_TRACKED_CHANGES_PER_WRITER entries could survive that cap, which gives up everything
+      // older as lost: do the same at once (here ack_base < remove_from < from), then mark the rest.
+      let cap = MAX_TRACKED_CHANGES_PER_WRITER as i64;
+      let mut from = remove_from;
+      if i64::from(remove_until_before).saturating_sub(i64::from(remove_from)) > cap {
+        from = remove_until_before - SequenceNumber::new(cap);
+        self.changes = self.changes.split_off(&from);
+        self.ack_base = from;
+      }
+      for na in SequenceNumber::range_inclusive(from, remove_until_before - SequenceNumber::new(1)) {
         self.changes.insert(na, None);
       }
       self.enforce_change_map_cap();
@@ -452,5 +473,35 @@ mod bounded_map_tests {
       MAX_TRACKED_CHANGES_PER_WRITER,
       wp.tracked_changes_count()
     );
+  }
+
+  // [sorting_line patch] A HEARTBEAT announcing 2^62 samples: at most what an ACKNACK carries is
+  // listed (this test did not end before the patch).
+  #[test]
+  fn missing_seqnums_of_a_huge_heartbeat_are_bounded() {
+    let wp = test_proxy();
+    let missing = wp.missing_seqnums(SequenceNumber::new(1), SequenceNumber::new(1 << 62));
+    assert_eq!(missing.len(), MAX_MISSING_LISTED);
+    assert_eq!(missing[0], SequenceNumber::new(1));
+  }
+
+  // [sorting_line patch] A GAP spanning 2^61 numbers above ack_base: the map stays within its cap
+  // and ack_base lands where the cap would have put it (this test did not end before the patch).
+  #[test]
+  fn a_huge_gap_is_bounded_as_the_cap_would_bound_it() {
+    let mut wp = test_proxy();
+    wp.received_changes_add(SequenceNumber::new(1), Timestamp::INVALID);
+    let (from, until) = (SequenceNumber::new(1 << 61), SequenceNumber::new(1 << 62));
+    wp.irrelevant_changes_range(from, until);
+    assert!(wp.tracked_changes_count() <= MAX_TRACKED_CHANGES_PER_WRITER);
+    assert!(wp.should_ignore_change(until - SequenceNumber::new(1)));
+    assert!(wp.should_ignore_change(from));
+    assert!(!wp.should_ignore_change(until));
+    // A short GAP still marks exactly its numbers.
+    let mut wp = test_proxy();
+    wp.irrelevant_changes_range(SequenceNumber::new(5), SequenceNumber::new(8));
+    assert!(!wp.should_ignore_change(SequenceNumber::new(4)));
+    assert!(wp.should_ignore_change(SequenceNumber::new(7)));
+    assert!(!wp.should_ignore_change(SequenceNumber::new(8)));
   }
 }

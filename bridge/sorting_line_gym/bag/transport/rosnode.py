@@ -1,0 +1,136 @@
+"""The rclpy side the bag tools share: a context, node and executor of their own (so that the
+tools run inside a process that uses rclpy for something else, such as a test session, without
+touching its context), QoS, raw endpoints, and waiting through :class:`~sorting_line_gym.ros.waits.Waiter`
+(every wait has a timeout and an error naming what it waited for), and the rclpy class of each
+message type a bag names."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import time
+from collections.abc import Callable
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ...line.process import NodeProcess
+from ...ros.context import check_domain_id
+from ...ros.waits import Waiter
+from ..format.topics import join
+
+#: Deep reliable queues: a tool that falls behind for a moment (a busy machine) catches up
+#: instead of losing samples (the node's own depth is 10).
+DEEP_QOS = QoSProfile(
+    depth=1000,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+
+def received_ns(info) -> int:
+    """When DDS received a message (its message info), else now (ns since the epoch)."""
+    received = info.get("received_timestamp") if isinstance(info, dict) else None
+    return int(received) if received else time.time_ns()
+
+
+def rclpy_class(msgtype: str):
+    """The rclpy message class of ``pkg/msg/Name`` (raises ImportError naming it if missing)."""
+    package, kind, name = msgtype.split("/")
+    module = importlib.import_module(f"{package}.{kind}")
+    try:
+        return getattr(module, name)
+    except AttributeError:
+        raise ImportError(f"{package}.{kind} has no {name}") from None
+
+
+def controller_seen(node, namespace: str, own_speed_writers: int = 0) -> bool:
+    """Whether ``node`` sees a controller of the line in ``namespace``: a reader of its input and a
+    writer of its speed commands, on the line's own topic (besides the caller's own
+    ``own_speed_writers``) or on the node's batch topic."""
+    speed = node.count_publishers(join(namespace, "cmd/speed")) > own_speed_writers
+    batch = node.count_publishers(join(namespace, "batch/cmd")) > 0
+    return node.count_subscribers(join(namespace, "input")) > 0 and (speed or batch)
+
+
+class InputMatches:
+    """The input readers the node says each line has matched (``input_readers``, /diagnostics).
+
+    A tick's input reaches only the readers the node's ``input`` writer has matched, so a
+    controller seen in the graph (:func:`controller_seen`, this process's view) may still miss a
+    tick the node sends before matching it; :meth:`all_matched` is the node's own word."""
+
+    def __init__(self, node):
+        self.node = node
+        self.readers: dict[str, int] = {}
+        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics", self._on, 10)
+
+    def _on(self, msg) -> None:
+        for status in msg.status:
+            for kv in status.values:
+                if kv.key == "input_readers":
+                    self.readers[status.hardware_id.rstrip("/")] = int(kv.value)
+
+    def all_matched(self, namespace: str) -> bool:
+        """Whether the node matched every input reader of ``namespace`` seen here (one at least).
+
+        Judged by the node's last status of that line against this process's view of the graph."""
+        matched = self.readers.get(namespace.rstrip("/"))
+        return matched is not None and matched >= max(1, self.node.count_subscribers(join(namespace, "input")))
+
+
+class ToolNode:
+    """One rclpy context with one node and one executor; ``close()`` shuts all three down."""
+
+    def __init__(self, name: str, process: NodeProcess | None = None):
+        check_domain_id()
+        self.context = rclpy.Context()
+        # A context of our own: rclpy installs no signal handlers for it (the caller decides).
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(
+            f"{name}_{os.getpid()}", context=self.context, start_parameter_services=False, enable_rosout=False
+        )
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.waiter = Waiter(self.executor, process)
+
+    def until(self, done: Callable[[], bool], timeout: float, what: Callable[[], str] | str) -> None:
+        self.waiter.until(done, timeout, what if callable(what) else (lambda: what))
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+
+    def raw_subscription(self, topic: str, msgtype: str, callback: Callable[[bytes, int], None], qos=DEEP_QOS):
+        """Subscribes ``topic`` without deserialising: ``callback(cdr_bytes, received_ns)``."""
+
+        # Two parameters: rclpy then passes the message info, whose receive time is the DDS
+        # layer's. (The time the executor gets round to the callback would reorder topics.)
+        def on_message(data, info):
+            callback(data, received_ns(info))
+
+        return self.node.create_subscription(rclpy_class(msgtype), topic, on_message, qos, raw=True)
+
+    def take_into(self, subscriptions: list[tuple[object, Callable[[bytes, int], None]]]) -> None:
+        """Hands every message the raw ``subscriptions`` already received to their callbacks
+        (``(subscription, callback)`` pairs), without the executor: for a loop that waits on them
+        with ``waiter.until_received``, whose round trip is shorter than the executor's."""
+        for sub, callback in subscriptions:
+            with sub.handle:
+                while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
+                    callback(taken[0], received_ns(taken[1]))
+
+    def publisher(self, topic: str, msgtype: str, qos=DEEP_QOS):
+        """A publisher of ``msgtype``; ``publish(bytes)`` sends CDR bytes as they are."""
+        return self.node.create_publisher(rclpy_class(msgtype), topic, qos)
+
+    def close(self) -> None:
+        try:
+            self.executor.remove_node(self.node)
+            self.node.destroy_node()
+            self.executor.shutdown(timeout_sec=0.5)
+        finally:
+            rclpy.try_shutdown(context=self.context)

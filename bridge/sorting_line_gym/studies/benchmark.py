@@ -1,0 +1,479 @@
+"""`sorting-line-benchmark`: the paper's Table 1 and Figure 7, reproduced through ROS 2.
+
+    sorting-line-benchmark                                   # everything: 8 lines x 6 agents, 5 training seeds
+    sorting-line-benchmark --setups B D --agents rba rba-hold ppo --train-seeds 42 43 44 --n-envs 8
+    sorting-line-benchmark --agents random rba rba-hold      # baselines only, about a minute
+
+For every setup (A-D) and variant (basic, advanced) it evaluates the baselines (random, rba,
+rba-hold) and, for each training seed, trains DQN, PPO and A2C with the paper's hyperparameters
+(``sorting-line-train``; with ``--n-envs N`` on N lines of one node, the hyperparameters mapped by
+``--lines-mapping``, one of ``training.hyperparams.MAPPINGS``) and evaluates the model. Every agent
+is evaluated twice with ``sorting-line-eval``'s protocol (50 steps, deterministic): on the paper's
+10 seeds 42..51, and
+on ``--heldout-episodes`` (100) held-out seeds from ``--heldout-seed`` (10000), which no training
+starts from (training seed s starts its N lines from seeds s..s+N-1 and draws the later
+episodes' seeds at random from [0, 2^63)). Every line is a real node process stepped over DDS.
+Beside each agent: ``sorting_line oracle`` on the same seeds (the clairvoyant optimum per seed)
+and the gap to it.
+
+Statistics (``reports.benchmark_summary`` with ``reports.stats``, rliable's method on scipy): per
+cell the mean, the IQM over training seeds x held-out episodes with its 95 % stratified bootstrap
+interval (training seeds resampled within each evaluation seed), the probability that each RL agent
+beats rba-hold per line, and per agent the IQM over the 8 lines of the score normalized between the random agent
+(0) and the oracle (1). Where cells of one agent on one line exist on one line and on N lines (in
+the same ``--out``; ``--check-n-envs`` trains the one-line cells of DQN, PPO and A2C on B advanced
+and D basic), the report checks that they agree, per line and per algorithm (a verdict needs at
+least 5 training seeds a side), with each side's gradient steps per transition.
+
+Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
+interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
+``--jobs N`` runs N cells at once (each its own node and process). When the cells are in, it
+writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Table 1 and the
+reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
+``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
+and interval per line and agent), ``aggregate`` (aggregate IQM and performance profiles) and the
+seed-42 dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
+Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
+cells that finished are kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
+from ..envs.native import BACKENDS
+from ..line.vocabulary import SETUPS, VARIANTS
+from ..reports.benchmark_summary import (
+    AGENTS,
+    BASELINES,
+    HELDOUT_EPISODES,
+    HELDOUT_SEED,
+    Heldout,
+    aggregates,
+    agreement,
+    agreement_by_algorithm,
+    improvements,
+    normalized_runs,
+    oracle_rows,
+    summarize,
+)
+from ..reports.benchmark_tables import statistics_markdown, table_markdown
+from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
+from . import cell_pool
+from .cell_store import write_atomic
+
+#: Five training seeds per RL cell, for interval estimates over runs; the paper's 42 first.
+DEFAULT_SEEDS = (42, 43, 44, 45, 46)
+#: Where --check-n-envs compares one line with N: ((setups), (variants)), agent.
+AGREEMENT_CELLS = tuple(((("B",), ("advanced",)), a) for a in ALGOS) + tuple(((("D",), ("basic",)), a) for a in ALGOS)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One evaluation of the benchmark: an agent on a line (and its training seed and number of
+    training lines, for RL)."""
+
+    setup: str
+    variant: str
+    agent: str
+    train_seed: int | None = None
+    n_envs: int = 1
+    #: How the one-line hyperparameters go to ``n_envs`` lines (``hyperparams.MAPPINGS``).
+    mapping: str = DEFAULT_MAPPING
+
+    @property
+    def lines(self) -> str:
+        """``_n<N>`` for N lines, with the mapping when it is not the default; empty for one line."""
+        if self.n_envs == 1:
+            return ""
+        return f"_n{self.n_envs}" + (f"_{self.mapping}" if self.mapping != DEFAULT_MAPPING else "")
+
+    @property
+    def name(self) -> str:
+        lines = self.lines
+        seed = f"_seed{self.train_seed}" if self.train_seed is not None else ""
+        return f"{self.setup}_{self.variant}_{self.agent}{lines}{seed}"
+
+
+def plan(setups, variants, agents, train_seeds, n_envs: int = 1, mapping: str = DEFAULT_MAPPING) -> list[Cell]:
+    """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
+    so a partial run has whole rows: one algorithm on every line before the next."""
+    cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
+    cells += [
+        Cell(s, v, a, seed, n_envs, mapping if n_envs > 1 else DEFAULT_MAPPING)
+        for seed in train_seeds
+        for a in agents
+        if a in ALGOS
+        for s in setups
+        for v in variants
+    ]
+    return cells
+
+
+def run_cell(
+    cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str = "ros"
+) -> dict[str, Any]:
+    """Trains (RL) and evaluates one cell on ``backend``; writes and returns its record. Runs in a
+    worker. Both backends give the same record but for wall times (a cell store may mix them); the
+    native backend draws no dashboard."""
+    from ..training import hyperparams
+    from ..training.train import train
+    from .evaluate import evaluate
+
+    start = time.perf_counter()
+    record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
+    spec = cell.agent
+    if cell.agent in ALGOS:
+        params = hyperparams.load(
+            cell.agent,
+            cell.variant,
+            overrides=[f"n_timesteps={timesteps}", f"n_envs={cell.n_envs}"],
+            mapping=cell.mapping,
+        )
+        models = out / f"models{cell.lines}"
+        run = train(
+            cell.agent,
+            cell.setup,
+            cell.variant,
+            seed=cell.train_seed,
+            out=models,
+            params=params,
+            tensorboard=out / "tensorboard",
+            progress=progress,
+            backend=backend,
+        )
+        record["training"] = asdict(run)
+        spec = f"{cell.agent}:{run.model_path}"
+    dashboard = out / "dashboards" / f"{cell.name}.png" if backend == "ros" else None  # episode 1, seed 42
+    if dashboard is not None:
+        dashboard.parent.mkdir(parents=True, exist_ok=True)
+    record["evaluation"] = asdict(evaluate(spec, cell.setup, cell.variant, dashboard=dashboard, backend=backend))
+    record["heldout"] = asdict(
+        evaluate(spec, cell.setup, cell.variant, seed=heldout.seed, episodes=heldout.episodes, backend=backend)
+    )
+    record["wall_s"] = time.perf_counter() - start
+    write_atomic(out / "cells" / f"{cell.name}.json", record)  # whole or absent, even if the run is killed
+    return record
+
+
+def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[str, Any] | None:
+    """The saved record of ``cell`` if it was run with the same budget and held-out seeds."""
+    path = out / "cells" / f"{cell.name}.json"
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        return None
+    if cell.agent in ALGOS and record.get("timesteps") != timesteps:
+        return None
+    saved = record.get("heldout")
+    if not saved or (saved["seed"], saved["episodes"]) != (heldout.seed, heldout.episodes):
+        return None
+    return record
+
+
+def saved_records(out: Path) -> list[dict[str, Any]]:
+    """Every finished cell in ``out`` (any budget or number of lines), for the agreement check."""
+    records = []
+    for path in sorted((out / "cells").glob("*.json")):
+        try:
+            records.append(json.loads(path.read_text()))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> dict[str, Any]:
+    """``sorting_line oracle --json`` for these seeds (the clairvoyant optimum per seed), kept in
+    ``cache`` (it is deterministic)."""
+    import subprocess
+
+    from ..line.process import find_node_binary
+
+    path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    flags = f"--setup {setup} --variant {variant} --seed {seed} --episodes {episodes} --json"
+    argv = [find_node_binary(), "oracle", *flags.split()]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    if result.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
+    record = json.loads(result.stdout)
+    for e in record["per_episode"]:
+        e.pop("actions", None)  # the report needs the rewards; `sorting_line oracle --actions` gives them again
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record) + "\n")
+    return record
+
+
+def write_report(
+    out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout | None = None
+) -> list[Path]:
+    """Table 1 (``table.md``, ``table.json``) and the figures from the cells' ``records``, with the
+    oracle on the same seeds (held-out: by default the benchmark's)."""
+    from ..reports.plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure
+
+    heldout = heldout or Heldout()
+
+    lines = sorted({(r["cell"]["setup"], r["cell"]["variant"]) for r in records})
+    oracles = {line: oracle(*line, heldout.seed, heldout.episodes, out / "oracle") for line in lines}
+    paper_oracles = {line: oracle(*line, 42, 10, out / "oracle") for line in lines}
+    rows = summarize(records, oracles)
+    rows.update(oracle_rows(oracles, paper_oracles))
+    poi = improvements(records)
+    normalized = normalized_runs(records, oracles)
+    aggregate = aggregates(normalized)
+    checks = agreement(saved_records(out), timesteps)
+    table = out / "table.md"
+    table.write_text(
+        f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}"
+        f"\n{statistics_markdown(poi, aggregate, checks)}"
+    )
+    (out / "table.json").write_text(
+        json.dumps(
+            {
+                "rows": [{"setup": s, "variant": v, "agent": a, **row} for (s, v, a), row in sorted(rows.items())],
+                "probability_of_improvement_over_rba_hold": [
+                    {"setup": s, "variant": v, "agent": a, **p} for (s, v, a), p in sorted(poi.items())
+                ],
+                "aggregate_normalized": aggregate,
+                "n_envs_agreement": checks,
+                "n_envs_agreement_by_algorithm": agreement_by_algorithm(checks),
+            },
+            indent=2,
+        )
+        + "\n"
+    )
+    written = [table, out / "table.json"]
+    written += benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
+    written += interval_figure(rows, out / "intervals")
+    if aggregate:
+        written += aggregate_figure(aggregate, normalized, out / "aggregate")
+    written += analysis_figure(out / "figure3")
+    return written
+
+
+# ------------------------------------------------------------------------------------------
+# Command line
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="sorting-line-benchmark", description="The paper's Table 1 and Figure 7 through ROS 2; resumable."
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/benchmark"), help="results directory (default results/benchmark)"
+    )
+    p.add_argument(
+        "--setups", nargs="+", default=list(SETUPS), choices=list(SETUPS), help="setups to run (default all)"
+    )
+    p.add_argument(
+        "--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS, help="variants to run (default both)"
+    )
+    p.add_argument("--agents", nargs="+", default=list(AGENTS), choices=AGENTS, help="agents to run (default all)")
+    p.add_argument(
+        "--train-seeds",
+        nargs="+",
+        type=int,
+        default=list(DEFAULT_SEEDS),
+        help="training seeds of the RL agents (default 42 43 44 45 46)",
+    )
+    p.add_argument(
+        "--timesteps", type=int, default=100_000, help="training budget per RL agent (default 100000, the paper's)"
+    )
+    p.add_argument(
+        "--n-envs",
+        type=int,
+        default=1,
+        help="lines of one node per training, a power of two "
+        "(default 1, as the paper; hyperparameters mapped, see hyperparams)",
+    )
+    p.add_argument(
+        "--heldout-seed",
+        type=int,
+        default=HELDOUT_SEED,
+        help=f"first held-out evaluation seed (default {HELDOUT_SEED})",
+    )
+    p.add_argument(
+        "--heldout-episodes",
+        type=int,
+        default=HELDOUT_EPISODES,
+        help=f"held-out evaluation episodes (default {HELDOUT_EPISODES})",
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
+    )
+    _add_check_options(p)
+    p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
+    p.add_argument(
+        "--backend",
+        default="ros",
+        choices=BACKENDS,
+        help="ros: each cell on nodes over ROS 2; native: the line in-process (same records) (default ros)",
+    )
+    return p
+
+
+def _add_check_options(p: argparse.ArgumentParser) -> None:
+    """The options of the one-line against N-line check."""
+    p.add_argument(
+        "--check-n-envs",
+        action="store_true",
+        help="with --n-envs N > 1: also train the selected RL agents on B advanced and D basic (where selected) on "
+        "one line, per training seed, for the check that one line and N lines agree, per algorithm (run last)",
+    )
+    p.add_argument(
+        "--lines-mapping",
+        choices=MAPPINGS,
+        default=DEFAULT_MAPPING,
+        help=f"with --n-envs N > 1: how the one-line hyperparameters go to N lines (default {DEFAULT_MAPPING}; "
+        "see training/hyperparams.py)",
+    )
+
+
+def heldout_of(args) -> Heldout:
+    return Heldout(args.heldout_seed, args.heldout_episodes)
+
+
+def run_all(todo: list[Cell], args, finished, bar) -> None:
+    """Runs the cells, ``args.jobs`` at a time; ``finished(cell, record or exception)`` for each."""
+    if args.jobs == 1:
+        # In this process, with SB3's progress bar for each training.
+        for cell in todo:
+            bar.set_postfix_str(cell.name)
+            try:
+                outcome = run_cell(cell, args.out, args.timesteps, heldout_of(args), True, args.backend)
+            except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
+                outcome = e
+            finished(cell, outcome)
+        return
+    # Only this bar, with the cells running (each worker is a fresh interpreter with its own node).
+    cell_pool.run_parallel(
+        todo,
+        lambda cell: (run_cell, cell, args.out, args.timesteps, heldout_of(args), False, args.backend),
+        args.jobs,
+        finished,
+        lambda cells: bar.set_postfix_str(", ".join(c.name for c in cells)),
+    )
+
+
+def _invalid(args) -> str | None:
+    """What is wrong with the command line's values, if anything."""
+    for flag, value in (
+        ("--timesteps", args.timesteps),
+        ("--n-envs", args.n_envs),
+        ("--jobs", args.jobs),
+        ("--heldout-episodes", args.heldout_episodes),
+    ):
+        if value < 1:
+            return f"{flag} = {value} is not valid: allowed 1 or more"
+    if args.n_envs & (args.n_envs - 1) or args.n_envs > 2048:
+        return f"--n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048"
+    if args.heldout_seed < 0:
+        return f"--heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more"
+    return None
+
+
+def _cells_of(args) -> list[Cell]:
+    """The cells the command line asks for, the one-line cells of --check-n-envs last."""
+    cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs, args.lines_mapping)
+    if args.check_n_envs and args.n_envs > 1:
+        cells += [
+            c
+            for line, agent in AGREEMENT_CELLS
+            for c in plan(*line, [agent], args.train_seeds, 1)
+            if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants
+        ]
+    return cells
+
+
+def _run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: list, args) -> bool:
+    """Runs ``todo`` under a progress bar, adding to ``done`` and ``failures``; False if interrupted."""
+    from tqdm import tqdm
+
+    signal.signal(signal.SIGTERM, cell_pool.interrupt)
+    bar = tqdm(total=len(cells), initial=len(done), unit="cell", desc="benchmark", file=sys.stderr, dynamic_ncols=True)
+
+    def finished(cell: Cell, outcome) -> None:
+        if isinstance(outcome, Exception):
+            failures.append((cell, outcome))
+            bar.write(f"{cell.name}: FAILED: {outcome}")
+        else:
+            done[cell] = outcome
+            r = outcome["evaluation"]
+            h = outcome["heldout"]
+            bar.write(
+                f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
+                f", held-out {h['reward_mean']:.2f}"
+                f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)"
+            )
+        bar.update(1)
+
+    try:
+        run_all(todo, args, finished, bar)
+    except KeyboardInterrupt:
+        return False
+    finally:
+        bar.close()
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    problem = _invalid(args)
+    if problem:
+        print(f"sorting-line-benchmark: {problem}", file=sys.stderr)
+        return 2
+    heldout = heldout_of(args)
+    cells = _cells_of(args)
+    done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
+    todo = [] if args.report_only else [c for c in cells if c not in done]
+    missing = missing_training_stack() if any(c.agent in ALGOS for c in todo) else []
+    if missing:
+        print(
+            f"sorting-line-benchmark: the RL agents ({', '.join(a for a in args.agents if a in ALGOS)}) need "
+            f"{' and '.join(missing)}, the training stack: {TRAIN_HINT}; without it, --agents random rba rba-hold",
+            file=sys.stderr,
+        )
+        return 2
+    print(
+        f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, "
+        f"{args.jobs} at a time -> {args.out}",
+        file=sys.stderr,
+    )
+    failures = []
+    if todo and not _run_with_bar(todo, cells, done, failures, args):
+        print(
+            f"sorting-line-benchmark: interrupted; {len(done)} of {len(cells)} cells are saved in {args.out}: "
+            "the same command goes on from there",
+            file=sys.stderr,
+        )
+        return 130
+    # The table is of the run's --n-envs; the one-line cells of --check-n-envs go to the agreement check.
+    records = [done[c] for c in cells if c in done and (c.agent not in ALGOS or c.n_envs == args.n_envs)]
+    if not records:
+        print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
+        return 1
+    for path in write_report(args.out, records, args.timesteps, args.agents, heldout):
+        print(f"written: {path}", file=sys.stderr)
+    print((args.out / "table.md").read_text())
+    if failures:
+        print(
+            f"sorting-line-benchmark: {len(failures)} cell(s) failed: {', '.join(c.name for c, _ in failures)}",
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,227 @@
+"""`sorting-line-transfer`: the transfer study of the evolving line (the paper's future work),
+through ROS: MaskablePPO and A2C on `SortingLineEvolving-v0`, resumable cell by cell.
+
+    sorting-line-transfer --full                 # the paper's scale: 2000 + 2000 episodes, 5 seeds, PPO and A2C
+    sorting-line-transfer --smoke --out /tmp/t   # the same pipeline at CI size
+    sorting-line-transfer --seeds 1 2 3 --before 300 --after 300 --algos ppo --evaluations 20
+
+For each scenario, algorithm and training seed: (a) **continued**, an agent trained `--before`
+episodes before the change and `--after` more after it, unchanged (the schedule changes the line:
+the agent is not told); (b) **frozen**, its snapshot at the change, evaluated on the changed line
+without further learning; (c) **from scratch**, a new agent trained `--after` episodes on the changed
+line; against rba and rba-hold (`sorting_line eval`, offline) and the oracle after the change
+where it can solve that line. Scenarios: `upgrade` (basic B -> advanced B: machine and sensor
+upgrade, the paper's) and `drift` (B with sensor noise 0 -> 0.3 and threshold 0.7 -> 0.8 in three
+steps), from the ready schedules in `evolutions/` with the change moved to episode `--before` + 1.
+What a cell runs: ``transfer_cells``; the statistics: ``reports.transfer_report``.
+
+Each finished cell is saved at once in `<out>/cells/` (whole or not at all); a rerun of the same
+command skips the finished cells and goes on, and a run with other result-changing options
+(`--before`, `--after`, `--evaluations`, `--ppo-settings` and the other hyperparameters, the
+schedules) into the same `--out` is refused. `--max-cells N` stops after N cells (to split a study
+into sittings); Ctrl-C keeps the finished cells. A progress bar (plain lines when stderr is not a
+terminal) projects the end time.
+Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfer.png`/`.svg`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from pathlib import Path
+
+from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
+from ..envs.native import BACKENDS
+from ..reports import transfer_report
+from . import cell_pool
+from . import transfer_cells as tc
+from .cell_store import CellProgress, CellStore, ConfigurationMismatch, write_atomic
+
+#: --full: the paper's scale (2000 episodes = 100,000 steps, the paper's training budget).
+FULL = {"before": 2000, "after": 2000, "seeds": [1, 2, 3, 4, 5], "evaluations": 100}
+#: --smoke: every step of the pipeline, in about a minute per cell kind.
+SMOKE = {"before": 10, "after": 10, "seeds": [1, 2], "evaluations": 3}
+DEFAULTS = {"before": 200, "after": 200, "seeds": [1, 2, 3], "evaluations": 20}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sorting-line-transfer", description=__doc__.split("\n\n")[0])
+    preset = p.add_mutually_exclusive_group()
+    preset.add_argument("--full", action="store_true", help=f"the paper's scale: {FULL} (options given override it)")
+    preset.add_argument("--smoke", action="store_true", help=f"CI size: {SMOKE} (options given override it)")
+    p.add_argument("--scenarios", nargs="+", choices=tc.SCENARIOS, default=list(tc.SCENARIOS), help="default: both")
+    p.add_argument("--algos", nargs="+", choices=tc.ALGOS, default=list(tc.ALGOS), help="default: ppo a2c")
+    p.add_argument(
+        "--ppo-settings",
+        choices=tc.PPO_SETTINGS,
+        default="study",
+        help="PPO's hyperparameters: study (SB3's defaults on 10-episode rollouts; default) or paper "
+        "(the paper's gamma, learning rate and entropy coefficient on the same rollouts)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="ros",
+        help="ros: each cell's line a node over ROS 2; native: the line in-process (same cells) (default ros)",
+    )
+    p.add_argument("--seeds", type=int, nargs="+", help=f"training seeds (default {DEFAULTS['seeds']})")
+    p.add_argument("--before", type=int, help=f"episodes before the change (default {DEFAULTS['before']})")
+    p.add_argument("--after", type=int, help=f"episodes after it, and from scratch (default {DEFAULTS['after']})")
+    p.add_argument(
+        "--evaluations",
+        type=int,
+        help=f"held-out evaluation episodes, seeds {tc.EVAL_SEED}... (default {DEFAULTS['evaluations']})",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/transfer"), help="results directory (default results/transfer)"
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
+    )
+    p.add_argument("--max-cells", type=int, help="stop after running this many cells (the rest on the next run)")
+    p.add_argument("--report-only", action="store_true", help="train nothing: the report of the cells saved in --out")
+    return p
+
+
+def options(argv: list[str] | None):
+    """The parsed options with the preset's values filled in; exits 2 naming a bad value."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    preset = FULL if args.full else SMOKE if args.smoke else DEFAULTS
+    for name, value in preset.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    if args.before < tc.WINDOW or args.before % tc.WINDOW:
+        parser.error(
+            f"--before = {args.before} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW} "
+            "(PPO's rollout is 10 episodes: the snapshot must be taken at the change)"
+        )
+    if args.after < tc.WINDOW or args.after % tc.WINDOW:
+        parser.error(f"--after = {args.after} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW}")
+    if args.evaluations < 1:
+        parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
+    if args.jobs < 1:
+        parser.error(f"--jobs = {args.jobs} is not valid: allowed 1 or more")
+    if args.max_cells is not None and args.max_cells < 1:
+        parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
+    args.settings = tc.Settings(args.before, args.after, args.evaluations, args.ppo_settings, args.backend)
+    return args
+
+
+def kind_of(name: str) -> str:
+    """A cell's kind for the projection: baselines, or an algorithm's transfer or scratch cells."""
+    parts = name.split("_")
+    return "baselines" if parts[-1] == "baselines" else f"{parts[1]}_{parts[2]}"
+
+
+def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]) -> int:
+    """Runs ``todo`` (the first ``--max-cells`` of them), ``--jobs`` at a time, saving each as it
+    finishes; 0, 1 if a cell failed (the others go on), 130 if interrupted. The projection is of
+    the whole study."""
+    times = {n: r["seconds"] for n, r in done.items()}
+    progress = CellProgress([c.name for c in todo], times, kind_of, "transfer", parallel=args.jobs)
+    limit = f" ({args.max_cells} of them now: --max-cells)" if args.max_cells is not None else ""
+    progress.line(
+        f"transfer: {len(todo) + len(done)} cells, {len(done)} already done, {len(todo)} to run{limit}, "
+        f"{args.jobs} at a time -> {args.out}"
+    )
+    failed = []
+
+    def finished(cell: tc.Cell, outcome) -> None:
+        if isinstance(outcome, Exception):
+            failed.append(cell.name)
+            progress.line(f"{cell.name}: FAILED: {outcome!r}")
+            return
+        done[cell.name] = store.save(cell.name, outcome)
+        progress.done(cell.name, outcome["seconds"])
+
+    def running(cells: list[tc.Cell]) -> None:
+        progress.bar.set_description_str(", ".join(c.name for c in cells))
+
+    try:
+        batch = todo[: args.max_cells]
+        if args.jobs == 1:
+            for cell in batch:
+                running([cell])
+                finished(cell, _outcome(cell, args))
+        else:
+            cell_pool.run_parallel(
+                batch, lambda c: (tc.run_cell, c, args.settings, args.out), args.jobs, finished, running
+            )
+    except KeyboardInterrupt:
+        progress.line(f"interrupted: {len(done)} cells are saved in {args.out}; the same command goes on from there")
+        return 130
+    finally:
+        progress.close()
+    return 1 if failed else 0
+
+
+def _outcome(cell: tc.Cell, args):
+    """The record of ``cell`` run in this process, or the exception it raised."""
+    try:
+        return tc.run_cell(cell, args.settings, args.out)
+    except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
+        return e
+
+
+def report(args, key: dict, done: dict[str, dict]) -> str:
+    records = list(done.values())
+    summary = transfer_report.summarize(records, key, args.scenarios, args.algos)
+    write_atomic(args.out / "transfer.json", {"key": key, "summary": summary})
+    text = transfer_report.markdown(summary, key)
+    (args.out / "transfer.md").write_text(text)
+    transfer_report.plot(records, summary, key, args.out / "transfer")
+    return text
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = options(argv)
+    # Its cells train agents, and its configuration's key holds their SB3 hyperparameters.
+    if missing := missing_training_stack():
+        print(
+            f"sorting-line-transfer: needs {' and '.join(missing)}, the training stack: {TRAIN_HINT}", file=sys.stderr
+        )
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    key = args.settings.key()
+    earlier = args.out / "transfer.json"
+    if earlier.is_file() and "runs" in json.loads(earlier.read_text()):
+        print(
+            f"sorting-line-transfer: {earlier} holds the runs of the earlier sorting-line-transfer (before cells): "
+            "use another --out, so that they are kept",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        store = CellStore(args.out, key)
+    except ConfigurationMismatch as e:
+        print(f"sorting-line-transfer: {e}", file=sys.stderr)
+        return 2
+    cells = tc.plan(args.scenarios, args.algos, args.seeds)
+    done = {c.name: r for c in cells if (r := store.load(c.name)) is not None}
+    todo = [] if args.report_only else [c for c in cells if c.name not in done]
+    status = 0
+    if todo:
+        store.begin(sys.argv if argv is None else ["sorting-line-transfer", *argv])
+        for scenario in args.scenarios:
+            tc.schedules(scenario, args.before, args.out)
+        signal.signal(signal.SIGTERM, cell_pool.interrupt)
+        status = run_cells(todo, store, args, done)
+    if not done:
+        print("sorting-line-transfer: no finished cells to report", file=sys.stderr)
+        return 1
+    print(report(args, key, done))
+    left = len([c for c in cells if c.name not in done])
+    print(
+        f"sorting-line-transfer: {len(done)} of {len(cells)} cells done"
+        + (f"; {left} left: the same command goes on" if left else "")
+        + f"; wrote {args.out}/transfer.{{json,md,png,svg}}",
+        file=sys.stderr,
+    )
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

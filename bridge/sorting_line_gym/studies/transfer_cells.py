@@ -1,0 +1,316 @@
+"""The cells of the transfer study (`sorting-line-transfer`): what each one trains and evaluates.
+
+A cell is saved as soon as it finishes (``studies.cell_store``), so a stopped study resumes cell
+by cell. The cells of a scenario:
+
+- ``baselines``: `rba` and `rba-hold` on the line before and after the change, and the oracle
+  (`sorting_line oracle`, the clairvoyant optimum per seed) where the line is one it can solve;
+- ``transfer`` per algorithm and training seed: one agent trained ``before`` episodes on the
+  evolving line and ``after`` more past the change (strategy **continued**), and its snapshot at
+  the change (strategy **frozen**), both evaluated on the changed line;
+- ``scratch`` per algorithm and training seed: a new agent trained ``after`` episodes on the
+  changed line (strategy **from scratch**), evaluated there.
+
+Evaluation: ``evaluations`` deterministic episodes from seed 10000 (held out: no training episode
+starts from them), on the line after the change, through the node like the training.
+
+Algorithms: MaskablePPO (sb3-contrib; it reads the env's action masks) and A2C (SB3). A2C rather
+than DQN because it is on-policy like PPO: "continued" then means the same for both, learning from
+fresh experience after the change, where DQN would go on replaying pre-change transitions from its
+buffer with its exploration already decayed to its floor (its epsilon schedule runs over the whole
+budget), which would measure the schedule as much as the transfer. A2C takes no masks: before the
+machine upgrade a mode 1 or 2 it picks runs as mode 0 (the node refuses the mode and keeps mode 0,
+as the library does), and its frozen snapshot is evaluated the same way.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+EPISODE_STEPS = 50
+SCENARIOS = ("upgrade", "drift")
+ALGOS = ("ppo", "a2c")
+KINDS = ("baselines", "transfer", "scratch")
+STRATEGIES = ("continued", "frozen", "scratch")
+#: Episodes of the moving mean of the training curves; --before and --after are multiples of it.
+WINDOW = 10
+EVAL_SEED = 10_000
+#: MaskablePPO as the study ran it from the start (10-episode rollouts; SB3's defaults otherwise).
+PPO_PARAMS = {"n_steps": 10 * EPISODE_STEPS, "batch_size": 100, "n_epochs": 5}
+#: --ppo-settings: "study" is PPO_PARAMS; "paper" adds the paper's gamma, learning rate and entropy
+#: coefficient (the benchmark's `hyperparams/ppo.yml`) on the same rollouts, which must stay whole
+#: episodes dividing --before so that the frozen snapshot is taken exactly at the change.
+PPO_SETTINGS = ("study", "paper")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One saved unit of the study."""
+
+    scenario: str
+    kind: str
+    algo: str | None = None
+    seed: int | None = None
+
+    @property
+    def name(self) -> str:
+        if self.kind == "baselines":
+            return f"{self.scenario}_baselines"
+        return f"{self.scenario}_{self.algo}_{self.kind}_seed{self.seed}"
+
+
+def plan(scenarios, algos, seeds) -> list[Cell]:
+    """Baselines first (seconds), then seed by seed every scenario and algorithm, so that a partial
+    study has whole seeds."""
+    cells = [Cell(s, "baselines") for s in scenarios]
+    cells += [
+        Cell(s, kind, a, seed) for seed in seeds for s in scenarios for a in algos for kind in ("transfer", "scratch")
+    ]
+    return cells
+
+
+def hyperparameters(algo: str, ppo_settings: str = "study") -> dict[str, Any]:
+    """The constructor arguments of ``algo`` in this study: PPO by ``ppo_settings`` (above), A2C the
+    paper's (the benchmark's `hyperparams/a2c.yml`)."""
+    from ..training import hyperparams
+
+    paper = hyperparams.split(hyperparams.load(algo, "advanced"))[1]
+    if algo != "ppo":
+        return paper
+    return dict(PPO_PARAMS) if ppo_settings == "study" else {**paper, **PPO_PARAMS}
+
+
+def schedule_digest(scenario: str) -> str:
+    from ..envs.evolving import schedule_file
+
+    return hashlib.sha256(schedule_file(scenario).read_bytes()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The options that change a cell's result (the key of the saved cells)."""
+
+    before: int
+    after: int
+    evaluations: int
+    ppo_settings: str = "study"
+    #: Where the lines run ("ros" or "native"); not in the key: both give the same cells.
+    backend: str = "ros"
+
+    def key(self, algos=ALGOS, scenarios=SCENARIOS) -> dict[str, Any]:
+        # ppo_settings enters the key through the hyperparameters it gives, so that studies saved
+        # before the option existed keep their key.
+        fields = {k: v for k, v in asdict(self).items() if k not in ("ppo_settings", "backend")}
+        return {
+            **fields,
+            "episode_steps": EPISODE_STEPS,
+            "eval_seed": EVAL_SEED,
+            "window": WINDOW,
+            "hyperparameters": {a: hyperparameters(a, self.ppo_settings) for a in algos},
+            "schedules": {s: schedule_digest(s) for s in scenarios},
+        }
+
+
+def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
+    """(the evolving schedule with the change after `before` episodes, the changed line's schedule
+    from episode 0), written to `out`/schedules/, from the ready schedule of `scenario`."""
+    from ..envs.evolving import schedule_file
+
+    events = yaml.safe_load(schedule_file(scenario).read_text())["events"]
+    first = min(e["at"]["episode"] for e in events if e["at"].get("episode", 0) > 0)
+    evolving, final = [], {}
+    for e in events:
+        e = dict(e)
+        episode = e["at"]["episode"]
+        if episode > 0:
+            # The first change lands at before + 1; later ones keep their spacing, scaled to 1/20.
+            e["at"] = {"episode": before + 1 + (episode - first) // 20}
+        evolving.append(e)
+        final.update({k: v for k, v in e.items() if k != "at"})
+    a, b = schedule_paths(scenario, before, out)
+    a.parent.mkdir(parents=True, exist_ok=True)
+    a.write_text(yaml.safe_dump({"events": evolving}, sort_keys=False))
+    b.write_text(yaml.safe_dump({"events": [{"at": {"episode": 0}, **final}]}, sort_keys=False))
+    return a, b
+
+
+def make_env(schedule: Path, backend: str = "ros"):
+    import gymnasium
+    from stable_baselines3.common.monitor import Monitor
+
+    import sorting_line_gym  # noqa: F401 - registers the ids
+
+    env = gymnasium.make(
+        "sorting_line_gym:SortingLineEvolving-v0",
+        evolution=str(schedule),
+        setup="B",
+        max_episode_steps=EPISODE_STEPS,
+        step_timeout=10.0,
+        backend=backend,
+    )
+    return Monitor(env)
+
+
+def algorithm_class(algo: str):
+    if algo == "ppo":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    from stable_baselines3 import A2C
+
+    return A2C
+
+
+def new_model(algo: str, env, seed: int, settings: Settings):
+    params = hyperparameters(algo, settings.ppo_settings)
+    return algorithm_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **params)
+
+
+def act(model, algo: str, obs, masks: np.ndarray) -> int:
+    """The deterministic action of ``model``; an A2C action the masks refuse runs in mode 0, as on the line."""
+    if algo == "ppo":
+        return int(model.predict(obs, action_masks=masks, deterministic=True)[0])
+    action = int(model.predict(obs, deterministic=True)[0])
+    return action if masks[action] else action - action % 3
+
+
+def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
+    """Deterministic episodes of `model` on `env` (seeds 10000, 10001, ...); `mode0`: the masks of a
+    machine without sort modes, whatever the line has."""
+    rewards = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=EVAL_SEED + i)
+        total, done = 0.0, False
+        while not done:
+            masks = env.get_wrapper_attr("action_masks")()
+            if mode0:
+                masks = np.array([a % 3 == 0 for a in range(len(masks))])
+            obs, reward, terminated, truncated, _ = env.step(act(model, algo, obs, masks))
+            total += float(reward)
+            done = terminated or truncated
+        rewards.append(total)
+    return rewards
+
+
+def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, models: Path) -> dict[str, Any]:
+    """Strategies continued and frozen: one agent through the change, and its snapshot at it."""
+    started = time.monotonic()
+    env = make_env(evolving, settings.backend)
+    try:
+        model = new_model(cell.algo, env, cell.seed, settings)
+        model.learn(settings.before * EPISODE_STEPS)
+        snapshot = models / f"{cell.name}-at-the-change.zip"
+        model.save(snapshot)
+        model.learn(settings.after * EPISODE_STEPS, reset_num_timesteps=False)
+        curve = [float(r) for r in env.get_episode_rewards()]
+    finally:
+        env.close()
+    trained = time.monotonic()
+    frozen_model = algorithm_class(cell.algo).load(snapshot, device="cpu")
+    eval_env = make_env(changed, settings.backend)
+    try:
+        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
+        continued = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
+    finally:
+        eval_env.close()
+    timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
+    return {"continued_curve": curve, "continued_eval": continued, "frozen_eval": frozen, **timing}
+
+
+def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
+    """Strategy from scratch: a new agent on the changed line."""
+    started = time.monotonic()
+    env = make_env(changed, settings.backend)
+    try:
+        model = new_model(cell.algo, env, cell.seed, settings)
+        model.learn(settings.after * EPISODE_STEPS)
+        curve = [float(r) for r in env.get_episode_rewards()]
+    finally:
+        env.close()
+    trained = time.monotonic()
+    eval_env = make_env(changed, settings.backend)
+    try:
+        final = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
+    finally:
+        eval_env.close()
+    timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
+    return {"scratch_curve": curve, "scratch_eval": final, **timing}
+
+
+def library(command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None) -> list[float]:
+    """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on setup B,
+    seeds 10000..., offline."""
+    from ..line.process import find_node_binary
+
+    argv = [
+        find_node_binary(),
+        command,
+        "--setup",
+        "B",
+        "--variant",
+        variant,
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(EVAL_SEED),
+        "--json",
+    ]
+    argv += ["--agent", agent] if agent else []
+    argv += ["--evolution", str(schedule)] if schedule else []
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    if r.returncode != 0:
+        raise RuntimeError(f"`{' '.join(argv)}` failed with {r.returncode}: {r.stderr.strip()}")
+    return [float(e["reward"]) for e in json.loads(r.stdout)["per_episode"]]
+
+
+def run_baselines(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
+    """rba and rba-hold before and after the change; the oracle of each side where the oracle can
+    solve it. It models the paper's fixed lines, so after the change it is used only when the
+    changed line is advanced B (rba-hold's episodes there equal the schedule's to the last digit);
+    otherwise the record says why it is missing."""
+    n = settings.evaluations
+    before_variant = "basic" if cell.scenario == "upgrade" else "advanced"
+    record: dict[str, Any] = {"before": {}, "after": {}}
+    for agent in ("rba", "rba-hold"):
+        record["before"][agent] = library("eval", agent, before_variant, n)
+        record["after"][agent] = library("eval", agent, "advanced", n, changed)
+    record["before"]["oracle"] = library("oracle", None, before_variant, n)
+    if library("eval", "rba-hold", "advanced", n) == record["after"]["rba-hold"]:
+        record["after"]["oracle"] = library("oracle", None, "advanced", n)
+    else:
+        record["oracle_after_missing"] = (
+            "the changed line is not one of the paper's setups (the oracle models those: it takes no schedule)"
+        )
+    return record
+
+
+def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
+    """Runs one cell (in this process); returns its record (saved by the caller)."""
+    import torch
+
+    torch.set_num_threads(1)  # small MLPs on 2 cores: the other core for the node and the bridge
+    started = time.monotonic()
+    evolving, changed = schedule_paths(cell.scenario, settings.before, out)
+    if cell.kind == "baselines":
+        result = run_baselines(cell, settings, changed)
+    elif cell.kind == "transfer":
+        models = out / "models"
+        models.mkdir(parents=True, exist_ok=True)
+        result = run_transfer(cell, settings, evolving, changed, models)
+    else:
+        result = run_scratch(cell, settings, changed)
+    return {"cell": asdict(cell), **result, "seconds": time.monotonic() - started}
+
+
+def schedule_paths(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
+    """Where ``schedules`` wrote the scenario's two schedules (the study writes them at its start)."""
+    return out / "schedules" / f"{scenario}-at-{before + 1}.yaml", out / "schedules" / f"{scenario}-after.yaml"
