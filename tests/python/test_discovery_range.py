@@ -1,6 +1,7 @@
 """The node follows ROS 2 Jazzy's discovery environment like an rcl node: seen from another "host"
 under the default range (SUBNET) and through ROS_STATIC_PEERS, not seen under LOCALHOST (nor under
-the deprecated ROS_LOCALHOST_ONLY=1).
+the deprecated ROS_LOCALHOST_ONLY=1). Under LOCALHOST, a ros2 daemon and the node find each other
+whatever participant ids they hold.
 
 The two hosts are network namespaces this test makes, joined by one veth pair whose two addresses
 exist only inside them (tests/python/netns_hosts.py). An rclpy node next to ours, under the default
@@ -9,6 +10,7 @@ range, is the control: the probes must see it, so a node they do not see is the 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -18,7 +20,9 @@ import sys
 import pytest
 
 import netns_hosts
+import participant_ids
 import ros_harness as h
+from test_ros2cli import poll
 
 # Polls the graph of its own participant until it has seen every name of `want` and at least
 # MIN s have passed (a name that is not supposed to appear gets that long), or MAX s; prints
@@ -139,3 +143,33 @@ def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
         assert names["localhost"] not in got, f"{what}: the LOCALHOST node was seen from another host\n{report}"
         assert names["legacy"] not in got, f"{what}: the ROS_LOCALHOST_ONLY=1 node was seen from another host\n{report}"
     assert codes == {key: 0 for key in nodes}, f"exit codes after SIGINT: {codes}\n{report}"
+
+
+def test_a_node_and_a_daemon_beyond_the_first_participant_ids_find_each_other(ros2, start_node, namespace):
+    """Under LOCALHOST discovery each participant announces itself by unicast to the discovery port
+    of each participant id (tests/python/participant_ids.py). Fast DDS reaches ids up to 31; RustDDS
+    reached 0..11 only, so a ros2 daemon that took id 12 or more (started while a dozen participants
+    ran) never heard of a node beyond 31, and `ros2 node list` lacked it for good (one of two nodes in a
+    CI run). Now the node announces itself to every id. Here sockets hold ids 0..39 of a domain of
+    this test's own, so its daemon and its node both take 40 or more."""
+    domain = 100 + (int(ros2.env["ROS_DOMAIN_ID"]) - 100 + 53) % 100
+    cli = dataclasses.replace(ros2, env=dict(ros2.env, ROS_DOMAIN_ID=str(domain)))
+    held = participant_ids.hold(domain, 40)
+    try:
+        cli.run("daemon", "start", timeout=30)
+        ns = namespace("beyond")
+        node = start_node("--ros-args", "-r", f"__ns:={ns}", env={"ROS_DOMAIN_ID": str(domain)})
+
+        def ids() -> str:
+            return f"participant ids of domain {domain}: {participant_ids.holders(domain, range(40, 120))}"
+
+        fqn = f"{ns}/sorting_line"
+        poll(cli, ["node", "list"], lambda out: fqn in out.split(), f"node {fqn}", timeout=20.0, context=ids)
+        # What makes this test mean something: both are beyond Fast DDS's reach and ours of before.
+        node_ids = participant_ids.ids_of(domain, node.pid)
+        others = {i: who for i, who in participant_ids.holders(domain, range(40, 120)).items() if i not in node_ids}
+        assert node_ids and min(node_ids) >= 40 and others and min(others) >= 40, (node_ids, others)
+    finally:
+        cli.run("daemon", "stop", timeout=30, check=False)
+        for s in held:
+            s.close()

@@ -18,6 +18,7 @@ import time
 import pytest
 import yaml
 
+import participant_ids
 import ros_harness as h
 from ros_harness import LINE_TYPES
 
@@ -85,8 +86,9 @@ def rt_line(tmp_path_factory):
     assert alive and code == 0, f"the realtime node exited with {code} (alive at the end: {alive})\n{node.describe()}"
 
 
-def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: float = 15.0) -> str:
-    """Repeats `ros2 ARGS` until `until(stdout)` holds; returns that stdout (fails with the last one)."""
+def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: float = 15.0, context=None) -> str:
+    """Repeats `ros2 ARGS` until `until(stdout)` holds; returns that stdout (fails with the last one,
+    and with what `context()` says then)."""
     deadline = time.monotonic() + timeout
     last = None
     while True:
@@ -97,7 +99,7 @@ def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: f
         if time.monotonic() > deadline:
             raise AssertionError(
                 f"`ros2 {' '.join(args)}` did not show {what} within {timeout} s; last answer "
-                f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}"
+                f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}" + (f"\n{context()}" if context else "")
             )
         time.sleep(0.5)
 
@@ -561,7 +563,14 @@ def test_the_daemon_stops_listing_a_stopped_node_at_once(ros2, start_node, names
         for sig in (signal.SIGINT, signal.SIGTERM)
     }
     names = {fqn for _, fqn in nodes.values()}
-    poll(ros2, ["node", "list"], lambda out: names <= set(out.split()), f"nodes {sorted(names)}")
+    domain = int(ros2.env["ROS_DOMAIN_ID"])
+    poll(
+        ros2,
+        ["node", "list"],
+        lambda out: names <= set(out.split()),
+        f"nodes {sorted(names)}",
+        context=lambda: f"participant ids of domain {domain}: {participant_ids.holders(domain)}",
+    )
     for sig, (node, _) in nodes.items():
         assert node.stop(sig, timeout=5.0) == 0, node.describe()
     stopped = time.monotonic()

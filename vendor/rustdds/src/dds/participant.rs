@@ -170,7 +170,7 @@ impl DomainParticipantBuilder {
   }
 
   /// [sorting_line patch] Hosts that SPDP is also sent to, by unicast, on the
-  /// well-known discovery ports of participant ids `0..SPDP_LOCALHOST_PEER_COUNT`
+  /// well-known discovery ports of participant ids `0..participant_id_count(domain)`
   /// (ROS 2's `ROS_STATIC_PEERS`, Fast DDS's initial peers).
   pub fn with_static_peers(mut self, peers: impl IntoIterator<Item = IpAddr>) -> Self {
     self.static_peers = peers.into_iter().collect();
@@ -1355,9 +1355,11 @@ impl DomainParticipantInner {
 
     let mut discovery_listener = None;
 
-    // Magic value 120 below is from RTPS spec 2.5 Section "9.6.2.3 Default Port
-    // Numbers"
-    while discovery_listener.is_none() && participant_id < 120 {
+    // [sorting_line patch] The ids SPDP announces to (RTPS 2.5 9.6.2.3), none
+    // whose ports would wrap around 16 bits.
+    while discovery_listener.is_none()
+      && participant_id < crate::network::constant::participant_id_count(domain_id)
+    {
       discovery_listener = UDPListener::new_unicast_with_buf_size(
         "0.0.0.0",
         spdp_well_known_unicast_port(domain_id, participant_id),

@@ -24,7 +24,7 @@ use crate::{
   },
   messages::submessages::submessages::AckSubmessage,
   network::{
-    constant::SPDP_LOCALHOST_PEER_COUNT,
+    constant::participant_id_count,
     udp_listener::UDPListener,
     udp_sender::UDPSender,
     util::{local_interface_table, localhost_spdp_peer_locators, IfAddr},
@@ -1132,12 +1132,12 @@ impl DPEventLoop {
         peers = localhost_spdp_peer_locators(
           self.domain_info.domain_id,
           self.domain_info.participant_id,
-          SPDP_LOCALHOST_PEER_COUNT,
+          participant_id_count(self.domain_info.domain_id),
         );
       }
       // [sorting_line patch] Static peers: every participant id's SPDP port on each.
       for ip in &self.static_peers {
-        peers.extend((0..SPDP_LOCALHOST_PEER_COUNT).map(|pid| {
+        peers.extend((0..participant_id_count(self.domain_info.domain_id)).map(|pid| {
           crate::structure::locator::Locator::from(std::net::SocketAddr::new(
             *ip,
             crate::network::constant::spdp_well_known_unicast_port(self.domain_info.domain_id, pid),
