@@ -41,11 +41,6 @@ def holders(domain: int, ids: range = range(120)) -> dict[int, str]:
     return dict(sorted(found.items()))
 
 
-def ids_of(domain: int, pid: int) -> list[int]:
-    """The participant ids process `pid` holds in `domain`."""
-    return [i for i, who in holders(domain).items() if re.search(rf"\b{pid}\b", who)]
-
-
 def hold(domain: int, count: int) -> list[socket.socket]:
     """Binds both ports of participant ids 0..count-1 (close the sockets to give them back), so that
     the next participant of `domain` on this host takes id `count` or higher."""

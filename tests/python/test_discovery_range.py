@@ -166,8 +166,9 @@ def test_a_node_and_a_daemon_beyond_the_first_participant_ids_find_each_other(ro
         fqn = f"{ns}/sorting_line"
         poll(cli, ["node", "list"], lambda out: fqn in out.split(), f"node {fqn}", timeout=20.0, context=ids)
         # What makes this test mean something: both are beyond Fast DDS's reach and ours of before.
-        node_ids = participant_ids.ids_of(domain, node.pid)
-        others = {i: who for i, who in participant_ids.holders(domain, range(40, 120)).items() if i not in node_ids}
+        held_now = participant_ids.holders(domain)
+        node_ids = [i for i, who in held_now.items() if who.endswith(f" {node.pid}")]
+        others = {i: who for i, who in held_now.items() if not who.endswith((f" {node.pid}", f" {os.getpid()}"))}
         assert node_ids and min(node_ids) >= 40 and others and min(others) >= 40, (node_ids, others)
     finally:
         cli.run("daemon", "stop", timeout=30, check=False)
