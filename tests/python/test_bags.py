@@ -261,6 +261,48 @@ def test_record_a_live_line_and_replay_it(ros, start_node, client_factory, names
 # Playing a bag to a controller
 
 
+def test_a_command_writer_counts_once_its_node_says_it_matched_every_reader(namespace, monkeypatch):
+    """The recorder's count of a controller's command writers (the one test_record_golden's bag
+    lost every command to, under load): a writer counts once its node says on /diagnostics that
+    it matched every reader seen here, or once it has been silent for CommandMatches.SILENT."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from sorting_line_interfaces.msg import SpeedCommand
+
+    from sorting_line_gym.bag.transport.rosnode import CommandMatches, ToolNode
+
+    monkeypatch.setattr(CommandMatches, "SILENT", 2.0)
+    topic = namespace("cmd") + "/cmd/speed"
+    recorder, controller, silent = ToolNode("recorder"), ToolNode("controller"), ToolNode("silent")
+    try:
+        commands = CommandMatches(recorder.node)
+        sub = recorder.node.create_subscription(SpeedCommand, topic, lambda _m: None, 10)
+        controller.node.create_publisher(SpeedCommand, topic, 10)
+        status = controller.node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        recorder.until(lambda: sub.get_publisher_count() == 1, 20.0, f"the recorder to match the writer of {topic}")
+
+        def say(readers: int) -> None:
+            name = controller.node.get_fully_qualified_name()
+            value = KeyValue(key="cmd_speed_readers", value=str(readers))
+            status.publish(DiagnosticArray(status=[DiagnosticStatus(hardware_id=name, values=[value])]))
+
+        def counted_after_saying(readers: int) -> int:
+            say(readers)
+            controller.spin_for(0.3)
+            recorder.spin_for(0.3)
+            return commands.matched(topic, sub.get_publisher_count())
+
+        assert counted_after_saying(0) == 0  # it has matched no reader yet: its commands reach nobody here
+        assert counted_after_saying(0) == 0
+        assert counted_after_saying(1) == 1  # every reader of the topic: ours
+        silent.node.create_publisher(SpeedCommand, topic, 10)  # a writer whose node never says
+        recorder.until(lambda: sub.get_publisher_count() == 2, 20.0, "the recorder to match the second writer")
+        assert commands.matched(topic, 2) == 1
+        recorder.until(lambda: commands.matched(topic, 2) == 2, 10.0, "the silent writer to count")
+    finally:
+        for tool in (silent, controller, recorder):
+            tool.close()
+
+
 def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace, tmp_path):
     from test_controller import ControllerProcess, line_recorders
 

@@ -204,6 +204,10 @@ def test_a_failing_policy_falls_back_to_rba_hold_or_stops(ros, start_node, clien
             return mine and int({v.key: v.value for v in mine[-1].values}["fallbacks"]) > 0
 
         ros.spin_until(counted, 10.0, "/diagnostics to count the fallbacks", ctl.describe)
+        mine = [s for s in statuses if s.name.startswith(f"{ns}/sorting_line_controller")]
+        said = {v.key: int(v.value) for v in mine[-1].values if v.key.endswith("_readers")}
+        # How many readers its command writers matched (the node's at least): what recorders wait for.
+        assert said["cmd_speed_readers"] >= 1 and said["cmd_sort_mode_readers"] >= 1, said
     finally:
         assert ctl.stop() == 0, ctl.describe()
     assert len(states) == 51 and "rba-hold answers it (fallback 1)" in ctl.log(), ctl.log()

@@ -1,7 +1,12 @@
 """The controller's status on ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``, once a
 second): which agent decides (a learned policy: what it was trained for), how many decisions it
 made and how many ticks the fallback answered instead, so that a plant's monitoring sees a
-policy that keeps failing. Level OK, WARN from the first fallback on."""
+policy that keeps failing. Level OK, WARN from the first fallback on.
+
+It also says how many readers each command writer has matched (``cmd_speed_readers``,
+``cmd_sort_mode_readers``): a writer sends only to readers it has matched, and only the writer's
+process knows which; a recorder reads it to tell when this controller's commands reach it
+(:class:`..bag.transport.rosnode.CommandMatches`)."""
 
 from __future__ import annotations
 
@@ -30,7 +35,10 @@ class ControllerDiagnostics:
             "decisions": str(self.node.decisions),
             "fallbacks": str(self.fallbacks),
             "skipped_ticks": str(self.node.skipped),
+            "cmd_speed_readers": str(self.node.speed_pub.get_subscription_count()),
         }
+        if self.node.mode_pub is not None:
+            values["cmd_sort_mode_readers"] = str(self.node.mode_pub.get_subscription_count())
         level = DiagnosticStatus.WARN if self.fallbacks else DiagnosticStatus.OK
         message = f"{self.fallbacks} ticks answered by the fallback" if self.fallbacks else "deciding"
         return DiagnosticStatus(

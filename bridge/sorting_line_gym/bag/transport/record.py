@@ -16,7 +16,9 @@ Recording starts once every topic the node publishes is matched and a ``/diagnos
 the line has arrived (proof that the node sends to this recorder); then it prints
 ``recording ...`` on stdout, and ``matched TOPIC: N publisher(s)`` whenever that count changes
 (a controller that joins later: wait for its line before driving, or its first commands are
-not in the bag). It stops on SIGINT/SIGTERM, after ``--duration`` seconds, or once
+not in the bag). A command writer counts once it has matched the recorder too, as far as it says
+(sorting-line-controller does; a writer that says nothing counts 2.5 s after it was seen).
+It stops on SIGINT/SIGTERM, after ``--duration`` seconds, or once
 ``--max-ticks`` states were recorded, and drains what is still in flight before closing the bag.
 At the end it compares what it received with the node's own counters (:mod:`..storage.losses`) and says
 how many messages it missed, on which topics; metadata.yaml keeps that for ``info``. A full disk
@@ -56,7 +58,7 @@ from ..format.topics import (
 from ..storage.losses import LossCounter, describe_losses
 from ..storage.schema import typestore
 from ..storage.writer import BagWriter
-from .rosnode import ToolNode
+from .rosnode import CommandMatches, ToolNode
 
 #: The node's parameters the recorder asks for: the line's options and the node's publishing rate.
 NODE_PARAMETERS = (*LINE_OPTIONS, "rate")
@@ -354,9 +356,11 @@ def _write(
     stop: Callable[[], bool],
     on_ready: Callable[[str], None],
 ) -> None:
-    """Spins (the subscriptions write) until the end, telling who joins; then drains."""
+    """Spins (the subscriptions write) until the end, telling who joins (a controller's writer
+    once it has matched us too, as far as it says: :class:`.rosnode.CommandMatches`); then drains."""
     started = time.monotonic()
     matched: dict[str, int] = {}
+    commands = CommandMatches(tool.node)
     next_check = 0.0
 
     def done() -> bool:
@@ -370,6 +374,8 @@ def _write(
             next_check = now + 0.2
             for name, sub in subs.items():
                 n = sub.get_publisher_count()
+                if name.rsplit("/", 2)[-2] == "cmd":
+                    n = commands.matched(name, n)
                 if matched.get(name) != n:
                     matched[name] = n
                     on_ready(f"matched {name}: {n} publisher(s)")

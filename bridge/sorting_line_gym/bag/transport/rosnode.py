@@ -81,6 +81,49 @@ class InputMatches:
         return matched is not None and matched >= max(1, self.node.count_subscribers(join(namespace, "input")))
 
 
+class CommandMatches:
+    """How many writers of a command topic have matched this process's readers, as far as they say.
+
+    Matching is one-sided: our reader matching a controller's writer does not mean that the writer
+    has matched our reader, and a writer sends only to readers it has matched. Under load the two
+    sides can be far apart, and a lock-step episode runs its course in 60 ms: a recorder that
+    counted its own side alone once stored a golden bag without a single command.
+    sorting-line-controller says on ``/diagnostics`` how many readers its command writers have
+    matched (``cmd_speed_readers``, ``cmd_sort_mode_readers``, once a second, ``hardware_id`` its
+    node's name). A writer counts once its node says that it matched every reader of the topic
+    seen here; a writer whose node has said nothing about it ``SILENT`` s after we first saw it (a
+    controller of your own) counts from then on, trusted without proof."""
+
+    SILENT = 2.5
+
+    def __init__(self, node):
+        self.node = node
+        self.readers: dict[tuple[str, str], int] = {}  # (writer's node, key) -> readers matched
+        self.first_seen: dict[tuple[str, str], float] = {}
+        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics", self._on, 10)
+
+    def _on(self, msg) -> None:
+        for status in msg.status:
+            for kv in status.values:
+                if kv.key.startswith("cmd_") and kv.key.endswith("_readers"):
+                    self.readers[(status.hardware_id, kv.key)] = int(kv.value)
+
+    def matched(self, topic: str, ours: int) -> int:
+        """Of the ``ours`` writers of ``topic`` our reader has matched, how many count (see above)."""
+        key = topic.rsplit("/", 2)[-2] + "_" + topic.rsplit("/", 1)[-1] + "_readers"  # .../cmd/speed
+        readers = self.node.count_subscribers(topic)
+        now = time.monotonic()
+        waiting = 0
+        for info in self.node.get_publishers_info_by_topic(topic):
+            writer = (join(info.node_namespace, info.node_name), key)
+            said = self.readers.get(writer)
+            first = self.first_seen.setdefault(writer, now)
+            if said is None and now - first >= self.SILENT:
+                continue
+            waiting += said is None or said < readers
+        return max(0, ours - waiting)
+
+
 class ToolNode:
     """One rclpy context with one node and one executor; ``close()`` shuts all three down."""
 
