@@ -60,10 +60,22 @@ def node_died(node) -> str | None:
     return None
 
 
+def bound_ports(node, domain: int, timeout: float = 20.0) -> dict[int, str]:
+    """The node's UDP ports once it has bound its discovery and its user port. start_node returns
+    as soon as the process runs; the node binds one port after the other as its participant starts
+    (a fresh run under load once read the discovery port alone)."""
+    deadline = time.monotonic() + timeout
+    while not {"discovery", "user"} <= set((ports := w.node_udp_ports(node.pid, domain)).values()):
+        problem = node_died(node)
+        assert problem is None, problem
+        assert time.monotonic() < deadline, f"the node bound no discovery and user port in {timeout} s: {ports}"
+        time.sleep(0.05)
+    return ports
+
+
 def connect_and_capture(client, node, domain: int):
     """The client connects and resets; the datagrams to and from the node meanwhile are the corpus."""
-    ports = w.node_udp_ports(node.pid, domain)
-    assert "discovery" in ports.values() and "user" in ports.values(), f"node ports: {ports}"
+    ports = bound_ports(node, domain)
     with w.LoopbackCapture(set(ports)) as capture:
         client.wait_connected()
         client.reset(1)
