@@ -373,9 +373,7 @@ def _write(
         if now >= next_check:  # tell who joins (a controller started later, say), so scripts can wait for it
             next_check = now + 0.2
             for name, sub in subs.items():
-                n = sub.get_publisher_count()
-                if name.rsplit("/", 2)[-2] == "cmd":
-                    n = commands.matched(name, n)
+                n = commands.matched(name, sub.get_publisher_count())
                 if matched.get(name) != n:
                     matched[name] = n
                     on_ready(f"matched {name}: {n} publisher(s)")

@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ...line.process import NodeProcess
 from ...ros.context import check_domain_id
 from ...ros.waits import Waiter
-from ..format.topics import join
+from ..format.topics import COMMANDS, join
 
 #: Deep reliable queues: a tool that falls behind for a moment (a busy machine) catches up
 #: instead of losing samples (the node's own depth is 10).
@@ -109,8 +109,12 @@ class CommandMatches:
                     self.readers[(status.hardware_id, kv.key)] = int(kv.value)
 
     def matched(self, topic: str, ours: int) -> int:
-        """Of the ``ours`` writers of ``topic`` our reader has matched, how many count (see above)."""
-        key = topic.rsplit("/", 2)[-2] + "_" + topic.rsplit("/", 1)[-1] + "_readers"  # .../cmd/speed
+        """Of the ``ours`` writers of ``topic`` our reader has matched, how many count (see above);
+        all of them on a topic that is not a line's command topic (:data:`..format.topics.COMMANDS`)."""
+        command = next((c for c in COMMANDS if topic.endswith("/" + c)), None)
+        if command is None:
+            return ours
+        key = command.replace("/", "_") + "_readers"  # cmd/speed -> cmd_speed_readers
         readers = self.node.count_subscribers(topic)
         now = time.monotonic()
         waiting = 0
