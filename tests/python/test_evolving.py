@@ -521,6 +521,24 @@ def test_a_lost_first_exchange_goes_to_a_fresh_node(tmp_path):
         env.close()
 
 
+def test_a_lost_setup_announcement_goes_to_a_fresh_node(tmp_path):
+    """The first node's events/evolution never reaches the env (as when its writer has not matched
+    our reader yet as it announces the setup of episode 1): the first exchange is not done, so the
+    reset goes to a fresh node, whose announcement arrives, instead of a reset that times out."""
+    schedule = tmp_path / "first.yaml"
+    schedule.write_text(FIRST_RESET_SCHEDULE)
+    env = make_env(schedule)
+    bank = env.unwrapped.bank
+    first_namespace = bank.namespace
+    msg_type, keep = bank._watch["events/evolution"]
+    bank._watch["events/evolution"] = (msg_type, lambda m: None if bank.namespace == first_namespace else keep(m))
+    try:
+        check_first_episode_is_the_schedules_first(env, schedule)
+        assert env.unwrapped.namespace != first_namespace
+    finally:
+        env.close()
+
+
 # --------------------------------------------------------------------------------------------
 # Bags: record an evolving run, replay it exactly
 

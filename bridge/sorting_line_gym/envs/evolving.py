@@ -142,13 +142,15 @@ class SortingLineEvolvingEnv(gym.Env):
         self._inbox: list = []
         # One line through the batch topics, which are there whatever the hardware (cmd/sort_mode
         # comes and goes with the machine upgrade); events/evolution is watched beside them. A
-        # first reset whose exchange was lost goes to a fresh node (its events replace the old's).
+        # first reset whose exchange was lost (its reply, step-0 state or setup announcement) goes
+        # to a fresh node (its events replace the old's).
         self.bank = LineBank(
             options,
             lines=1,
             batch=True,
             watch={"events/evolution": (EvolutionEvent, self._inbox.append)},
             on_fresh_node=self._inbox.clear,
+            first_proof=self._setup_not_announced,
         )
         self._settings: dict | None = None
         self._line_tick: int | None = None
@@ -170,6 +172,14 @@ class SortingLineEvolvingEnv(gym.Env):
         return action_mask("advanced", sort_modes=self._settings is not None and self._settings["sort_modes"])
 
     # -- the events ----------------------------------------------------------------------------
+    def _setup_not_announced(self, results) -> str | None:
+        """What the first reset's exchange still lacks on events/evolution: the setup of the
+        episode it started (a node that has not matched our reader yet publishes it to nobody)."""
+        episode = results[0].episode
+        if any(m.at_reset and m.episode == episode for m in self._inbox):
+            return None
+        return f"events/evolution: the setup of episode {episode}"
+
     def _take(self, match, what: str):
         waiter = self.bank.waiter
         found = []

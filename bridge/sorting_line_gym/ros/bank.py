@@ -34,7 +34,7 @@ from ..workarounds.late_matching import (
 from ..workarounds.participant_deletion_hang import retire_node
 from ..workarounds.simultaneous_discovery import joining_graph
 from .context import acquire_rclpy, release_rclpy
-from .links import QOS, BatchLink, LineLink, stamp_key
+from .links import QOS, BatchLink, LineLink, ResetResult, stamp_key
 from .transports import BatchTransport, PerLineTransport, Transport
 from .waits import Waiter
 
@@ -56,6 +56,7 @@ class LineBank:
         batch: bool = False,
         watch: dict | None = None,
         on_fresh_node: Callable[[], None] | None = None,
+        first_proof: Callable[[dict[int, ResetResult]], str | None] | None = None,
     ):
         if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
@@ -83,6 +84,10 @@ class LineBank:
         #: Called when the first reset's node is replaced by a fresh one (see _counted_handshake),
         #: e.g. to drop what the watch callbacks kept from the old node.
         self._on_fresh_node = on_fresh_node
+        #: What else the first reset's exchange must deliver, beyond its reply and step-0 state, to
+        #: count as done: given the replies, it names what has not arrived, or returns None (e.g.
+        #: the evolving line's announcement of the episode's setup, on a watched topic).
+        self._first_proof = first_proof
         #: Whether each reset is an event for the node (an evolving line: its schedule's next
         #: episode), so that the handshake must not repeat one (workarounds.late_matching).
         self.resets_count = options.evolution is not None
@@ -223,13 +228,17 @@ class LineBank:
         )
 
     def _first_exchange(self, seeds: dict[int, int | None], timeout: float):
-        """One reset whose reply and step-0 state must both arrive within ``timeout`` each."""
+        """One reset whose reply, step-0 state and ``first_proof`` must each arrive within
+        ``timeout``. Each travels from its own writer, which may not have matched our reader yet."""
         responses = self._reset_once(seeds, timeout=timeout)
         self.waiter.until(
             lambda: self.transport.saw_first_states(seeds),
             timeout,
             lambda: f"the first state of {self.namespace} after reset",
         )
+        proof = self._first_proof
+        if proof is not None:
+            self.waiter.until(lambda: proof(responses) is None, timeout, lambda: f"{self.namespace}/{proof(responses)}")
         return responses
 
     def _counted_handshake(self, seeds: dict[int, int | None]):

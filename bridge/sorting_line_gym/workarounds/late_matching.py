@@ -17,8 +17,9 @@ Who does what:
   info depends on it).
 - Evolving lines (``LineBank`` with an evolution schedule, ``SortingLineEvolving-v0``): every
   reset is the schedule's next episode, so the first reset goes once to each node and is waited
-  for as any reset (``step_timeout``), slow or not. If its reply or step-0 state still does not
-  come, a spawned node is replaced by a fresh one (``repeated_while_unanswered``, up to
+  for as any reset (``step_timeout``), slow or not. If its reply, its step-0 state or its
+  announcement of the episode's setup (``events/evolution``) still does not come, a spawned node
+  is replaced by a fresh one (``repeated_while_unanswered``, up to
   ``FRESH_NODE_ATTEMPTS`` nodes), which has had no reset; an attached node is never reset twice,
   the error goes on.
 - Bag replay (``bag.transport.replay``): the bag's first reset is judged by every message of its tick
