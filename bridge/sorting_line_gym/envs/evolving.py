@@ -104,6 +104,11 @@ def settings_of(message) -> dict:
     return {name: getattr(message, name) for name in _SETTINGS}
 
 
+def announces_setup_of(episode: int):
+    """Whether an EvolutionEvent is the announcement, at its reset, of episode ``episode``'s setup."""
+    return lambda m: bool(m.at_reset) and m.episode == episode
+
+
 def event_info(message) -> dict:
     return {
         "at_reset": bool(message.at_reset),
@@ -176,7 +181,7 @@ class SortingLineEvolvingEnv(gym.Env):
         """What the first reset's exchange still lacks on events/evolution: the setup of the
         episode it started (a node that has not matched our reader yet publishes it to nobody)."""
         episode = results[0].episode
-        if any(m.at_reset and m.episode == episode for m in self._inbox):
+        if any(map(announces_setup_of(episode), self._inbox)):
             return None
         return f"events/evolution: the setup of episode {episode}"
 
@@ -215,7 +220,7 @@ class SortingLineEvolvingEnv(gym.Env):
         result = self.bank.reset({0: node_seed})[0]
         self._episode_start = sim_seconds(result.stamp.sec, result.stamp.nanosec)
         episode = result.episode
-        message = self._take(lambda m: m.at_reset and m.episode == episode, f"the setup of episode {episode}")
+        message = self._take(announces_setup_of(episode), f"the setup of episode {episode}")
         self._settings = settings_of(message)
         self._line_tick = int(message.tick)
         self._announced = [event_info(message)] if len(message.event_indices) else []
