@@ -15,12 +15,16 @@ counted on /diagnostics.
 from __future__ import annotations
 
 import re
+import signal
+import subprocess
+import sys
 import time
 
 import pytest
 
 import ros_harness as h
 from ros_harness import show_ns, stamp_ns
+from sorting_line_gym.line.process import with_parent_death_signal
 
 SETUP, VARIANT, SEED, RATE = "B", "basic", 13, 40.0
 START_SPEED_INDEX = 5  # the speed a line starts each episode with (0.6), held until commanded
@@ -282,6 +286,56 @@ def test_standard_services_drive_the_line_as_trace_does(simulator):
     assert sim.proc.proc.returncode == 0, sim.proc.describe()
     sim.proc.stopped_by_test = True
     assert "simulation QUITTING" in sim.proc.log()
+    assert "QUITTING reply may be lost" not in sim.proc.log(), "our reader acknowledges at once"
+
+
+# A second client of set_simulation_state, in a process of its own: asks for PAUSED (already there)
+# until answered, which proves that the node's reply writer has matched its reader, then idles.
+SECOND_CLIENT = """
+import sys, time
+import rclpy
+from simulation_interfaces.msg import SimulationState
+from simulation_interfaces.srv import SetSimulationState
+rclpy.init()
+node = rclpy.create_node("second_simif_client")
+client = node.create_client(SetSimulationState, sys.argv[1])
+client.wait_for_service(timeout_sec=30)
+for attempt in range(10):
+    future = client.call_async(SetSimulationState.Request(state=SimulationState(state=2)))
+    rclpy.spin_until_future_complete(node, future, timeout_sec=3)
+    if future.done():
+        print("answered", future.result().result.result, flush=True)
+        break
+time.sleep(600)
+"""
+
+
+def test_quitting_waits_for_every_reader_of_its_reply_then_leaves_anyway(simulator, tmp_path):
+    """QUITTING leaves once every reader of its reply has acknowledged it (a reply still in flight
+    would be lost with the participant), or after 2 s without: a second client, stopped (SIGSTOP),
+    never acknowledges, so the node says so in its log and still leaves with 0."""
+    sim = simulator
+    log = tmp_path / "second_client.log"
+    with open(log, "wb") as out:
+        second = subprocess.Popen(
+            with_parent_death_signal([sys.executable, "-c", SECOND_CLIENT, f"{sim.fqn}/set_simulation_state"]),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        answered = f"answered {ALREADY_IN_TARGET_STATE}"
+        sim.ros.spin_until(
+            lambda: answered in log.read_text(), 60.0, f"the second client's reply ({log})", lambda: log.read_text()
+        )
+        second.send_signal(signal.SIGSTOP)
+        assert sim.set_state(QUITTING) == (OK, "")
+        sim.proc.proc.wait(timeout=20)
+    finally:
+        second.kill()
+        second.wait(timeout=10)
+    assert sim.proc.proc.returncode == 0, sim.proc.describe()
+    sim.proc.stopped_by_test = True
+    assert "the QUITTING reply may be lost: not acknowledged within 2 s" in sim.proc.log(), sim.proc.describe()
 
 
 def matched_simulate_steps_client(sim):

@@ -2,7 +2,7 @@
 //! lock-step, PLAYING realtime), the realtime timer, the services' counters and servers. A request
 //! is checked by the rules of `ros::simulation`, applied to the lines and answered, except a
 //! StepSimulation of some steps (handed to the stepping part, answered when they are done) and
-//! QUITTING (answered, then the node leaves).
+//! QUITTING (answered, then the node leaves once the reply is acknowledged, 2 s at most).
 
 use std::time::Duration;
 
@@ -21,6 +21,11 @@ use crate::ros::names::Names;
 use crate::ros::params::NodeParams;
 use crate::ros::simulation::{self, reset_scope, step_request, transition, ResetScope, SimState, Transition};
 use crate::ros::simulation_interfaces::SimResult;
+
+/// How long a QUITTING node waits for its reply to be acknowledged before it leaves anyway (the
+/// reply piggybacks a heartbeat, so a reader acknowledges at once; 2 s outlasts rustdds's slow
+/// heartbeat period of 1 s, should the first acknowledgment be lost).
+const QUIT_REPLY_WAIT: Duration = Duration::from_secs(2);
 
 /// What the node does after a simulation_interfaces request.
 pub(super) enum SimFlow {
@@ -93,6 +98,9 @@ impl SimulationControl {
                 Ok(Transition::Quit) => {
                     self.counters.answered_ok += 1;
                     self.reply(id, request, ok()).await;
+                    if let Err(why) = self.servers.set_state_delivered(QUIT_REPLY_WAIT).await {
+                        log("WARN", format!("the QUITTING reply may be lost: {why}"));
+                    }
                     log("INFO", "simulation QUITTING (SetSimulationState): leaving the graph");
                     return SimFlow::Quit;
                 }

@@ -4,6 +4,7 @@
 //! lines, in `control`.
 
 use std::rc::Rc;
+use std::time::Duration;
 
 use futures::stream::{LocalBoxStream, StreamExt};
 use ros2_client::{Node, ReadResult, RmwRequestId, Server as ServiceServer};
@@ -87,5 +88,18 @@ impl SimulationServers {
         if let Err(error) = sent {
             log("WARN", format!("{}: cannot send the response: {error}", request.service().name()));
         }
+    }
+
+    /// Waits until every reader of SetSimulationState replies has acknowledged the replies sent,
+    /// at most `within`; says why it gave up. For a node about to leave the graph: DDS repeats a
+    /// lost sample only while its writer lives, so a reply in flight is lost with the participant.
+    pub(super) async fn set_state_delivered(&self, within: Duration) -> Result<(), String> {
+        let acknowledged =
+            async { self.set_state.async_wait_for_acknowledgments().await.map(|_| ()).map_err(|e| format!("{e:?}")) };
+        let late = async {
+            smol::Timer::after(within).await;
+            Err(format!("not acknowledged within {} s", within.as_secs_f64()))
+        };
+        smol::future::or(acknowledged, late).await
     }
 }
