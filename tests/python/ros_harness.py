@@ -52,6 +52,8 @@ from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, S
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_TEST_DOMAIN = "87"
 NS_PER_S = 1_000_000_000
+# How long a wait goes on spinning once its peer is gone, to take what the peer sent before it went.
+DRAIN_AFTER_ABORT = 0.5
 
 # Every topic of one line (relative to its namespace) and its type.
 LINE_TYPES = {
@@ -492,7 +494,8 @@ class RosSession:
         abort: Callable[[], str | None] = lambda: None,
     ):
         """Spins until `condition()` is truthy (and returns it); raises WaitTimeout naming `what`
-        after `timeout` s, or at once when `abort()` says why waiting is pointless."""
+        after `timeout` s, or soon after `abort()` says why waiting is pointless (a peer that is
+        gone: what it sent before it went is taken first, DRAIN_AFTER_ABORT s at most)."""
         deadline = time.monotonic() + timeout
         while True:
             result = condition()
@@ -500,6 +503,9 @@ class RosSession:
                 return result
             reason = abort()
             if reason:
+                drained = self._drain(condition)
+                if drained:
+                    return drained
                 raise WaitTimeout(f"gave up waiting for {what}: {reason}\n{context()}")
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -508,6 +514,17 @@ class RosSession:
                     f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else "")
                 )
             self.executor.spin_once(timeout_sec=min(step, remaining))
+
+    def _drain(self, condition: Callable[[], Any]):
+        """Spins a last DRAIN_AFTER_ABORT s for `condition`: a process that replied and then exited
+        (a node QUITTING) can be seen gone before its reply, already here, has been taken."""
+        deadline = time.monotonic() + DRAIN_AFTER_ABORT
+        while (remaining := deadline - time.monotonic()) > 0:
+            self.executor.spin_once(timeout_sec=min(0.02, remaining))
+            result = condition()
+            if result:
+                return result
+        return None
 
     def spin_for(self, seconds: float) -> None:
         """Spins for `seconds`, handling whatever arrives."""
