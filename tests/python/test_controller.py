@@ -86,12 +86,15 @@ class ControllerProcess(h.ScriptProcess):
             label="controller",
         )
 
-    def decisions(self) -> dict[int, dict]:
-        """The decision log, by tick stamp (ns)."""
+    def decision_rows(self) -> list[dict]:
+        """The decision log, a row per decision, in order (a restarted node's ticks repeat stamps)."""
         if not self.decision_path.exists():
-            return {}
-        rows = [json.loads(line) for line in self.decision_path.read_text().splitlines() if line.strip()]
-        return {r["stamp_ns"]: r for r in rows}
+            return []
+        return [json.loads(line) for line in self.decision_path.read_text().splitlines() if line.strip()]
+
+    def decisions(self) -> dict[int, dict]:
+        """The decision log, by tick stamp (ns): for one node's run, where stamps do not repeat."""
+        return {r["stamp_ns"]: r for r in self.decision_rows()}
 
 
 @pytest.fixture
