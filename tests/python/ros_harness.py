@@ -503,10 +503,10 @@ class RosSession:
                 return result
             reason = abort()
             if reason:
-                drained = self._drain(condition)
-                if drained:
-                    return drained
-                raise WaitTimeout(f"gave up waiting for {what}: {reason}\n{context()}")
+                try:  # what the peer sent before it went may be here, not yet taken
+                    return self.spin_until(condition, DRAIN_AFTER_ABORT, what, step=step)
+                except WaitTimeout:
+                    raise WaitTimeout(f"gave up waiting for {what}: {reason}\n{context()}") from None
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 extra = context()
@@ -514,17 +514,6 @@ class RosSession:
                     f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else "")
                 )
             self.executor.spin_once(timeout_sec=min(step, remaining))
-
-    def _drain(self, condition: Callable[[], Any]):
-        """Spins a last DRAIN_AFTER_ABORT s for `condition`: a process that replied and then exited
-        (a node QUITTING) can be seen gone before its reply, already here, has been taken."""
-        deadline = time.monotonic() + DRAIN_AFTER_ABORT
-        while (remaining := deadline - time.monotonic()) > 0:
-            self.executor.spin_once(timeout_sec=min(0.02, remaining))
-            result = condition()
-            if result:
-                return result
-        return None
 
     def spin_for(self, seconds: float) -> None:
         """Spins for `seconds`, handling whatever arrives."""

@@ -187,8 +187,9 @@ where
   }
 
   /// [sorting_line patch] Resolves once every matched reader of the responses has acknowledged
-  /// every response sent so far (at once for a best-effort writer). No timeout: bring your own. Lets a server that is about to leave the graph stay until its last
-  /// reply has arrived, since a reply still in flight is lost with the participant.
+  /// every response sent so far (at once for a best-effort writer). No timeout: bring your own.
+  /// Lets a server that is about to leave the graph stay until its last reply has arrived, since
+  /// a reply still in flight is lost with the participant.
   pub async fn async_wait_for_acknowledgments(&self) -> WriteResult<bool, ()> {
     self.response_sender.async_wait_for_acknowledgments().await.map_err(WriteError::from)
   }
