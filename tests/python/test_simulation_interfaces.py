@@ -415,10 +415,10 @@ def test_simulate_steps_action_feedback_refusal_and_cancel(simulator):
 
 def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node, namespace):
     """`ros2 service list -t` and `ros2 action list -t` show the standard types; `ros2 service call`
-    works on them."""
+    works on them, QUITTING (the node leaves) last."""
     ros2 = ros2_daemon
     ns = namespace("simif_cli")
-    start_node("--setup", SETUP, "--seed", str(SEED), "--ros-args", "-r", f"__ns:={ns}")
+    node = start_node("--setup", SETUP, "--seed", str(SEED), "--ros-args", "-r", f"__ns:={ns}")
     fqn = h.join_ns(ns, "sorting_line")
     want = {f"{fqn}/{name}": f"[{t}]" for name, t in SERVICES.items()}
     deadline = time.monotonic() + 20
@@ -444,3 +444,13 @@ def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node,
     )
     out = call("reset_simulation", "{scope: 4}")
     assert "result=0, error_message='scope 4 is not supported" in out, out
+
+    # QUITTING from a client that is not ours: the CLI gets its reply, then the node leaves as on
+    # SIGINT, without the warning that the reply may be lost (the CLI's reader acknowledged it).
+    out = call("set_simulation_state", f"{{state: {{state: {QUITTING}}}}}")
+    assert "result=simulation_interfaces.msg.Result(result=1, error_message='')" in out, out
+    node.proc.wait(timeout=10)  # on its own: a SIGINT here would hide a node that did not quit
+    node.stopped_by_test = True
+    assert node.proc.returncode == 0, node.describe()
+    assert "simulation QUITTING" in node.log(), node.describe()
+    assert "QUITTING reply may be lost" not in node.log(), node.describe()
