@@ -74,6 +74,10 @@ def file_tail(path: str | Path, lines: int) -> str:
     return "\n".join(text[-lines:])
 
 
+#: Seconds a node is given to leave on SIGINT, and then on SIGKILL.
+STOP_TIMEOUT = 5.0
+
+
 class NodeProcess:
     """A `sorting_line node` process owned by a bridge: started with the given options in its own
     namespace (plus ``ros_args``, e.g. remaps, after ``--ros-args``), its log kept in a temporary
@@ -111,8 +115,10 @@ class NodeProcess:
             f" (log {self.log_path}):\n{self.log_tail()}"
         )
 
-    def stop(self, timeout: float = 5.0) -> int | None:
-        """Stops the node; returns its exit code. Deletes the log if the node stopped cleanly."""
+    def stop(self, timeout: float = STOP_TIMEOUT) -> int | None:
+        """Stops the node; returns its exit code. Deletes the log if the node stopped cleanly.
+
+        SIGINT, then SIGKILL if it has not left after ``timeout``, each waited ``timeout`` at most."""
         if self.alive():
             self.process.send_signal(signal.SIGINT)
             try:

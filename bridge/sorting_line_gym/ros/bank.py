@@ -23,7 +23,7 @@ from ..line import line_server
 from ..line.errors import BridgeError
 from ..line.line_server import Lease
 from ..line.options import LineOptions
-from ..line.process import NodeProcess, private_namespace
+from ..line.process import STOP_TIMEOUT, NodeProcess, private_namespace
 from ..workarounds.fork_unsafe_dds import fork_error
 from ..workarounds.late_matching import (
     FRESH_NODE_ATTEMPTS,
@@ -39,6 +39,13 @@ from .transports import BatchTransport, PerLineTransport, Transport
 from .waits import Waiter
 
 _bank_ids = itertools.count()
+
+#: Waits of a first exchange (:meth:`LineBank._first_exchange`): the reset's reply, the step-0
+#: state, the first proof.
+EXCHANGE_WAITS = 3
+
+#: Seconds the executor is given to shut down when a bank is torn down.
+EXECUTOR_SHUTDOWN = 0.5
 
 
 class LineBank:
@@ -209,12 +216,28 @@ class LineBank:
         if self.connected:
             self.check_usable()
             return self._reset_once(seeds)
-        with joining_graph(self.startup_timeout):
+        with joining_graph(self._longest_join()):
             # Once it is this bank's turn, startup_timeout bounds the rest of the start: rclpy,
             # the node (or the lease), discovery.
             deadline = time.monotonic() + self.startup_timeout
             self.open()
             return self._handshake(seeds, deadline)
+
+    def _longest_join(self) -> float:
+        """The longest this bank can hold the host's join lock, every wait in its turn at its
+        bound: the start (``startup_timeout``, which bounds open and discovery) and the first
+        reset, three waits per exchange (:meth:`_first_exchange`): with resets that count up to
+        ``FRESH_NODE_ATTEMPTS`` exchanges of ``step_timeout``, each after the first on a fresh
+        node (a tear-down, a start); otherwise the retried handshake's short attempts; and the
+        tear-down of a start that failed. Waiters on the lock wait this long for this bank
+        (:func:`joining_graph`), not their own bound."""
+        tear_down = EXECUTOR_SHUTDOWN + 2 * STOP_TIMEOUT  # a start that fails tears its node down
+        if self.resets_count:
+            exchanges = FRESH_NODE_ATTEMPTS * EXCHANGE_WAITS * self.step_timeout
+            handshake = exchanges + (FRESH_NODE_ATTEMPTS - 1) * (tear_down + self.startup_timeout)
+        else:
+            handshake = sum(EXCHANGE_WAITS * min(limit, self.step_timeout) for limit in HANDSHAKE_TIMEOUTS)
+        return self.startup_timeout + handshake + tear_down
 
     def _handshake(self, seeds: dict[int, int | None], deadline: float):
         self._connect(deadline)
@@ -348,7 +371,7 @@ class LineBank:
         if node is not None:
             self.executor.remove_node(node)
             retire_node(node)
-            self.executor.shutdown(timeout_sec=0.5)
+            self.executor.shutdown(timeout_sec=EXECUTOR_SHUTDOWN)
             self.node = None
         # The participant goes (if this bank was its last user) before the node process does: the
         # node's departure is a discovery event, and one in flight when the participant is deleted

@@ -21,43 +21,67 @@ import time
 from ..line.errors import BridgeTimeout
 from ..line.host import host_state_directory, network_namespace
 
+#: How long past the end of its turn that it declared a holder may still keep the lock: the
+#: exception that ends a failed turn on its way out, and a loaded machine's scheduling delay.
+HANDOVER = 5.0
+
+
+def _clock() -> float:
+    # CLOCK_MONOTONIC is one clock for every process of the machine: a holder's declared end is
+    # read by other processes. (time.monotonic promises only a clock per process.)
+    return time.clock_gettime(time.CLOCK_MONOTONIC)
+
 
 @contextlib.contextmanager
-def joining_graph(timeout: float):
+def joining_graph(turn: float):
     """Holds this host's lock for joining the DDS graph of ``ROS_DOMAIN_ID`` (per network
     namespace) while a bank starts its participant and node and discovers the node's endpoints.
 
-    A waiter gives up only when the queue stops moving: when one holder has kept the lock for
-    ``timeout`` (a holder's own start is bounded by its startup_timeout, so that means it hangs).
-    The whole queue may take longer: 16 workers joining one after the other at 1-2 s each on a
-    busy machine must not time out for waiting their turn. Each holder writes its pid and the
-    time of its turn into the lock file, which is how waiters see the lock change hands; a holder
-    that dies frees the lock at once (flock)."""
+    ``turn`` is the longest this holder's turn can take, every wait in it at its bound (the bank
+    adds them up: the start, the first reset's handshake). The holder writes its pid and the end
+    of its turn into the lock file; a waiter gives up only when the holder in front of it has
+    kept the lock more than ``HANDOVER`` past the end it declared, which means it hangs. A
+    waiter never judges a holder by its own bound: another bank may have longer timeouts, and
+    a slow start on a busy machine is a long turn, not a hang. The whole queue may take longer
+    than any turn: 16 workers joining one after the other at 1-2 s each must not time out for
+    waiting their turn. A holder that dies frees the lock at once (flock)."""
     digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
     path = host_state_directory() / f"join-{digest}.lock"
     with open(path, "a+") as f:
-        holder, since = None, time.monotonic()
+        seen, (since, end) = None, (_clock(), _clock() + turn)
         while True:
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 break
             except BlockingIOError:
-                now = time.monotonic()
-                current = os.pread(f.fileno(), 64, 0)  # "pid time", as the holder wrote it
-                if current != holder:
-                    holder, since = current, now  # the lock changed hands: the queue moves
-                elif now - since > timeout:
-                    pid = holder.decode(errors="replace").split(" ")[0] or "?"
+                now = _clock()
+                current = os.pread(f.fileno(), 64, 0)  # "pid start end", as the holder wrote it
+                if current != seen:  # the lock changed hands: the queue moves
+                    seen, (since, end) = current, _declared_turn(current, default=(now, now + turn))
+                elif now > end + HANDOVER:
+                    pid = current.decode(errors="replace").split(" ")[0] or "?"
                     raise BridgeTimeout(
-                        f"timed out after {timeout:g} s waiting for other environments of this host to join "
-                        f"the DDS graph: pid {pid} has held the lock (file {path}) for {now - since:.0f} s"
+                        f"timed out waiting for other environments of this host to join the DDS graph: pid {pid} "
+                        f"has held the lock (file {path}) for {now - since:.0f} s, {now - end:.0f} s past the end "
+                        "of the turn it declared"
                     ) from None
                 time.sleep(0.01)
         try:
             f.seek(0)
             f.truncate()
-            f.write(f"{os.getpid()} {time.time_ns()}")
+            now = _clock()
+            f.write(f"{os.getpid()} {now:.3f} {now + turn:.3f}")
             f.flush()
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _declared_turn(declaration: bytes, default: tuple[float, float]) -> tuple[float, float]:
+    """The start and end of its turn that a holder wrote; ``default`` while it has not written
+    them yet (the file is empty between its truncate and its write)."""
+    try:
+        _pid, start, end = declaration.split()
+        return float(start), float(end)
+    except ValueError:
+        return default
