@@ -49,7 +49,7 @@ def test_a_queue_longer_than_the_timeout_is_waited_out_while_it_moves():
 
 def _holding(turn: float, keep: float):
     """A thread that takes the lock declaring ``turn`` and keeps it ``keep`` seconds (or until
-    released); returns the thread, the event set once it holds the lock, and the release event."""
+    released); returns once it holds the lock, with the thread and the release event."""
     release, held = threading.Event(), threading.Event()
 
     def holder():

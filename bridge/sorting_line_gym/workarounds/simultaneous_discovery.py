@@ -48,7 +48,7 @@ def joining_graph(turn: float):
     digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
     path = host_state_directory() / f"join-{digest}.lock"
     with open(path, "a+") as f:
-        seen, (since, end) = None, (_clock(), _clock() + turn)
+        seen, since, end = None, 0.0, 0.0  # set at the first look: the file never reads None
         while True:
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
