@@ -52,9 +52,13 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
 ``late_matching`` -- the first exchange after discovery can be lost.
     Defect: right after discovery the node may match our request writer before our reply reader,
     or before our state reader; volatile samples sent before matching are dropped. Symptom: the
-    first reset's reply, or its step-0 state, never arrives. Measured: found by the node tests'
-    harness; retrying after 0.2, 0.4, 0.8, ... s instead of 2 s brought 64 shared envs' start-up
-    from about 25 s to 11.5 s (load 12). Seen in: rclpy 7.1 / Fast DDS 2.14 against RustDDS.
+    first reset's reply, or its step-0 state, never arrives. (The node now waits, at most 2 s, for
+    the client's reply reader before it replies, as the rmw layers do: vendor/README.md,
+    ros2-client patch 4. A step-0 state has no such guard: a topic's writer cannot know who is
+    about to subscribe. So the handshake stays, for the state and for nodes built before.)
+    Measured: found by the node tests' harness; retrying after 0.2, 0.4, 0.8, ... s instead of
+    2 s brought 64 shared envs' start-up from about 25 s to 11.5 s (load 12). Seen in: rclpy 7.1
+    / Fast DDS 2.14 against RustDDS, Cyclone DDS 11 against RustDDS.
     Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's on
     a fixed line, the recorder's parameter query and the pytest plugin's first answer of a
     controller (a controller that is still discovering the node misses its first tick the same
@@ -67,8 +71,8 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     happened: ``bag.check.closed_loop`` (a reset whose first tick got no answer; a fresh node first when
     the reset had no seed) and the tests' harness (tests/python/line_client.py: a reset that
     /diagnostics shows did not happen; bag_golden.py: a golden recording's reset nobody answered).
-    Delete when: a service client can tell that the server matched its reply reader, and no test
-    sees a lost first reply.
+    Delete when: the first state of a reset is proven to arrive (a reader-side handshake of the
+    node's own, or a durable step-0 state), and no test sees a lost first reply or state.
 
 ``orphaned_processes`` -- what a process starts is not told when it dies.
     Defect: Linux leaves a dead process's children running, a SIGKILLed Python runs no cleanup,

@@ -3,6 +3,7 @@
 //! as long as it serves.
 
 use std::rc::Rc;
+use std::time::Duration;
 
 use futures::stream::{self, Stream};
 use ros2_client::{
@@ -12,6 +13,7 @@ use ros2_client::{
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
+use super::log::log;
 use crate::ros::messages::Typed;
 use crate::ros::qos::default_profile;
 
@@ -75,6 +77,47 @@ where
         let received = server.async_receive_request().await;
         Some((received, server))
     })
+}
+
+/// How long a reply waits for its client's reply reader to be matched (see [`respond`]).
+pub(super) const REPLY_READER_WAIT: Duration = Duration::from_secs(2);
+
+/// Sends `response` to the request `id` of `service`, once `server` has matched a reader of the
+/// participant that sent the request, i.e. the client's reply reader: right after discovery the
+/// node can match a client's request writer before its reply reader, and a reply sent then is
+/// lost for good (the reply writer is volatile; a Cyclone DDS client saw the reset happen and no
+/// reply come, 1 run in 10 beside two CPU hogs). Waits at most [`REPLY_READER_WAIT`], then sends
+/// anyway and says so. The node's other inputs wait meanwhile; a reply reader that exists is
+/// matched within milliseconds, and one that is already matched costs nothing.
+pub(super) async fn respond<Req, Resp>(
+    server: &ServiceServer<Req, Resp>,
+    service: &str,
+    id: RmwRequestId,
+    response: Resp,
+) -> Result<(), String>
+where
+    Req: Message + 'static,
+    Resp: Message + Serialize + 'static,
+{
+    let matched = async {
+        server.async_wait_for_requester(id).await;
+        true
+    };
+    let late = async {
+        smol::Timer::after(REPLY_READER_WAIT).await;
+        false
+    };
+    if !smol::future::or(matched, late).await {
+        log(
+            "WARN",
+            format!(
+                "{service}: the requester's reply reader was not matched within {} s; replying anyway, \
+                 the reply may not arrive",
+                REPLY_READER_WAIT.as_secs_f64()
+            ),
+        );
+    }
+    server.async_send_response(id, response).await.map_err(|e| format!("{e:?}"))
 }
 
 /// The messages of a subscription, from a stream that owns it: the subscription leaves the graph

@@ -9,7 +9,7 @@ use std::rc::Rc;
 use futures::stream::StreamExt;
 use ros2_client::{MessageInfo, Node, Publisher, RmwRequestId, Server as ServiceServer};
 
-use super::endpoints::{messages, publisher, requests, service, subscription};
+use super::endpoints::{messages, publisher, requests, respond, service, subscription};
 use super::events::{client_of, Event, Input};
 use super::graph::Graph;
 use super::line_messages;
@@ -181,8 +181,8 @@ impl LineSet {
                 ResetLinesResponse { success: false, message, states: self.states() }
             }
         };
-        if let Err(error) = self.batch_reset.async_send_response(id, response).await {
-            log("WARN", format!("batch/reset: cannot send the response: {error:?}"));
+        if let Err(error) = respond(&self.batch_reset, "batch/reset", id, response).await {
+            log("WARN", format!("batch/reset: cannot send the response: {error}"));
         }
         self.publish_batch_state(graph);
         self.publish_clock(graph);
@@ -193,8 +193,9 @@ impl LineSet {
         let line = &mut self.lines[k];
         let observation = line.reset(graph, request.has_seed.then_some(request.seed));
         let response = line_messages::reset_response(&line.host, observation, request.has_seed);
-        if let Err(error) = line.reset.async_send_response(id, response).await {
-            log("WARN", format!("{}/reset: cannot send the response: {error:?}", line.namespace));
+        let service = format!("{}/reset", line.namespace);
+        if let Err(error) = respond(&line.reset, &service, id, response).await {
+            log("WARN", format!("{service}: cannot send the response: {error}"));
         }
         self.publish_batch_state(graph);
         self.publish_clock(graph);

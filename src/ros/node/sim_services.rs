@@ -9,7 +9,7 @@ use std::time::Duration;
 use futures::stream::{LocalBoxStream, StreamExt};
 use ros2_client::{Node, ReadResult, RmwRequestId, Server as ServiceServer};
 
-use super::endpoints::{requests, service};
+use super::endpoints::{requests, respond, service};
 use super::events::{SimInput, SimRequest};
 use super::log::log;
 use crate::ros::names::Names;
@@ -59,7 +59,7 @@ impl SimulationServers {
 
     /// Answers `request` with `result` (and the state, for GetSimulationState).
     pub(super) async fn reply(&self, id: RmwRequestId, request: SimRequest, result: SimResult, state: SimState) {
-        let err = |e| format!("{e:?}");
+        let name = request.service().name();
         let sent = match request {
             SimRequest::Features => {
                 let features = SimulatorFeatures {
@@ -69,24 +69,18 @@ impl SimulationServers {
                                   PLAYING is realtime at the rate parameter; one step is one tick of every line"
                         .to_string(),
                 };
-                self.features.async_send_response(id, GetSimulatorFeaturesResponse { features }).await.map_err(err)
+                respond(&self.features, name, id, GetSimulatorFeaturesResponse { features }).await
             }
             SimRequest::GetState => {
                 let response = GetSimulationStateResponse { state: SimulationState { state: state.code() }, result };
-                self.get_state.async_send_response(id, response).await.map_err(err)
+                respond(&self.get_state, name, id, response).await
             }
-            SimRequest::SetState(_) => {
-                self.set_state.async_send_response(id, SetSimulationStateResponse { result }).await.map_err(err)
-            }
-            SimRequest::Step(_) => {
-                self.step.async_send_response(id, StepSimulationResponse { result }).await.map_err(err)
-            }
-            SimRequest::Reset(_) => {
-                self.reset.async_send_response(id, ResetSimulationResponse { result }).await.map_err(err)
-            }
+            SimRequest::SetState(_) => respond(&self.set_state, name, id, SetSimulationStateResponse { result }).await,
+            SimRequest::Step(_) => respond(&self.step, name, id, StepSimulationResponse { result }).await,
+            SimRequest::Reset(_) => respond(&self.reset, name, id, ResetSimulationResponse { result }).await,
         };
         if let Err(error) = sent {
-            log("WARN", format!("{}: cannot send the response: {error}", request.service().name()));
+            log("WARN", format!("{name}: cannot send the response: {error}"));
         }
     }
 

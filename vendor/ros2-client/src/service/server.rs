@@ -193,6 +193,17 @@ where
   pub async fn async_wait_for_acknowledgments(&self) -> WriteResult<bool, ()> {
     self.response_sender.async_wait_for_acknowledgments().await.map_err(WriteError::from)
   }
+
+  /// [sorting_line patch] Resolves once the response writer has matched a reader of the
+  /// participant that sent the request `rmw_req_id` (its client's reply reader), at once if it
+  /// has. No timeout: bring your own. Right after discovery a server can match a client's
+  /// request writer before its reply reader, and a reply sent then is lost for good (the
+  /// response writer is volatile); the rmw layers of ROS 2 wait, bounded, the same way before
+  /// they send a response.
+  pub async fn async_wait_for_requester(&self, rmw_req_id: RmwRequestId) {
+    let requester = GUID::from(rmw_req_id.writer_gid);
+    self.response_sender.async_wait_for_reader_of(requester).await
+  }
 }
 
 #[cfg(feature = "mio_06")]

@@ -2031,6 +2031,15 @@ impl Writer {
               );
             }
           }
+          // [sorting_line patch] Tell DataWriter::async_wait_for_reader_of only now, after
+          // the initial HEARTBEAT: a sample written on that news gets a sequence number
+          // beyond this HEARTBEAT's lastSN. Told before, the HEARTBEAT announced the
+          // sample before it was sent, and Cyclone DDS starts a volatile reader after the
+          // lastSN of the first HEARTBEAT it sees: the sample was dropped as old (a reset
+          // reply, seen in Cyclone's trace).
+          self
+            .send_buffer
+            .set_reader_matched(reader_proxy.remote_reader_guid, true);
           info!(
             "Matched new remote reader on topic={:?} reader={:?}",
             self.topic_name(),
@@ -2151,6 +2160,8 @@ impl Writer {
   fn matched_reader_remove(&mut self, guid: GUID) -> Option<RtpsReaderProxy> {
     let removed = self.readers.remove(&guid);
     if let Some(ref removed_reader) = removed {
+      // [sorting_line patch] for DataWriter::async_wait_for_reader_of
+      self.send_buffer.set_reader_matched(guid, false);
       info!(
         "Removed reader proxy. topic={:?} reader={:?}",
         self.topic_name(),

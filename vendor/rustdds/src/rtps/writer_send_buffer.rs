@@ -1,6 +1,6 @@
 use std::{
   cmp::max,
-  collections::BTreeMap,
+  collections::{BTreeMap, BTreeSet},
   sync::{Arc, Condvar, Mutex},
   time::{Duration as StdDuration, Instant},
 };
@@ -11,7 +11,11 @@ use log::{debug, error, trace, warn};
 
 use crate::{
   dds::{ddsdata::DDSData, with_key::datawriter::WriteOptions},
-  structure::{cache_change::CacheChange, guid::GUID, sequence_number::SequenceNumber},
+  structure::{
+    cache_change::CacheChange,
+    guid::{GuidPrefix, GUID},
+    sequence_number::SequenceNumber,
+  },
 };
 
 /// Result of an admission attempt into the [`WriterSendBuffer`].
@@ -73,6 +77,14 @@ struct Inner {
   // Wakers of async producers / ack-waiters parked because the window was full
   // or acknowledgements were still pending. Drained (woken) on any advance.
   wakers: Vec<Waker>,
+
+  // [sorting_line patch] The remote readers the Writer has matched, kept by the
+  // Writer (event loop) as it matches and removes them, so that the DataWriter
+  // side can wait for a given participant's reader (a service reply for a
+  // client whose reply reader is not matched yet would be lost: volatile).
+  matched_readers: BTreeSet<GUID>,
+  // Wakers of tasks waiting for a reader to be matched.
+  match_wakers: Vec<Waker>,
 }
 
 struct Shared {
@@ -131,6 +143,8 @@ impl WriterSendBuffer {
           sent_frontier: SequenceNumber::new(0),
           max_retain: max_retain.max(1),
           wakers: Vec::new(),
+          matched_readers: BTreeSet::new(),
+          match_wakers: Vec::new(),
         }),
         progress: Condvar::new(),
         writer_guid,
@@ -429,6 +443,34 @@ impl WriterSendBuffer {
     let mut inner = self.shared.inner.lock().unwrap();
     register_waker(&mut inner.wakers, waker);
   }
+
+  // --- [sorting_line patch] matched readers ---
+
+  /// The Writer matched (`matched == true`) or removed a remote reader. Wakes
+  /// the tasks waiting for a reader to be matched.
+  pub fn set_reader_matched(&self, reader: GUID, matched: bool) {
+    let mut inner = self.shared.inner.lock().unwrap();
+    if matched {
+      inner.matched_readers.insert(reader);
+      for w in inner.match_wakers.drain(..) {
+        w.wake();
+      }
+    } else {
+      inner.matched_readers.remove(&reader);
+    }
+  }
+
+  /// Whether the Writer has matched a reader of the participant `prefix`.
+  pub fn has_matched_reader_of(&self, prefix: GuidPrefix) -> bool {
+    let inner = self.shared.inner.lock().unwrap();
+    inner.matched_readers.iter().any(|r| r.prefix == prefix)
+  }
+
+  /// Register `waker` to be notified when a reader is matched.
+  pub fn register_match_waker(&self, waker: &Waker) {
+    let mut inner = self.shared.inner.lock().unwrap();
+    register_waker(&mut inner.match_wakers, waker);
+  }
 }
 
 // Avoid storing duplicate wakers for the same task.
@@ -446,7 +488,7 @@ mod tests {
   use crate::{
     dds::{ddsdata::DDSData, with_key::datawriter::WriteOptionsBuilder},
     messages::submessages::elements::serialized_payload::SerializedPayload,
-    structure::guid::GUID,
+    structure::guid::{EntityId, EntityKind, GUID},
     RepresentationIdentifier,
   };
 
@@ -662,5 +704,31 @@ mod tests {
       assert!(admit_now(&buf, WriteOptions::default()));
     }
     assert_eq!(buf.retained_len(), max_retain + 10);
+  }
+
+  // [sorting_line patch] What the Writer matched is what a reply waits for: a
+  // reader of the requester's participant, not of another one, and not once it
+  // is removed.
+  #[test]
+  fn matched_readers_are_known_by_participant() {
+    let buf = WriterSendBuffer::new(
+      GUID::GUID_UNKNOWN,
+      "t".to_string(),
+      /* reliable_writer */ true,
+      /* is_builtin */ false,
+      /* volatile */ true,
+      /* window_limit */ 10,
+      /* backlog_limit */ 10,
+      /* max_retain */ 10,
+    );
+    let client = GuidPrefix::new(&[1; 12]);
+    let other = GuidPrefix::new(&[2; 12]);
+    let reply_reader = GUID::new(client, EntityId::new([0, 0, 1], EntityKind::READER_NO_KEY_USER_DEFINED));
+    assert!(!buf.has_matched_reader_of(client));
+    buf.set_reader_matched(reply_reader, true);
+    assert!(buf.has_matched_reader_of(client));
+    assert!(!buf.has_matched_reader_of(other));
+    buf.set_reader_matched(reply_reader, false);
+    assert!(!buf.has_matched_reader_of(client));
   }
 }

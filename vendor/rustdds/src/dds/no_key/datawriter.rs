@@ -462,6 +462,11 @@ where
   pub async fn async_wait_for_acknowledgments(&self) -> WriteResult<bool, ()> {
     self.keyed_datawriter.async_wait_for_acknowledgments().await
   } // fn
+
+  /// [sorting_line patch] See the keyed `DataWriter::async_wait_for_reader_of`.
+  pub async fn async_wait_for_reader_of(&self, entity: GUID) {
+    self.keyed_datawriter.async_wait_for_reader_of(entity).await
+  }
 } // impl
 
 #[cfg(test)]

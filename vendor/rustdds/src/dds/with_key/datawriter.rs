@@ -28,7 +28,10 @@ use crate::{
   rtps::writer_send_buffer::{Admission, WriterSendBuffer},
   serialization::CDRSerializerAdapter,
   structure::{
-    cache_change::ChangeKind, entity::RTPSEntity, guid::GUID, rpc::SampleIdentity,
+    cache_change::ChangeKind,
+    entity::RTPSEntity,
+    guid::{GuidPrefix, GUID},
+    rpc::SampleIdentity,
     sequence_number::SequenceNumber, time::Timestamp,
   },
   Keyed, TopicDescription,
@@ -997,11 +1000,59 @@ where
   }
 }
 
+// [sorting_line patch] A future that resolves once the writer has matched a
+// reader of a given participant. No timeout here either.
+#[must_use = "futures do nothing unless you `.await` or poll them"]
+pub struct AsyncWaitForReaderOf<'a, D, SA>
+where
+  D: Keyed,
+  SA: SerializerAdapter<D>,
+{
+  writer: &'a DataWriter<D, SA>,
+  participant: GuidPrefix,
+}
+
+impl<D, SA> Future for AsyncWaitForReaderOf<'_, D, SA>
+where
+  D: Keyed,
+  SA: SerializerAdapter<D>,
+{
+  type Output = ();
+
+  fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+    let buffer = &self.writer.send_buffer;
+    if buffer.has_matched_reader_of(self.participant) {
+      return Poll::Ready(());
+    }
+    // Register first, then check again: a match between the two is not missed.
+    buffer.register_match_waker(cx.waker());
+    if buffer.has_matched_reader_of(self.participant) {
+      Poll::Ready(())
+    } else {
+      Poll::Pending
+    }
+  }
+}
+
 impl<D, SA> DataWriter<D, SA>
 where
   D: Keyed,
   SA: SerializerAdapter<D>,
 {
+  /// [sorting_line patch] Resolves once this writer has matched a reader of
+  /// the participant of `entity` (any entity's GUID: its prefix names the
+  /// participant), at once if it has. A sample written before a volatile
+  /// writer matches a reader never reaches that reader: a service replying to
+  /// a request waits for the client's reply reader with this, given the
+  /// request's writer. No timeout: bring your own.
+  pub async fn async_wait_for_reader_of(&self, entity: GUID) {
+    AsyncWaitForReaderOf {
+      writer: self,
+      participant: entity.prefix,
+    }
+    .await
+  }
+
   pub async fn async_write(
     &self,
     data: D,
