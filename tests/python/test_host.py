@@ -6,6 +6,7 @@ fail, naming it."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 import threading
 import time
@@ -13,7 +14,7 @@ import time
 import pytest
 
 from sorting_line_gym import BridgeTimeout
-from sorting_line_gym.workarounds.simultaneous_discovery import HANDOVER, joining_graph
+from sorting_line_gym.workarounds.simultaneous_discovery import HANDOVER, join_lock_path, joining_graph
 
 
 @pytest.fixture(autouse=True)
@@ -91,3 +92,24 @@ def test_a_holder_within_a_turn_longer_than_the_waiters_own_is_waited_out():
     finally:
         release.set()
         t.join(timeout=10)
+
+
+def test_a_declaration_left_from_an_earlier_turn_is_not_the_holders():
+    # The fresh-clone failure of 2026-11-29 (run 26): a SubprocVecEnv-16 worker read the lock file
+    # of a holder killed six hours before (the same network namespace inode and domain, reused) in
+    # the moment between the new holder taking the lock and writing its own declaration, and gave up
+    # at once, "21335 s past the end of the turn it declared".
+    path = join_lock_path()
+    now = time.clock_gettime(time.CLOCK_MONOTONIC)
+    path.write_text(f"999999 {now - 3600:.3f} {now - 3500:.3f}")  # a dead holder's, over long ago
+    keep = HANDOVER + 1.0
+    with open(path, "a+") as newcomer:  # has the lock, has not declared yet: the window
+        fcntl.flock(newcomer, fcntl.LOCK_EX)
+        release = threading.Timer(keep, fcntl.flock, (newcomer, fcntl.LOCK_UN))
+        release.start()
+        t0 = time.monotonic()
+        with joining_graph(keep + HANDOVER + 5.0):
+            waited = time.monotonic() - t0
+        release.join()
+    assert waited > keep - 0.5, "the waiter got the lock before the holder let go: this test tests nothing"
+    assert path.read_text() == "", "a holder's declaration outlived its turn"

@@ -17,6 +17,7 @@ import fcntl
 import hashlib
 import os
 import time
+from pathlib import Path
 
 from ..line.errors import BridgeTimeout
 from ..line.host import host_state_directory, network_namespace
@@ -32,6 +33,12 @@ def _clock() -> float:
     return time.clock_gettime(time.CLOCK_MONOTONIC)
 
 
+def join_lock_path() -> Path:
+    """This host's lock file for joining the DDS graph of ``ROS_DOMAIN_ID`` in this network namespace."""
+    digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
+    return host_state_directory() / f"join-{digest}.lock"
+
+
 @contextlib.contextmanager
 def joining_graph(turn: float):
     """Holds this host's lock for joining the DDS graph of ``ROS_DOMAIN_ID`` (per network
@@ -44,9 +51,14 @@ def joining_graph(turn: float):
     waiter never judges a holder by its own bound: another bank may have longer timeouts, and
     a slow start on a busy machine is a long turn, not a hang. The whole queue may take longer
     than any turn: 16 workers joining one after the other at 1-2 s each must not time out for
-    waiting their turn. A holder that dies frees the lock at once (flock)."""
-    digest = hashlib.sha1(f"{network_namespace()}|{os.environ.get('ROS_DOMAIN_ID', '0')}".encode()).hexdigest()[:12]
-    path = host_state_directory() / f"join-{digest}.lock"
+    waiting their turn. A holder that dies frees the lock at once (flock).
+
+    A holder clears its declaration before it lets go. A declaration already over when a waiter
+    first reads it is a leftover, not the holder's: one killed in its turn leaves its own in the
+    file, and the next holder has the lock a moment before it writes its own (a fresh-clone run's
+    SubprocVecEnv-16 worker read a six-hour-old declaration there and gave up at once). The
+    waiter then gives the holder its own ``turn``, the one bound it knows."""
+    path = join_lock_path()
     with open(path, "a+") as f:
         seen, since, end = None, 0.0, 0.0  # set at the first look: the file never reads None
         while True:
@@ -58,6 +70,8 @@ def joining_graph(turn: float):
                 current = os.pread(f.fileno(), 64, 0)  # "pid start end", as the holder wrote it
                 if current != seen:  # the lock changed hands: the queue moves
                     seen, (since, end) = current, _declared_turn(current, default=(now, now + turn))
+                    if now > end + HANDOVER:  # a leftover (see above): not the holder's turn
+                        since, end = now, now + turn
                 elif now > end + HANDOVER:
                     pid = current.decode(errors="replace").split(" ")[0] or "?"
                     raise BridgeTimeout(
@@ -74,6 +88,7 @@ def joining_graph(turn: float):
             f.flush()
             yield
         finally:
+            f.truncate(0)  # no declaration outlives its turn
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
