@@ -87,27 +87,19 @@ pub(super) const REPLY_READER_WAIT: Duration = Duration::from_secs(2);
 /// node can match a client's request writer before its reply reader, and a reply sent then is
 /// lost for good (the reply writer is volatile; a Cyclone DDS client saw the reset happen and no
 /// reply come, 1 run in 10 beside two CPU hogs). Waits at most [`REPLY_READER_WAIT`], then sends
-/// anyway and says so. The node's other inputs wait meanwhile; a reply reader that exists is
-/// matched within milliseconds, and one that is already matched costs nothing.
+/// anyway and says so; a reply that cannot be sent is logged too. The node's other inputs wait
+/// meanwhile; a reply reader that exists is matched within milliseconds, and one that is already
+/// matched costs nothing.
 pub(super) async fn respond<Req, Resp>(
     server: &ServiceServer<Req, Resp>,
     service: &str,
     id: RmwRequestId,
     response: Resp,
-) -> Result<(), String>
-where
+) where
     Req: Message + 'static,
     Resp: Message + Serialize + 'static,
 {
-    let matched = async {
-        server.async_wait_for_requester(id).await;
-        true
-    };
-    let late = async {
-        smol::Timer::after(REPLY_READER_WAIT).await;
-        false
-    };
-    if !smol::future::or(matched, late).await {
+    if within(REPLY_READER_WAIT, server.async_wait_for_requester(id)).await.is_none() {
         log(
             "WARN",
             format!(
@@ -117,7 +109,18 @@ where
             ),
         );
     }
-    server.async_send_response(id, response).await.map_err(|e| format!("{e:?}"))
+    if let Err(error) = server.async_send_response(id, response).await {
+        log("WARN", format!("{service}: cannot send the response: {error:?}"));
+    }
+}
+
+/// `future`'s output, or `None` if it takes longer than `limit`.
+pub(super) async fn within<T>(limit: Duration, future: impl std::future::Future<Output = T>) -> Option<T> {
+    let late = async {
+        smol::Timer::after(limit).await;
+        None
+    };
+    smol::future::or(async { Some(future.await) }, late).await
 }
 
 /// The messages of a subscription, from a stream that owns it: the subscription leaves the graph

@@ -14,7 +14,6 @@ use super::events::{client_of, Event, Input};
 use super::graph::Graph;
 use super::line_messages;
 use super::lines::{Line, Refusal};
-use super::log::log;
 use crate::ros::messages::{batch_reset_service_type, Clock, LineCommands, LineStates, ResetLineRequest};
 use crate::ros::messages::{ResetLinesRequest, ResetLinesResponse, Time};
 use crate::ros::names::Names;
@@ -181,9 +180,7 @@ impl LineSet {
                 ResetLinesResponse { success: false, message, states: self.states() }
             }
         };
-        if let Err(error) = respond(&self.batch_reset, "batch/reset", id, response).await {
-            log("WARN", format!("batch/reset: cannot send the response: {error}"));
-        }
+        respond(&self.batch_reset, "batch/reset", id, response).await;
         self.publish_batch_state(graph);
         self.publish_clock(graph);
     }
@@ -193,10 +190,7 @@ impl LineSet {
         let line = &mut self.lines[k];
         let observation = line.reset(graph, request.has_seed.then_some(request.seed));
         let response = line_messages::reset_response(&line.host, observation, request.has_seed);
-        let service = format!("{}/reset", line.namespace);
-        if let Err(error) = respond(&line.reset, &service, id, response).await {
-            log("WARN", format!("{service}: cannot send the response: {error}"));
-        }
+        respond(&line.reset, &format!("{}/reset", line.namespace), id, response).await;
         self.publish_batch_state(graph);
         self.publish_clock(graph);
     }

@@ -9,9 +9,8 @@ use std::time::Duration;
 use futures::stream::{LocalBoxStream, StreamExt};
 use ros2_client::{Node, ReadResult, RmwRequestId, Server as ServiceServer};
 
-use super::endpoints::{requests, respond, service};
+use super::endpoints::{requests, respond, service, within};
 use super::events::{SimInput, SimRequest};
-use super::log::log;
 use crate::ros::names::Names;
 use crate::ros::simulation::{self, code, SimState};
 use crate::ros::simulation_interfaces::*;
@@ -60,7 +59,7 @@ impl SimulationServers {
     /// Answers `request` with `result` (and the state, for GetSimulationState).
     pub(super) async fn reply(&self, id: RmwRequestId, request: SimRequest, result: SimResult, state: SimState) {
         let name = request.service().name();
-        let sent = match request {
+        match request {
             SimRequest::Features => {
                 let features = SimulatorFeatures {
                     features: simulation::features(),
@@ -78,22 +77,16 @@ impl SimulationServers {
             SimRequest::SetState(_) => respond(&self.set_state, name, id, SetSimulationStateResponse { result }).await,
             SimRequest::Step(_) => respond(&self.step, name, id, StepSimulationResponse { result }).await,
             SimRequest::Reset(_) => respond(&self.reset, name, id, ResetSimulationResponse { result }).await,
-        };
-        if let Err(error) = sent {
-            log("WARN", format!("{name}: cannot send the response: {error}"));
         }
     }
 
     /// Waits until every reader of SetSimulationState replies has acknowledged the replies sent,
-    /// at most `within`; says why it gave up. For a node about to leave the graph: DDS repeats a
+    /// at most `limit`; says why it gave up. For a node about to leave the graph: DDS repeats a
     /// lost sample only while its writer lives, so a reply in flight is lost with the participant.
-    pub(super) async fn set_state_delivered(&self, within: Duration) -> Result<(), String> {
-        let acknowledged =
-            async { self.set_state.async_wait_for_acknowledgments().await.map(|_| ()).map_err(|e| format!("{e:?}")) };
-        let late = async {
-            smol::Timer::after(within).await;
-            Err(format!("not acknowledged within {} s", within.as_secs_f64()))
-        };
-        smol::future::or(acknowledged, late).await
+    pub(super) async fn set_state_delivered(&self, limit: Duration) -> Result<(), String> {
+        match within(limit, self.set_state.async_wait_for_acknowledgments()).await {
+            Some(acknowledged) => acknowledged.map(|_| ()).map_err(|e| format!("{e:?}")),
+            None => Err(format!("not acknowledged within {} s", limit.as_secs_f64())),
+        }
     }
 }
