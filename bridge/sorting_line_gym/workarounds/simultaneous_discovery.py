@@ -69,9 +69,7 @@ def joining_graph(turn: float):
                 now = _clock()
                 current = os.pread(f.fileno(), 64, 0)  # "pid start end", as the holder wrote it
                 if current != seen:  # the lock changed hands: the queue moves
-                    seen, (since, end) = current, _declared_turn(current, default=(now, now + turn))
-                    if now > end + HANDOVER:  # a leftover (see above): not the holder's turn
-                        since, end = now, now + turn
+                    seen, (since, end) = current, _holders_turn(current, now, turn)
                 elif now > end + HANDOVER:
                     pid = current.decode(errors="replace").split(" ")[0] or "?"
                     raise BridgeTimeout(
@@ -92,11 +90,14 @@ def joining_graph(turn: float):
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-def _declared_turn(declaration: bytes, default: tuple[float, float]) -> tuple[float, float]:
-    """The start and end of its turn that a holder wrote; ``default`` while it has not written
-    them yet (the file is empty between its truncate and its write)."""
+def _holders_turn(declaration: bytes, now: float, turn: float) -> tuple[float, float]:
+    """The start and end of the turn the holder wrote, as a waiter reading it at ``now`` first
+    sees it; ``(now, now + turn)``, the waiter's own bound, when the file has nothing of the
+    holder's to go by: empty (between the holder's truncate and its write) or a declaration
+    already over (``HANDOVER`` included), a leftover of a holder killed in its turn."""
     try:
         _pid, start, end = declaration.split()
-        return float(start), float(end)
+        declared = float(start), float(end)
     except ValueError:
-        return default
+        return now, now + turn
+    return declared if now <= declared[1] + HANDOVER else (now, now + turn)
