@@ -60,8 +60,9 @@ def summarize(
 ) -> dict[Key, dict[str, Any]]:
     """Per (setup, variant, agent). On the paper's seeds 42..51: the mean over training seeds of
     each model's mean, with the std across training seeds (the per-episode std for one run). On
-    the held-out seeds: mean, IQM and their stratified bootstrap intervals over runs x episodes,
-    and the gap to the oracle of the same seeds."""
+    the held-out seeds: mean and IQM over runs x episodes with their bootstrap intervals over
+    whole runs, each run's mean (``per_seed``: one per training seed), and the gap to the oracle of
+    the same seeds."""
     rows = {}
     for key, rs in _group(records).items():
         evals = [r["evaluation"] for r in rs]
@@ -154,14 +155,15 @@ def normalized_runs(
 
 
 def aggregates(normalized: dict[str, dict[tuple[str, str], np.ndarray]]) -> dict[str, dict[str, Any]]:
-    """Per agent: IQM and mean over the lines of the normalized score, stratified by line."""
+    """Per agent: IQM and mean over runs x lines of the normalized score, the interval over whole
+    runs stratified by line (each line's runs drawn from that line's)."""
     found = {}
     for agent, lines in normalized.items():
         strata = list(lines.values())
         found[agent] = {
             "lines": len(strata),
-            "iqm": stats.stratified_bootstrap(strata, lambda x: stats.iqm(x, axis=-1)).as_dict(),
-            "mean": stats.stratified_bootstrap(strata, lambda x: np.mean(x, axis=-1)).as_dict(),
+            "iqm": stats.iqm_interval_over_lines(strata).as_dict(),
+            "mean": stats.mean_interval_over_lines(strata).as_dict(),
         }
     return found
 
@@ -173,8 +175,8 @@ def _updates_per_transition(agent: str, records: list[dict[str, Any]]) -> float:
 
 def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, Any]]:
     """Where one agent on one line was trained on one line and on N lines (same budget, per
-    mapping): their IQM intervals and P(N lines > 1 line); they agree when the IQM intervals
-    overlap."""
+    mapping): their IQM intervals, P(N lines > 1 line) and each side's runs (held-out mean per
+    run); they agree when the IQM intervals overlap."""
     by_lines: dict[tuple[str, str, str], dict[tuple[int, str], list[dict[str, Any]]]] = {}
     for r in records:
         c = r["cell"]
@@ -203,6 +205,7 @@ def agreement(records: list[dict[str, Any]], timesteps: int) -> list[dict[str, A
                     "iqm_1": iqm_one.as_dict(),
                     "iqm_n": iqm_many.as_dict(),
                     "poi_n_over_1": stats.probability_of_improvement_interval(many, one).as_dict(),
+                    "per_run": [one.mean(axis=1).tolist(), many.mean(axis=1).tolist()],
                     "agree": iqm_one.overlaps(iqm_many),
                     "gradient_steps_per_transition": [
                         _updates_per_transition(agent, ones[0]),

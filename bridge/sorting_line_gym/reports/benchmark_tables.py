@@ -53,8 +53,9 @@ def _table_note(timesteps: int, heldout: Heldout) -> str:
         "\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10"
         " episodes of 50 steps, deterministic policy), mean +- population std over the episodes, or for RL with several"
         f" runs the mean over runs +- the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean"
-        " and IQM over runs x episodes, the IQM's 95% stratified bootstrap interval resamples the runs within each"
-        " evaluation seed (one run: exact); gap to oracle = mean over runs x seeds of `sorting_line oracle` - agent. RL"
+        " and IQM over runs x episodes, the IQM's 95% bootstrap interval resamples whole runs (a run's scores on"
+        " all held-out seeds together; one run: exact); each run's held-out mean is drawn in `runs.png`; gap to"
+        " oracle = mean over runs x seeds of `sorting_line oracle` - agent. RL"
         f" agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random,"
         " rba-hold or oracle rows, and its RBA figures are not what the reference implementation's code gives on the"
         " same protocol (last column). Bold: our best agent on seeds 42..51."
@@ -105,7 +106,7 @@ def _improvement_markdown(poi) -> list[str]:
     return out + [
         "",
         "P(X > Y): the chance that a run of X beats rba-hold on a held-out seed, averaged over the seeds (ties half);"
-        " 0.5 = no difference. Interval: runs resampled within each seed.",
+        " 0.5 = no difference. Interval: whole runs of the agent resampled (rba-hold is one deterministic run).",
         "",
     ]
 
@@ -124,7 +125,7 @@ def _aggregate_markdown(aggregate) -> list[str]:
     return out + [
         "",
         "Per run and line: (held-out mean reward - random's) / (oracle's - random's); IQM over runs x lines,"
-        " interval by the bootstrap stratified by line.",
+        " interval: whole runs resampled within each line (the bootstrap stratified by line).",
         "",
     ]
 
@@ -149,7 +150,8 @@ def _agreement_markdown(checks: list[dict[str, Any]]) -> list[str]:
         )
     out += [
         "",
-        "Agree: the two IQM intervals overlap. Mapping: how the one-line hyperparameters go to N lines"
+        "Agree: the two IQM intervals overlap (each over whole runs; the runs are drawn in `runs.png`)."
+        " Mapping: how the one-line hyperparameters go to N lines"
         " (`training/hyperparams.py`).",
         "",
         "### Per algorithm",

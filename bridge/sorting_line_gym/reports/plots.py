@@ -8,6 +8,10 @@
   in black; reward against accuracy per speed; the expected-reward heat map with the best speed
   per occupancy marked.
 
+- :func:`strip_figure`: strip plots, each row one cell's runs (a dot per run) beside its interval,
+  so a reader sees how the runs spread, not only the summary; :func:`runs_figure` draws the
+  benchmark's (per line and agent, and the --n-envs check), the transfer study draws its own.
+
 Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths. Figures are drawn on their
 own ``Figure`` and Agg canvas (as ``render`` does), never through pyplot: importing this module
 leaves the caller's matplotlib backend and open windows alone.
@@ -18,6 +22,8 @@ from __future__ import annotations
 import csv
 import io
 import subprocess
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -257,3 +263,97 @@ def aggregate_figure(
     right.grid(alpha=0.3)
     right.legend(fontsize=8)
     return _save(fig, stem)
+
+
+@dataclass(frozen=True)
+class Strip:
+    """One row of a strip plot: one value per run of a cell, and the cell's interval (None: none)."""
+
+    label: str
+    runs: Sequence[float]
+    interval: dict[str, float] | None = None
+    color: str = "#444444"
+
+
+@dataclass(frozen=True)
+class StripPanel:
+    """A panel of strips, with reference values (label, value) drawn as vertical lines."""
+
+    title: str
+    strips: Sequence[Strip]
+    references: Sequence[tuple[str, float]] = ()
+
+
+def _draw_strips(ax, panel: StripPanel) -> None:
+    for i, strip in enumerate(panel.strips):
+        if strip.interval is not None:
+            lo, hi = strip.interval["low"], strip.interval["high"]
+            ax.plot([lo, hi], [i, i], color=strip.color, linewidth=8, alpha=0.3, solid_capstyle="butt")
+            ax.plot(strip.interval["point"], i, "|", color=strip.color, markersize=12, markeredgewidth=2)
+        runs = np.asarray(strip.runs, dtype=float)
+        # Spread the dots over the row by rank (no random jitter: a redrawn report is the same).
+        offsets = np.linspace(-0.22, 0.22, len(runs)) if len(runs) > 1 else np.zeros(len(runs))
+        order = np.argsort(runs, kind="stable")
+        marker = "D" if len(runs) == 1 else "o"
+        ax.scatter(runs[order], i + offsets, s=16, marker=marker, color=strip.color, edgecolors="black", lw=0.4)
+    for (label, value), style in zip(panel.references, ("--", ":", "-."), strict=False):
+        ax.axvline(value, color="black", linestyle=style, linewidth=1, label=f"{label} {value:.2f}")
+    if panel.references:
+        ax.legend(fontsize=6, loc="best")
+    ax.set_yticks(range(len(panel.strips)), [s.label for s in panel.strips], fontsize=8)
+    ax.set_ylim(-0.7, len(panel.strips) - 0.3)
+    ax.invert_yaxis()
+    ax.set_title(panel.title, fontsize=9)
+    ax.grid(axis="x", alpha=0.3)
+
+
+def strip_figure(panels: Sequence[StripPanel], stem: Path, xlabel: str, columns: int = 4) -> list[Path]:
+    """One panel per entry of ``panels``, up to ``columns`` a row: each strip's runs as dots (a
+    diamond for a single run) over its interval (bar) and point (tick); nothing when no panels."""
+    panels = [p for p in panels if p.strips]
+    if not panels:
+        return []
+    columns = min(columns, len(panels))
+    rows = (len(panels) + columns - 1) // columns
+    height = max(len(p.strips) for p in panels)
+    fig = _figure(figsize=(max(6.5, 3.8 * columns), (0.9 + 0.32 * height) * rows + 0.5))
+    axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
+    for ax, panel in zip(axes, panels, strict=False):
+        _draw_strips(ax, panel)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    fig.supxlabel(xlabel, fontsize=9)
+    return _save(fig, stem)
+
+
+def runs_figure(
+    rows: dict[tuple[str, str, str], dict[str, Any]], checks: Sequence[dict[str, Any]], stem: Path
+) -> list[Path]:
+    """The benchmark's runs: per line, each agent's runs (held-out mean per training seed) over its
+    IQM interval, the oracle's mean as a line; then per --n-envs check, one line's runs against N
+    lines'."""
+    panels = []
+    for setup in SETUPS:
+        for variant in VARIANTS:
+            held = {
+                a: rows[(setup, variant, a)]["heldout"]
+                for a in AGENT_COLORS
+                if "heldout" in rows.get((setup, variant, a), {})
+            }
+            strips = [Strip(a, h["per_seed"], h["iqm"], AGENT_COLORS[a]) for a, h in held.items()]
+            oracle = rows.get((setup, variant, "oracle"))
+            refs = [("oracle", oracle["heldout"]["mean"]["point"])] if oracle else []
+            panels.append(StripPanel(_line_label(setup, variant), strips, refs))
+    for c in checks:
+        color = AGENT_COLORS[c["agent"]]
+        strips = [
+            Strip("1 line", c["per_run"][0], c["iqm_1"], color),
+            Strip(f"{c['n_envs']} lines", c["per_run"][1], c["iqm_n"], color),
+        ]
+        title = f"{_line_label(c['setup'], c['variant'])}, {c['agent']}: --n-envs ({c['mapping']})"
+        panels.append(StripPanel(title, strips))
+    return strip_figure(
+        panels,
+        stem,
+        "held-out episode reward: a dot per run (its mean over the seeds), tick: IQM, bar: its 95% CI over runs",
+    )

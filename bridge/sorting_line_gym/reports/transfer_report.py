@@ -5,9 +5,10 @@ Statistics are the benchmark's (``reports.stats``, rliable's method): a *run* is
 the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
 
 - each strategy's final score after the change: IQM over runs x evaluation seeds with its 95 %
-  stratified bootstrap interval (runs resampled within each evaluation seed);
+  bootstrap interval over whole runs (a run's scores on all evaluation seeds drawn together), and
+  each run's mean (``per_run``), which :func:`runs_plot` draws beside the interval;
 - the probability of improvement between strategies, and of each strategy over rba-hold, with
-  its interval;
+  its interval (each strategy's runs drawn whole, the two sides independently);
 - steps to recover: training steps after the change (for "from scratch": from its start) until
   the 10-episode moving mean of the training rewards first reaches 90 % of the from-scratch final
   score (its IQM over runs x seeds); a run that never does counts as its whole budget (so the
@@ -113,6 +114,7 @@ def algo_summary(records: list[dict], scenario: str, algo: str, key: dict[str, A
         if s.size:
             strategies[strategy] = {
                 "runs": s.shape[0],
+                "per_run": s.mean(axis=1).tolist(),
                 "iqm": stats.iqm_interval(s).as_dict(),
                 "mean": stats.mean_interval(s).as_dict(),
             }
@@ -278,3 +280,30 @@ def plot(records: list[dict], summary: dict[str, Any], key: dict[str, Any], stem
     fig.savefig(written[0], dpi=110)
     fig.savefig(written[1])
     return written
+
+
+def runs_plot(summary: dict[str, Any], stem: Path) -> list[Path]:
+    """Each strategy's runs (a dot per training seed: its mean over the evaluation seeds) over its
+    IQM interval, one panel per scenario and algorithm, rba-hold and the oracle after the change
+    as lines; ``stem``.png and .svg (nothing when no strategy has runs)."""
+    from .plots import Strip, StripPanel, strip_figure
+
+    colours = {"continued": "tab:blue", "frozen": "tab:gray", "scratch": "tab:orange"}
+    labels = {"continued": "(a) continued", "frozen": "(b) frozen", "scratch": "(c) from scratch"}
+    panels = []
+    for scenario, s in summary.items():
+        after = (s["baselines"] or {}).get("after", {})
+        refs = [(agent, after[agent]) for agent in ("rba-hold", "oracle") if agent in after]
+        for algo, a in s["algos"].items():
+            strips = [
+                Strip(labels[name], st["per_run"], st["iqm"], colours[name])
+                for name, st in a["strategies"].items()
+                if "per_run" in st
+            ]
+            panels.append(StripPanel(f"{scenario}, {algo}: final score after the change", strips, refs))
+    return strip_figure(
+        panels,
+        stem,
+        "reward after the change: a dot per run (its mean over the seeds), tick: IQM, bar: its 95% CI over runs",
+        columns=2,
+    )

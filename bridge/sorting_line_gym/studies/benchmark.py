@@ -17,10 +17,11 @@ Beside each agent: ``sorting_line oracle`` on the same seeds (the clairvoyant op
 and the gap to it.
 
 Statistics (``reports.benchmark_summary`` with ``reports.stats``, rliable's method on scipy): per
-cell the mean, the IQM over training seeds x held-out episodes with its 95 % stratified bootstrap
-interval (training seeds resampled within each evaluation seed), the probability that each RL agent
-beats rba-hold per line, and per agent the IQM over the 8 lines of the score normalized between the random agent
-(0) and the oracle (1). Where cells of one agent on one line exist on one line and on N lines (in
+cell the mean, the IQM over training seeds x held-out episodes with its 95 % bootstrap interval
+over whole runs (a training seed's scores on all held-out seeds drawn together), the probability
+that each RL agent beats rba-hold per line (same bootstrap), and per agent the IQM over the 8 lines
+of the score normalized between the random agent (0) and the oracle (1), its runs drawn within
+each line. Where cells of one agent on one line exist on one line and on N lines (in
 the same ``--out``; ``--check-n-envs`` trains the one-line cells of DQN, PPO and A2C on B advanced
 and D basic), the report checks that they agree, per line and per algorithm (a verdict needs at
 least 5 training seeds a side), with each side's gradient steps per transition.
@@ -31,7 +32,8 @@ interrupted run picks up where it stopped: a rerun skips cells already done with
 writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Table 1 and the
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
 ``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
-and interval per line and agent), ``aggregate`` (aggregate IQM and performance profiles) and the
+and interval per line and agent), ``runs`` (each cell's runs, a dot per training seed, beside its
+interval; and the --n-envs check's), ``aggregate`` (aggregate IQM and performance profiles) and the
 seed-42 dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
 Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
 cells that finished are kept.
@@ -220,7 +222,7 @@ def write_report(
 ) -> list[Path]:
     """Table 1 (``table.md``, ``table.json``) and the figures from the cells' ``records``, with the
     oracle on the same seeds (held-out: by default the benchmark's)."""
-    from ..reports.plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure
+    from ..reports.plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure, runs_figure
 
     heldout = heldout or Heldout()
 
@@ -256,6 +258,7 @@ def write_report(
     written = [table, out / "table.json"]
     written += benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
     written += interval_figure(rows, out / "intervals")
+    written += runs_figure(rows, checks, out / "runs")
     if aggregate:
         written += aggregate_figure(aggregate, normalized, out / "aggregate")
     written += analysis_figure(out / "figure3")

@@ -21,7 +21,8 @@ command skips the finished cells and goes on, and a run with other result-changi
 schedules) into the same `--out` is refused. `--max-cells N` stops after N cells (to split a study
 into sittings); Ctrl-C keeps the finished cells. A progress bar (plain lines when stderr is not a
 terminal) projects the end time.
-Writes `transfer.json` (the statistics), `transfer.md` (the tables) and `transfer.png`/`.svg`.
+Writes `transfer.json` (the statistics), `transfer.md` (the tables), `transfer.png`/`.svg` (training
+curves around the change) and `transfer_runs.png`/`.svg` (each strategy's runs beside its interval).
 """
 
 from __future__ import annotations
@@ -173,6 +174,7 @@ def report(args, key: dict, done: dict[str, dict]) -> str:
     text = transfer_report.markdown(summary, key)
     (args.out / "transfer.md").write_text(text)
     transfer_report.plot(records, summary, key, args.out / "transfer")
+    transfer_report.runs_plot(summary, args.out / "transfer_runs")
     return text
 
 
