@@ -1,0 +1,14 @@
+"""The batched trainer (issue 54): S independent seeds of one SB3 algorithm trained at once in one
+process, on S x L native lines stepped in one call, with the S networks evaluated and updated as
+one batched computation. Each seed stays a run of its own (its initial weights, RNG, optimizer
+state, gradient clipping and episode bookkeeping), and every mirrored piece names the SB3 code it
+is held to, so that a seed's update equals SB3's for that seed.
+
+One concept per module; the base of all learners is ``stacked`` (S networks as stacked weights
+over a leading seed axis, the per-seed gradient clip, the optimizer and its state per seed).
+
+This package sits below ``training`` in docs/layout.md's layers (``training/batched``): it may
+use ``envs``, ``agents`` and ``line`` but not ``training``'s modules (``train`` imports it, not
+the other way). Importing the package loads nothing heavy; torch and SB3 load with the modules
+that need them.
+"""
