@@ -326,7 +326,14 @@ def test_benchmark_resumes_and_draws_its_figures(tmp_path, capsys):
     aggregate = report["aggregate_normalized"]
     assert aggregate["random"]["iqm"]["point"] == pytest.approx(0.0, abs=1e-12)
     assert 0.5 < aggregate["rba-hold"]["iqm"]["point"] < 1.0
-    for name in ("figure7.png", "figure3.png", "intervals.png", "aggregate.png", "dashboards/B_advanced_rba-hold.png"):
+    for name in (
+        "figure7.png",
+        "figure3.png",
+        "intervals.png",
+        "runs.png",
+        "aggregate.png",
+        "dashboards/B_advanced_rba-hold.png",
+    ):
         assert_real_image(out / name)
     assert (out / "figure7.svg").stat().st_size > 10_000
     assert benchmark.main(argv) == 0
@@ -363,6 +370,9 @@ def test_benchmark_statistics_over_training_seeds_and_lines(tmp_path, capsys):
         [2, 2],
     )
     assert check["mapping"] == "same-rollout" and check["gradient_steps_per_transition"] == [0.25, 0.25]
+    # Each side's runs, drawn beside the intervals in runs.png: one held-out mean per training seed.
+    assert [len(side) for side in check["per_run"]] == [2, 2] and row["heldout"]["per_seed"] != []
+    assert (out / "runs.png").is_file()
     (verdict,) = report["n_envs_agreement_by_algorithm"]
     assert (verdict["agent"], verdict["lines"], verdict["verdict"]) == (
         "dqn",
