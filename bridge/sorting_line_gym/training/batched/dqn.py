@@ -1,0 +1,611 @@
+"""Batched DQN: S independent seeds of Stable-Baselines3's DQN trained at once in one process, on
+S x L native lines stepped in one call (``envs.native.NativeLines``), each seed held to SB3 step for
+step.
+
+    engine = BatchedDQN([42, 43, 44], setup="B", variant="advanced", gamma=0.95)  # the paper's DQN
+    engine.learn(100_000)
+    paths = engine.save("models")  # dqn_B_advanced_seed42.zip ...: DQN.load opens each
+
+Seed s is the run ``DQN("MlpPolicy", env, seed=s, **hyperparameters).learn(n)`` on the VecEnv of
+``sorting-line-train --backend native`` (L lines, line k seeded s + k): its initial weights are
+that model's (built with seed=s, so torch's default init of SB3's QNetwork); its np.random global
+generator is a ``RandomState(s)`` of its own, drawn by the same calls in the same order (the
+epsilon-greedy coin of ``DQN.predict``, the replay indices of ``ReplayBuffer.sample``); its action
+space is seeded s as SB3 seeds it; it has its own replay buffer, Adam moments and gradient clip.
+The seeds share only the arithmetic: their networks are stacked over a leading seed axis and
+evaluated and updated by batched matmuls, the loss of the batch being the sum of the seeds' own
+losses (so each seed's gradient is its own). Every piece below names the SB3 code it mirrors.
+
+Each seed is saved as the SB3 ``.zip`` SB3 would write (the per-seed model with the trained
+weights, optimizer state and counters, ``model.save``), and ``BatchedDQN.from_models`` starts
+from saved SB3 DQN files to continue training them. Options the engine does not implement fail
+at construction, by name (:func:`check_hyperparameters`).
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import random
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.utils import polyak_update, update_learning_rate
+from stable_baselines3.common.vec_env import DummyVecEnv
+from torch import nn
+from torch.nn import functional as F
+
+from ...envs.env import action_space, observation_space
+from ...envs.native import NativeLines
+from ...line.options import LineOptions
+from ...line.vocabulary import check_setup, check_variant
+from .replay import BatchedReplayBuffer, ReplaySamples
+from .stacked import (
+    StackedSequential,
+    clip_grad_norm_per_seed,
+    optimizer_state_from_seeds,
+    optimizer_state_to_seeds,
+    parameter_pairs,
+    stacked_optimizer,
+)
+
+#: DQN's constructor arguments and SB3's defaults (DQN.__init__).
+SB3_DEFAULTS = {
+    name: p.default
+    for name, p in inspect.signature(DQN.__init__).parameters.items()
+    if p.default is not inspect.Parameter.empty
+}
+#: Arguments the engine sets itself: the seeds are the engine's, the device is the CPU.
+ENGINE_OWNED = ("policy", "env", "seed", "_init_setup_model")
+#: Keys of policy_kwargs the engine implements (DQNPolicy.__init__), and of Adam's optimizer_kwargs
+#: (elementwise, so one Adam over the stacked weights is each seed's own Adam).
+POLICY_KEYS = ("net_arch", "activation_fn", "optimizer_class", "optimizer_kwargs", "normalize_images")
+ADAM_KEYS = ("betas", "eps", "weight_decay", "amsgrad")
+#: Elementwise activations: applied to the stacked activations they act on each seed alone.
+ACTIVATIONS = (nn.ReLU, nn.Tanh, nn.ELU, nn.LeakyReLU, nn.SiLU, nn.GELU)
+
+
+def _refuse(key: str, value: Any, allowed: str) -> ValueError:
+    return ValueError(f"{key} = {value!r} is not implemented by the batched DQN engine: allowed {allowed}")
+
+
+def check_hyperparameters(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """SB3's DQN defaults updated by ``kwargs``, or a ValueError naming the first key or value the
+    engine does not implement (or that is not DQN's)."""
+    for key in kwargs:
+        if key in ENGINE_OWNED:
+            raise ValueError(f"{key} is set by the batched engine (the seeds are its `seeds` argument)")
+        if key not in SB3_DEFAULTS:
+            raise ValueError(f"{key}: not a hyperparameter of DQN (allowed: {', '.join(sorted(SB3_DEFAULTS))})")
+    p = {k: v for k, v in SB3_DEFAULTS.items() if k not in ENGINE_OWNED} | kwargs
+    fixed = {"optimize_memory_usage": False, "n_steps": 1, "tensorboard_log": None, "verbose": 0}
+    for key, value in fixed.items():
+        if p[key] != value:
+            raise _refuse(key, p[key], f"{value!r} (SB3's default)")
+    if p["replay_buffer_class"] not in (None, ReplayBuffer):
+        raise _refuse("replay_buffer_class", p["replay_buffer_class"], "None or ReplayBuffer")
+    extra = set(p["replay_buffer_kwargs"] or {}) - {"handle_timeout_termination"}
+    if extra:
+        raise _refuse("replay_buffer_kwargs", p["replay_buffer_kwargs"], "only handle_timeout_termination")
+    if p["device"] not in ("auto", "cpu"):
+        raise _refuse("device", p["device"], "'auto' or 'cpu' (the engine runs on the CPU)")
+    train_freq = p["train_freq"]
+    if isinstance(train_freq, tuple | list):
+        if len(train_freq) != 2 or train_freq[1] != "step":
+            raise _refuse("train_freq", train_freq, "an integer or (n, 'step'): the seeds step together")
+        train_freq = train_freq[0]
+    integers = {"train_freq": (train_freq, 1), "gradient_steps": (p["gradient_steps"], -1)}
+    integers |= {k: (p[k], low) for k, low in (("buffer_size", 1), ("learning_starts", 0), ("batch_size", 1))}
+    integers |= {k: (p[k], 1) for k in ("target_update_interval", "stats_window_size")}
+    for key, (value, low) in integers.items():
+        if not isinstance(value, int | np.integer) or isinstance(value, bool) or value < low:
+            raise ValueError(f"{key} = {value!r} is not valid: allowed an integer >= {low}")
+    for key in ("tau", "gamma", "exploration_fraction", "exploration_initial_eps", "exploration_final_eps"):
+        if not isinstance(p[key], int | float) or not 0.0 <= p[key] <= 1.0:
+            raise ValueError(f"{key} = {p[key]!r} is not valid: allowed a number in [0, 1]")
+    if not isinstance(p["max_grad_norm"], int | float) or not p["max_grad_norm"] > 0:
+        raise ValueError(f"max_grad_norm = {p['max_grad_norm']!r} is not valid: allowed a number > 0")
+    lr = p["learning_rate"]
+    if not callable(lr) and (not isinstance(lr, int | float) or not lr > 0):
+        raise ValueError(f"learning_rate = {lr!r} is not valid: allowed a number > 0 or a schedule")
+    _check_policy_kwargs(p["policy_kwargs"] or {})
+    return p | {"train_freq": int(train_freq)}
+
+
+def _check_policy_kwargs(kw: dict[str, Any]) -> None:
+    extra = sorted(set(kw) - set(POLICY_KEYS))
+    if extra:
+        raise _refuse(f"policy_kwargs[{extra[0]!r}]", kw[extra[0]], f"only the keys {', '.join(POLICY_KEYS)}")
+    arch = kw.get("net_arch", [64, 64])
+    if not isinstance(arch, list) or not all(isinstance(n, int) and n > 0 for n in arch):
+        raise _refuse("policy_kwargs['net_arch']", arch, "a list of layer widths such as [64, 64]")
+    if kw.get("activation_fn", nn.ReLU) not in ACTIVATIONS:
+        allowed = ", ".join(a.__name__ for a in ACTIVATIONS)
+        raise _refuse("policy_kwargs['activation_fn']", kw["activation_fn"], f"one of nn.{allowed}")
+    if kw.get("optimizer_class", torch.optim.Adam) is not torch.optim.Adam:
+        raise _refuse("policy_kwargs['optimizer_class']", kw["optimizer_class"], "torch.optim.Adam (SB3's)")
+    extra = sorted(set(kw.get("optimizer_kwargs") or {}) - set(ADAM_KEYS))
+    if extra:
+        raise _refuse(f"optimizer_kwargs[{extra[0]!r}]", kw["optimizer_kwargs"][extra[0]], ", ".join(ADAM_KEYS))
+
+
+def check_seeds(seeds: Sequence[int]) -> list[int]:
+    seeds = list(seeds)
+    bad = [s for s in seeds if not isinstance(s, int | np.integer) or isinstance(s, bool) or s < 0]
+    if not seeds or bad:
+        raise ValueError(f"seeds {seeds!r} are not valid: allowed one or more integers >= 0 ({bad!r} are not)")
+    if len(set(seeds)) != len(seeds):
+        dup = sorted({s for s in seeds if seeds.count(s) > 1})
+        raise ValueError(f"seeds {seeds!r} repeat {dup}: each seed is a run of its own, give each once")
+    return [int(s) for s in seeds]
+
+
+class SpacesEnv(gym.Env):
+    """The line's spaces without a line: what SB3 needs to build or load a seed's model (the engine
+    steps the lines itself, so reset() and step() refuse)."""
+
+    def __init__(self, observation_space: gym.Space, action_space: gym.spaces.Discrete):
+        self.observation_space, self.action_space = observation_space, action_space
+
+    def reset(self, *, seed=None, options=None):
+        raise RuntimeError("SpacesEnv has no line: the batched engine steps its lines itself")
+
+    def step(self, action):
+        raise RuntimeError("SpacesEnv has no line: the batched engine steps its lines itself")
+
+
+def spaces_vec_env(variant: str, n_envs: int) -> DummyVecEnv:
+    return DummyVecEnv([lambda: SpacesEnv(observation_space(variant), action_space(variant))] * n_envs)
+
+
+@dataclass
+class SeedModel:
+    """One seed's SB3 model, and the state of numpy's global generator right after SB3 built (or
+    loaded) it: SB3 seeded it there (set_random_seed), and the seed's run draws from it from then on."""
+
+    model: DQN
+    numpy_state: Any
+
+
+def _keeping_global_generators(make: Callable[[], DQN]) -> SeedModel:
+    """``make()``'s model and numpy's state after it; the process's generators are left as they were
+    (SB3 reseeds them on every build, which would otherwise reach the caller and the next seed)."""
+    saved = random.getstate(), np.random.get_state(), torch.get_rng_state()
+    try:
+        model = make()
+        return SeedModel(model, np.random.get_state())
+    finally:
+        random.setstate(saved[0])
+        np.random.set_state(saved[1])
+        torch.set_rng_state(saved[2])
+
+
+def new_models(seeds: list[int], variant: str, n_envs: int, kwargs: dict[str, Any]) -> list[SeedModel]:
+    """SB3's ``DQN("MlpPolicy", env, seed=s, **kwargs)`` for each seed: its QNetwork's weights are
+    the ones SB3's training of seed s starts from (torch's default init after manual_seed(s))."""
+    return [
+        _keeping_global_generators(
+            lambda s=s: DQN("MlpPolicy", spaces_vec_env(variant, n_envs), seed=s, device="cpu", **kwargs)
+        )
+        for s in seeds
+    ]
+
+
+def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], variant: str, n_envs: int):
+    """SB3's ``DQN.load(path, env)`` for each path (with ``seed=s`` where one is given: SB3's load
+    reseeds with the saved seed otherwise), refused with the path named when a file is not a DQN
+    model of this line's spaces."""
+    from ...agents.learned_policy import PolicyFileError, read_sb3_zip
+
+    loaded = []
+    for path, seed in zip(paths, seeds, strict=True):
+        try:
+            parts = read_sb3_zip(path)
+        except PolicyFileError as e:
+            raise ValueError(str(e)) from None
+        if parts.algorithm != "dqn":
+            raise ValueError(f"{path}: a {parts.algorithm} model; allowed here: DQN models (this engine trains DQN)")
+        spaces = observation_space(variant), action_space(variant)
+        theirs = parts.data["observation_space"], parts.data["action_space"]
+        if theirs != spaces:
+            raise ValueError(
+                f"{path}: a model of observation space {theirs[0]} and action space {theirs[1]}; allowed here: "
+                f"{spaces[0]} and {spaces[1]} (the {variant} line's)"
+            )
+        extra = {} if seed is None else {"seed": seed}
+        env = spaces_vec_env(variant, n_envs)
+        loaded.append(_keeping_global_generators(lambda p=path, e=env, x=extra: DQN.load(p, env=e, device="cpu", **x)))
+    return loaded
+
+
+@dataclass
+class LinesStep:
+    """One step of all lines, each (S, L, ...): ``obs`` to act on next (a fresh episode's where one
+    ended), ``terminal_obs`` the step's own observations (an ended episode's last one)."""
+
+    obs: np.ndarray
+    rewards: np.ndarray
+    dones: np.ndarray
+    truncated: np.ndarray
+    terminal_obs: np.ndarray
+
+
+class BatchedLines:
+    """S seeds x L native lines stepped in one call, seen by each seed as SB3 sees its VecEnv:
+    line k of seed s starts from seed s + k with the generator default_rng(s + k) (envs/seeding.py,
+    VecEnv.seed), an ended episode restarts at once keeping its last observation for the bootstrap
+    (SortingLineSB3VecEnv.step_wait), and VecMonitor's episode returns (float32) and lengths."""
+
+    def __init__(
+        self, seeds: list[int], n_envs: int, *, setup: str, variant: str, episode_steps: int, stats_window: int
+    ):
+        self.seeds, self.n_envs = seeds, n_envs
+        options = LineOptions(setup=setup, variant=variant, max_episode_steps=episode_steps)
+        self._lines = NativeLines(len(seeds) * n_envs, options)
+        self.episodes: list[deque[dict[str, float]]] = [deque(maxlen=stats_window) for _ in seeds]
+        self._returns = np.zeros((len(seeds), n_envs), dtype=np.float32)
+        self._lengths = np.zeros((len(seeds), n_envs), dtype=np.int64)
+        self._t_start = time.time()
+
+    def reset(self) -> np.ndarray:
+        first = {}
+        for i, seed in enumerate(self.seeds):
+            for k in range(self.n_envs):
+                self._lines.rngs[i * self.n_envs + k] = np.random.default_rng(seed + k)
+                first[i * self.n_envs + k] = seed + k
+        obs = self._lines.reset(first)
+        self._returns[:], self._lengths[:] = 0, 0
+        return np.stack([obs[j] for j in range(len(first))]).reshape(len(self.seeds), self.n_envs, -1)
+
+    def step(self, actions: np.ndarray) -> LinesStep:
+        obs, rewards, truncated, _ = self._lines.step(np.ascontiguousarray(actions, dtype=np.int64).reshape(-1))
+        shape = (len(self.seeds), self.n_envs)
+        rewards, truncated = rewards.astype(np.float32).reshape(shape), truncated.reshape(shape)
+        terminal = obs.reshape(*shape, -1)
+        self._returns += rewards
+        self._lengths += 1
+        nxt = terminal
+        if truncated.any():
+            nxt = terminal.copy()
+            done = np.flatnonzero(truncated).tolist()
+            fresh = self._lines.restart(done)
+            for j in done:
+                i, k = divmod(j, self.n_envs)
+                nxt[i, k] = fresh[j]
+                ret, length = float(self._returns[i, k]), int(self._lengths[i, k])
+                self.episodes[i].append({"r": ret, "l": length, "t": round(time.time() - self._t_start, 6)})
+            self._returns[truncated], self._lengths[truncated] = 0, 0
+        # The line has no terminal state: an episode ends by its time limit only.
+        return LinesStep(nxt, rewards, truncated.copy(), truncated, terminal)
+
+    def close(self) -> None:
+        self._lines.close()
+
+
+class BatchedDQN:
+    """S seeds of SB3's DQN on ``n_envs`` native lines each (see the module docstring).
+    ``hyperparameters`` are DQN's constructor arguments (SB3's defaults for the rest); the seeds
+    share them. The counters are SB3's names, one value for all seeds: they step together."""
+
+    def __init__(
+        self,
+        seeds: Sequence[int],
+        *,
+        setup: str = "A",
+        variant: str = "basic",
+        n_envs: int = 1,
+        episode_steps: int = 250,
+        **hyperparameters: Any,
+    ):
+        seeds = check_seeds(seeds)
+        self._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(hyperparameters))
+        sb3_kwargs = {k: v for k, v in hyperparameters.items() if k != "device"}
+        self._adopt(seeds, new_models(seeds, variant, n_envs, sb3_kwargs))
+
+    @classmethod
+    def from_models(
+        cls,
+        paths: Sequence[str | Path],
+        seeds: Sequence[int] | None = None,
+        *,
+        setup: str = "A",
+        variant: str = "basic",
+        n_envs: int = 1,
+        episode_steps: int = 250,
+    ) -> BatchedDQN:
+        """Continues SB3 DQN models (``.zip``, one per seed) as SB3's ``DQN.load(path, env,
+        seed=s).learn(...)`` would: their weights, Adam state, ``_n_calls``/``_n_updates`` and
+        hyperparameters (which must agree), an empty replay buffer (SB3 saves none), the lines and
+        generators seeded by ``seeds`` (default: each model's saved seed, as SB3's load does)."""
+        given: Sequence[int | None] = [None] * len(paths) if seeds is None else check_seeds(seeds)
+        if len(given) != len(paths):
+            raise ValueError(f"{len(paths)} models and {len(given)} seeds: allowed one seed per model")
+        loaded = load_models(paths, given, variant, n_envs)
+        seeds = check_seeds([sm.model.seed if s is None else s for sm, s in zip(loaded, given, strict=True)])
+        params = [{k: getattr(sm.model, k) for k in _LOADED_KEYS} for sm in loaded]
+        for path, p in zip(paths, params, strict=True):
+            if p != params[0]:
+                diff = sorted(k for k in p if p[k] != params[0][k])
+                raise ValueError(
+                    f"{path}: hyperparameters {diff} differ from {paths[0]}'s: allowed models of one setting"
+                )
+        engine = cls.__new__(cls)
+        loaded_params = {**params[0], "train_freq": params[0]["train_freq"].frequency}
+        engine._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(loaded_params))
+        engine._adopt(seeds, loaded)
+        return engine
+
+    def _configure(self, setup: str, variant: str, n_envs: int, episode_steps: int, params: dict[str, Any]) -> None:
+        check_setup(setup)
+        check_variant(variant)
+        for key, value in (("n_envs", n_envs), ("episode_steps", episode_steps)):
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"{key} = {value!r} is not valid: allowed an integer >= 1")
+        self.setup, self.variant, self.n_envs, self.episode_steps = setup, variant, n_envs, episode_steps
+        self.params = params
+        # SB3's attribute names, for the loop below to read as SB3's does.
+        self.learning_starts, self.batch_size = params["learning_starts"], params["batch_size"]
+        self.tau, self.gamma, self.max_grad_norm = params["tau"], params["gamma"], params["max_grad_norm"]
+        self.train_freq, self.gradient_steps = params["train_freq"], params["gradient_steps"]
+        self.target_update_interval = params["target_update_interval"]
+
+    def _adopt(self, seeds: list[int], built: list[SeedModel]) -> None:
+        """Takes over the SB3 models: their weights stacked, their optimizers' state, generators and
+        counters (equal across seeds: a fresh build, or models checked to agree)."""
+        self.seeds, self.models = seeds, [sm.model for sm in built]
+        self.np_rngs = []
+        for sm in built:
+            # SB3 draws its epsilon coin and its replay indices from np.random (DQN.predict,
+            # BaseBuffer.sample): seed s's run gets a generator of its own in the state SB3 left it.
+            rng = np.random.RandomState()
+            rng.set_state(sm.numpy_state)
+            self.np_rngs.append(rng)
+        # set_random_seed seeded the model's action space with s: warm-up and random actions come from it.
+        self.action_spaces = [copy.deepcopy(m.action_space) for m in self.models]
+        policies = [m.policy for m in self.models]
+        self.q_net = StackedSequential([p.q_net.q_net for p in policies])
+        self.q_net_target = StackedSequential([p.q_net_target.q_net for p in policies])
+        for p in self.q_net_target.parameters():
+            p.requires_grad_(False)
+        self._pairs = parameter_pairs(self.q_net, [p.q_net.q_net for p in policies])
+        self.optimizer = stacked_optimizer(policies[0].optimizer, self.q_net.parameters())
+        optimizer_state_from_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
+        first = self.models[0]
+        if any(m._n_calls != first._n_calls or m._n_updates != first._n_updates for m in self.models):
+            raise ValueError("the models have trained different numbers of steps: allowed models trained alike")
+        self.lr_schedule, self.exploration_schedule = first.lr_schedule, first.exploration_schedule
+        self._n_calls, self._n_updates = first._n_calls, first._n_updates
+        self.exploration_rate, self._current_progress_remaining = first.exploration_rate, 1.0
+        self.num_timesteps, self._total_timesteps = 0, 0
+        self._episode_num = np.zeros(len(seeds), dtype=np.int64)
+        self._last_obs: np.ndarray | None = None
+        self.lines: BatchedLines | None = None
+        self.replay: BatchedReplayBuffer | None = None
+
+    @property
+    def n_seeds(self) -> int:
+        return len(self.seeds)
+
+    # ---- the training loop: OffPolicyAlgorithm.learn / collect_rollouts, for all seeds at once ----
+
+    def learn(self, total_timesteps: int, callback: Callable[[BatchedDQN], bool | None] | None = None) -> BatchedDQN:
+        """Trains every seed for ``total_timesteps`` steps of its L lines, as SB3's ``learn``
+        (``reset_num_timesteps=True``). ``callback(engine)`` runs after each rollout; False stops."""
+        if not isinstance(total_timesteps, int) or isinstance(total_timesteps, bool) or total_timesteps < 1:
+            raise ValueError(f"total_timesteps = {total_timesteps!r} is not valid: allowed an integer >= 1")
+        self._setup_learn(total_timesteps)
+        # OffPolicyAlgorithm.learn: rollouts of train_freq vector steps, then gradient steps once
+        # past learning_starts (gradient_steps -1: as many as transitions collected, per seed).
+        while self.num_timesteps < total_timesteps:
+            self._collect_rollout()
+            if self.num_timesteps > 0 and self.num_timesteps > self.learning_starts:
+                steps = self.gradient_steps if self.gradient_steps >= 0 else self.train_freq * self.n_envs
+                if steps > 0:
+                    self.train(steps, self.batch_size)
+            if callback is not None and callback(self) is False:
+                break
+        return self
+
+    def _setup_learn(self, total_timesteps: int) -> None:
+        # BaseAlgorithm._setup_learn with reset_num_timesteps=True: counters from 0, lines reset
+        # (line k of seed s from seed s + k, VecEnv.seed); OffPolicyAlgorithm._setup_model's buffer.
+        self.num_timesteps, self._total_timesteps = 0, total_timesteps
+        self._episode_num[:] = 0
+        if self.lines is None:
+            self.lines = BatchedLines(
+                self.seeds,
+                self.n_envs,
+                setup=self.setup,
+                variant=self.variant,
+                episode_steps=self.episode_steps,
+                stats_window=self.params["stats_window_size"],
+            )
+        self._last_obs = self.lines.reset()
+        if self.replay is None:
+            handle = (self.params["replay_buffer_kwargs"] or {}).get("handle_timeout_termination", True)
+            self.replay = BatchedReplayBuffer(
+                self.n_seeds, self.params["buffer_size"], self._last_obs.shape[-1], self.n_envs, handle
+            )
+            check_memory(self.replay, total_timesteps, self.n_envs)
+
+    def _collect_rollout(self) -> None:
+        """OffPolicyAlgorithm.collect_rollouts with TrainFreq(train_freq, STEP)."""
+        assert self.lines is not None and self.replay is not None and self._last_obs is not None
+        for _ in range(self.train_freq):
+            actions = self._sample_actions()
+            step = self.lines.step(actions)
+            self.num_timesteps += self.n_envs
+            # _store_transition: next_obs is the terminal observation where an episode ended
+            # (the step's own observation); every end is a time limit here (TimeLimit.truncated).
+            self.replay.add(self._last_obs, step.terminal_obs, actions, step.rewards, step.dones, step.truncated)
+            self._last_obs = step.obs
+            # BaseAlgorithm._update_current_progress_remaining
+            self._current_progress_remaining = 1.0 - float(self.num_timesteps) / float(self._total_timesteps)
+            self._on_step()
+            self._episode_num += step.dones.sum(axis=1)
+
+    def _sample_actions(self) -> np.ndarray:
+        """(S, L) actions: OffPolicyAlgorithm._sample_action, then DQN.predict(deterministic=False)."""
+        assert self._last_obs is not None
+        if self.num_timesteps < self.learning_starts:
+            # Warm-up: action_space.sample() per line.
+            return np.array([[space.sample() for _ in range(self.n_envs)] for space in self.action_spaces])
+        # DQN.predict draws ONE number per call (per seed here, from that seed's np.random) and
+        # takes random actions for all L lines of the call, or greedy ones for all of them.
+        explore = [rng.rand() < self.exploration_rate for rng in self.np_rngs]
+        if all(explore):
+            actions = np.empty((self.n_seeds, self.n_envs), dtype=np.int64)
+        else:
+            actions = self.predict(self._last_obs)
+        for s in np.flatnonzero(explore):
+            actions[s] = [self.action_spaces[s].sample() for _ in range(self.n_envs)]
+        return actions
+
+    def _on_step(self) -> None:
+        """DQN._on_step: the target network every max(target_update_interval // n_envs, 1) vector
+        steps (polyak_update, tau), and the exploration rate from its LinearSchedule."""
+        self._n_calls += 1
+        if self._n_calls % max(self.target_update_interval // self.n_envs, 1) == 0:
+            polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
+            # (SB3 also copies batch-norm running stats here; the MLP has none.)
+        self.exploration_rate = self.exploration_schedule(self._current_progress_remaining)
+
+    # ---- the update: DQN.train ----
+
+    def train(self, gradient_steps: int, batch_size: int) -> np.ndarray:
+        """DQN.train: the learning rate from its schedule, then ``gradient_steps`` steps, each on a
+        fresh batch of each seed's own buffer. Returns the seeds' mean losses (S,)."""
+        assert self.replay is not None
+        # BaseAlgorithm._update_learning_rate
+        update_learning_rate(self.optimizer, self.lr_schedule(self._current_progress_remaining))
+        losses = []
+        for _ in range(gradient_steps):
+            losses.append(self.gradient_step(self.replay.sample(batch_size, self.np_rngs)))
+        self._n_updates += gradient_steps
+        return np.mean(losses, axis=0)
+
+    def gradient_step(self, batch: ReplaySamples) -> np.ndarray:
+        """One DQN gradient step of every seed on its batch (tensors with a leading seed axis, as
+        ReplaySamples): DQN.train's loop body. Returns each seed's Huber loss (S,)."""
+        with torch.no_grad():
+            # 1-step TD target from the target network's greedy value.
+            next_q_values = self.q_net_target(batch.next_observations).max(dim=2).values.unsqueeze(2)
+            target_q_values = batch.rewards + (1 - batch.dones) * self.gamma * next_q_values
+        current_q_values = torch.gather(self.q_net(batch.observations), dim=2, index=batch.actions.long())
+        # F.smooth_l1_loss (Huber), its mean over each seed's own batch; the sum of the seeds'
+        # losses gives each seed its own gradient.
+        loss = F.smooth_l1_loss(current_q_values, target_q_values, reduction="none").mean(dim=(1, 2))
+        self.optimizer.zero_grad()
+        loss.sum().backward()
+        # clip_grad_norm_(policy.parameters(), max_grad_norm): over each seed's parameters alone
+        # (the target network's have no gradient, as in SB3).
+        clip_grad_norm_per_seed(self.q_net.parameters(), self.max_grad_norm)
+        self.optimizer.step()
+        return loss.detach().numpy()
+
+    @torch.no_grad()
+    def predict(self, observations: np.ndarray) -> np.ndarray:
+        """Greedy actions (S, N) for observations (S, N, obs_dim): each seed's
+        ``predict(obs, deterministic=True)`` (QNetwork._predict: argmax of the Q-values)."""
+        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32))
+        if obs.dim() != 3 or obs.shape[0] != self.n_seeds:
+            raise ValueError(f"observations of shape {tuple(obs.shape)}: allowed (seeds={self.n_seeds}, N, obs_dim)")
+        return self.q_net(obs).argmax(dim=2).numpy()
+
+    # ---- saving: each seed as the SB3 model SB3 would have written ----
+
+    def sb3_models(self) -> list[DQN]:
+        """The seeds' SB3 models with the engine's state written into them: weights of q_net and
+        q_net_target, Adam's state, and what SB3's learn leaves on a model (counters, schedules'
+        progress, last observations, episode statistics), so that ``save`` writes SB3's zip."""
+        policies = [m.policy for m in self.models]
+        self.q_net.write_to([p.q_net.q_net for p in policies])
+        self.q_net_target.write_to([p.q_net_target.q_net for p in policies])
+        optimizer_state_to_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
+        for s, model in enumerate(self.models):
+            model.num_timesteps, model._total_timesteps = self.num_timesteps, self._total_timesteps
+            model._num_timesteps_at_start = 0
+            model._n_calls, model._n_updates = self._n_calls, self._n_updates
+            model._episode_num = int(self._episode_num[s])
+            model.exploration_rate = self.exploration_rate
+            model._current_progress_remaining = self._current_progress_remaining
+            if self._last_obs is not None:
+                model._last_obs = self._last_obs[s].copy()
+                model._last_original_obs = model._last_obs
+                model._last_episode_starts = np.zeros(self.n_envs, dtype=bool)
+            if self.lines is not None:
+                model.ep_info_buffer = deque(self.lines.episodes[s], maxlen=model._stats_window_size)
+                model.ep_success_buffer = deque(maxlen=model._stats_window_size)
+        return self.models
+
+    def save(self, out: str | Path, stem: str = "dqn_{setup}_{variant}_seed{seed}") -> list[Path]:
+        """Writes each seed's SB3 zip into ``out`` (``stem`` names it, sorting-line-train's names
+        by default); returns the paths in seed order."""
+        (out := Path(out)).mkdir(parents=True, exist_ok=True)
+        paths = []
+        for seed, model in zip(self.seeds, self.sb3_models(), strict=True):
+            path = out / (stem.format(setup=self.setup, variant=self.variant, seed=seed) + ".zip")
+            model.save(path)
+            paths.append(path)
+        return paths
+
+    def close(self) -> None:
+        if self.lines is not None:
+            self.lines.close()
+            self.lines = None
+
+
+#: The hyperparameters a loaded model holds as attributes of those names (BaseAlgorithm, DQN).
+_LOADED_KEYS = (
+    "learning_rate",
+    "buffer_size",
+    "learning_starts",
+    "batch_size",
+    "tau",
+    "gamma",
+    "train_freq",
+    "gradient_steps",
+    "replay_buffer_kwargs",
+    "optimize_memory_usage",
+    "n_steps",
+    "target_update_interval",
+    "exploration_fraction",
+    "exploration_initial_eps",
+    "exploration_final_eps",
+    "max_grad_norm",
+    "policy_kwargs",
+)
+
+
+def available_memory() -> int | None:
+    """MemAvailable of /proc/meminfo in bytes (None where there is none)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(replay: BatchedReplayBuffer, total_timesteps: int, n_envs: int) -> None:
+    """Refuses a training whose replay buffers would not fit: the rows a run writes (its steps, up
+    to buffer_size) for every seed, against the memory available now."""
+    rows = min(replay.buffer_size, -(-total_timesteps // n_envs) + 1)
+    need = replay.seeds * rows * replay.bytes_per_seed() // replay.buffer_size
+    have = available_memory()
+    if have is not None and need > have:
+        raise MemoryError(
+            f"the replay buffers of {replay.seeds} seeds x {n_envs} lines for {total_timesteps} steps take "
+            f"{need / 1e9:.2f} GB and {have / 1e9:.2f} GB are available: train fewer seeds at once "
+            f"(about {max(1, have * replay.seeds // need)}) or a smaller buffer_size"
+        )

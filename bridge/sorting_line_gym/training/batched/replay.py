@@ -1,0 +1,93 @@
+"""The replay buffers of S independent DQN runs, held in one set of arrays with a leading seed axis.
+
+Seed s's slice is SB3's ``ReplayBuffer`` (stable_baselines3/common/buffers.py) of that run, entry for
+entry: ``buffer_size // n_envs`` rows of ``n_envs`` transitions, written at one position shared by
+all seeds (they step together), with the timeouts of ``handle_timeout_termination``. A sample draws
+its indices from seed s's own generator, by SB3's calls in SB3's order (``BaseBuffer.sample`` then
+``ReplayBuffer._get_samples``), so each seed's batch is the one SB3 would have drawn from that
+generator and no seed reads another's rows. ``optimize_memory_usage`` is not mirrored (the engine
+refuses it).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+
+class ReplaySamples(NamedTuple):
+    """One batch for every seed, as SB3's ``ReplayBufferSamples`` with a leading seed axis:
+    observations and next_observations (S, B, obs_dim), actions (S, B, 1) int64, dones and rewards
+    (S, B, 1) float32 (dones already cleared where the episode was cut by a time limit)."""
+
+    observations: torch.Tensor
+    actions: torch.Tensor
+    next_observations: torch.Tensor
+    dones: torch.Tensor
+    rewards: torch.Tensor
+
+
+class BatchedReplayBuffer:
+    """S replay buffers of ``buffer_size`` transitions each over ``n_envs`` lines per seed."""
+
+    def __init__(self, seeds: int, buffer_size: int, obs_dim: int, n_envs: int, handle_timeout_termination: bool):
+        # ReplayBuffer.__init__: the rows are buffer_size // n_envs, at least one.
+        self.buffer_size = max(buffer_size // n_envs, 1)
+        self.seeds, self.n_envs = seeds, n_envs
+        self.handle_timeout_termination = handle_timeout_termination
+        shape = (seeds, self.buffer_size, n_envs)
+        # np.zeros as SB3: the pages of rows never written are never touched, so a buffer far larger
+        # than a run's steps costs the memory of the steps only.
+        self.observations = np.zeros((*shape, obs_dim), dtype=np.float32)
+        self.next_observations = np.zeros((*shape, obs_dim), dtype=np.float32)
+        self.actions = np.zeros(shape, dtype=np.int64)
+        self.rewards = np.zeros(shape, dtype=np.float32)
+        self.dones = np.zeros(shape, dtype=np.float32)
+        self.timeouts = np.zeros(shape, dtype=np.float32)
+        self.pos, self.full = 0, False
+        self._seed_index = np.arange(seeds)[:, None]
+
+    def bytes_per_seed(self) -> int:
+        """What one seed's full buffer takes (as SB3 counts it in its memory warning)."""
+        arrays = (self.observations, self.next_observations, self.actions, self.rewards, self.dones, self.timeouts)
+        return sum(a.nbytes for a in arrays) // self.seeds
+
+    def add(self, obs, next_obs, actions, rewards, dones, timeouts) -> None:
+        """One vector step of every seed: arrays (S, n_envs[, obs_dim]). ``next_obs`` holds the
+        terminal observation where an episode ended (OffPolicyAlgorithm._store_transition)."""
+        # ReplayBuffer.add: copy into row pos, timeouts only with handle_timeout_termination.
+        p = self.pos
+        self.observations[:, p] = obs
+        self.next_observations[:, p] = next_obs
+        self.actions[:, p] = actions
+        self.rewards[:, p] = rewards
+        self.dones[:, p] = dones
+        if self.handle_timeout_termination:
+            self.timeouts[:, p] = timeouts
+        self.pos += 1
+        if self.pos == self.buffer_size:
+            self.full, self.pos = True, 0
+
+    def sample(self, batch_size: int, rngs: list[np.random.RandomState]) -> ReplaySamples:
+        """``batch_size`` transitions of each seed s, drawn with ``rngs[s]`` (the generator that
+        is np.random's global one in SB3's run of that seed)."""
+        # BaseBuffer.sample: rows uniform below pos (or all of them once full) ...
+        upper_bound = self.buffer_size if self.full else self.pos
+        rows = np.empty((self.seeds, batch_size), dtype=np.int64)
+        lines = np.empty((self.seeds, batch_size), dtype=np.int64)
+        for s, rng in enumerate(rngs):
+            rows[s] = rng.randint(0, upper_bound, size=batch_size)
+            # ... then ReplayBuffer._get_samples: a line per sample, from the same generator.
+            lines[s] = rng.randint(0, high=self.n_envs, size=(batch_size,))
+        at = (self._seed_index, rows, lines)
+        # _get_samples: dones only where the episode was not cut by a time limit.
+        dones = self.dones[at] * (1 - self.timeouts[at])
+        return ReplaySamples(
+            torch.from_numpy(self.observations[at]),
+            torch.from_numpy(self.actions[at][..., None]),
+            torch.from_numpy(self.next_observations[at]),
+            torch.from_numpy(dones[..., None]),
+            torch.from_numpy(self.rewards[at][..., None]),
+        )
