@@ -4,8 +4,16 @@ one batched computation. Each seed stays a run of its own (its initial weights, 
 state, gradient clipping and episode bookkeeping), and every mirrored piece names the SB3 code it
 is held to, so that a seed's update equals SB3's for that seed.
 
-One concept per module; the base of all learners is ``stacked`` (S networks as stacked weights
-over a leading seed axis, the per-seed gradient clip, the optimizer and its state per seed).
+One concept per module:
+
+- ``stacked``: S networks as stacked weights over a leading seed axis, the per-seed gradient
+  clip, the optimizer over the stacked weights and its state per seed (the base of all learners);
+- ``lines``: the S x L native lines, seeded, auto-reset and counted per seed as SB3's VecEnv;
+- ``checks``: what the trainer accepts (algorithms, seeds, hyperparameters, memory);
+- ``models``: the SB3 models behind the seeds (built, loaded, written back as SB3's zips);
+- ``actor_critic``, ``rollout``, ``ppo``, ``a2c``: SB3's actor-critic policy, rollout buffer
+  (GAE, the truncation bootstrap), PPO/MaskablePPO and A2C updates, for S seeds;
+- ``on_policy``: the driver, ``OnPolicyTrainer`` (PPO, A2C, MaskablePPO).
 
 This package sits below ``training`` in docs/layout.md's layers (``training/batched``): it may
 use ``envs``, ``agents`` and ``line`` but not ``training``'s modules (``train`` imports it, not

@@ -1,0 +1,243 @@
+"""The batched trainer's PPO, A2C and MaskablePPO (training/batched) held to SB3 step for step,
+for every seed of a batch of several seeds:
+
+- one update (PPO: all epochs and minibatches, in an order both draw from the same generator
+  states; A2C: its one step) from the same weights and the same transitions gives SB3's weights
+  to 1e-5 relative: SB3's own ``train()`` on its filled buffer is the reference;
+- the returns and advantages of a rollout with terminations and truncations are SB3's;
+- action masks act as MaskablePPO's (the update with masks, sampling, deterministic prediction);
+- a whole short training on native lines (rollouts with truncated episodes, their bootstrap,
+  two updates) equals SB3's ``learn`` with the same seed: the same episodes, the same weights;
+- each seed saved loads with PPO.load / A2C.load, whose ``predict(deterministic=True)`` gives the
+  trainer's actions, and loads back into the trainer;
+- bad input fails at construction, naming the value.
+
+Native lines in this process: no node, no DDS. About 30 s on a busy machine.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("sb3_contrib")
+
+from stable_baselines3.common.logger import Logger  # noqa: E402
+
+from sorting_line_gym.training.batched.on_policy import OnPolicyTrainer  # noqa: E402
+from sorting_line_gym.training.train import make_training_env  # noqa: E402
+
+SEEDS = [3, 4, 11]
+LINES = 2
+#: The paper's PPO settings, on short rollouts whose 2 x 40 samples leave a short last minibatch.
+PPO = dict(n_steps=40, batch_size=24, n_epochs=3, gamma=0.85, learning_rate=7e-4, ent_coef=0.03)
+A2C = dict(gamma=0.9, learning_rate=5e-4, ent_coef=0.06)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_torch_thread():
+    """One torch thread, as sorting-line-train runs: on a busy machine a second one only waits."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def trainer(algo: str, params: dict, seeds=SEEDS, lines: int = LINES, **kwargs) -> OnPolicyTrainer:
+    return OnPolicyTrainer(algo, seeds, setup="B", variant="advanced", params=params, lines_per_seed=lines, **kwargs)
+
+
+def fill(tr: OnPolicyTrainer, rng: np.random.Generator, masked: bool = False) -> None:
+    """The same random transitions into the trainer's buffer and every seed's SB3 buffer, with
+    SB3's values and log-probabilities of them; episodes start anywhere (terminations and
+    truncations alike), and SB3's buffer computes its returns and advantages."""
+    S, L, n = len(tr.seeds), tr.lines.n_lines, tr.template.n_steps
+    tr.buffer.reset()
+    for m in tr.models:
+        m.rollout_buffer.reset()
+    for t in range(n):
+        obs = np.stack([rng.random((S, L)), rng.integers(0, 3, (S, L))], axis=-1).astype(np.float32)
+        masks = rng.random((S, L, 30)) < 0.4 if masked else None
+        if masks is not None:
+            masks[..., 0] = True
+        actions = np.stack([[rng.choice(np.flatnonzero(masks[s, j]) if masked else 30) for j in range(L)]
+                            for s in range(S)]).astype(np.int64)  # fmt: skip
+        rewards = (rng.normal(size=(S, L)) * 3).astype(np.float32)
+        starts = (rng.random((S, L)) < 0.15) | (t == 0)
+        values, log_probs = np.zeros((S, L), np.float32), np.zeros((S, L), np.float32)
+        for s, m in enumerate(tr.models):
+            extra = {"action_masks": masks[s]} if masked else {}
+            with torch.no_grad():
+                v, lp, _ = m.policy.evaluate_actions(torch.as_tensor(obs[s]), torch.as_tensor(actions[s]), **extra)
+            m.rollout_buffer.add(obs[s], actions[s], rewards[s], starts[s], v, lp, **extra)
+            values[s], log_probs[s] = v.numpy().flatten(), lp.numpy()
+        tr.buffer.add(obs, actions, rewards, starts, values, log_probs, masks)
+    last_values = rng.normal(size=(S, L)).astype(np.float32)
+    dones = rng.random((S, L)) < 0.5
+    for s, m in enumerate(tr.models):
+        m.rollout_buffer.compute_returns_and_advantage(torch.as_tensor(last_values[s]), dones[s])
+    tr.buffer.compute_returns_and_advantage(last_values, dones, tr.template.gamma, tr.template.gae_lambda)
+
+
+def assert_weights_equal_sb3(tr: OnPolicyTrainer, rtol: float = 1e-5) -> None:
+    """Every stacked weight's slice s equals seed s's SB3 weight, to ``rtol`` of the tensor's scale."""
+    for p, per_seed in tr.pairs:
+        for s, q in enumerate(per_seed):
+            scale = q.detach().abs().max().item()
+            assert (p[s].detach() - q.detach()).abs().max().item() <= rtol * scale, (s, tuple(q.shape))
+
+
+def sb3_train(tr: OnPolicyTrainer, progress: float, numpy_seeds: list[int]) -> None:
+    """SB3's own train() of each seed's model, its minibatches shuffled from ``np.random.seed(k)``;
+    the trainer's update with each seed's generator in that state."""
+    for m, k in zip(tr.models, numpy_seeds, strict=True):
+        m.set_logger(Logger(None, []))
+        m._current_progress_remaining = progress
+        np.random.seed(k)
+        m.train()
+    tr.np_rngs = [np.random.RandomState(k) for k in numpy_seeds]
+    tr.progress_remaining = progress
+    tr.train()
+
+
+@pytest.mark.parametrize(
+    "algo, params",
+    [
+        ("ppo", PPO),
+        ("ppo", {**PPO, "clip_range": lambda p: 0.3 * p, "clip_range_vf": 0.1, "learning_rate": lambda p: 1e-3 * p}),
+        ("maskable_ppo", PPO),
+        ("a2c", A2C),
+        ("a2c", {**A2C, "normalize_advantage": True, "n_steps": 8}),
+    ],
+    ids=["ppo", "ppo-schedules-clip-vf", "maskable-ppo", "a2c", "a2c-normalized"],
+)
+def test_one_update_equals_sb3s_for_every_seed(algo, params):
+    tr = trainer(algo, params)
+    try:
+        rng = np.random.default_rng(7)
+        fill(tr, rng, masked=algo == "maskable_ppo")
+        for s, m in enumerate(tr.models):  # returns and advantages: SB3's, exactly
+            np.testing.assert_array_equal(tr.buffer.advantages[:, s], m.rollout_buffer.advantages)
+            np.testing.assert_array_equal(tr.buffer.returns[:, s], m.rollout_buffer.returns)
+        before = [p.detach().clone() for p, _ in tr.pairs]
+        sb3_train(tr, 0.6, [100 + s for s in range(len(SEEDS))])
+        assert_weights_equal_sb3(tr)
+        assert tr.n_updates == tr.models[0]._n_updates
+        # The weights moved, every seed's: the comparison is not of untouched initial weights.
+        assert all(max((p[s] - b[s]).abs().max().item() for (p, _), b in zip(tr.pairs, before, strict=True)) > 1e-4
+                   for s in range(len(SEEDS)))  # fmt: skip
+    finally:
+        tr.close()
+
+
+def test_returns_and_advantages_of_terminations_and_truncations_equal_sb3s():
+    """Episodes cut anywhere (episode_starts) and at the rollout's end (dones), gae_lambda < 1 and 1."""
+    for params in (PPO, {**A2C, "n_steps": 16}):
+        tr = trainer("ppo" if "batch_size" in params else "a2c", params)
+        try:
+            fill(tr, np.random.default_rng(1))
+            for s, m in enumerate(tr.models):
+                np.testing.assert_array_equal(tr.buffer.advantages[:, s], m.rollout_buffer.advantages)
+                np.testing.assert_array_equal(tr.buffer.returns[:, s], m.rollout_buffer.returns)
+        finally:
+            tr.close()
+
+
+def test_masks_act_as_maskable_ppos():
+    """With the evolving line's kind of masks: sampling never picks a masked action, the
+    log-probabilities and entropies are MaskablePPO's, and the deterministic action is its predict's."""
+    tr = trainer("maskable_ppo", PPO)
+    try:
+        rng = np.random.default_rng(3)
+        S, B = len(SEEDS), 64
+        obs = np.stack([rng.random((S, B)), rng.integers(0, 3, (S, B))], axis=-1).astype(np.float32)
+        masks = rng.random((S, B, 30)) < 0.3
+        masks[..., 3] = True
+        actions, _, log_probs = tr.policy.act(torch.as_tensor(obs), tr.generators, torch.as_tensor(masks))
+        assert np.take_along_axis(masks, actions.numpy()[..., None], axis=-1).all()
+        chosen = tr.predict(obs, masks)
+        for s, m in enumerate(tr.models):
+            with torch.no_grad():
+                _, lp, ent = m.policy.evaluate_actions(torch.as_tensor(obs[s]), actions[s], action_masks=masks[s])
+            torch.testing.assert_close(log_probs[s], lp, rtol=1e-5, atol=1e-6)
+            _, _, mine = tr.policy.evaluate_actions(torch.as_tensor(obs), actions, torch.as_tensor(masks))
+            torch.testing.assert_close(mine[s].detach(), ent, rtol=1e-5, atol=1e-6)
+            np.testing.assert_array_equal(chosen[s], m.predict(obs[s], action_masks=masks[s], deterministic=True)[0])
+    finally:
+        tr.close()
+
+
+@pytest.mark.parametrize("algo, params", [("ppo", PPO), ("a2c", A2C)], ids=["ppo", "a2c"])
+def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
+    """Two rollouts on native lines with 20-step episodes (truncated: SB3 bootstraps them from the
+    terminal observation) and their updates: each seed equals SB3 trained with that seed on one
+    line of the same backend, episode for episode; saved, it loads in SB3 and predicts the
+    trainer's actions, and it loads back into the trainer."""
+    total = 2 * params.get("n_steps", 5) * (4 if algo == "a2c" else 1)
+    tr = trainer(algo, params, lines=1, episode_steps=20)
+    try:
+        tr.learn(total)
+        paths = tr.save([tmp_path / f"{algo}_seed{s}" for s in SEEDS])
+        episodes = [[e["r"] for e in tr.lines.episodes[s]] for s in range(len(SEEDS))]
+        obs = np.stack([np.random.default_rng(0).random(50), np.arange(50) % 3], axis=-1).astype(np.float32)
+        engine_actions = tr.predict(np.broadcast_to(obs, (len(SEEDS), *obs.shape)))
+    finally:
+        tr.close()
+    cls = type(tr.template)
+    for s, seed in enumerate(SEEDS):
+        env = make_training_env("B", "advanced", 1, 20, backend="native")
+        try:
+            reference = cls("MlpPolicy", env, seed=seed, device="cpu", **params).learn(total)
+        finally:
+            env.close()
+        assert [float(e["r"]) for e in reference.ep_info_buffer] == pytest.approx(episodes[s], rel=1e-6)
+        saved = cls.load(paths[s], device="cpu")
+        assert saved.num_timesteps == reference.num_timesteps and saved._n_updates == reference._n_updates
+        for (name, ref), mine in zip(
+            reference.policy.state_dict().items(), saved.policy.state_dict().values(), strict=True
+        ):
+            assert (ref - mine).abs().max().item() <= 1e-4 * ref.abs().max().item(), name
+        np.testing.assert_array_equal(saved.predict(obs, deterministic=True)[0], engine_actions[s])
+    again = trainer(algo, params, lines=1, models=paths)
+    try:
+        for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):
+            torch.testing.assert_close(p, q, rtol=0, atol=0)
+        assert again.optimizer.state and again.num_timesteps == total
+    finally:
+        again.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"algo": "ddpg"}, "algorithm 'ddpg' is not valid for the batched trainer: allowed ppo, a2c, maskable_ppo"),
+        ({"seeds": [1, 2, 1]}, r"seeds \[1\] are given more than once"),
+        ({"seeds": [-1]}, "seed -1 is not valid: allowed integers 0 <= seed < 2"),
+        ({"seeds": []}, "seeds = \\[\\]: allowed one or more"),
+        ({"params": {"target_kl": 0.01}}, "target_kl = 0.01: the batched trainer implements only target_kl = None"),
+        ({"params": {"use_sde": True}}, "use_sde = True: the batched trainer implements only use_sde = False"),
+        ({"params": {"gamma_": 0.9}}, "gamma_ is not a hyperparameter of PPO"),
+        ({"params": {"seed": 3}}, "seed is not a hyperparameter of the batched trainer"),
+        ({"params": {"policy_kwargs": {"squash_output": True}}}, "policy_kwargs squash_output: not implemented"),
+        ({"params": {"policy_kwargs": {"optimizer_class": torch.optim.LBFGS}}}, "optimizer LBFGS is not supported"),
+        ({"lines": 0}, "lines_per_seed = 0 is not valid"),
+        ({"seeds": list(range(4096)), "lines": 4096}, r"4096 seeds x 4096 lines .* would need about .* GiB"),
+    ],
+)
+def test_bad_input_fails_at_construction_naming_it(kwargs, message):
+    args = {"algo": "ppo", "seeds": [1, 2], "params": {}, "lines": 1, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        trainer(args["algo"], args["params"], seeds=args["seeds"], lines=args["lines"])
+
+
+def test_a_model_of_another_algorithm_or_line_is_refused(tmp_path):
+    tr = trainer("a2c", A2C, seeds=[5], lines=1)
+    try:
+        (path,) = tr.save([tmp_path / "a2c_seed5.zip"])
+    finally:
+        tr.close()
+    with pytest.raises(ValueError, match="a2c_seed5.zip: a a2c model; allowed here: ppo models"):
+        trainer("ppo", PPO, seeds=[5], lines=1, models=[path])
+    with pytest.raises(ValueError, match="a2c_seed5.zip: a model of observation space Box.*allowed here: Box"):
+        OnPolicyTrainer("a2c", [5], setup="B", variant="basic", params=A2C, models=[path])
