@@ -32,7 +32,7 @@ from stable_baselines3 import DQN, PPO  # noqa: E402
 from stable_baselines3.common.buffers import ReplayBufferSamples  # noqa: E402
 from stable_baselines3.common.logger import Logger  # noqa: E402
 
-from sorting_line_gym.training.batched.dqn import BatchedDQN, spaces_vec_env  # noqa: E402
+from sorting_line_gym.training.batched.dqn import BatchedDQN, spaces_env  # noqa: E402
 from sorting_line_gym.training.batched.replay import ReplaySamples  # noqa: E402
 from sorting_line_gym.training.train import make_training_env  # noqa: E402
 
@@ -106,7 +106,7 @@ def test_gradient_steps_and_target_update_equal_sb3_for_every_seed():
     per_seed, stacked = batches(len(SEEDS), 32, np.random.default_rng(0))
     references = []
     for s, seed in enumerate(SEEDS):
-        reference = quiet(DQN("MlpPolicy", spaces_vec_env("advanced", 1), seed=seed, device="cpu", **params))
+        reference = quiet(DQN("MlpPolicy", spaces_env("advanced", 1), seed=seed, device="cpu", **params))
         ours = engine_nets(engine, s)
         assert relative_error(ours[0], reference.policy.q_net.state_dict()) == 0.0, "not SB3's initial weights"
         feed = iter(per_seed[s])
@@ -229,10 +229,10 @@ def test_bad_seeds_and_model_files_fail_naming_them(tmp_path):
         with pytest.raises(ValueError, match=named):
             BatchedDQN(seeds, **LINE)
     ppo = tmp_path / "ppo.zip"
-    PPO("MlpPolicy", spaces_vec_env("advanced", 1), n_steps=8, batch_size=8, device="cpu").save(ppo)
+    PPO("MlpPolicy", spaces_env("advanced", 1), n_steps=8, batch_size=8, device="cpu").save(ppo)
     with pytest.raises(ValueError, match="a ppo model"):
         BatchedDQN.from_models([ppo], **LINE)
     basic = tmp_path / "basic.zip"
-    DQN("MlpPolicy", spaces_vec_env("basic", 1), device="cpu", buffer_size=10).save(basic)
+    DQN("MlpPolicy", spaces_env("basic", 1), device="cpu", buffer_size=10).save(basic)
     with pytest.raises(ValueError, match="observation space"):
         BatchedDQN.from_models([basic], **LINE)

@@ -15,6 +15,9 @@ space is seeded s as SB3 seeds it; it has its own replay buffer, Adam moments an
 The seeds share only the arithmetic: their networks are stacked over a leading seed axis and
 evaluated and updated by batched matmuls, the loss of the batch being the sum of the seeds' own
 losses (so each seed's gradient is its own). Every piece below names the SB3 code it mirrors.
+The package's shared parts carry the rest: ``stacked`` (the stacked networks, the per-seed clip,
+the optimizer and its state per seed), ``lines`` (the S x L lines as each seed's VecEnv),
+``models`` (the spaces SB3 builds a model on); ``replay`` is DQN's own (per-seed buffers).
 
 Each seed is saved as the SB3 ``.zip`` SB3 would write (the per-seed model with the trained
 weights, optimizer state and counters, ``model.save``), and ``BatchedDQN.from_models`` starts
@@ -27,27 +30,24 @@ from __future__ import annotations
 import copy
 import inspect
 import random
-import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.utils import polyak_update, update_learning_rate
-from stable_baselines3.common.vec_env import DummyVecEnv
 from torch import nn
 from torch.nn import functional as F
 
 from ...envs.env import action_space, observation_space
-from ...envs.native import NativeLines
-from ...line.options import LineOptions
 from ...line.vocabulary import check_setup, check_variant
+from .lines import BatchedLines
+from .models import spaces_vec_env
 from .replay import BatchedReplayBuffer, ReplaySamples
 from .stacked import (
     StackedSequential,
@@ -149,22 +149,9 @@ def check_seeds(seeds: Sequence[int]) -> list[int]:
     return [int(s) for s in seeds]
 
 
-class SpacesEnv(gym.Env):
-    """The line's spaces without a line: what SB3 needs to build or load a seed's model (the engine
-    steps the lines itself, so reset() and step() refuse)."""
-
-    def __init__(self, observation_space: gym.Space, action_space: gym.spaces.Discrete):
-        self.observation_space, self.action_space = observation_space, action_space
-
-    def reset(self, *, seed=None, options=None):
-        raise RuntimeError("SpacesEnv has no line: the batched engine steps its lines itself")
-
-    def step(self, action):
-        raise RuntimeError("SpacesEnv has no line: the batched engine steps its lines itself")
-
-
-def spaces_vec_env(variant: str, n_envs: int) -> DummyVecEnv:
-    return DummyVecEnv([lambda: SpacesEnv(observation_space(variant), action_space(variant))] * n_envs)
+def spaces_env(variant: str, n_envs: int):
+    """A VecEnv of the line's spaces (and no line) for SB3 to build or load a seed's model on."""
+    return spaces_vec_env(observation_space(variant), action_space(variant), n_envs)
 
 
 @dataclass
@@ -194,7 +181,7 @@ def new_models(seeds: list[int], variant: str, n_envs: int, kwargs: dict[str, An
     the ones SB3's training of seed s starts from (torch's default init after manual_seed(s))."""
     return [
         _keeping_global_generators(
-            lambda s=s: DQN("MlpPolicy", spaces_vec_env(variant, n_envs), seed=s, device="cpu", **kwargs)
+            lambda s=s: DQN("MlpPolicy", spaces_env(variant, n_envs), seed=s, device="cpu", **kwargs)
         )
         for s in seeds
     ]
@@ -222,73 +209,9 @@ def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], varian
                 f"{spaces[0]} and {spaces[1]} (the {variant} line's)"
             )
         extra = {} if seed is None else {"seed": seed}
-        env = spaces_vec_env(variant, n_envs)
+        env = spaces_env(variant, n_envs)
         loaded.append(_keeping_global_generators(lambda p=path, e=env, x=extra: DQN.load(p, env=e, device="cpu", **x)))
     return loaded
-
-
-@dataclass
-class LinesStep:
-    """One step of all lines, each (S, L, ...): ``obs`` to act on next (a fresh episode's where one
-    ended), ``terminal_obs`` the step's own observations (an ended episode's last one)."""
-
-    obs: np.ndarray
-    rewards: np.ndarray
-    dones: np.ndarray
-    truncated: np.ndarray
-    terminal_obs: np.ndarray
-
-
-class BatchedLines:
-    """S seeds x L native lines stepped in one call, seen by each seed as SB3 sees its VecEnv:
-    line k of seed s starts from seed s + k with the generator default_rng(s + k) (envs/seeding.py,
-    VecEnv.seed), an ended episode restarts at once keeping its last observation for the bootstrap
-    (SortingLineSB3VecEnv.step_wait), and VecMonitor's episode returns (float32) and lengths."""
-
-    def __init__(
-        self, seeds: list[int], n_envs: int, *, setup: str, variant: str, episode_steps: int, stats_window: int
-    ):
-        self.seeds, self.n_envs = seeds, n_envs
-        options = LineOptions(setup=setup, variant=variant, max_episode_steps=episode_steps)
-        self._lines = NativeLines(len(seeds) * n_envs, options)
-        self.episodes: list[deque[dict[str, float]]] = [deque(maxlen=stats_window) for _ in seeds]
-        self._returns = np.zeros((len(seeds), n_envs), dtype=np.float32)
-        self._lengths = np.zeros((len(seeds), n_envs), dtype=np.int64)
-        self._t_start = time.time()
-
-    def reset(self) -> np.ndarray:
-        first = {}
-        for i, seed in enumerate(self.seeds):
-            for k in range(self.n_envs):
-                self._lines.rngs[i * self.n_envs + k] = np.random.default_rng(seed + k)
-                first[i * self.n_envs + k] = seed + k
-        obs = self._lines.reset(first)
-        self._returns[:], self._lengths[:] = 0, 0
-        return np.stack([obs[j] for j in range(len(first))]).reshape(len(self.seeds), self.n_envs, -1)
-
-    def step(self, actions: np.ndarray) -> LinesStep:
-        obs, rewards, truncated, _ = self._lines.step(np.ascontiguousarray(actions, dtype=np.int64).reshape(-1))
-        shape = (len(self.seeds), self.n_envs)
-        rewards, truncated = rewards.astype(np.float32).reshape(shape), truncated.reshape(shape)
-        terminal = obs.reshape(*shape, -1)
-        self._returns += rewards
-        self._lengths += 1
-        nxt = terminal
-        if truncated.any():
-            nxt = terminal.copy()
-            done = np.flatnonzero(truncated).tolist()
-            fresh = self._lines.restart(done)
-            for j in done:
-                i, k = divmod(j, self.n_envs)
-                nxt[i, k] = fresh[j]
-                ret, length = float(self._returns[i, k]), int(self._lengths[i, k])
-                self.episodes[i].append({"r": ret, "l": length, "t": round(time.time() - self._t_start, 6)})
-            self._returns[truncated], self._lengths[truncated] = 0, 0
-        # The line has no terminal state: an episode ends by its time limit only.
-        return LinesStep(nxt, rewards, truncated.copy(), truncated, terminal)
-
-    def close(self) -> None:
-        self._lines.close()
 
 
 class BatchedDQN:
