@@ -7,12 +7,13 @@ seed of a batch of several seeds:
   gradient clip biting for one seed and not for another;
 - a short training on native lines (warm-up, the epsilon-greedy schedule, train_freq and
   gradient_steps, target updates every target_update_interval // n_envs calls, truncated episodes
-  bootstrapped from their final observation, a replay buffer that wraps) equals SB3's ``learn``
-  with the same seed: the same transitions in the replay buffer, the same exploration rate and
-  target updates at each step, the same weights;
+  bootstrapped from their final observation, a replay buffer that wraps, a second ``learn`` with
+  reset_num_timesteps=False) equals SB3's ``learn`` calls with the same seed: the same transitions
+  in the replay buffer, the same exploration rate and target updates at each step, the same weights;
 - a saved seed loads with DQN.load, whose ``predict(deterministic=True)`` gives the engine's
   actions, and continues in the engine as in SB3 (``DQN.load(...).learn``);
-- a bad hyperparameter, seed or model file fails at construction, naming it.
+- a bad hyperparameter, seed or model file fails at construction, naming it; so does a second
+  ``learn`` that would reset the lines (not mirrored).
 
 Native lines in this process: no node, no DDS. About 25 s on a busy machine.
 """
@@ -149,13 +150,14 @@ def short_runs(tmp_path_factory):
     seeds = SEEDS[:2]
     engine = BatchedDQN(seeds, **LINE, n_envs=LINES, episode_steps=EPISODE, **SHORT)
     engine_trace = traced(engine, engine.q_net_target.parameters, len(seeds))
-    engine.learn(STEPS)
+    # Two learn() calls, the second continuing the first (reset_num_timesteps=False), on both sides.
+    engine.learn(STEPS - 200).learn(200, reset_num_timesteps=False)
     references = []
     for seed in seeds:
         env = make_training_env(LINE["setup"], LINE["variant"], LINES, EPISODE, backend="native")
         model = DQN("MlpPolicy", env, seed=seed, device="cpu", **SHORT)
         trace = traced(model, model.q_net_target.parameters)
-        references.append((model.learn(STEPS), trace))
+        references.append((model.learn(STEPS - 200).learn(200, reset_num_timesteps=False), trace))
         env.close()
     paths = engine.save(tmp_path_factory.mktemp("models"))
     yield engine, engine_trace, references, paths
@@ -222,6 +224,11 @@ def test_a_saved_seed_loads_in_sb3_and_continues_in_the_engine(short_runs):
 def test_a_bad_hyperparameter_fails_at_construction(keywords, named):
     with pytest.raises(ValueError, match=named):
         BatchedDQN([1], **LINE, **keywords)
+
+
+def test_a_second_learn_that_resets_is_refused(short_runs):
+    with pytest.raises(ValueError, match="reset_num_timesteps=False"):
+        short_runs[0].learn(10)
 
 
 def test_bad_seeds_and_model_files_fail_naming_them(tmp_path):

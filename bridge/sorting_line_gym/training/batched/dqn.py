@@ -254,15 +254,16 @@ class BatchedDQN:
             raise ValueError(f"{len(paths)} models and {len(given)} seeds: allowed one seed per model")
         loaded = load_models(paths, given, variant, n_envs)
         seeds = check_seeds([sm.model.seed if s is None else s for sm, s in zip(loaded, given, strict=True)])
-        params = [{k: getattr(sm.model, k) for k in _LOADED_KEYS} for sm in loaded]
+        params = [loaded_hyperparameters(sm.model) for sm in loaded]
         for path, p in zip(paths, params, strict=True):
-            if p != params[0]:
-                diff = sorted(k for k in p if p[k] != params[0][k])
+            diff = sorted(k for k in p if comparable(p[k]) != comparable(params[0][k]))
+            if diff:
                 raise ValueError(
                     f"{path}: hyperparameters {diff} differ from {paths[0]}'s: allowed models of one setting"
                 )
         engine = cls.__new__(cls)
-        loaded_params = {**params[0], "train_freq": params[0]["train_freq"].frequency}
+        train_freq = params[0]["train_freq"]  # a TrainFreq once SB3 has built the model
+        loaded_params = {**params[0], "train_freq": (train_freq.frequency, train_freq.unit.value)}
         engine._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(loaded_params))
         engine._adopt(seeds, loaded)
         return engine
@@ -303,12 +304,14 @@ class BatchedDQN:
         self.optimizer = stacked_optimizer(policies[0].optimizer, self.q_net.parameters())
         optimizer_state_from_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
         first = self.models[0]
-        if any(m._n_calls != first._n_calls or m._n_updates != first._n_updates for m in self.models):
+        counters = ("num_timesteps", "_total_timesteps", "_n_calls", "_n_updates")
+        if any(getattr(m, c) != getattr(first, c) for m in self.models for c in counters):
             raise ValueError("the models have trained different numbers of steps: allowed models trained alike")
         self.lr_schedule, self.exploration_schedule = first.lr_schedule, first.exploration_schedule
         self._n_calls, self._n_updates = first._n_calls, first._n_updates
         self.exploration_rate, self._current_progress_remaining = first.exploration_rate, 1.0
-        self.num_timesteps, self._total_timesteps = 0, 0
+        self.num_timesteps, self._total_timesteps = first.num_timesteps, first._total_timesteps
+        self._num_timesteps_at_start = first.num_timesteps
         self._episode_num = np.zeros(len(seeds), dtype=np.int64)
         self._last_obs: np.ndarray | None = None
         self.lines: BatchedLines | None = None
@@ -320,12 +323,25 @@ class BatchedDQN:
 
     # ---- the training loop: OffPolicyAlgorithm.learn / collect_rollouts, for all seeds at once ----
 
-    def learn(self, total_timesteps: int, callback: Callable[[BatchedDQN], bool | None] | None = None) -> BatchedDQN:
-        """Trains every seed for ``total_timesteps`` steps of its L lines, as SB3's ``learn``
-        (``reset_num_timesteps=True``). ``callback(engine)`` runs after each rollout; False stops."""
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Callable[[BatchedDQN], bool | None] | None = None,
+        reset_num_timesteps: bool = True,
+    ) -> BatchedDQN:
+        """Trains every seed for ``total_timesteps`` steps of its L lines, as SB3's ``learn``.
+        ``reset_num_timesteps=False`` continues the last ``learn`` (its lines, counters and
+        buffers), as SB3's does. ``callback(engine)`` runs after each rollout; False stops."""
         if not isinstance(total_timesteps, int) or isinstance(total_timesteps, bool) or total_timesteps < 1:
             raise ValueError(f"total_timesteps = {total_timesteps!r} is not valid: allowed an integer >= 1")
-        self._setup_learn(total_timesteps)
+        if reset_num_timesteps and self.lines is not None:
+            # SB3 would reset its VecEnv again, which then draws its line seeds from the lines'
+            # generators rather than from the seeds: not mirrored, so refused rather than different.
+            raise ValueError(
+                "learn(reset_num_timesteps=True) a second time is not implemented by the batched DQN engine: "
+                "allowed learn(..., reset_num_timesteps=False), which continues the training as SB3's does"
+            )
+        total_timesteps = self._setup_learn(total_timesteps, reset_num_timesteps)
         # OffPolicyAlgorithm.learn: rollouts of train_freq vector steps, then gradient steps once
         # past learning_starts (gradient_steps -1: as many as transitions collected, per seed).
         while self.num_timesteps < total_timesteps:
@@ -338,11 +354,16 @@ class BatchedDQN:
                 break
         return self
 
-    def _setup_learn(self, total_timesteps: int) -> None:
-        # BaseAlgorithm._setup_learn with reset_num_timesteps=True: counters from 0, lines reset
-        # (line k of seed s from seed s + k, VecEnv.seed); OffPolicyAlgorithm._setup_model's buffer.
-        self.num_timesteps, self._total_timesteps = 0, total_timesteps
-        self._episode_num[:] = 0
+    def _setup_learn(self, total_timesteps: int, reset_num_timesteps: bool) -> int:
+        """BaseAlgorithm._setup_learn: the counters from 0 (or the total counted on from them), the
+        lines reset where there is no last observation (line k of seed s from seed s + k,
+        VecEnv.seed); OffPolicyAlgorithm._setup_model's replay buffer. Returns the total."""
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+            self._episode_num[:] = 0
+        else:
+            total_timesteps += self.num_timesteps
+        self._total_timesteps, self._num_timesteps_at_start = total_timesteps, self.num_timesteps
         if self.lines is None:
             self.lines = BatchedLines(
                 self.seeds,
@@ -352,13 +373,15 @@ class BatchedDQN:
                 episode_steps=self.episode_steps,
                 stats_window=self.params["stats_window_size"],
             )
-        self._last_obs = self.lines.reset()
+        if self._last_obs is None:
+            self._last_obs = self.lines.reset()
         if self.replay is None:
             handle = (self.params["replay_buffer_kwargs"] or {}).get("handle_timeout_termination", True)
             self.replay = BatchedReplayBuffer(
                 self.n_seeds, self.params["buffer_size"], self._last_obs.shape[-1], self.n_envs, handle
             )
             check_memory(self.replay, total_timesteps, self.n_envs)
+        return total_timesteps
 
     def _collect_rollout(self) -> None:
         """OffPolicyAlgorithm.collect_rollouts with TrainFreq(train_freq, STEP)."""
@@ -456,7 +479,7 @@ class BatchedDQN:
         optimizer_state_to_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
         for s, model in enumerate(self.models):
             model.num_timesteps, model._total_timesteps = self.num_timesteps, self._total_timesteps
-            model._num_timesteps_at_start = 0
+            model._num_timesteps_at_start = self._num_timesteps_at_start
             model._n_calls, model._n_updates = self._n_calls, self._n_updates
             model._episode_num = int(self._episode_num[s])
             model.exploration_rate = self.exploration_rate
@@ -507,6 +530,22 @@ _LOADED_KEYS = (
     "max_grad_norm",
     "policy_kwargs",
 )
+
+
+def loaded_hyperparameters(model: DQN) -> dict[str, Any]:
+    """A loaded model's hyperparameters, as DQN's constructor arguments."""
+    return {k: getattr(model, k) for k in _LOADED_KEYS} | {"stats_window_size": model._stats_window_size}
+
+
+def comparable(value: Any) -> Any:
+    """A value two models' hyperparameters can be compared by: a schedule by its repr where it has
+    one of its own (SB3's schedules do), a function by its code; anything else as it is."""
+    if callable(value) and not isinstance(value, type):
+        if type(value).__repr__ is not object.__repr__ and not inspect.isfunction(value):
+            return repr(value)
+        code = getattr(value, "__code__", None)
+        return code.co_code if code is not None else id(value)
+    return value
 
 
 def available_memory() -> int | None:
