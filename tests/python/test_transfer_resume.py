@@ -81,6 +81,9 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
     assert "| upgrade | ppo | 2/2/2 | " in table and "IQM [95 % CI]" in table and "reached)" in table
     assert_real_image(out / "transfer.png")
     assert (out / "transfer.svg").stat().st_size > 10_000
+    # Each strategy's runs beside its interval: one mean per training seed.
+    assert len(ppo["strategies"]["continued"]["per_run"]) == 2
+    assert_real_image(out / "transfer_runs.png")
 
     assert transfer.main([*SMOKE, "--evaluations", "4", "--out", str(out)]) == 2
     assert "holds cells of another configuration (evaluations: saved 3, asked 4)" in capsys.readouterr().err
