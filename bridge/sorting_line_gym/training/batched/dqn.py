@@ -302,6 +302,9 @@ class BatchedDQN:
             p.requires_grad_(False)
         self._pairs = parameter_pairs(self.q_net, [p.q_net.q_net for p in policies])
         self.optimizer = stacked_optimizer(policies[0].optimizer, self.q_net.parameters())
+        # Adam's foreach path: the arithmetic of the per-tensor loop SB3's CPU Adam runs, bit for bit,
+        # in one call per operation over all of the network's tensors (about 10% of a gradient step).
+        self.optimizer.param_groups[0]["foreach"] = True
         optimizer_state_from_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
         first = self.models[0]
         counters = ("num_timesteps", "_total_timesteps", "_n_calls", "_n_updates")
