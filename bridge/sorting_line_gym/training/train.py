@@ -3,6 +3,7 @@
     sorting-line-train --algo ppo --setup B --variant advanced            # the paper's PPO, 100k steps
     sorting-line-train --algo dqn --setup D --variant basic --hp learning_rate=3e-4 --timesteps 50000
     sorting-line-train --algo ppo --setup B --variant advanced --n-envs 8 # 8 lines of one node
+    sorting-line-train --algo ppo --setup B --variant advanced --engine batched --seeds 42 43 44 45
 
 The environment is the real thing: a `sorting_line` node process started for the run, stepped in
 lock-step over DDS by the bridge (one env, or with ``n_envs`` > 1 N lines of one node stepped by
@@ -13,16 +14,18 @@ Writes ``<out>/<algo>_<setup>_<variant>_seed<seed>.zip`` (the SB3 model) and a `
 (algorithm, line, hyperparameters, wall time, steps per second, versions), and TensorBoard logs
 under ``<out>/tensorboard/`` with the line KPIs (``line/purity``, ``line/mean_speed``, ... see
 ``callbacks``). A progress bar shows the steps unless ``--no-progress``.
+
+``--engine batched`` trains all ``--seeds`` at once in this process on native lines (``train_batched``,
+``training/batched``), each seed's model and record written as above.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import platform
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -31,31 +34,10 @@ from ..envs.native import BACKENDS
 from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS, VARIANTS, check_setup
 from . import hyperparams
+from .run_record import TrainingRun, model_stem, versions
 
-
-@dataclass
-class TrainingRun:
-    """What one training did: written next to the model as JSON."""
-
-    algo: str
-    setup: str
-    variant: str
-    seed: int
-    n_timesteps: int
-    n_envs: int
-    episode_steps: int
-    policy: str
-    hyperparams: dict[str, Any]
-    wall_s: float
-    steps_per_s: float
-    episodes: int
-    model_path: str
-    torch_threads: int
-    versions: dict[str, str]
-
-
-def model_stem(algo: str, setup: str, variant: str, seed: int) -> str:
-    return f"{algo}_{setup}_{variant}_seed{seed}"
+#: How sorting-line-train trains: SB3 itself, or the batched trainer (training/batched, train_batched).
+ENGINES = ("sb3", "batched")
 
 
 def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int, backend: str = "ros"):
@@ -82,19 +64,6 @@ def make_training_env(setup: str, variant: str, n_envs: int, episode_steps: int,
             num_envs=n_envs, setup=setup, variant=variant, max_episode_steps=episode_steps, backend=backend
         )
     return VecMonitor(venv)
-
-
-def versions() -> dict[str, str]:
-    import gymnasium
-    import stable_baselines3
-    import torch
-
-    return {
-        "python": platform.python_version(),
-        "stable_baselines3": stable_baselines3.__version__,
-        "gymnasium": gymnasium.__version__,
-        "torch": torch.__version__,
-    }
 
 
 def train(
@@ -173,9 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty",
     )
     p.add_argument("--variant", default="basic", choices=VARIANTS, help="basic or advanced line (default %(default)s)")
-    p.add_argument(
-        "--seed", type=int, default=42, help="seed of the algorithm and of the first training episodes (default 42)"
-    )
+    p.add_argument("--seed", type=int, help="seed of the algorithm and of the first training episodes (default 42)")
     p.add_argument(
         "--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)"
     )
@@ -197,9 +164,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (default 1)")
     p.add_argument(
         "--backend",
-        default="ros",
         choices=BACKENDS,
-        help="ros: lines of a sorting_line node over ROS 2; native: the line in-process (same model) (default ros)",
+        help="ros: lines of a sorting_line node over ROS 2; native: the line in-process (same model) "
+        "(default ros; with --engine batched native, its only backend)",
+    )
+    p.add_argument(
+        "--engine",
+        default="sb3",
+        choices=ENGINES,
+        help="sb3: Stable-Baselines3, one seed after another; batched: all --seeds at once in one process, "
+        "each equal to SB3's run of that seed (training/batched) (default sb3)",
+    )
+    p.add_argument(
+        "--seeds", type=int, nargs="+", metavar="S", help="several seeds, one model each (instead of --seed)"
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", action="count", default=0, help="SB3's console log (-v)")
@@ -212,6 +189,45 @@ def main(argv: list[str] | None = None) -> int:
     if missing:
         print(f"sorting-line-train: needs {' and '.join(missing)}, the training stack: {TRAIN_HINT}", file=sys.stderr)
         return 2
+    if args.seeds is not None and args.seed is not None:
+        print("sorting-line-train: --seed and --seeds: allowed one of them", file=sys.stderr)
+        return 2
+    args.seeds = args.seeds or [42 if args.seed is None else args.seed]
+    params = training_params(args)
+    if params is None:
+        return 2
+    if args.engine == "batched":
+        from .train_batched import main_batched
+
+        return main_batched(args, params)
+    args.backend = args.backend or "ros"
+    tensorboard = None if args.tensorboard == "none" else (args.tensorboard or str(Path(args.out) / "tensorboard"))
+    for seed in args.seeds:
+        print(
+            f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {seed}: {params}",
+            file=sys.stderr,
+        )
+        run = call_with_flags(
+            train,
+            args,
+            args.algo,
+            args.setup,
+            args.variant,
+            seed=seed,
+            params=params,
+            tensorboard=tensorboard,
+            progress=not args.no_progress,
+        )
+        print(
+            f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s"
+            f", {run.episodes} episodes); "
+            f"model {run.model_path}"
+        )
+    return 0
+
+
+def training_params(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The hyperparameters of the flags (``hyperparams.load``), or None after printing why not."""
     overrides = list(args.hp)
     if args.timesteps is not None:
         overrides.append(f"n_timesteps={args.timesteps}")
@@ -222,33 +238,12 @@ def main(argv: list[str] | None = None) -> int:
             f"sorting-line-train: --torch-threads = {args.torch_threads} is not valid: allowed 1 or more",
             file=sys.stderr,
         )
-        return 2
+        return None
     try:
-        params = hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
+        return hyperparams.load(args.algo, args.variant, args.hyperparams, overrides)
     except ValueError as e:
         print(f"sorting-line-train: {e}", file=sys.stderr)
-        return 2
-    tensorboard = None if args.tensorboard == "none" else (args.tensorboard or str(Path(args.out) / "tensorboard"))
-    print(
-        f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seed {args.seed}: {params}",
-        file=sys.stderr,
-    )
-    run = call_with_flags(
-        train,
-        args,
-        args.algo,
-        args.setup,
-        args.variant,
-        params=params,
-        tensorboard=tensorboard,
-        progress=not args.no_progress,
-    )
-    print(
-        f"trained {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s"
-        f", {run.episodes} episodes); "
-        f"model {run.model_path}"
-    )
-    return 0
+        return None
 
 
 if __name__ == "__main__":

@@ -1,0 +1,155 @@
+"""`sorting-line-train --engine batched --seeds 42 43 ...`: the batched trainer (training/batched)
+behind the training command: all the seeds of one algorithm trained at once on native lines, each
+written as ``--engine sb3`` writes one (``<algo>_<setup>_<variant>_seed<S>.zip``, an SB3 model
+file, and its ``.json`` training record).
+
+The hyperparameters are the same (``hyperparams.load``: the paper's, ``--hp``, ``n_envs`` lines
+per seed); what the batched trainer does not implement fails before anything starts (its checks).
+The progress bar counts each seed's steps and shows the steps per second of all seeds together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from ..line.flags import call_with_flags
+from ..line.vocabulary import check_setup
+from . import hyperparams
+from .run_record import TrainingRun, model_stem, versions
+
+
+def trainer(algo: str, setup: str, variant: str, seeds: Sequence[int], own: dict[str, Any], kwargs: dict[str, Any]):
+    """The batched trainer of ``algo`` (DQN's or the on-policy one) for ``seeds``."""
+    if algo == "dqn":
+        from .batched.dqn import BatchedDQN
+
+        return BatchedDQN(
+            seeds, setup=setup, variant=variant, n_envs=own["n_envs"], episode_steps=own["episode_steps"], **kwargs
+        )
+    from .batched.on_policy import OnPolicyTrainer
+
+    return OnPolicyTrainer(
+        algo,
+        seeds,
+        setup=setup,
+        variant=variant,
+        params=kwargs,
+        lines_per_seed=own["n_envs"],
+        episode_steps=own["episode_steps"],
+    )
+
+
+def progress_bar(total: int, n_seeds: int):
+    """A tqdm bar of one seed's steps and a callback for the trainers' ``learn`` that updates it."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="step", desc=f"{n_seeds} seeds", dynamic_ncols=True)
+    started = time.perf_counter()
+
+    def update(engine) -> None:
+        bar.update(max(0, min(engine.num_timesteps, total) - bar.n))
+        rate = engine.num_timesteps * n_seeds / max(time.perf_counter() - started, 1e-9)
+        bar.set_postfix_str(f"{rate:,.0f} steps/s over all seeds", refresh=False)
+
+    return bar, update
+
+
+def train_batched(
+    algo: str,
+    setup: str,
+    variant: str,
+    *,
+    seeds: Sequence[int] = (42,),
+    out: str | Path = "models",
+    params: dict[str, Any] | None = None,
+    progress: bool = True,
+    torch_threads: int = 1,
+) -> list[TrainingRun]:
+    """Trains ``algo`` for every seed of ``seeds`` at once on native lines and saves each seed's
+    model and record; returns the records (``wall_s`` is the batch's wall time, shared)."""
+    import torch
+
+    check_setup(setup)
+    params = params if params is not None else hyperparams.load(algo, variant)
+    own, kwargs = hyperparams.split(params)
+    torch.set_num_threads(torch_threads)
+    (out := Path(out)).mkdir(parents=True, exist_ok=True)
+    engine = trainer(algo, setup, variant, seeds, own, kwargs)
+    try:
+        bar, update = progress_bar(own["n_timesteps"], len(engine.seeds)) if progress else (None, None)
+        start = time.perf_counter()
+        engine.learn(own["n_timesteps"], update)
+        wall = time.perf_counter() - start
+        if bar is not None:
+            bar.close()
+        if algo == "dqn":  # BatchedDQN.save names the files as model_stem does
+            paths = engine.save(out)
+        else:
+            paths = engine.save([out / f"{model_stem(algo, setup, variant, s)}.zip" for s in engine.seeds])
+        episodes = [int(n) for n in engine.lines.episode_counts]
+    finally:
+        engine.close()
+    runs = []
+    for s, (seed, path) in enumerate(zip(engine.seeds, paths, strict=True)):
+        run = TrainingRun(
+            algo=algo,
+            setup=setup,
+            variant=variant,
+            seed=seed,
+            n_timesteps=own["n_timesteps"],
+            n_envs=own["n_envs"],
+            episode_steps=own["episode_steps"],
+            policy=own["policy"],
+            hyperparams=kwargs,
+            wall_s=wall,
+            steps_per_s=own["n_timesteps"] * len(engine.seeds) / wall,
+            episodes=episodes[s],
+            model_path=str(path),
+            torch_threads=torch_threads,
+            versions={**versions(), "engine": f"batched ({len(engine.seeds)} seeds at once)"},
+        )
+        path.with_suffix(".json").write_text(json.dumps(asdict(run), indent=2) + "\n")
+        runs.append(run)
+    return runs
+
+
+def refused_flags(args: argparse.Namespace) -> str | None:
+    """Why the flags cannot go to the batched trainer, or None: what it lacks is refused, not ignored."""
+    if args.backend not in (None, "native"):
+        return f"--backend {args.backend}: the batched engine trains on native lines (--backend native)"
+    if args.tensorboard not in (None, "none"):
+        return f"--tensorboard {args.tensorboard}: the batched engine writes no TensorBoard logs (--engine sb3 does)"
+    if args.verbose:
+        return "-v: SB3's console log is --engine sb3's; the batched engine shows a progress bar"
+    return None
+
+
+def main_batched(args: argparse.Namespace, params: dict[str, Any]) -> int:
+    """``sorting-line-train --engine batched``: exit 0, or 2 for flags or hyperparameters it refuses."""
+    refused = refused_flags(args)
+    if refused:
+        print(f"sorting-line-train: {refused}", file=sys.stderr)
+        return 2
+    print(
+        f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seeds {args.seeds} at once: {params}",
+        file=sys.stderr,
+    )
+    try:
+        runs = call_with_flags(train_batched, args, args.algo, args.setup, args.variant, params=params,
+                               progress=not args.no_progress)  # fmt: skip
+    except ValueError as e:  # what the trainer refuses, before it trains
+        print(f"sorting-line-train: {e}", file=sys.stderr)
+        return 2
+    run = runs[0]
+    print(
+        f"trained {len(runs)} seeds x {run.n_timesteps} steps in {run.wall_s:.1f} s ({run.steps_per_s:.0f} steps/s "
+        f"over all seeds); models {', '.join(r.model_path for r in runs)}"
+    )
+    return 0
