@@ -38,6 +38,11 @@ step "set-up (venv with the training stack, interfaces, release build)"
 MAIN_CHOICE="${SORTING_LINE_PYTHON:-}"
 [[ -x .venv/bin/python || -n "$MAIN_CHOICE" ]] || MAIN_CHOICE=3.11
 SORTING_LINE_PYTHON="$MAIN_CHOICE" bash launch_scripts/setup.sh --train
+# Foxglove's own JavaScript readers for tests/python/test_foxglove.py, as tests/foxglove/package-lock.json
+# pins them (Node.js is the machine's package; seconds once npm's cache has them).
+if [[ $RUST_ONLY == 0 ]]; then
+  (cd tests/foxglove && npm ci --no-audit --no-fund --loglevel=error) || { echo "test.sh: npm ci in tests/foxglove failed" >&2; exit 1; }
+fi
 MAIN_PYTHON="$(.venv/bin/python -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
 OTHER_PYTHON=3.12
 [[ $MAIN_PYTHON == 3.12 ]] && OTHER_PYTHON=3.11

@@ -151,12 +151,7 @@ struct TableArgs {
 }
 
 fn main() -> ExitCode {
-    // The DDS stack's own log (RUST_LOG=rustdds=debug, to stderr) only when asked for: without it
-    // env_logger would still print rustdds' error lines, some of them routine.
-    #[cfg(feature = "ros")]
-    if std::env::var_os("RUST_LOG").is_some() {
-        env_logger::Builder::from_default_env().format_timestamp_micros().init();
-    }
+    // The DDS stack's own log (RUST_LOG=rustdds=debug) is set up by the node (ros::node::log).
     // `--ros-args ... [--]` belongs to ROS, not to clap: split it off first.
     #[cfg(feature = "ros")]
     let (args, ros_args) = sorting_line::ros::options::split_ros_args(std::env::args().collect());

@@ -9,7 +9,8 @@
 //! - `protocol`: lock-step/realtime command handling of one line, without I/O.
 //! - `simulation`: the node as a standard simulator (simulation_interfaces: state, step, reset,
 //!   features), as rules without I/O; `simulation_interfaces`: the standard's types on the wire.
-//! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire.
+//! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire; `ros2msg`: the types'
+//!   schemas as Foxglove reads them (the live view).
 //! - `node`: the running node: the DDS participant, the endpoints, and the server whose loop
 //!   handles every event (one module per concern, listed there).
 
@@ -24,6 +25,7 @@ pub mod param_descriptors;
 pub mod params;
 pub mod protocol;
 pub mod qos;
+pub mod ros2msg;
 pub mod ros_args;
 pub mod simulation;
 pub mod simulation_interfaces;

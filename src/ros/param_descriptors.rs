@@ -24,6 +24,7 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
     ("setup", "The paper's setup A, B, C or D (empty: none); sets input, obs_noise and action_penalty unless given explicitly"),
     ("use_sim_time", "Ignored: this node is the clock, it publishes /clock"),
     ("evolution_file", "Evolution schedule every line follows (upgrades, drifts, sensor faults; empty: none); the values it changes are updated on /parameter_events"),
+    ("foxglove", "Where the Foxglove WebSocket live view listens ([ADDR:]PORT; empty: off): every topic, /clock's time, /diagnostics and the line as a scene (docs/foxglove.md)"),
 ];
 
 /// The parameters an evolution schedule changes while the node runs (on /parameter_events).

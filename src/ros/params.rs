@@ -8,6 +8,7 @@
 //! explicitly anywhere override it. So `--setup B --obs-noise 0.1` and a file with `setup: B`
 //! plus `-p obs_noise:=0.1` mean the same line.
 
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::Path;
 
 use serde_yaml::Value;
@@ -35,6 +36,8 @@ pub struct NodeParams {
     /// The evolution schedule's file as given ("" for none) and the schedule read from it.
     pub evolution_file: String,
     pub evolution: Schedule,
+    /// Where the Foxglove live view listens, if it is on (`foxglove`).
+    pub foxglove: Option<SocketAddr>,
 }
 
 impl Default for NodeParams {
@@ -49,6 +52,7 @@ impl Default for NodeParams {
             tick_period: 1.0,
             evolution_file: String::new(),
             evolution: Schedule::default(),
+            foxglove: None,
         }
     }
 }
@@ -81,7 +85,31 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("setup", "A, B, C or D, or empty for none (sets input, obs_noise and action_penalty; those given explicitly override it)"),
     ("use_sim_time", "true or false (ignored: this node is the clock)"),
     ("evolution_file", "a readable evolution schedule (YAML, see src/sim/evolution.rs), or empty for none"),
+    ("foxglove", FOXGLOVE_ALLOWED),
 ];
+
+/// What the `foxglove` parameter accepts.
+pub const FOXGLOVE_ALLOWED: &str = "empty for off, or [ADDR:]PORT: PORT 0 ..= 65535 (0: any free port, logged), \
+     ADDR an IP address of this host or localhost (default 127.0.0.1; 0.0.0.0 or [::] for every interface)";
+
+/// The address the Foxglove live view listens on, from `[ADDR:]PORT` (see [`FOXGLOVE_ALLOWED`]);
+/// `None` for "" (off); the error says what is allowed. Whether ADDR belongs to this host shows
+/// when the node binds it.
+pub fn listen_address(text: &str) -> Result<Option<SocketAddr>, String> {
+    let text = text.trim();
+    if text.is_empty() {
+        return Ok(None);
+    }
+    let invalid = || format!("is not valid: allowed {FOXGLOVE_ALLOWED}");
+    let port = |p: &str| p.parse::<u16>().map_err(|_| invalid());
+    if text.bytes().all(|b| b.is_ascii_digit()) {
+        return Ok(Some(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port(text)?)));
+    }
+    if let Some(p) = text.strip_prefix("localhost:") {
+        return Ok(Some(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port(p)?)));
+    }
+    text.parse::<SocketAddr>().map(Some).map_err(|_| invalid())
+}
 
 fn allowed(name: &str) -> &'static str {
     PARAMETERS.iter().find(|(n, _)| *n == name).map(|(_, a)| *a).unwrap_or("")
@@ -156,6 +184,15 @@ impl NodeParams {
                     load_schedule(file).map_err(|e| format!("parameter {name} = {file} (from {source}): {e}"))?;
                 self.evolution_file = file.to_string();
             }
+            "foxglove" => {
+                // A port alone reads as a YAML integer (`-p foxglove:=8765`).
+                let given = match value {
+                    Value::Number(n) => n.to_string(),
+                    _ => text()?.to_string(),
+                };
+                self.foxglove =
+                    listen_address(&given).map_err(|e| format!("parameter {name} = {given} (from {source}) {e}"))?;
+            }
             "use_sim_time" => {
                 value.as_bool().ok_or_else(bad)?;
             }
@@ -215,6 +252,7 @@ impl NodeParams {
             ("lines", Value::from(self.lines)),
             ("tick_period", Value::from(self.tick_period)),
             ("evolution_file", Value::from(self.evolution_file.clone())),
+            ("foxglove", Value::from(self.foxglove.map(|a| a.to_string()).unwrap_or_default())),
         ]
     }
 }
@@ -244,6 +282,7 @@ fn explicit_flags(a: &NodeArgs) -> Vec<(&'static str, Value)> {
     push("lines", a.lines.map(Value::from));
     push("tick_period", a.tick_period.map(Value::from));
     push("evolution_file", a.evolution.as_ref().map(|p| Value::from(p.display().to_string())));
+    push("foxglove", a.foxglove.clone().map(Value::from));
     v
 }
 
@@ -396,6 +435,30 @@ mod tests {
         let bad = vec![("setup".to_string(), Value::from("E"))];
         let e = NodeParams::resolve(&NodeArgs::default(), &bad, none, &names("/")).unwrap_err();
         assert!(e.contains("parameter setup = E (from --ros-args -p) is not valid: allowed A, B, C or D"), "{e}");
+    }
+
+    #[test]
+    fn the_foxglove_address_is_a_port_or_an_address_and_port() {
+        let resolve = |ros: Vec<(String, Value)>, flag: Option<&str>| {
+            let args = NodeArgs { foxglove: flag.map(String::from), ..NodeArgs::default() };
+            NodeParams::resolve(&args, &ros, &[] as &[&Path], &names("/")).map(|p| p.foxglove.map(|a| a.to_string()))
+        };
+        assert_eq!(resolve(vec![], None).unwrap(), None);
+        assert_eq!(resolve(vec![], Some("8765")).unwrap().as_deref(), Some("127.0.0.1:8765"));
+        assert_eq!(resolve(vec![], Some("0.0.0.0:0")).unwrap().as_deref(), Some("0.0.0.0:0"));
+        assert_eq!(resolve(vec![], Some("[::1]:9")).unwrap().as_deref(), Some("[::1]:9"));
+        assert_eq!(resolve(vec![], Some("localhost:9")).unwrap().as_deref(), Some("127.0.0.1:9"));
+        let as_int = vec![("foxglove".to_string(), Value::from(8765))];
+        assert_eq!(resolve(as_int, None).unwrap().as_deref(), Some("127.0.0.1:8765"));
+        let off = vec![("foxglove".to_string(), Value::from(""))];
+        assert_eq!(resolve(off, None).unwrap(), None);
+        for bad in ["65536", "-1", "host.example:80", "127.0.0.1", "1.2.3.4:99999", "::1:80"] {
+            let e = resolve(vec![], Some(bad)).unwrap_err();
+            assert!(
+                e.contains(&format!("parameter foxglove = {bad} (from --foxglove) is not valid: allowed empty")),
+                "{e}"
+            );
+        }
     }
 
     #[test]

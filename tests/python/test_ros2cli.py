@@ -30,6 +30,7 @@ NODE_TYPES = {"/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_m
 PARAMETERS = [
     "action_penalty",
     "evolution_file",
+    "foxglove",
     "input",
     "lines",
     "max_steps",
@@ -409,6 +410,7 @@ def test_param_list_get_dump(ros2, rt_line):
             "ros__parameters": {
                 "action_penalty": 0.0,
                 "evolution_file": "",
+                "foxglove": "",
                 "input": "random",
                 "lines": 1,
                 "max_steps": 1000000,

@@ -1,6 +1,7 @@
 //! /diagnostics as a part of the node: published once a second (wall time), one status per line
 //! (its counters, where it is, and on an evolving line its setup and how far its schedule has
-//! come), and one for the simulation_interfaces side.
+//! come), one for the simulation_interfaces side, and with the live view on, one for it
+//! (`live_view`), which also shows the array itself.
 
 use std::time::{Duration, Instant};
 
@@ -8,6 +9,7 @@ use futures::stream::{Fuse, StreamExt};
 use ros2_client::{Node, Publisher};
 
 use super::endpoints::publisher;
+use super::graph::{ros_type, Graph};
 use super::lines::Line;
 use super::log::{log, show_client, show_stamp};
 use crate::ros::messages::{DiagnosticArray, DiagnosticStatus, Header, KeyValue};
@@ -45,14 +47,24 @@ impl Diagnostics {
         self.started = Instant::now();
     }
 
-    /// Every line's status and then `simulation`'s (`node`: whose matches the statuses count).
-    pub(super) fn publish(&mut self, node: &Node, lines: &mut [Line], simulation: DiagnosticStatus) {
+    /// Every line's status, then `simulation`'s, then the live view's if it is on (the graph's
+    /// node: whose matches the statuses count).
+    pub(super) fn publish(&mut self, graph: &Graph, lines: &mut [Line], simulation: DiagnosticStatus) {
         let uptime = format!("{:.0}", self.started.elapsed().as_secs_f64());
         let params = &self.params;
-        let status =
-            lines.iter_mut().map(|line| line_status(line, node, params, &uptime)).chain([simulation]).collect();
+        let node = &graph.node;
+        let live = graph.live.as_ref().map(|live| live.status());
+        let status = lines
+            .iter_mut()
+            .map(|line| line_status(line, node, params, &uptime))
+            .chain([simulation])
+            .chain(live)
+            .collect();
         let stamp = lines.iter().map(|line| line.host.stamp()).max().unwrap_or_default();
         let array = DiagnosticArray { header: Header { stamp, frame_id: String::new() }, status };
+        if let Some(live) = &graph.live {
+            live.offer("/diagnostics", &ros_type::<DiagnosticArray>(), &array);
+        }
         if let Err(e) = self.publisher.publish(array) {
             log("WARN", format!("cannot publish /diagnostics: {e:?}"));
         }

@@ -14,6 +14,7 @@ use super::events::{client_of, Event, Input};
 use super::graph::Graph;
 use super::line_messages;
 use super::lines::{Line, Refusal};
+use super::log::show_topic;
 use crate::ros::messages::{batch_reset_service_type, Clock, LineCommands, LineStates, ResetLineRequest};
 use crate::ros::messages::{ResetLinesRequest, ResetLinesResponse, Time};
 use crate::ros::names::Names;
@@ -49,6 +50,8 @@ pub(super) struct LineSet {
     /// Whether `batch/cmd` carries sort modes.
     modes: BatchModes,
     batch_state: Publisher<LineStates>,
+    /// Its name, for the log and the live view.
+    batch_state_topic: String,
     batch_reset: Rc<ServiceServer<ResetLinesRequest, ResetLinesResponse>>,
     clock: ClockPublisher,
 }
@@ -72,7 +75,8 @@ impl LineSet {
             requests(&batch_reset).map(move |r| Event::BatchReset(r.map_err(err))).boxed_local(),
         ]);
         let modes = BatchModes::of(params.line.variant, !params.evolution.is_empty());
-        Ok(LineSet { lines, modes, batch_state, batch_reset, clock })
+        let batch_state_topic = show_topic(&names.namespace, "batch/state");
+        Ok(LineSet { lines, modes, batch_state, batch_state_topic, batch_reset, clock })
     }
 
     /// The lines as built: their episode-0 events applied (announced, and line 0's parameters
@@ -92,7 +96,7 @@ impl LineSet {
     /// `batch/state`, when a vectorised client reads it (per-line clients and realtime lines
     /// without one would otherwise get every line's state built and sent each tick for nothing).
     fn publish_batch_state(&self, graph: &Graph) {
-        graph.offer(&self.batch_state, &|| "batch/state".to_string(), || self.states());
+        graph.offer(&self.batch_state, &|| self.batch_state_topic.clone(), || self.states());
     }
 
     /// Every line's current state, as arrays.

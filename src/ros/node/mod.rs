@@ -46,6 +46,9 @@ mod graph;
 mod line_messages;
 mod line_set;
 mod lines;
+// Without the `foxglove` cargo feature, a stand-in that refuses `--foxglove` at start.
+#[cfg_attr(not(feature = "foxglove"), path = "live_view_off.rs")]
+mod live_view;
 mod log;
 mod parameters;
 mod server;
@@ -60,7 +63,8 @@ use crate::ros::names::{Names, NODE_NAME};
 use crate::ros::options::{NodeArgs, TickMode};
 use crate::ros::params::NodeParams;
 use crate::ros::ros_args::RosArgs;
-use log::log;
+use live_view::LiveView;
+use log::{install_records, log};
 use parameters::node_options;
 use server::Server;
 
@@ -69,12 +73,19 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let ros = RosArgs::parse(&ros_args, NODE_NAME)?;
     let names = Names::new(&ros)?;
     let params = NodeParams::resolve(&args, &ros.params, &ros.params_files, &names)?;
+    install_records(params.foxglove.is_some());
     let discovery = Discovery::from_env()?;
     for warning in &discovery.warnings {
         log("WARN", warning);
     }
     // Before any DDS thread exists, so a signal during start-up is ours to handle.
     let signals = Signals::new([Signal::Int, Signal::Term]).map_err(|e| format!("cannot catch signals: {e}"))?;
+    // Before DDS too: a port in use (or an address not of this host) fails the start at once.
+    let live = match params.foxglove {
+        Some(address) => Some(LiveView::start(address, &names.node_name)?),
+        None => None,
+    };
+    let live_address = live.as_ref().map(LiveView::address);
 
     // Whatever the environment asks, as any rcl node would: keeping a test on this machine is
     // the test's business (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, network namespaces).
@@ -84,10 +95,14 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
     let (options, parameter_values) = node_options(&params);
     let node = context.new_node(node_name, options).map_err(|e| format!("cannot create the node: {e:?}"))?;
-    let mut server = Server::new(node, &names, &params, parameter_values, signals)?;
+    let mut server = Server::new(node, &names, &params, parameter_values, (signals, live))?;
     let spinner = server.spinner()?;
 
     log("INFO", started_message(&names, &discovery, &params));
+    if let Some(address) = live_address {
+        // Tests and launch files read the port from this line (port 0: the one the system chose).
+        log("INFO", format!("foxglove live view on ws://{address}"));
+    }
     let spin = async move {
         if let Err(e) = spinner.spin().await {
             log("ERROR", format!("node spinner stopped: {e:?}"));

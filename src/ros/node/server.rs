@@ -17,6 +17,7 @@ use super::events::Event;
 use super::graph::Graph;
 use super::line_set::{ClockPublisher, LineSet};
 use super::lines::Line;
+use super::live_view::LiveView;
 use super::log::log;
 use super::parameters::ParameterValues;
 use super::stepping::{StepReply, Stepping};
@@ -54,7 +55,7 @@ impl Server {
         names: &Names,
         params: &NodeParams,
         parameter_values: ParameterValues,
-        signals: Signals,
+        (signals, live): (Signals, Option<LiveView>),
     ) -> Result<Self, String> {
         let mut lines = Vec::new();
         let mut inputs = Vec::new();
@@ -69,7 +70,7 @@ impl Server {
         let (control, sim_inputs) = SimulationControl::new(&mut node, names, params)?;
         let stepping = Stepping::new(&mut node, names, &mut inputs)?;
         inputs.extend(sim_inputs);
-        let graph = Graph::new(node, parameter_values, inputs);
+        let graph = Graph::new(node, parameter_values, inputs, live);
         Ok(Server { lines, control, stepping, diagnostics, signals: signals.fuse(), graph })
     }
 
@@ -96,7 +97,7 @@ impl Server {
                 }
                 Wake::Diagnostics => {
                     let simulation = self.control.status(self.stepping.progress());
-                    self.diagnostics.publish(&self.graph.node, &mut self.lines.lines, simulation);
+                    self.diagnostics.publish(&self.graph, &mut self.lines.lines, simulation);
                     ControlFlow::Continue(())
                 }
                 Wake::Signal(signal) => {

@@ -1,0 +1,263 @@
+//! The Foxglove live view as a part of the node (`--foxglove [ADDR:]PORT`, docs/foxglove.md): a
+//! Foxglove WebSocket server (the `foxglove` crate, the SDK Foxglove ships) with one channel per
+//! topic the node publishes, each with its `ros2msg` schema (`ros::ros2msg`) and the very CDR
+//! bytes the node writes to DDS; /clock's time as the server's time, so Foxglove's timeline is the
+//! simulated one; /diagnostics; and the line as a scene (`scene`).
+//!
+//! Never in the line's way: the node's thread only serialises a message and offers it to a
+//! bounded queue (a full queue drops it, counted on /diagnostics as `dropped_queue_full`); a
+//! thread of its own hands the queue to the server, which keeps a bounded queue per viewer and
+//! drops a slow viewer's oldest messages (the crate's rule). The server runs on its own tokio
+//! threads, so nothing here blocks the node's single task. A viewer that subscribes gets the
+//! channel's latest message at once, so one connecting mid-episode (or to an idle lock-step
+//! line) sees where the line is. Client messages the server refuses (malformed, unknown channel,
+//! unsupported request) are answered by it with an error status and counted here
+//! (`client_messages_refused`, from the crate's own log records: `log::refused_client_messages`).
+
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
+use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
+use serde::Serialize;
+
+use super::log::{outbox_full_reports, refused_client_messages};
+use crate::ros::messages::{DiagnosticStatus, KeyValue};
+use crate::ros::ros2msg;
+
+/// Messages waiting between the node's thread and the server (a few ticks of every topic of a
+/// 64-line node); beyond it they are dropped and counted.
+const QUEUE: usize = 4096;
+
+/// Messages the server buffers per viewer before it drops the viewer's oldest.
+const VIEWER_BACKLOG: usize = 1024;
+
+/// What the node's thread hands to the server's side.
+enum Outgoing {
+    /// A message for a channel, stamped with the simulated time (ns) it describes.
+    Message(Arc<RawChannel>, Vec<u8>, u64),
+    /// The server's time (from /clock).
+    Time(u64),
+}
+
+/// Counters the node's thread and the forwarding thread share.
+#[derive(Default)]
+struct Counts {
+    sent: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// Each channel's latest message, for a viewer that subscribes later.
+type Latest = Arc<Mutex<HashMap<u64, (Vec<u8>, u64)>>>;
+
+/// The running live view.
+pub(super) struct LiveView {
+    address: SocketAddr,
+    context: Arc<Context>,
+    /// Shared with the forwarding thread (which sets the server's time); stopped on drop.
+    handle: Option<Arc<WebSocketServerHandle>>,
+    /// By topic name.
+    channels: RefCell<HashMap<String, Arc<RawChannel>>>,
+    latest: Latest,
+    queue: Option<SyncSender<Outgoing>>,
+    counts: Arc<Counts>,
+    forwarder: Option<JoinHandle<()>>,
+}
+
+/// Sends a channel's latest message to a viewer that just subscribed to it.
+struct Listener {
+    context: Arc<Context>,
+    latest: Latest,
+}
+
+impl ServerListener for Listener {
+    fn on_subscribe(&self, client: Client, channel: ChannelView) {
+        let latest = self.latest.lock().unwrap_or_else(|p| p.into_inner()).get(&u64::from(channel.id())).cloned();
+        if let (Some((bytes, time)), Some(raw)) = (latest, self.context.get_channel_by_topic(channel.topic())) {
+            raw.log_with_meta_to_sink(&bytes, PartialMetadata::with_log_time(time), client.sink_id());
+        }
+    }
+}
+
+/// The CDR bytes DDS carries for `message`: the encapsulation header (CDR little-endian) and
+/// the body, as ros2-client's publisher writes them.
+pub(super) fn cdr<M: Serialize>(message: &M) -> Vec<u8> {
+    let mut bytes = rustdds::RepresentationIdentifier::CDR_LE.to_bytes().to_vec();
+    bytes.extend([0, 0]);
+    if let Err(e) =
+        rustdds::serialization::to_writer_with_rep_id(&mut bytes, message, rustdds::RepresentationIdentifier::CDR_LE)
+    {
+        // Our plain mirror types always serialise; say so loudly if one ever does not.
+        super::log::log("ERROR", format!("live view: cannot serialise a message: {e:?}"));
+    }
+    bytes
+}
+
+/// The simulated time a message describes, in ns: every message the node publishes opens with a
+/// builtin_interfaces/Time (its header's stamp, or /clock's clock), the 8 bytes after the
+/// encapsulation header (int32 sec, uint32 nanosec, little-endian).
+fn stamp_ns(cdr: &[u8]) -> u64 {
+    let word = |at: usize| cdr.get(at..at + 4).map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    u64::from(word(4)) * 1_000_000_000 + u64::from(word(8))
+}
+
+impl LiveView {
+    /// Starts the server on `address`; fails, naming the address, if it cannot listen there (a
+    /// port in use, an address that is not this host's).
+    pub(super) fn start(address: SocketAddr, name: &str) -> Result<Self, String> {
+        let context = Context::new();
+        let latest: Latest = Arc::default();
+        let listener = Arc::new(Listener { context: Arc::clone(&context), latest: Arc::clone(&latest) });
+        let host = match address {
+            SocketAddr::V4(a) => a.ip().to_string(),
+            SocketAddr::V6(a) => format!("[{}]", a.ip()),
+        };
+        let handle = WebSocketServer::new()
+            .name(name)
+            .context(&context)
+            .bind(host, address.port())
+            .capabilities([Capability::Time])
+            .supported_encodings(["cdr"])
+            .message_backlog_size(VIEWER_BACKLOG)
+            .listener(listener)
+            .start_blocking()
+            .map_err(|e| {
+                format!(
+                    "parameter foxglove = {address}: cannot listen there ({e}): allowed {}",
+                    crate::ros::params::FOXGLOVE_ALLOWED
+                )
+            })?;
+        let bound = SocketAddr::new(address.ip(), handle.port());
+        let handle = Arc::new(handle);
+        let (queue, outgoing) = sync_channel(QUEUE);
+        let counts = Arc::new(Counts::default());
+        let forwarder = {
+            let (counts, server) = (Arc::clone(&counts), Arc::clone(&handle));
+            std::thread::Builder::new()
+                .name("foxglove-forward".into())
+                .spawn(move || forward(&outgoing, &counts, &server))
+                .map_err(|e| format!("live view: cannot start its thread: {e}"))?
+        };
+        Ok(LiveView {
+            address: bound,
+            context,
+            handle: Some(handle),
+            channels: RefCell::default(),
+            latest,
+            queue: Some(queue),
+            counts,
+            forwarder: Some(forwarder),
+        })
+    }
+
+    /// Where it listens (the port the system chose, for port 0).
+    pub(super) fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// The channel of `topic` (created, and advertised, the first time), with its schema.
+    fn channel(&self, topic: &str, ros_type: &str) -> Option<Arc<RawChannel>> {
+        if let Some(channel) = self.channels.borrow().get(topic) {
+            return Some(Arc::clone(channel));
+        }
+        let schema = ros2msg::schema(ros_type)?;
+        let built = ChannelBuilder::new(topic)
+            .context(&self.context)
+            .message_encoding("cdr")
+            .schema(Schema::new(ros_type, "ros2msg", schema.into_bytes()))
+            .build_raw();
+        match built {
+            Ok(channel) => {
+                self.channels.borrow_mut().insert(topic.to_string(), Arc::clone(&channel));
+                Some(channel)
+            }
+            Err(e) => {
+                super::log::log("WARN", format!("live view: cannot create channel {topic}: {e}"));
+                None
+            }
+        }
+    }
+
+    /// Offers `message` (of ROS type `ros_type`) on `topic`: its CDR becomes the channel's latest
+    /// and goes to the server if a viewer subscribed. Never blocks.
+    pub(super) fn offer<M: Serialize>(&self, topic: &str, ros_type: &str, message: &M) {
+        let Some(channel) = self.channel(topic, ros_type) else { return };
+        let bytes = cdr(message);
+        let time = stamp_ns(&bytes);
+        if ros_type == "rosgraph_msgs/msg/Clock" {
+            self.enqueue(Outgoing::Time(time));
+        }
+        let subscribed = channel.has_sinks();
+        let id = u64::from(channel.id());
+        if subscribed {
+            self.latest.lock().unwrap_or_else(|p| p.into_inner()).insert(id, (bytes.clone(), time));
+            self.enqueue(Outgoing::Message(channel, bytes, time));
+        } else {
+            self.latest.lock().unwrap_or_else(|p| p.into_inner()).insert(id, (bytes, time));
+        }
+    }
+
+    fn enqueue(&self, item: Outgoing) {
+        let Some(queue) = &self.queue else { return };
+        match queue.try_send(item) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+                self.counts.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// The live view's status on /diagnostics.
+    pub(super) fn status(&self) -> DiagnosticStatus {
+        let viewers = self.handle.as_ref().map_or(0, |h| h.client_count());
+        let dropped = self.counts.dropped.load(Ordering::Relaxed);
+        let kv = |key: &str, value: String| KeyValue { key: key.to_string(), value };
+        DiagnosticStatus {
+            level: u8::from(dropped > 0),
+            name: "sorting_line: foxglove".to_string(),
+            message: format!("ws://{}, {viewers} viewer(s)", self.address),
+            hardware_id: String::new(),
+            values: vec![
+                kv("address", format!("ws://{}", self.address)),
+                kv("viewers", viewers.to_string()),
+                kv("channels", self.channels.borrow().len().to_string()),
+                kv("messages_sent", self.counts.sent.load(Ordering::Relaxed).to_string()),
+                kv("dropped_queue_full", dropped.to_string()),
+                kv("client_messages_refused", refused_client_messages().to_string()),
+                kv("viewer_outbox_full_reports", outbox_full_reports().to_string()),
+            ],
+        }
+    }
+}
+
+impl Drop for LiveView {
+    /// The queue closes (the forwarding thread ends after what it holds), then the server stops.
+    fn drop(&mut self) {
+        self.queue = None;
+        if let Some(forwarder) = self.forwarder.take() {
+            let _ = forwarder.join();
+        }
+        if let Some(handle) = self.handle.take().and_then(Arc::into_inner) {
+            handle.stop().wait_blocking();
+        }
+    }
+}
+
+/// The forwarding thread: hands each message to the server (which queues it per subscribed
+/// viewer, never waiting for one) until the node's side closes the queue.
+fn forward(outgoing: &Receiver<Outgoing>, counts: &Counts, server: &WebSocketServerHandle) {
+    while let Ok(item) = outgoing.recv() {
+        match item {
+            Outgoing::Message(channel, bytes, t) => {
+                channel.log_with_meta(&bytes, PartialMetadata::with_log_time(t));
+                counts.sent.fetch_add(1, Ordering::Relaxed);
+            }
+            Outgoing::Time(t) => server.broadcast_time(t),
+        }
+    }
+}

@@ -1,0 +1,300 @@
+"""The node's Foxglove live view (`--foxglove`, docs/foxglove.md) read by Foxglove's own client
+libraries, headless (tests/python/foxglove_viewer.py runs them under Node.js), and the
+recorder's bags read by Foxglove's MCAP reader:
+
+- every channel decodes by the schema the server advertised, to the values an rclpy subscriber
+  gets over DDS for the same ticks, from the same CDR bytes; /clock is the server's time;
+- a viewer that stops reading does not slow the line (its outbox overflows; the ticks go on);
+- malformed and unsupported client messages are answered and counted, the line unaffected;
+- bad `--foxglove` values fail at start naming the value;
+- plain, zstd and split bags: every message decoded, counts equal to metadata.yaml.
+"""
+
+from __future__ import annotations
+
+import socket
+import statistics
+import time
+
+import pytest
+import yaml
+
+from foxglove_viewer import Viewer, live_view_url, message_bytes, read_bags
+from ros_harness import TopicRecorder, diagnostic_values, join_ns, run_node_expecting_failure, stamp_ns
+from sorting_line_gym.bag.format.options import WriteOptions
+from sorting_line_gym.bag.storage import schema
+from sorting_line_gym.bag.storage.rewrite import rewrite_bag
+
+LINE_TYPES = {
+    "input": "sorting_line_interfaces/msg/MaterialInput",
+    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
+    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
+    "state": "sorting_line_interfaces/msg/LineState",
+    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
+}
+LIVE = "sorting_line: foxglove"  # the live view's status on /diagnostics
+
+
+def live_status(recorder: TopicRecorder, predicate, timeout: float, what: str) -> dict[str, str]:
+    """The values of the first /diagnostics live-view status for which `predicate` holds."""
+
+    def values(array):
+        for status in array.status:
+            if status.name == LIVE:
+                return {kv.key: kv.value for kv in status.values}
+        return None
+
+    found = recorder.wait_for(lambda a: (v := values(a)) is not None and predicate(v), timeout, what)
+    return values(found)
+
+
+def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, client_factory, probe, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import serialize_message
+    from rosgraph_msgs.msg import Clock
+
+    from sorting_line_gym.bag.transport.rosnode import rclpy_class
+
+    ns = namespace("live")
+    node = start_node(
+        "--variant", "advanced", "--max-steps", "3", "--foxglove", "0", "--ros-args", "-r", f"__ns:={ns}"
+    )  # fmt: skip
+    viewer = Viewer("record", live_view_url(node), tmp_path / "viewer.log")
+    try:
+        at_start = [join_ns(ns, t) for t in ("input", "belt/occupancy", "sensors/ratio", "state")] + ["/clock"]
+        viewer.wait_for(lambda: all(viewer.of("subscribed", t) for t in at_start), 10.0, f"subscriptions to {at_start}")
+        clock = TopicRecorder(ros, probe, "/clock", Clock)
+        diagnostics = TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
+        # The CDR bytes DDS delivers, as they came (a writer's padding bytes are its own, so the
+        # messages rclpy decoded, serialised again, need not have the same bytes).
+        raw: dict[str, list[bytes]] = {rel: [] for rel in LINE_TYPES}
+        subs = [
+            probe.create_subscription(rclpy_class(t), join_ns(ns, rel), raw[rel].append, 10, raw=True)
+            for rel, t in LINE_TYPES.items()
+        ]
+        client = client_factory(ns, "advanced", node_proc=node)
+        client.wait_connected()
+        ros.spin_until(lambda: all(s.get_publisher_count() for s in subs), 10.0, "the raw readers to match")
+        client.reset(seed=7)
+        for speed, mode in [(0.5, 1), (1.0, 0), (0.2, 2)]:
+            state = client.step(speed, mode)
+        assert state.truncated, state
+        last = stamp_ns(state.header.stamp)
+        # Every DDS message of the episode has reached the viewer, and a /diagnostics array
+        # counting it as a viewer.
+        status = live_status(diagnostics, lambda v: v["viewers"] == "1", 10.0, "the live view with one viewer")
+        assert status["address"] == live_view_url(node), status
+        state_topic = join_ns(ns, "state")
+        viewer.wait_for(
+            lambda: any(stamp_ns_of(e) == last for e in viewer.of("message", state_topic)),
+            10.0,
+            f"{state_topic} stamped {last}",
+        )
+        viewer.wait_for(lambda: viewer.of("message", "/diagnostics"), 10.0, "a /diagnostics message")
+        ros.spin_until(
+            lambda: any(time_ns(decode(d, LINE_TYPES["state"])["header"]["stamp"]) == last for d in raw["state"]),
+            10.0,
+            f"the raw reader of {state_topic}: the tick stamped {last}",
+        )
+    finally:
+        assert viewer.close() == 0, viewer.describe()
+
+    assert not viewer.of("decode_error"), viewer.of("decode_error")
+    advertised = {e["topic"]: e for e in viewer.of("advertise")}
+    expected = {join_ns(ns, t): ros_type for t, ros_type in LINE_TYPES.items()} | {
+        join_ns(ns, "batch/state"): "sorting_line_interfaces/msg/LineStates",
+        "/clock": "rosgraph_msgs/msg/Clock",
+        "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    }
+    for topic, ros_type in expected.items():
+        assert topic in advertised, f"{topic} not advertised: {sorted(advertised)}"
+        got = advertised[topic]
+        assert (got["schema"], got["encoding"], got["schemaEncoding"]) == (ros_type, "cdr", "ros2msg"), got
+
+    # The line's topics: each DDS message of the episode is on its channel with the same CDR
+    # bytes, and Foxglove's decoder reads the values rclpy read.
+    compared = 0
+    for rel, ros_type in LINE_TYPES.items():
+        topic = join_ns(ns, rel)
+        live = viewer.of("message", topic)
+        rclpy_values = {
+            stamp_ns(m.header.stamp): decode(bytes(serialize_message(m)), ros_type) for m in client.msgs[rel]
+        }
+        for data in raw[rel]:
+            value = decode(data, ros_type)
+            stamp = time_ns(value["header"]["stamp"])
+            if stamp < client.first_reset:
+                continue
+            assert rclpy_values.get(stamp) == value, (topic, stamp, rclpy_values.get(stamp), value)
+            same = [e for e in live if stamp_ns_of(e) == stamp and cdr_equal(message_bytes(e), data)]
+            assert same, (
+                f"{topic} stamped {stamp}: not in the live view with the bytes DDS carried: {data.hex()}; "
+                f"live: {[message_bytes(e).hex() for e in live if stamp_ns_of(e) == stamp]}"
+            )
+            assert same[0]["value"] == value, (same[0]["value"], value)
+            assert int(same[0]["log_time"]) == stamp, "a message's log time is the tick's simulated time"
+            compared += 1
+    # The three steps' ticks of four topics at least (the raw readers are matched by the node
+    # a little later than the client's, so the reset's own tick may precede them).
+    assert compared >= 3 * 4, compared
+    # /clock: the DDS values, and the server's time follows them.
+    live_clock = {time_ns(e["value"]["clock"]) for e in viewer.of("message", "/clock")}
+    dds_clock = {stamp_ns(m.clock) for m in clock.msgs if stamp_ns(m.clock) >= client.first_reset}
+    assert dds_clock and dds_clock <= live_clock, (sorted(dds_clock), sorted(live_clock))
+    assert dds_clock <= {int(e["time"]) for e in viewer.of("time")}, "the server's time is /clock's"
+    # /diagnostics and batch/state: Foxglove's decoder and the bag tools' agree on every message,
+    # and the arrays DDS delivered are among the live view's.
+    for topic, ros_type in [
+        ("/diagnostics", expected["/diagnostics"]),
+        (join_ns(ns, "batch/state"), expected[join_ns(ns, "batch/state")]),
+    ]:
+        messages = viewer.of("message", topic)
+        assert messages, f"no {topic} message in the live view"
+        for e in messages:
+            assert e["value"] == decode(message_bytes(e), ros_type), topic
+    live_arrays = [e["value"] for e in viewer.of("message", "/diagnostics")]
+    dds_arrays = [decode(bytes(serialize_message(m)), expected["/diagnostics"]) for m in diagnostics.msgs]
+    assert any(a in live_arrays for a in dds_arrays), "no /diagnostics array of DDS is in the live view"
+    assert diagnostic_values(diagnostics.msgs[-1], ns) is not None
+
+
+def decode(data: bytes, ros_type: str):
+    """CDR bytes decoded by the bag tools (rosbags), as plain values without the type's constants
+    (which rosbags lists beside the fields)."""
+
+    def fields(v):
+        if isinstance(v, dict):
+            return {k: fields(x) for k, x in v.items() if not k.isupper()}
+        if isinstance(v, list):
+            return [fields(x) for x in v]
+        return v
+
+    return fields(schema.decode(data, ros_type))
+
+
+def time_ns(t: dict) -> int:
+    """A decoded builtin_interfaces/Time, in ns."""
+    return int(t["sec"]) * 1_000_000_000 + int(t["nanosec"])
+
+
+def stamp_ns_of(event) -> int:
+    return time_ns(event["value"]["header"]["stamp"])
+
+
+def cdr_equal(a: bytes, b: bytes) -> bool:
+    """The same CDR message: equal, but for the alignment padding a writer may append."""
+    n = min(len(a), len(b))
+    return a[:n] == b[:n] and not a[n:].strip(b"\0") and not b[n:].strip(b"\0") and abs(len(a) - len(b)) < 4
+
+
+def test_a_viewer_that_stops_reading_does_not_slow_the_line(ros, start_node, namespace, probe, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    ns = namespace("stall")
+    rate, lines = 1000, 16
+    node = start_node(
+        "--mode", "realtime", "--rate", rate, "--lines", lines, "--max-steps", 1_000_000, "--foxglove", "0",
+        "--ros-args", "-r", f"__ns:={ns}",
+    )  # fmt: skip
+    diagnostics = TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
+    line0 = join_ns(ns, "line_0")
+
+    def tick_rates(after: float, count: int, what: str) -> list[float]:
+        """Line 0's tick rate in the first `count` /diagnostics reports received after `after`."""
+        got: list[float] = []
+
+        def enough():
+            got[:] = [float(diagnostic_values(a, line0)["tick_rate"]) for t, a in stamped if t > after]
+            return len(got) >= count
+
+        ros.spin_until(enough, count + 10.0, what, lambda: node.describe())
+        return got[:count]
+
+    stamped: list[tuple[float, object]] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", lambda a: stamped.append((time.monotonic(), a)), 10)
+    alone = tick_rates(time.monotonic() + 1.0, 3, "3 reports of the line's tick rate without a viewer")
+    viewer = Viewer("stall", live_view_url(node), tmp_path / "viewer.log")
+    try:
+        viewer.wait_for(lambda: viewer.of("stalled"), 10.0, "the viewer subscribed and stopped reading")
+        # The viewer's outbox overflows: its socket and the server's queue for it are full.
+        live_status(
+            diagnostics,
+            lambda v: int(v["viewer_outbox_full_reports"]) >= 1,
+            30.0,
+            "the stalled viewer's outbox to overflow",
+        )
+        stalled = tick_rates(time.monotonic(), 3, "3 reports of the line's tick rate with the stalled viewer")
+        status = next({kv.key: kv.value for kv in st.values} for st in stamped[-1][1].status if st.name == LIVE)
+        assert status["viewers"] == "1", status  # still connected, never read from
+    finally:
+        viewer.close()
+    # A tick waiting for the viewer would stop the line (lock-step) or drop its rate to what the
+    # viewer reads (nothing); the margin is for a machine busy with other work.
+    print(f"tick rates: alone {alone}, with the stalled viewer {stalled}; live view {status}")
+    assert statistics.median(stalled) >= 0.5 * statistics.median(alone), (alone, stalled)
+    assert node.running(), node.describe()
+
+
+def test_garbage_from_a_viewer_is_answered_and_counted(ros, start_node, namespace, client_factory, probe, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    ns = namespace("garbage")
+    node = start_node("--foxglove", "0", "--ros-args", "-r", f"__ns:={ns}")
+    diagnostics = TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
+    viewer = Viewer("garbage", live_view_url(node), tmp_path / "viewer.log")
+    try:
+        sent = viewer.wait_for(lambda: viewer.of("sent"), 10.0, "the garbage sent")[0]["count"]
+        viewer.wait_for(lambda: len(viewer.of("status")) >= 200, 10.0, "error statuses for the flood")
+        status = live_status(
+            diagnostics, lambda v: int(v["client_messages_refused"]) >= 200, 10.0, "the refusals counted"
+        )
+        assert int(status["client_messages_refused"]) <= sent, status
+        assert all(s["level"] >= 1 for s in viewer.of("status")), viewer.of("status")[:5]
+        # The line is unaffected: it still steps.
+        client = client_factory(ns, "basic", node_proc=node)
+        client.wait_connected()
+        client.reset(seed=1)
+        assert client.step(0.5).step == 1
+    finally:
+        assert viewer.close() == 0, viewer.describe()
+    assert node.running(), node.describe()
+
+
+def test_bad_foxglove_values_fail_at_start_naming_them():
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        for value, words in [
+            (str(port), [f"foxglove = 127.0.0.1:{port}", "cannot listen there"]),
+            ("65536", ["foxglove = 65536", "is not valid", "PORT 0 ..= 65535"]),
+            ("192.0.2.1:8765", ["foxglove = 192.0.2.1:8765", "cannot listen there"]),
+            ("somehost:80", ["foxglove = somehost:80", "is not valid"]),
+        ]:
+            code, err = run_node_expecting_failure(["--foxglove", value])
+            assert code != 0 and all(w in err for w in words), (value, code, err)
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """The golden bags (plain), and copies written zstd-compressed and split, as the recorder writes them."""
+    from bag_golden import DATA
+
+    out = tmp_path_factory.mktemp("foxglove_bags")
+    plain = [DATA / name for name in ("basic_d", "advanced_b", "ppo_advanced_b")]
+    zstd, split = out / "basic_d_zstd", out / "advanced_b_split"
+    rewrite_bag(DATA / "basic_d", zstd, options=WriteOptions(compression="zstd"))
+    rewrite_bag(DATA / "advanced_b", split, options=WriteOptions(max_bag_size=48 * 1024))
+    return [*plain, zstd, split]
+
+
+def test_bags_are_read_by_foxglove_readers(bags):
+    report = read_bags(bags)
+    for bag in bags:
+        got = report[str(bag)]
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        want = {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]}
+        assert not got["errors"], (bag.name, got["errors"][:5])
+        assert got["counts"] == want, (bag.name, got["counts"], want)
+        assert got["files"] == len(meta["relative_file_paths"]), (bag.name, got["files"])
+    assert report[str(bags[-1])]["files"] >= 3, "the split bag has several files"
