@@ -1,0 +1,138 @@
+"""Speed of the batched trainer (training/batched) against SB3, side by side in one run: wall time
+per seed of a training at the paper's settings (hyperparams/<algo>.yml: one line per seed,
+250-step episodes, 100k steps), the engine with S = 1, 4, 16 seeds at once against SB3's own
+``learn`` on ``sorting-line-train --backend native``'s env, one torch thread, native backend:
+
+    .venv/bin/python benches/batched_training.py                           # PPO and A2C, 100k steps
+    .venv/bin/python benches/batched_training.py --algos ppo --seeds 1 16 --timesteps 20000
+    .venv/bin/python benches/batched_training.py --algos ppo --update-only  # one PPO update per seed
+
+Before the trainings, one PPO update (10 epochs of 32 minibatches of 64 over a 2048-step rollout)
+and one 2048-step rollout are timed per seed, engine at each S against SB3's ``train()`` and
+``collect_rollouts``. Model building is excluded on both sides; neither side writes logs or shows
+a progress bar. Prints wall and CPU time (this process's: the steadier figure on a shared machine),
+the ratios, the command and the load average before and after: the figures move with what else
+runs, so both sides are measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import torch
+
+from sorting_line_gym.training import hyperparams
+from sorting_line_gym.training.train import make_training_env
+from sorting_line_gym.training.train_batched import trainer
+
+LINE = dict(setup="B", variant="advanced")
+
+
+class Clock:
+    """Wall and CPU time of a block."""
+
+    def __enter__(self):
+        self.wall, self.cpu = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall, self.cpu = time.perf_counter() - self.wall, time.process_time() - self.cpu
+
+    def per(self, n: int) -> tuple[float, float]:
+        return self.wall / n, self.cpu / n
+
+
+def paper(algo: str, timesteps: int | None = None) -> tuple[dict, dict]:
+    overrides = [] if timesteps is None else [f"n_timesteps={timesteps}"]
+    return hyperparams.split(hyperparams.load(algo, LINE["variant"], overrides=overrides))
+
+
+def sb3_model(algo: str, seed: int = 42):
+    own, kwargs = paper(algo)
+    env = make_training_env(**LINE, n_envs=own["n_envs"], episode_steps=own["episode_steps"], backend="native")
+    return hyperparams.algorithm_class(algo)("MlpPolicy", env, seed=seed, device="cpu", **kwargs), env
+
+
+def update_times(seed_counts: list[int]) -> dict[str, dict[int, tuple[float, float]]]:
+    """Seconds per seed of one PPO rollout and one PPO update: SB3 (key 0) and the engine at each S."""
+    from stable_baselines3.common.callbacks import ConvertCallback
+    from stable_baselines3.common.logger import Logger
+
+    model, env = sb3_model("ppo")
+    model.learn(2048)  # warm: one rollout and update, the logger set up
+    model.set_logger(Logger(None, []))
+    callback = ConvertCallback(None)  # no callback, as learn() without one
+    callback.init_callback(model)
+    with Clock() as rollout:
+        model.collect_rollouts(model.env, callback, model.rollout_buffer, model.n_steps)
+    with Clock() as update:
+        model.train()
+    env.close()
+    out = {"rollout": {0: rollout.per(1)}, "update": {0: update.per(1)}}
+    own, kwargs = paper("ppo")
+    for n in seed_counts:
+        engine = trainer("ppo", LINE["setup"], LINE["variant"], list(range(42, 42 + n)), own, kwargs)
+        engine.learn(2048)
+        with Clock() as rollout:
+            engine.collect_rollout()
+        with Clock() as update:
+            engine.train()
+        engine.close()
+        out["rollout"][n], out["update"][n] = rollout.per(n), update.per(n)
+    return out
+
+
+def training_times(algo: str, seed_counts: list[int], timesteps: int) -> dict[int, tuple[float, float]]:
+    """Seconds of training per seed: SB3 (key 0, one seed) and the engine with S seeds at once."""
+    model, env = sb3_model(algo)
+    with Clock() as clock:
+        model.learn(timesteps)
+    env.close()
+    out = {0: clock.per(1)}
+    own, kwargs = paper(algo, timesteps)
+    for n in seed_counts:
+        engine = trainer(algo, LINE["setup"], LINE["variant"], list(range(42, 42 + n)), own, kwargs)
+        with Clock() as clock:
+            engine.learn(timesteps)
+        engine.close()
+        out[n] = clock.per(n)
+    return out
+
+
+def report(what: str, times: dict[int, tuple[float, float]], scale: float, unit: str) -> None:
+    (wall0, cpu0), fmt = times[0], lambda w, c: f"wall {w * scale:.3f} {unit}, CPU {c * scale:.3f} {unit}"
+    print(f"{what}, SB3 one seed: {fmt(wall0, cpu0)}", flush=True)
+    for n, (wall, cpu) in times.items():
+        if n:
+            print(
+                f"{what}, engine S={n}, per seed: {fmt(wall, cpu)} ({wall0 / wall:.1f}x wall, {cpu0 / cpu:.1f}x CPU)",
+                flush=True,
+            )
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--algos", nargs="+", default=["ppo", "a2c"], choices=hyperparams.ALGOS, help="(default ppo a2c)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 4, 16], help="S, seeds at once (default 1 4 16)")
+    p.add_argument("--timesteps", type=int, default=100_000, help="steps per seed of a training (default 100000)")
+    p.add_argument("--update-only", action="store_true", help="time one PPO rollout and update only")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
+    print(f"load average before: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores", flush=True)
+    if "ppo" in args.algos:
+        times = update_times(args.seeds)
+        report("PPO 2048-step rollout", times["rollout"], 1.0, "s")
+        report("PPO update (10 epochs x 32 minibatches)", times["update"], 1.0, "s")
+    if not args.update_only:
+        for algo in args.algos:
+            report(f"{algo.upper()} {args.timesteps}-step training", training_times(algo, args.seeds, args.timesteps),
+                   1.0, "s")  # fmt: skip
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
