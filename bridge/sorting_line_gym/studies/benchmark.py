@@ -383,6 +383,11 @@ def _invalid(args) -> str | None:
         return f"--n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048"
     if args.heldout_seed < 0:
         return f"--heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more"
+    # Before any cell runs: a cell that cannot be saved would be found out only after its minutes of work.
+    try:
+        (args.out / "cells").mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        return f"--out {args.out} cannot be written: {e.strerror} ({e.filename})"
     return None
 
 
