@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Background jobs for setup.sh and test.sh (sourced by them, not run on its own).
 #
 # Steps that mostly wait (a download, a build beside other steps) run in the background, each with

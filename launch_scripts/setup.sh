@@ -105,8 +105,11 @@ python_candidates() { # X.Y
   echo "python$1"
   local root
   root="$(pyenv root 2>/dev/null || true)"
-  [[ -n "$root" ]] && ls -d "$root/versions/$1".*/bin/"python$1" 2>/dev/null | sort -V -r
-  return 0
+  if [[ -n "$root" ]]; then
+    # A glob of pyenv's own folder names (X.Y.Z): no odd characters for ls to mangle.
+    # shellcheck disable=SC2012
+    ls -d "$root/versions/$1".*/bin/"python$1" 2>/dev/null | sort -V -r || true
+  fi
 }
 
 # Sets PYTHON to the interpreter for a new venv and WANTED to the version SORTING_LINE_PYTHON names (empty:
@@ -282,8 +285,9 @@ build_interfaces() { # NAME DIR IMPORT_CHECK
     say "interfaces: $name is already installed in .venv by another package; not building our copy"
     return
   fi
-  command -v cc >/dev/null 2>&1 && command -v c++ >/dev/null 2>&1 ||
+  if ! command -v cc >/dev/null 2>&1 || ! command -v c++ >/dev/null 2>&1; then
     die "C/C++ compilers missing; Debian: apt-get install build-essential"
+  fi
   fix_wheel_cmake_paths
   rm -f "$STATE/$name.stamp" "$STATE/interfaces.stamp"
   uninstall_interfaces "$name"
@@ -391,8 +395,14 @@ PY_ID="$("$VENV/bin/python" -c 'import sys; print(sys.version.split()[0], sys.im
 SITE="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 mkdir -p "$STATE"
 install_wheels
-[[ $TRAIN == 1 ]] && install_extra train "requirements-train.txt (torch, SB3, RL Zoo, tensorboard: ~5 GB, most of it torch's CUDA libraries)" "$REQ_TRAIN"
-[[ $RLLIB == 1 ]] && install_extra rllib "requirements-rllib.txt (Ray; ~1 min from a warm pip cache, minutes cold)" "$REQ_TRAIN" "$REQ_RLLIB"
+# As if-statements, not `[[ ]] && step`: bash runs a function called from an && list without errexit,
+# so a failing command inside it would not end the script.
+if [[ $TRAIN == 1 ]]; then
+  install_extra train "requirements-train.txt (torch, SB3, RL Zoo, tensorboard: ~5 GB, most of it torch's CUDA libraries)" "$REQ_TRAIN"
+fi
+if [[ $RLLIB == 1 ]]; then
+  install_extra rllib "requirements-rllib.txt (Ray; ~1 min from a warm pip cache, minutes cold)" "$REQ_TRAIN" "$REQ_RLLIB"
+fi
 build_interfaces simulation_interfaces "$MSG_DIR/simulation_interfaces" \
   'from simulation_interfaces.srv import StepSimulation; from simulation_interfaces.action import SimulateSteps'
 build_interfaces sorting_line_interfaces "$MSG_DIR" \

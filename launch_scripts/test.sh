@@ -93,6 +93,17 @@ step "Python lint and formatting (ruff.toml)"
 .venv/bin/ruff check --no-cache . || { echo "test.sh: fix what \`.venv/bin/ruff check\` reports above (\`--fix\` fixes the ones marked [*])" >&2; exit 1; }
 .venv/bin/ruff format --check --no-cache . || { echo "test.sh: run \`.venv/bin/ruff format\` (it would reformat the files above)" >&2; exit 1; }
 
+step "Shell scripts (shellcheck, every rule: each one disabled is disabled on its line, with the reason)"
+# Debian's package, installed here when missing (test.sh runs as root, as CI does).
+if ! command -v shellcheck >/dev/null 2>&1; then
+  echo "test.sh: installing shellcheck (apt-get install shellcheck)"
+  { apt-get update -qq && apt-get install -y -qq --no-install-recommends shellcheck; } >/dev/null ||
+    { echo "test.sh: could not install shellcheck with apt-get" >&2; exit 1; }
+fi
+mapfile -t shell_scripts < <(git ls-files '*.sh' .ci/run)
+shellcheck -x "${shell_scripts[@]}" || { echo "test.sh: fix what shellcheck reports above (or disable a rule on its line, saying why)" >&2; exit 1; }
+echo "test.sh: shellcheck $(shellcheck --version | sed -n 's/^version: //p'): ${#shell_scripts[@]} scripts clean"
+
 step "Python types (mypy: the bridge modules without rclpy, [tool.mypy] in bridge/pyproject.toml)"
 # About 11 CPU-seconds from a cold cache (bridge/.mypy_cache), under 1 warm; prints its verdict only.
 (cd bridge && ../.venv/bin/mypy) || { echo "test.sh: fix the type errors above (\`cd bridge && ../.venv/bin/mypy\`)" >&2; exit 1; }

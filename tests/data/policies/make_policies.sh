@@ -10,6 +10,8 @@ cd "$ROOT"
 bash launch_scripts/setup.sh >/dev/null
 OUT=tests/data/policies
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((100 + $$ % 100))}"
+# The script is in single quotes on purpose: $seed is the inner shell's; $OUT is spliced in.
+# shellcheck disable=SC2016
 unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
