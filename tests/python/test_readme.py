@@ -155,6 +155,65 @@ def _anchors(text: str) -> set[str]:
     return {_slug(h) for h in re.findall(r"^#+ (.*)$", text, re.M)}
 
 
+#: Each command the README gives (every line of its sh blocks, and the commands it names in running text: set-up,
+#: env.sh, pip), with where it runs: a file and the text in it that runs that command. A command added to the
+#: README needs a line here, and so something that runs it; one that cannot run in CI says why in the README.
+RUN_BY = {
+    "launch_scripts/run.sh": [("tests/python/test_run_sh.py", 'RUN = ROOT / "launch_scripts" / "run.sh"')],
+    "launch_scripts/test.sh": [(".ci/run", "exec bash launch_scripts/test.sh")],
+    "launch_scripts/setup.sh": [("launch_scripts/test.sh", "bash launch_scripts/setup.sh --no-cargo")],
+    "launch_scripts/setup.sh --train": [("launch_scripts/test.sh", "bash launch_scripts/setup.sh --train")],
+    "source launch_scripts/env.sh": [("launch_scripts/test.sh", "source launch_scripts/env.sh")],
+    "pip install ./bridge": [("tests/python/test_wheel.py", '"wheel", "--no-deps", "--no-build-isolation"')],
+    # The deploy lines are the first steps of docs/deploying-a-policy.md's deploy block, which its test runs.
+    "sorting-line-export models/ppo_B_advanced_seed42.zip --out policy.onnx": [
+        ("docs/deploying-a-policy.md", "\nsorting-line-export models/ppo_B_advanced_seed42.zip --out policy.onnx\n"),
+        ("tests/python/test_deploying_a_policy.py", "train, export, node, controller = deploy_block()"),
+    ],
+    "sorting-line-controller --policy policy.onnx --ros-args -r __ns:=/plant": [
+        ("docs/deploying-a-policy.md", "\nsorting-line-controller --policy policy.onnx --ros-args -r __ns:=/plant\n"),
+        ("tests/python/test_deploying_a_policy.py", "controller_argv = shlex.split(controller"),
+    ],
+    "sorting_line node --setup A --mode realtime --rate 10": [
+        ("tests/python/test_readme.py", 'shell_command("sorting_line")')
+    ],
+    "bash launch_scripts/ros2cli.sh && source .venv-ros2cli/env.sh": [
+        ("tests/python/test_readme.py", '"launch_scripts/ros2cli.sh" in line]')
+    ],
+    "ros2 topic echo /state --field reward": [("tests/python/test_readme.py", 'argv = shell_command("ros2")')],
+    "python my_controller.py": [
+        ("tests/python/test_readme.py", 'snippet("ros-controller"), tmp_path, "my_controller.py"')
+    ],
+    # Hours long: CI runs its tests at a reduced size, which the README says.
+    "launch_scripts/reliability.sh": [("README.md", "CI runs them reduced")],
+}
+
+
+def readme_commands() -> list[str]:
+    """The commands of README.md: each line of its sh blocks (comment dropped), then those in running text."""
+    text = README.read_text()
+    commands = [
+        " ".join(shlex.split(line, comments=True))
+        for block in re.findall(r"```sh\n(.*?)\n```", text, re.S)
+        for line in block.splitlines()
+        if shlex.split(line, comments=True)
+    ]
+    return commands + re.findall(r"`(launch_scripts/[\w.-]+\.sh[^`]*|source [^`]+|pip install [^`]+)`", text)
+
+
+def test_every_readme_command_is_run_by_a_test():
+    commands = readme_commands()
+    assert "launch_scripts/run.sh" in commands and "python my_controller.py" in commands, commands
+    missing = sorted(set(commands) - set(RUN_BY))
+    assert not missing, f"README commands nothing runs (add each to RUN_BY with the test that runs it): {missing}"
+    assert not set(RUN_BY) - set(commands), (
+        f"RUN_BY names commands the README no longer has: {set(RUN_BY) - set(commands)}"
+    )
+    for command, places in RUN_BY.items():
+        for path, evidence in places:
+            assert evidence in (ROOT / path).read_text(), f"{path} no longer runs `{command}` (no {evidence!r} in it)"
+
+
 def test_links_in_readme_and_docs_resolve():
     """Every relative link of README.md and docs/*.md names a file that exists (and a heading that exists)."""
     broken = []
