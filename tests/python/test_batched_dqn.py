@@ -231,6 +231,16 @@ def test_a_second_learn_that_resets_is_refused(short_runs):
         short_runs[0].learn(10)
 
 
+def test_replay_buffers_beyond_memory_fail_saying_what_they_take(monkeypatch):
+    from sorting_line_gym.training.batched import dqn
+
+    monkeypatch.setattr(dqn, "available_memory", lambda: 10**6)
+    engine = BatchedDQN([1, 2], **LINE, n_envs=2)
+    with pytest.raises(MemoryError, match=r"2 seeds x 2 lines .* 100000 steps take 0.0[0-9] GB, and 0.00 GB"):
+        engine.learn(100_000)
+    engine.close()
+
+
 def test_bad_seeds_and_model_files_fail_naming_them(tmp_path):
     for seeds, named in (([1, 1], "repeat"), ([-1], "-1"), ([], "one or more")):
         with pytest.raises(ValueError, match=named):

@@ -380,10 +380,9 @@ class BatchedDQN:
             self._last_obs = self.lines.reset()
         if self.replay is None:
             handle = (self.params["replay_buffer_kwargs"] or {}).get("handle_timeout_termination", True)
-            self.replay = BatchedReplayBuffer(
-                self.n_seeds, self.params["buffer_size"], self._last_obs.shape[-1], self.n_envs, handle
+            self.replay = new_replay(
+                self.n_seeds, self.params["buffer_size"], self._last_obs.shape[-1], self.n_envs, handle, total_timesteps
             )
-            check_memory(self.replay, total_timesteps, self.n_envs)
         return total_timesteps
 
     def _collect_rollout(self) -> None:
@@ -562,15 +561,23 @@ def available_memory() -> int | None:
     return None
 
 
-def check_memory(replay: BatchedReplayBuffer, total_timesteps: int, n_envs: int) -> None:
-    """Refuses a training whose replay buffers would not fit: the rows a run writes (its steps, up
-    to buffer_size) for every seed, against the memory available now."""
-    rows = min(replay.buffer_size, -(-total_timesteps // n_envs) + 1)
-    need = replay.seeds * rows * replay.bytes_per_seed() // replay.buffer_size
+def new_replay(
+    seeds: int, buffer_size: int, obs_dim: int, n_envs: int, handle_timeouts: bool, total_timesteps: int
+) -> BatchedReplayBuffer:
+    """The seeds' replay buffers, or a MemoryError saying what they would take: the rows a run of
+    ``total_timesteps`` writes (up to buffer_size) for every seed, against the memory available now
+    (np.zeros leaves the rows never written untouched, as in SB3)."""
+    rows = min(max(buffer_size // n_envs, 1), -(-total_timesteps // n_envs) + 1)
+    need = seeds * rows * n_envs * BatchedReplayBuffer.bytes_per_transition(obs_dim)
     have = available_memory()
+    message = (
+        f"the replay buffers of {seeds} seeds x {n_envs} lines (buffer_size {buffer_size}) for {total_timesteps} "
+        f"steps take {need / 1e9:.2f} GB, and {'?' if have is None else f'{have / 1e9:.2f}'} GB are available: "
+        f"train fewer seeds at once (about {max(1, (have or need) * seeds // max(need, 1))}) or a smaller buffer_size"
+    )
     if have is not None and need > have:
-        raise MemoryError(
-            f"the replay buffers of {replay.seeds} seeds x {n_envs} lines for {total_timesteps} steps take "
-            f"{need / 1e9:.2f} GB and {have / 1e9:.2f} GB are available: train fewer seeds at once "
-            f"(about {max(1, have * replay.seeds // need)}) or a smaller buffer_size"
-        )
+        raise MemoryError(message)
+    try:
+        return BatchedReplayBuffer(seeds, buffer_size, obs_dim, n_envs, handle_timeouts)
+    except MemoryError:  # the whole buffer's address space, which SB3 reserves too
+        raise MemoryError(message) from None

@@ -49,10 +49,11 @@ class BatchedReplayBuffer:
         self.pos, self.full = 0, False
         self._seed_index = np.arange(seeds)[:, None]
 
-    def bytes_per_seed(self) -> int:
-        """What one seed's full buffer takes (as SB3 counts it in its memory warning)."""
-        arrays = (self.observations, self.next_observations, self.actions, self.rewards, self.dones, self.timeouts)
-        return sum(a.nbytes for a in arrays) // self.seeds
+    @staticmethod
+    def bytes_per_transition(obs_dim: int) -> int:
+        """What one stored transition takes: two float32 observations, an int64 action, float32
+        reward, done and timeout."""
+        return 2 * 4 * obs_dim + 8 + 3 * 4
 
     def add(self, obs, next_obs, actions, rewards, dones, timeouts) -> None:
         """One vector step of every seed: arrays (S, n_envs[, obs_dim]). ``next_obs`` holds the
