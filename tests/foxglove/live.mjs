@@ -1,7 +1,7 @@
 // A headless Foxglove viewer of the node's live view, with Foxglove's own client libraries:
 // @foxglove/ws-protocol speaks the WebSocket protocol, @foxglove/rosmsg parses each channel's
 // advertised ros2msg schema and @foxglove/rosmsg2-serialization decodes its CDR messages, as the
-// Foxglove app does. tests/python/test_foxglove.py drives it; it reports on stdout, one JSON
+// Foxglove app does (the scene's protobuf messages: protobufjs, as the app decodes them). tests/python/test_foxglove.py drives it; it reports on stdout, one JSON
 // object a line, and ends when its stdin closes (or, in `stall` mode, when the server drops it).
 //
 //   node live.mjs record URL   every channel subscribed as advertised; each message decoded:
@@ -18,6 +18,8 @@
 import wsProtocol from "@foxglove/ws-protocol";
 import rosmsg from "@foxglove/rosmsg";
 import serialization from "@foxglove/rosmsg2-serialization";
+import protobuf from "protobufjs";
+import descriptor from "protobufjs/ext/descriptor/index.js";
 import WebSocket from "ws";
 
 // (CommonJS packages: their exports come as one object)
@@ -70,7 +72,7 @@ client.on("advertise", (advertised) => {
     if (mode === "garbage") continue;
     let reader;
     try {
-      reader = new MessageReader(parse(channel.schema, { ros2: true }));
+      reader = decoder(channel);
     } catch (error) {
       say({ event: "decode_error", topic: channel.topic, error: `schema: ${error}` });
       continue;
@@ -109,6 +111,22 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
     value,
   });
 });
+
+// A channel's decoder by its advertised schema, as the Foxglove app picks it: ros2msg (CDR) with
+// @foxglove/rosmsg2-serialization, protobuf (the scene: a base64 FileDescriptorSet) with protobufjs.
+function decoder(channel) {
+  if (channel.schemaEncoding === "ros2msg" && channel.encoding === "cdr") {
+    return new MessageReader(parse(channel.schema, { ros2: true }));
+  }
+  if (channel.schemaEncoding === "protobuf" && channel.encoding === "protobuf") {
+    const set = descriptor.FileDescriptorSet.decode(Buffer.from(channel.schema, "base64"));
+    const type = protobuf.Root.fromDescriptor(set).lookupType(channel.schemaName);
+    return {
+      readMessage: (bytes) => type.toObject(type.decode(bytes), { longs: Number, enums: String, defaults: true }),
+    };
+  }
+  throw new Error(`no decoder for ${channel.encoding} messages with a ${channel.schemaEncoding} schema`);
+}
 
 // What a confused or hostile viewer sends: none of it may hurt the line.
 function sendGarbage() {

@@ -12,6 +12,7 @@ recorder's bags read by Foxglove's MCAP reader:
 
 from __future__ import annotations
 
+import json
 import socket
 import statistics
 import time
@@ -110,6 +111,10 @@ def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, c
         assert topic in advertised, f"{topic} not advertised: {sorted(advertised)}"
         got = advertised[topic]
         assert (got["schema"], got["encoding"], got["schemaEncoding"]) == (ros_type, "cdr", "ros2msg"), got
+    scene_topic = join_ns(ns, "scene")
+    got = advertised[scene_topic]
+    assert (got["schema"], got["encoding"], got["schemaEncoding"]) == ("foxglove.SceneUpdate", "protobuf", "protobuf")
+    check_scene(viewer, scene_topic, state)
 
     # The line's topics: each DDS message of the episode is on its channel with the same CDR
     # bytes, and Foxglove's decoder reads the values rclpy read.
@@ -170,6 +175,29 @@ def decode(data: bytes, ros_type: str):
         return v
 
     return fields(schema.decode(data, ros_type))
+
+
+def check_scene(viewer: Viewer, topic: str, state) -> None:
+    """The scene of the tick of `state` draws the line as that state says it is."""
+    stamp = stamp_ns(state.header.stamp)
+    scenes = [e["value"] for e in viewer.of("message", topic) if int(e["log_time"]) == stamp]
+    assert scenes, f"no {topic} message for the tick stamped {stamp}"
+    (entity,) = scenes[0]["entities"]
+    assert (entity["id"], entity["frame_id"]) == ("line_0", "sorting_line"), entity["id"]
+    assert int(entity["timestamp"]["seconds"]) * 1_000_000_000 + int(entity["timestamp"]["nanos"]) == stamp
+    texts = [t["text"] for t in entity["texts"]]
+    want = [
+        f"step {state.step}",
+        f"reward {state.reward:+.2f} (total {state.cumulative_reward:+.2f})",
+        f"speed {state.speed:.1f}",
+        f"A: {state.container_a} + {state.container_a_false} wrong",
+        f"B: {state.container_b} + {state.container_b_false} wrong",
+        f"mode {['basic', 'positive (A-rich)', 'negative (B-rich)'][state.mode]}",
+    ]
+    for w in want:
+        assert any(w in t for t in texts), (w, texts)
+    # Hopper, belt, machine, two container floors at least; every box has a size and a colour.
+    assert len(entity["cubes"]) >= 5 and all(c["size"] and c["color"] for c in entity["cubes"]), entity["cubes"]
 
 
 def time_ns(t: dict) -> int:
@@ -298,3 +326,32 @@ def test_bags_are_read_by_foxglove_readers(bags):
         assert got["counts"] == want, (bag.name, got["counts"], want)
         assert got["files"] == len(meta["relative_file_paths"]), (bag.name, got["files"])
     assert report[str(bags[-1])]["files"] >= 3, "the split bag has several files"
+
+
+def test_the_layout_shows_what_the_node_serves():
+    """launch_scripts/sorting_line.foxglove.json: every panel of the tree is configured, and every
+    message path names a topic the node serves (default namespace) and a field of its type."""
+    from ros_harness import ROOT
+
+    layout = json.loads((ROOT / "launch_scripts" / "sorting_line.foxglove.json").read_text())
+
+    def panels(node):
+        return [node] if isinstance(node, str) else panels(node["first"]) + panels(node["second"])
+
+    assert sorted(panels(layout["layout"])) == sorted(layout["configById"]), "panels without config or unused configs"
+    types = {"/state": "LineState", "/input": "MaterialInput", "/belt/occupancy": "BeltOccupancy"}
+    fields = {
+        topic: {line.split()[1] for line in (ROOT / "msg" / "msg" / f"{t}.msg").read_text().splitlines()
+                if line.split() and not line.startswith("#") and "=" not in line}
+        for topic, t in types.items()
+    }  # fmt: skip
+    paths = [p["value"] for c in layout["configById"].values() for p in c.get("paths", [])]
+    assert len(paths) >= 9, paths
+    for path in paths:
+        topic, _, field = path.rpartition(".")
+        assert topic in fields and field in fields[topic], f"{path}: no such topic or field"
+    config = layout["configById"]
+    assert config["3D!scene"]["topics"] == {"/scene": {"visible": True}}
+    assert config["3D!scene"]["followTf"] == "sorting_line"  # the scene's frame (src/ros/node/scene.rs)
+    assert config["DiagnosticSummary!diagnostics"]["topicToRender"] == "/diagnostics"
+    assert {p["value"] for p in config["StateTransitions!mode"]["paths"]} >= {"/state.mode"}

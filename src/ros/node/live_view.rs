@@ -2,7 +2,7 @@
 //! Foxglove WebSocket server (the `foxglove` crate, the SDK Foxglove ships) with one channel per
 //! topic the node publishes, each with its `ros2msg` schema (`ros::ros2msg`) and the very CDR
 //! bytes the node writes to DDS; /clock's time as the server's time, so Foxglove's timeline is the
-//! simulated one; /diagnostics; and the line as a scene (`scene`).
+//! simulated one; /diagnostics; and the line as a scene (`super::scene`).
 //!
 //! Never in the line's way: the node's thread only serialises a message and offers it to a
 //! bounded queue (a full queue drops it, counted on /diagnostics as `dropped_queue_full`); a
@@ -22,12 +22,17 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
+use foxglove::messages::SceneUpdate;
 use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
-use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
+use foxglove::{
+    ChannelBuilder, Context, Encode, PartialMetadata, RawChannel, Schema, WebSocketServer, WebSocketServerHandle,
+};
 use serde::Serialize;
 
+use super::lines::Line;
 use super::log::{outbox_full_reports, refused_client_messages};
-use crate::ros::messages::{DiagnosticStatus, KeyValue};
+use super::scene;
+use crate::ros::messages::{DiagnosticStatus, KeyValue, Time};
 use crate::ros::ros2msg;
 
 /// Messages waiting between the node's thread and the server (a few ticks of every topic of a
@@ -160,17 +165,19 @@ impl LiveView {
         self.address
     }
 
-    /// The channel of `topic` (created, and advertised, the first time), with its schema.
-    fn channel(&self, topic: &str, ros_type: &str) -> Option<Arc<RawChannel>> {
+    /// The channel of `topic` (created, and advertised, the first time, with the schema and
+    /// message encoding `describe` gives).
+    fn channel(
+        &self,
+        topic: &str,
+        describe: impl FnOnce() -> Option<(Schema, &'static str)>,
+    ) -> Option<Arc<RawChannel>> {
         if let Some(channel) = self.channels.borrow().get(topic) {
             return Some(Arc::clone(channel));
         }
-        let schema = ros2msg::schema(ros_type)?;
-        let built = ChannelBuilder::new(topic)
-            .context(&self.context)
-            .message_encoding("cdr")
-            .schema(Schema::new(ros_type, "ros2msg", schema.into_bytes()))
-            .build_raw();
+        let (schema, encoding) = describe()?;
+        let built =
+            ChannelBuilder::new(topic).context(&self.context).message_encoding(encoding).schema(schema).build_raw();
         match built {
             Ok(channel) => {
                 self.channels.borrow_mut().insert(topic.to_string(), Arc::clone(&channel));
@@ -186,12 +193,31 @@ impl LiveView {
     /// Offers `message` (of ROS type `ros_type`) on `topic`: its CDR becomes the channel's latest
     /// and goes to the server if a viewer subscribed. Never blocks.
     pub(super) fn offer<M: Serialize>(&self, topic: &str, ros_type: &str, message: &M) {
-        let Some(channel) = self.channel(topic, ros_type) else { return };
+        let describe = || Some((Schema::new(ros_type, "ros2msg", ros2msg::schema(ros_type)?.into_bytes()), "cdr"));
+        let Some(channel) = self.channel(topic, describe) else { return };
         let bytes = cdr(message);
         let time = stamp_ns(&bytes);
         if ros_type == "rosgraph_msgs/msg/Clock" {
             self.enqueue(Outgoing::Time(time));
         }
+        self.send(channel, bytes, time);
+    }
+
+    /// Offers the scene of `lines` on `topic` (a `foxglove.SceneUpdate`, protobuf, as the
+    /// Foxglove SDK encodes it), stamped `stamp`.
+    pub(super) fn offer_scene(&self, topic: &str, lines: &[Line], stamp: Time) {
+        let describe = || Some((SceneUpdate::get_schema()?, "protobuf"));
+        let Some(channel) = self.channel(topic, describe) else { return };
+        let mut bytes = Vec::new();
+        if let Err(e) = scene::scene(lines, stamp).encode(&mut bytes) {
+            super::log::log("ERROR", format!("live view: cannot encode the scene: {e}"));
+            return;
+        }
+        self.send(channel, bytes, u64::try_from(stamp.nanos()).unwrap_or_default());
+    }
+
+    /// `bytes` become the channel's latest and go to the server if a viewer subscribed.
+    fn send(&self, channel: Arc<RawChannel>, bytes: Vec<u8>, time: u64) {
         let subscribed = channel.has_sinks();
         let id = u64::from(channel.id());
         if subscribed {

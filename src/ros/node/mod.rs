@@ -28,6 +28,8 @@
 //!   batched), every line's tick, ResetSimulation.
 //! - `lines`: one hosted line: its endpoints and state, the commands it takes, its hardware
 //!   endpoints at upgrades, what it publishes per tick; `evolution`: its evolution announcements.
+//! - `live_view`: the Foxglove live view (with the `foxglove` feature; a stand-in without it);
+//!   `scene`: the lines drawn as a 3D scene for it.
 //! - `line_messages`: what a hosted line's tick looks like in each message (the wire types in
 //!   `ros::messages` are plain mirrors of the .msg files).
 //! - `graph`: what the parts share of the ROS graph: the ROS node, the inputs the node waits on,
@@ -51,6 +53,8 @@ mod lines;
 mod live_view;
 mod log;
 mod parameters;
+#[cfg(feature = "foxglove")]
+mod scene;
 mod server;
 mod sim_services;
 mod stepping;
