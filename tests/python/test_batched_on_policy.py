@@ -263,3 +263,34 @@ def test_sorting_line_train_engine_batched_writes_each_seeds_model(tmp_path, cap
     ):
         assert main([*argv, "--out", str(tmp_path / "no"), *extra]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_maskable_ppo_on_the_evolving_line_equals_sb3s():
+    """The evolving line's masks (mode 0 only before its upgrade) in the rollouts: each seed equals
+    sb3-contrib's MaskablePPO trained with that seed on the native evolving line, episode for episode."""
+    import gymnasium
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.monitor import Monitor
+
+    import sorting_line_gym  # noqa: F401 - registers the ids
+    from sorting_line_gym.envs.evolving import schedule_file
+
+    schedule, params, seeds = str(schedule_file("upgrade")), dict(n_steps=100, batch_size=50, n_epochs=2), [5, 6]
+    tr = OnPolicyTrainer("maskable_ppo", seeds, setup="B", variant="advanced", params=params, episode_steps=50,
+                         evolution=schedule)  # fmt: skip
+    try:
+        tr.learn(300)
+        models = tr.sync_models()
+        for s, seed in enumerate(seeds):
+            env = gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", evolution=schedule, setup="B",
+                                 max_episode_steps=50, backend="native")  # fmt: skip
+            reference = MaskablePPO("MlpPolicy", Monitor(env), seed=seed, device="cpu", **params).learn(300)
+            env.close()
+            ours = [e["r"] for e in tr.lines.episodes[s]]
+            # Monitor sums a return in float64 and rounds it to 6 decimals (VecMonitor, above: float32 as here).
+            assert [float(e["r"]) for e in reference.ep_info_buffer] == pytest.approx(ours, rel=1e-6, abs=1e-6)
+            for name, ref in reference.policy.state_dict().items():
+                mine = models[s].policy.state_dict()[name]
+                assert (ref - mine).abs().max().item() <= 1e-4 * ref.abs().max().item(), name
+    finally:
+        tr.close()

@@ -13,7 +13,10 @@ One concept per module:
 - ``models``: the SB3 models behind the seeds (built, loaded, written back as SB3's zips);
 - ``actor_critic``, ``rollout``, ``ppo``, ``a2c``: SB3's actor-critic policy, rollout buffer
   (GAE, the truncation bootstrap), PPO/MaskablePPO and A2C updates, for S seeds;
-- ``on_policy``: the driver, ``OnPolicyTrainer`` (PPO, A2C, MaskablePPO).
+- ``on_policy``: the driver, ``OnPolicyTrainer`` (PPO, A2C, MaskablePPO);
+- ``dqn`` (``BatchedDQN``) and ``replay``: DQN and its replay buffer, for S seeds.
+
+``training.train_batched`` puts both behind ``sorting-line-train --engine batched --seeds ...``.
 
 This package sits below ``training`` in docs/layout.md's layers (``training/batched``): it may
 use ``envs``, ``agents`` and ``line`` but not ``training``'s modules (``train`` imports it, not
