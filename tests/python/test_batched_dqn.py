@@ -206,6 +206,16 @@ def test_a_saved_seed_loads_in_sb3_and_continues_in_the_engine(short_runs):
     continued.close()
 
 
+@pytest.mark.parametrize("n_envs, train_freq, gradient_steps", [(1, 4, 1), (8, 1, 2)])
+def test_the_papers_settings_are_implemented(n_envs, train_freq, gradient_steps):
+    """hyperparams/dqn.yml, for one line and mapped to 8 (hyperparams.for_lines)."""
+    from sorting_line_gym.training import hyperparams
+
+    own, kwargs = hyperparams.split(hyperparams.load("dqn", "advanced", overrides=[f"n_envs={n_envs}"]))
+    engine = BatchedDQN([1, 2], **LINE, n_envs=own["n_envs"], episode_steps=own["episode_steps"], **kwargs)
+    assert (engine.gamma, engine.train_freq, engine.gradient_steps) == (0.95, train_freq, gradient_steps)
+
+
 @pytest.mark.parametrize(
     "keywords, named",
     [
