@@ -252,7 +252,7 @@ def test_replay_buffers_beyond_memory_fail_saying_what_they_take(monkeypatch):
 
 
 def test_bad_seeds_and_model_files_fail_naming_them(tmp_path):
-    for seeds, named in (([1, 1], "repeat"), ([-1], "-1"), ([], "one or more")):
+    for seeds, named in (([1, 1], "more than once"), ([-1], "-1"), ([], "one or more")):
         with pytest.raises(ValueError, match=named):
             BatchedDQN(seeds, **LINE)
     ppo = tmp_path / "ppo.zip"

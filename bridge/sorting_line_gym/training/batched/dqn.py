@@ -46,6 +46,7 @@ from torch.nn import functional as F
 
 from ...envs.env import action_space, observation_space
 from ...line.vocabulary import check_setup, check_variant
+from .checks import available_memory, check_seeds
 from .lines import BatchedLines
 from .models import spaces_vec_env
 from .replay import BatchedReplayBuffer, ReplaySamples
@@ -136,17 +137,6 @@ def _check_policy_kwargs(kw: dict[str, Any]) -> None:
     extra = sorted(set(kw.get("optimizer_kwargs") or {}) - set(ADAM_KEYS))
     if extra:
         raise _refuse(f"optimizer_kwargs[{extra[0]!r}]", kw["optimizer_kwargs"][extra[0]], ", ".join(ADAM_KEYS))
-
-
-def check_seeds(seeds: Sequence[int]) -> list[int]:
-    seeds = list(seeds)
-    bad = [s for s in seeds if not isinstance(s, int | np.integer) or isinstance(s, bool) or s < 0]
-    if not seeds or bad:
-        raise ValueError(f"seeds {seeds!r} are not valid: allowed one or more integers >= 0 ({bad!r} are not)")
-    if len(set(seeds)) != len(seeds):
-        dup = sorted({s for s in seeds if seeds.count(s) > 1})
-        raise ValueError(f"seeds {seeds!r} repeat {dup}: each seed is a run of its own, give each once")
-    return [int(s) for s in seeds]
 
 
 def spaces_env(variant: str, n_envs: int):
@@ -548,17 +538,6 @@ def comparable(value: Any) -> Any:
         code = getattr(value, "__code__", None)
         return code.co_code if code is not None else id(value)
     return value
-
-
-def available_memory() -> int | None:
-    """MemAvailable of /proc/meminfo in bytes (None where there is none)."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
 
 
 def new_replay(
