@@ -106,11 +106,12 @@ def sb3_train(tr: OnPolicyTrainer, progress: float, numpy_seeds: list[int]) -> N
     [
         ("ppo", PPO),
         ("ppo", {**PPO, "clip_range": lambda p: 0.3 * p, "clip_range_vf": 0.1, "learning_rate": lambda p: 1e-3 * p}),
+        ("ppo", {**PPO, "policy_kwargs": {"net_arch": {"pi": [32], "vf": [16, 16]}, "activation_fn": torch.nn.ReLU}}),
         ("maskable_ppo", PPO),
         ("a2c", A2C),
         ("a2c", {**A2C, "normalize_advantage": True, "n_steps": 8}),
     ],
-    ids=["ppo", "ppo-schedules-clip-vf", "maskable-ppo", "a2c", "a2c-normalized"],
+    ids=["ppo", "ppo-schedules-clip-vf", "ppo-net-arch-relu", "maskable-ppo", "a2c", "a2c-normalized"],
 )
 def test_one_update_equals_sb3s_for_every_seed(algo, params):
     tr = trainer(algo, params)
@@ -199,7 +200,7 @@ def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
         ):
             assert (ref - mine).abs().max().item() <= 1e-4 * ref.abs().max().item(), name
         np.testing.assert_array_equal(saved.predict(obs, deterministic=True)[0], engine_actions[s])
-    again = trainer(algo, params, lines=1, models=paths)
+    again = trainer(algo, {}, lines=1, models=paths)
     try:
         for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):
             torch.testing.assert_close(p, q, rtol=0, atol=0)
@@ -238,9 +239,18 @@ def test_a_model_of_another_algorithm_or_line_is_refused(tmp_path):
     finally:
         tr.close()
     with pytest.raises(ValueError, match="a2c_seed5.zip: a a2c model; allowed here: ppo models"):
-        trainer("ppo", PPO, seeds=[5], lines=1, models=[path])
+        trainer("ppo", {}, seeds=[5], lines=1, models=[path])
     with pytest.raises(ValueError, match="a2c_seed5.zip: a model of observation space Box.*allowed here: Box"):
-        OnPolicyTrainer("a2c", [5], setup="B", variant="basic", params=A2C, models=[path])
+        OnPolicyTrainer("a2c", [5], setup="B", variant="basic", models=[path])
+    with pytest.raises(ValueError, match=r"params \['gamma'\] with models: a loaded model keeps its own"):
+        trainer("a2c", {"gamma": 0.5}, seeds=[5], lines=1, models=[path])
+    other = trainer("a2c", {**A2C, "ent_coef": 0.0}, seeds=[6], lines=1)
+    try:
+        (different,) = other.save([tmp_path / "a2c_seed6.zip"])
+    finally:
+        other.close()
+    with pytest.raises(ValueError, match="a2c_seed6.zip: ent_coef = 0.0 where .*a2c_seed5.zip has 0.06"):
+        trainer("a2c", {}, seeds=[5, 6], lines=1, models=[path, different])
 
 
 def test_sorting_line_train_engine_batched_writes_each_seeds_model(tmp_path, capsys):

@@ -100,7 +100,36 @@ def load_models(algo: str, paths: Sequence[str | Path], seeds: Sequence[int], sp
         model = cls.load(path, env=spaces_vec_env(*spaces, n_lines), device="cpu")
         generator = torch.Generator().manual_seed(seed)
         loaded.append(SeedModel(model, generator.get_state(), np.random.RandomState(seed).get_state()))
+    check_alike([b.model for b in loaded], paths)
     return loaded
+
+
+#: What the seeds of one trainer must share (one schedule and one update serve them all): the
+#: attributes SB3 keeps of its constructor arguments, schedules read at the start of training.
+SHARED = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "ent_coef", "vf_coef", "max_grad_norm",
+          "normalize_advantage", "policy_kwargs", "num_timesteps", "_n_updates")  # fmt: skip
+SCHEDULES = ("lr_schedule", "clip_range", "clip_range_vf")
+
+
+def check_alike(models: Sequence[Any], paths: Sequence[str | Path]) -> None:
+    """Refuses models that differ in what the seeds share (:data:`SHARED`), naming the keys."""
+
+    def settings(m: Any) -> dict[str, Any]:
+        own = {k: getattr(m, k, None) for k in SHARED}
+        for k in SCHEDULES:
+            schedule = getattr(m, k, None)
+            own[k] = schedule(1.0) if callable(schedule) else schedule
+        return own
+
+    first = settings(models[0])
+    for model, path in zip(models[1:], paths[1:], strict=True):
+        theirs = settings(model)
+        differ = sorted(k for k in first if repr(theirs[k]) != repr(first[k]))
+        if differ:
+            raise ValueError(
+                f"{path}: {', '.join(f'{k} = {theirs[k]!r}' for k in differ)} where {paths[0]} has "
+                f"{', '.join(f'{first[k]!r}' for k in differ)}: allowed models of one setting and training length"
+            )
 
 
 def finish_model(model: Any, state: dict[str, Any]) -> None:

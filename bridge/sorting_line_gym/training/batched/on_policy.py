@@ -56,6 +56,11 @@ class OnPolicyTrainer:
     ) -> None:
         self.algo = checks.check_algo(algo)
         self.seeds = checks.check_seeds(seeds)
+        if models is not None and params:
+            raise ValueError(
+                f"params {sorted(params)} with models: a loaded model keeps its own hyperparameters (as SB3's "
+                "load does); allowed no params when continuing models"
+            )
         params = checks.check_params(algo, params or {})
         if not isinstance(lines_per_seed, int) or lines_per_seed < 1:
             raise ValueError(f"lines_per_seed = {lines_per_seed!r} is not valid: allowed an integer >= 1")
