@@ -253,19 +253,22 @@ def test_a_model_of_another_algorithm_or_line_is_refused(tmp_path):
         trainer("a2c", {}, seeds=[5, 6], lines=1, models=[path, different])
 
 
-def test_sorting_line_train_engine_batched_writes_each_seeds_model(tmp_path, capsys):
+@pytest.mark.parametrize("algo", ["a2c", "dqn"])
+def test_sorting_line_train_engine_batched_writes_each_seeds_model(algo, tmp_path, capsys):
     """`sorting-line-train --engine batched --seeds ...`: one SB3 zip and record per seed, named as
-    --engine sb3 names them; flags the batched engine lacks are refused (exit 2), not ignored."""
-    from stable_baselines3 import A2C as SB3A2C
-
+    --engine sb3 names them (DQN through BatchedDQN); flags the batched engine lacks are refused
+    (exit 2), not ignored."""
+    from sorting_line_gym.training import hyperparams
     from sorting_line_gym.training.train import main
 
-    argv = ["--algo", "a2c", "--setup", "D", "--engine", "batched", "--seeds", "7", "8", "--timesteps", "40"]
+    argv = ["--algo", algo, "--setup", "D", "--engine", "batched", "--seeds", "7", "8", "--timesteps", "40"]
     assert main([*argv, "--out", str(tmp_path), "--no-progress"]) == 0
     for seed in (7, 8):
-        model = SB3A2C.load(tmp_path / f"a2c_D_basic_seed{seed}.zip", device="cpu")
+        model = hyperparams.algorithm_class(algo).load(tmp_path / f"{algo}_D_basic_seed{seed}.zip", device="cpu")
         assert model.num_timesteps == 40 and model.seed == seed
-        assert (tmp_path / f"a2c_D_basic_seed{seed}.json").is_file()
+        assert (tmp_path / f"{algo}_D_basic_seed{seed}.json").is_file()
+    if algo == "dqn":
+        return
     for extra, message in (
         (["--backend", "ros"], "--backend ros: the batched engine trains on native lines"),
         (["--hp", "use_sde=true"], "use_sde = True: the batched trainer implements only use_sde = False"),

@@ -119,6 +119,8 @@ class OnPolicyTrainer:
         # BaseAlgorithm._setup_learn
         if reset_num_timesteps:
             self.num_timesteps = 0
+            for episodes in self.lines.episodes:  # a new ep_info_buffer, as SB3's
+                episodes.clear()
         else:
             total_timesteps += self.num_timesteps
         self.total_timesteps = total_timesteps
