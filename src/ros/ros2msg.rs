@@ -27,8 +27,22 @@ fn definition(ros_type: &str) -> Option<&'static str> {
             "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n"
         ),
         "diagnostic_msgs/msg/KeyValue" => "string key\nstring value\n",
+        "sorting_line_interfaces/srv/ResetLine_Request" => service_part(include_str!("../../msg/srv/ResetLine.srv"), 0),
+        "sorting_line_interfaces/srv/ResetLine_Response" => {
+            service_part(include_str!("../../msg/srv/ResetLine.srv"), 1)
+        }
         _ => return None,
     })
+}
+
+/// The request (0) or response (1) part of a .srv text.
+fn service_part(srv: &'static str, part: usize) -> &'static str {
+    let (request, response) = srv.split_once("\n---\n").unwrap_or((srv, ""));
+    if part == 0 {
+        request
+    } else {
+        response
+    }
 }
 
 /// Whether a .msg field type is a primitive (or a string), not a message.
@@ -154,6 +168,14 @@ mod tests {
             assert!(schema(&n).is_some(), "{n}");
         }
         assert_eq!(schema("geometry_msgs/msg/Pose"), None);
+    }
+
+    #[test]
+    fn a_service_has_a_schema_per_part() {
+        let request = schema("sorting_line_interfaces/srv/ResetLine_Request").unwrap();
+        assert!(request.contains("bool has_seed") && !request.contains("success") && !request.contains("MSG: "));
+        let response = schema("sorting_line_interfaces/srv/ResetLine_Response").unwrap();
+        assert!(response.contains("bool success") && response.contains("MSG: builtin_interfaces/Time\n"));
     }
 
     #[test]

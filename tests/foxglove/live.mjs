@@ -10,6 +10,11 @@
 //                              (a viewer that hangs): {"event":"stalled"} once it stops reading
 //   node live.mjs garbage URL  malformed and unsupported client messages, then what the server
 //                              answered: {"event":"status",...}; {"event":"sent","count"}
+//   node live.mjs params URL   every parameter, then a set request for `seed`: each answer as
+//                              {"event":"parameters","id","parameters"}
+//   node live.mjs reset URL SERVICE SEED   as `record`, and calls the service SERVICE (a line's
+//                              ResetLine) with SEED, then with bytes that are no request:
+//                              {"event":"service_response","value"}, {"event":"service_failure","message"}
 //
 // Other events: {"event":"open"}, {"event":"advertise","topic","schema","encoding","schemaEncoding"},
 // {"event":"subscribed","topic"}, {"event":"time","time"}, {"event":"decode_error","topic","error"},
@@ -28,8 +33,9 @@ const { parse } = rosmsg;
 const { MessageReader } = serialization;
 
 const [mode, url] = process.argv.slice(2);
-if (!["record", "stall", "garbage"].includes(mode) || !url) {
-  process.stderr.write("usage: node live.mjs record|stall|garbage ws://HOST:PORT\n");
+const [serviceName, seed] = process.argv.slice(4);
+if (!["record", "stall", "garbage", "params", "reset"].includes(mode) || !url || (mode === "reset" && !seed)) {
+  process.stderr.write("usage: node live.mjs record|stall|garbage|params ws://HOST:PORT | reset URL SERVICE SEED\n");
   process.exit(2);
 }
 
@@ -51,7 +57,31 @@ const channels = new Map(); // subscription id -> {topic, schema, reader}
 client.on("open", () => {
   say({ event: "open" });
   if (mode === "garbage") sendGarbage();
+  if (mode === "params") {
+    client.getParameters([], "all");
+    client.setParameters([{ name: "seed", value: 12345 }], "set-seed");
+  }
 });
+client.on("advertiseServices", (services) => {
+  for (const service of services) {
+    say({ event: "advertise_service", name: service.name, type: service.type });
+    if (mode !== "reset" || service.name !== serviceName) continue;
+    // The request encoded by the advertised schema, as the Foxglove app's service call panel does.
+    const request = new serialization.MessageWriter(parse(service.request.schema, { ros2: true }));
+    const response = new MessageReader(parse(service.response.schema, { ros2: true }));
+    responses.set(service.id, response);
+    const data = request.writeMessage({ has_seed: true, seed: BigInt(seed) });
+    client.sendServiceCallRequest({ serviceId: service.id, callId: 1, encoding: "cdr", data });
+    client.sendServiceCallRequest({ serviceId: service.id, callId: 2, encoding: "cdr", data: new Uint8Array([1, 2]) });
+  }
+});
+const responses = new Map(); // service id -> response reader
+client.on("serviceCallResponse", ({ serviceId, callId, data }) => {
+  const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+  say({ event: "service_response", callId, value: responses.get(serviceId).readMessage(bytes) });
+});
+client.on("serviceCallFailure", ({ callId, message }) => say({ event: "service_failure", callId, message }));
+client.on("parameterValues", ({ id, parameters }) => say({ event: "parameters", id, parameters }));
 client.on("error", (error) => say({ event: "error", error: String(error?.message ?? error) }));
 client.on("close", () => {
   say({ event: "close" });
@@ -69,7 +99,7 @@ client.on("advertise", (advertised) => {
       encoding: channel.encoding,
       schemaEncoding: channel.schemaEncoding,
     });
-    if (mode === "garbage") continue;
+    if (mode === "garbage" || mode === "params") continue;
     let reader;
     try {
       reader = decoder(channel);

@@ -51,13 +51,13 @@ class Viewer:
     """`node live.mjs MODE URL` with its events collected by a reader thread; closing its stdin
     ends it (see live.mjs)."""
 
-    def __init__(self, mode: str, url: str, log_path: Path):
+    def __init__(self, mode: str, url: str, log_path: Path, *extra: object):
         self.mode, self.url = mode, url
         self.events: list[dict[str, Any]] = []
         self.lock = threading.Condition()
         self.stderr = open(log_path, "wb")
         self.proc = subprocess.Popen(
-            with_parent_death_signal([node_js(), str(FOXGLOVE / "live.mjs"), mode, url]),
+            with_parent_death_signal([node_js(), str(FOXGLOVE / "live.mjs"), mode, url, *map(str, extra)]),
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=self.stderr,

@@ -288,6 +288,56 @@ def test_garbage_from_a_viewer_is_answered_and_counted(ros, start_node, namespac
     assert node.running(), node.describe()
 
 
+def test_a_reset_through_the_service_capability_restarts_the_episode(start_node, namespace, tmp_path):
+    ns = namespace("reset")
+    node = start_node("--variant", "advanced", "--foxglove", "0", "--ros-args", "-r", f"__ns:={ns}")
+    service, state_topic = join_ns(ns, "reset"), join_ns(ns, "state")
+    viewer = Viewer("reset", live_view_url(node), tmp_path / "viewer.log", service, 11)
+    try:
+        ok = viewer.wait_for(lambda: [e for e in viewer.of("service_response") if e["callId"] == 1], 10.0, "the reply")
+        failed = viewer.wait_for(lambda: viewer.of("service_failure"), 10.0, "the malformed call's failure")
+        reply = ok[0]["value"]
+        assert (reply["success"], reply["seed"], reply["episode"]) == (True, 11, 1), reply
+        # The new episode's first tick, on the line's state channel: the stamp the reply named.
+        viewer.wait_for(
+            lambda: any(
+                e["value"]["episode"] == 1 and e["value"]["seed"] == 11 and e["value"]["step"] == 0
+                and e["value"]["header"]["stamp"] == reply["stamp"]
+                for e in viewer.of("message", state_topic)
+            ),
+            10.0,
+            f"{state_topic}: episode 1's first tick",
+        )  # fmt: skip
+    finally:
+        assert viewer.close() == 0, viewer.describe()
+    assert [e["callId"] for e in failed] == [2] and "ResetLine" in failed[0]["message"], failed
+    assert node.running(), node.describe()
+
+
+def test_the_parameters_are_readable_and_fixed(start_node, namespace, tmp_path):
+    ns = namespace("params")
+    node = start_node("--setup", "B", "--seed", "9", "--foxglove", "0", "--ros-args", "-r", f"__ns:={ns}")
+    url = live_view_url(node)
+    viewer = Viewer("params", url, tmp_path / "viewer.log")
+    try:
+        answers = viewer.wait_for(
+            lambda: len(viewer.of("parameters")) >= 2 and viewer.of("parameters"), 10.0, "both parameter answers"
+        )
+    finally:
+        assert viewer.close() == 0, viewer.describe()
+    by_id = {a["id"]: {p["name"]: p.get("value") for p in a["parameters"]} for a in answers}
+    got = by_id["all"]
+    assert {k: got[k] for k in ("setup", "input", "obs_noise", "action_penalty", "seed", "foxglove")} == {
+        "setup": "B",
+        "input": "seasonal",
+        "obs_noise": 0.0,
+        "action_penalty": 0.5,
+        "seed": 9,
+        "foxglove": url.removeprefix("ws://").replace(url.rsplit(":", 1)[1], "0"),
+    }, got
+    assert by_id["set-seed"] == {}, "a set request applies nothing: the parameters are fixed for the run"
+
+
 def test_bad_foxglove_values_fail_at_start_naming_them():
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -5,6 +5,7 @@ use futures::stream::{LocalBoxStream, SelectAll};
 use ros2_client::action::{CancelHandle, NewGoalHandle};
 use ros2_client::{Gid, MessageInfo, RmwRequestId};
 
+use super::live_view::ResetCall;
 use crate::ros::messages::{LineCommands, ResetLineRequest, ResetLinesRequest, Time};
 use crate::ros::protocol::{Client, Command};
 use crate::ros::simulation_interfaces::{SimService, SimulateStepsGoal};
@@ -21,6 +22,8 @@ pub(super) enum Event {
     /// A new SimulateSteps goal, or a request to cancel goals.
     Goal(Result<NewGoalHandle<SimulateStepsGoal>, String>),
     Cancel(Result<CancelHandle, String>),
+    /// A viewer of the live view called a line's `reset`.
+    LiveReset(ResetCall),
 }
 
 /// One input of the node.

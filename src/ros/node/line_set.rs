@@ -14,6 +14,7 @@ use super::events::{client_of, Event, Input};
 use super::graph::Graph;
 use super::line_messages;
 use super::lines::{Line, Refusal};
+use super::live_view::ResetCall;
 use super::log::show_topic;
 use crate::ros::messages::{batch_reset_service_type, Clock, LineCommands, LineStates, ResetLineRequest};
 use crate::ros::messages::{ResetLinesRequest, ResetLinesResponse, Time};
@@ -203,6 +204,16 @@ impl LineSet {
         let observation = line.reset(graph, request.has_seed.then_some(request.seed));
         let response = line_messages::reset_response(&line.host, observation, request.has_seed);
         respond(&line.reset, &format!("{}/reset", line.namespace), id, response).await;
+        self.publish_batch_state(graph);
+        self.publish_clock(graph);
+    }
+
+    /// A live view viewer's call of line k's `reset`: done and answered as the ROS service is.
+    pub(super) fn on_live_reset(&mut self, graph: &mut Graph, call: ResetCall) {
+        let Some(line) = self.lines.get_mut(call.line) else { return };
+        let observation = line.reset(graph, call.seed);
+        let response = line_messages::reset_response(&line.host, observation, call.seed.is_some());
+        call.answer(&response);
         self.publish_batch_state(graph);
         self.publish_clock(graph);
     }

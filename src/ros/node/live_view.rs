@@ -13,6 +13,9 @@
 //! line) sees where the line is. Client messages the server refuses (malformed, unknown channel,
 //! unsupported request) are answered by it with an error status and counted here
 //! (`client_messages_refused`, from the crate's own log records: `log::refused_client_messages`).
+//! The node's parameters are readable (the Parameters capability), read-only as over ROS; each
+//! line's `reset` is a service (the Services capability) that the node's own task carries out,
+//! as it does a ROS request, and answers with the same ResetLine response.
 
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -23,16 +26,22 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use foxglove::messages::SceneUpdate;
-use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
+use foxglove::websocket::service::{Request, Responder, Service, ServiceSchema};
+use foxglove::websocket::{
+    AnyClient, Capability, ChannelView, Client, GetParametersResponder, Parameter, ParameterHandler, ServerListener,
+    SetParametersResponder,
+};
 use foxglove::{
     ChannelBuilder, Context, Encode, PartialMetadata, RawChannel, Schema, WebSocketServer, WebSocketServerHandle,
 };
+use futures::channel::mpsc::{unbounded, UnboundedReceiver, UnboundedSender};
 use serde::Serialize;
 
 use super::lines::Line;
 use super::log::{outbox_full_reports, refused_client_messages};
+use super::parameters::ParameterValues;
 use super::scene;
-use crate::ros::messages::{DiagnosticStatus, KeyValue, Time};
+use crate::ros::messages::{DiagnosticStatus, KeyValue, ResetLineRequest, ResetLineResponse, Time};
 use crate::ros::ros2msg;
 
 /// Messages waiting between the node's thread and the server (a few ticks of every topic of a
@@ -89,6 +98,95 @@ impl ServerListener for Listener {
     }
 }
 
+/// The node's parameters for viewers (Foxglove's Parameters panel): their current values, read
+/// where the node's own parameter services read them (an evolution schedule moves some). They
+/// are fixed for the run, so a set request applies nothing (the viewer keeps the values it got).
+struct Parameters {
+    values: ParameterValues,
+}
+
+impl Parameters {
+    fn current(&self, names: &[String]) -> Vec<Parameter> {
+        let values = self.values.lock().unwrap_or_else(|p| p.into_inner());
+        values
+            .iter()
+            .filter(|(name, _)| names.is_empty() || names.iter().any(|n| n == name))
+            .filter_map(|(name, value)| {
+                use ros2_client::ParameterValue as V;
+                Some(match value {
+                    V::Boolean(b) => Parameter::bool(*name, *b),
+                    V::Integer(i) => Parameter::integer(*name, *i),
+                    V::Double(d) => Parameter::float64(*name, *d),
+                    V::String(t) => Parameter::string(*name, t.as_str()),
+                    _ => return None, // the node declares none of the other types
+                })
+            })
+            .collect()
+    }
+}
+
+impl ParameterHandler for Parameters {
+    fn get(&self, _client: AnyClient, names: Vec<String>, _id: Option<String>, responder: GetParametersResponder) {
+        responder.respond(self.current(&names));
+    }
+
+    fn set(&self, _client: AnyClient, _params: Vec<Parameter>, _id: Option<String>, responder: SetParametersResponder) {
+        responder.respond(Vec::new());
+    }
+}
+
+/// A viewer's call of a line's `reset` service, for the node's task to carry out and answer.
+pub(super) struct ResetCall {
+    pub(super) line: usize,
+    pub(super) seed: Option<u64>,
+    responder: Responder,
+}
+
+impl ResetCall {
+    /// Answers the call with the line's ResetLine response, in CDR as over ROS.
+    pub(super) fn answer(self, response: &ResetLineResponse) {
+        self.responder.respond_ok(cdr(response));
+    }
+}
+
+/// The requests of the viewers' reset calls, as the node waits on them.
+pub(super) type ResetCalls = UnboundedReceiver<ResetCall>;
+
+/// The `reset` service of line `index`, named as its ROS service.
+fn reset_service(name: &str, index: usize, calls: UnboundedSender<ResetCall>) -> Option<Service> {
+    let part = |t: &str| Some(Schema::new(t, "ros2msg", ros2msg::schema(t)?.into_bytes()));
+    let schema = ServiceSchema::new("sorting_line_interfaces/srv/ResetLine")
+        .with_request("cdr", part("sorting_line_interfaces/srv/ResetLine_Request")?)
+        .with_response("cdr", part("sorting_line_interfaces/srv/ResetLine_Response")?);
+    Some(Service::builder(name, schema).handler(ResetHandler { index, calls }))
+}
+
+/// Decodes a call (a malformed one is answered with an error at once) and hands it to the node.
+struct ResetHandler {
+    index: usize,
+    calls: UnboundedSender<ResetCall>,
+}
+
+impl foxglove::websocket::service::Handler for ResetHandler {
+    fn call(&self, request: Request, responder: Responder) {
+        let payload = request.payload();
+        let decoded = (payload.len() >= 4 && request.encoding() == "cdr")
+            .then(|| rustdds::RepresentationIdentifier::from_bytes(&payload[..2]).ok())
+            .flatten()
+            .and_then(|rep| {
+                rustdds::serialization::deserialize_from_cdr_with_rep_id::<ResetLineRequest>(&payload[4..], rep).ok()
+            });
+        let Some((request, _)) = decoded else {
+            responder.respond_err("not a ResetLine request in CDR".to_string());
+            return;
+        };
+        let call = ResetCall { line: self.index, seed: request.has_seed.then_some(request.seed), responder };
+        if let Err(e) = self.calls.unbounded_send(call) {
+            e.into_inner().responder.respond_err("the node is shutting down".to_string());
+        }
+    }
+}
+
 /// The CDR bytes DDS carries for `message`: the encapsulation header (CDR little-endian) and
 /// the body, as ros2-client's publisher writes them.
 pub(super) fn cdr<M: Serialize>(message: &M) -> Vec<u8> {
@@ -114,7 +212,13 @@ fn stamp_ns(cdr: &[u8]) -> u64 {
 impl LiveView {
     /// Starts the server on `address`; fails, naming the address, if it cannot listen there (a
     /// port in use, an address that is not this host's).
-    pub(super) fn start(address: SocketAddr, name: &str) -> Result<Self, String> {
+    /// `lines`: each hosted line's `reset` service name.
+    pub(super) fn start(
+        address: SocketAddr,
+        name: &str,
+        parameters: ParameterValues,
+        lines: &[String],
+    ) -> Result<(Self, ResetCalls), String> {
         let context = Context::new();
         let latest: Latest = Arc::default();
         let listener = Arc::new(Listener { context: Arc::clone(&context), latest: Arc::clone(&latest) });
@@ -122,6 +226,8 @@ impl LiveView {
             SocketAddr::V4(a) => a.ip().to_string(),
             SocketAddr::V6(a) => format!("[{}]", a.ip()),
         };
+        let (calls, reset_calls) = unbounded();
+        let services = lines.iter().enumerate().filter_map(|(k, name)| reset_service(name, k, calls.clone()));
         let handle = WebSocketServer::new()
             .name(name)
             .context(&context)
@@ -130,6 +236,8 @@ impl LiveView {
             .supported_encodings(["cdr"])
             .message_backlog_size(VIEWER_BACKLOG)
             .listener(listener)
+            .parameter_handler(Arc::new(Parameters { values: parameters }))
+            .services(services)
             .start_blocking()
             .map_err(|e| {
                 format!(
@@ -148,7 +256,7 @@ impl LiveView {
                 .spawn(move || forward(&outgoing, &counts, &server))
                 .map_err(|e| format!("live view: cannot start its thread: {e}"))?
         };
-        Ok(LiveView {
+        let live = LiveView {
             address: bound,
             context,
             handle: Some(handle),
@@ -157,7 +265,8 @@ impl LiveView {
             queue: Some(queue),
             counts,
             forwarder: Some(forwarder),
-        })
+        };
+        Ok((live, reset_calls))
     }
 
     /// Where it listens (the port the system chose, for port 0).

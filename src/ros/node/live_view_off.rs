@@ -7,13 +7,35 @@ use std::net::SocketAddr;
 use serde::Serialize;
 
 use super::lines::Line;
-use crate::ros::messages::{DiagnosticStatus, Time};
+use super::parameters::ParameterValues;
+use crate::ros::messages::{DiagnosticStatus, ResetLineResponse, Time};
+
+/// Never made: there is no live view to call.
+pub(super) struct ResetCall {
+    pub(super) line: usize,
+    pub(super) seed: Option<u64>,
+    never: Infallible,
+}
+
+impl ResetCall {
+    pub(super) fn answer(self, _response: &ResetLineResponse) {
+        match self.never {}
+    }
+}
+
+/// Never yields.
+pub(super) type ResetCalls = futures::stream::Pending<ResetCall>;
 
 /// Never built: [`LiveView::start`] refuses.
 pub(super) struct LiveView(Infallible);
 
 impl LiveView {
-    pub(super) fn start(address: SocketAddr, _name: &str) -> Result<Self, String> {
+    pub(super) fn start(
+        address: SocketAddr,
+        _name: &str,
+        _parameters: ParameterValues,
+        _lines: &[String],
+    ) -> Result<(Self, ResetCalls), String> {
         Err(format!(
             "parameter foxglove = {address}: this sorting_line was built without the live view \
              (cargo build --release --features foxglove)"

@@ -84,12 +84,17 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     }
     // Before any DDS thread exists, so a signal during start-up is ours to handle.
     let signals = Signals::new([Signal::Int, Signal::Term]).map_err(|e| format!("cannot catch signals: {e}"))?;
+    let (options, parameter_values) = node_options(&params);
     // Before DDS too: a port in use (or an address not of this host) fails the start at once.
     let live = match params.foxglove {
-        Some(address) => Some(LiveView::start(address, &names.node_name)?),
+        Some(address) => {
+            let resets: Vec<String> =
+                (0..params.lines).map(|k| names.topic(&names.line_namespace(k, params.lines), "reset")).collect();
+            Some(LiveView::start(address, &names.node_name, parameter_values.clone(), &resets)?)
+        }
         None => None,
     };
-    let live_address = live.as_ref().map(LiveView::address);
+    let live_address = live.as_ref().map(|(live, _)| live.address());
 
     // Whatever the environment asks, as any rcl node would: keeping a test on this machine is
     // the test's business (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, network namespaces).
@@ -97,7 +102,6 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     let context =
         Context::from_domain_participant(participant).map_err(|e| format!("cannot create the ROS context: {e:?}"))?;
     let node_name = NodeName::new(&names.namespace, &names.node_name).map_err(|e| format!("bad node name: {e:?}"))?;
-    let (options, parameter_values) = node_options(&params);
     let node = context.new_node(node_name, options).map_err(|e| format!("cannot create the node: {e:?}"))?;
     let mut server = Server::new(node, &names, &params, parameter_values, (signals, live))?;
     let spinner = server.spinner()?;

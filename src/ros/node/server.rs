@@ -17,7 +17,7 @@ use super::events::Event;
 use super::graph::Graph;
 use super::line_set::{ClockPublisher, LineSet};
 use super::lines::Line;
-use super::live_view::LiveView;
+use super::live_view::{LiveView, ResetCalls};
 use super::log::log;
 use super::parameters::ParameterValues;
 use super::stepping::{StepReply, Stepping};
@@ -55,7 +55,7 @@ impl Server {
         names: &Names,
         params: &NodeParams,
         parameter_values: ParameterValues,
-        (signals, live): (Signals, Option<LiveView>),
+        (signals, live): (Signals, Option<(LiveView, ResetCalls)>),
     ) -> Result<Self, String> {
         let mut lines = Vec::new();
         let mut inputs = Vec::new();
@@ -70,6 +70,10 @@ impl Server {
         let (control, sim_inputs) = SimulationControl::new(&mut node, names, params)?;
         let stepping = Stepping::new(&mut node, names, &mut inputs)?;
         inputs.extend(sim_inputs);
+        let live = live.map(|(live, calls)| {
+            inputs.push(calls.map(Event::LiveReset).boxed_local());
+            live
+        });
         let graph = Graph::new(node, parameter_values, inputs, live);
         Ok(Server { lines, control, stepping, diagnostics, signals: signals.fuse(), graph })
     }
@@ -160,6 +164,7 @@ impl Server {
             Event::Goal(Ok(handle)) => self.stepping.on_goal(lines, &mut self.control, handle).await,
             Event::Goal(Err(error)) => log("WARN", format!("{}: unreadable goal: {error}", NAME)),
             Event::Cancel(Ok(cancel)) => self.stepping.on_cancel(lines, cancel).await,
+            Event::LiveReset(call) => lines.on_live_reset(graph, call),
             Event::Cancel(Err(error)) => {
                 log("WARN", format!("{}: unreadable cancel request: {error}", NAME));
             }
