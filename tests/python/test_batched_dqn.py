@@ -186,13 +186,18 @@ def test_a_short_training_equals_sb3_learn(short_runs):
 
 
 def test_a_saved_seed_loads_in_sb3_and_continues_in_the_engine(short_runs):
-    engine, _, _, paths = short_runs
+    engine, _, references, paths = short_runs
     grid = np.stack(np.meshgrid(np.linspace(0, 1, 21), [0.0, 1.0, 2.0]), axis=-1).reshape(-1, 2).astype(np.float32)
     greedy = engine.predict(np.stack([grid] * engine.n_seeds))
     for s, path in enumerate(paths):
-        model = DQN.load(path, device="cpu")
+        model, (sb3, _) = DQN.load(path, device="cpu"), references[s]
         assert np.array_equal(model.predict(grid, deterministic=True)[0], greedy[s]), path
-        assert model.num_timesteps == STEPS and model._n_calls == engine._n_calls
+        # What SB3's learn leaves on the model and saves with it: the same as SB3's run.
+        for key in ("num_timesteps", "_total_timesteps", "_n_calls", "_n_updates", "_episode_num", "exploration_rate"):
+            assert getattr(model, key) == getattr(sb3, key), key
+        for key in ("_last_obs", "_last_original_obs", "_last_episode_starts"):
+            assert np.array_equal(getattr(model, key), getattr(sb3, key)), key
+        assert [(e["r"], e["l"]) for e in model.ep_info_buffer] == [(e["r"], e["l"]) for e in sb3.ep_info_buffer]
     # Continuing: SB3's DQN.load(path, env).learn(n) against the engine's from_models(...).learn(n).
     more = 160
     continued = BatchedDQN.from_models(paths, **LINE, n_envs=LINES, episode_steps=EPISODE).learn(more)

@@ -307,6 +307,7 @@ class BatchedDQN:
         self._num_timesteps_at_start = first.num_timesteps
         self._episode_num = np.zeros(len(seeds), dtype=np.int64)
         self._last_obs: np.ndarray | None = None
+        self._last_original_obs: np.ndarray | None = None
         self.lines: BatchedLines | None = None
         self.replay: BatchedReplayBuffer | None = None
 
@@ -385,7 +386,7 @@ class BatchedDQN:
             # _store_transition: next_obs is the terminal observation where an episode ended
             # (the step's own observation); every end is a time limit here (TimeLimit.truncated).
             self.replay.add(self._last_obs, step.terminal_obs, actions, step.rewards, step.dones, step.truncated)
-            self._last_obs = step.obs
+            self._last_original_obs, self._last_obs = self._last_obs, step.obs
             # BaseAlgorithm._update_current_progress_remaining
             self._current_progress_remaining = 1.0 - float(self.num_timesteps) / float(self._total_timesteps)
             self._on_step()
@@ -476,10 +477,12 @@ class BatchedDQN:
             model._episode_num = int(self._episode_num[s])
             model.exploration_rate = self.exploration_rate
             model._current_progress_remaining = self._current_progress_remaining
-            if self._last_obs is not None:
+            if self._last_obs is not None and self._last_original_obs is not None:
                 model._last_obs = self._last_obs[s].copy()
-                model._last_original_obs = model._last_obs
-                model._last_episode_starts = np.zeros(self.n_envs, dtype=bool)
+                # _store_transition keeps the observation acted on last; _setup_learn's episode starts
+                # (all True) are left as they are by an off-policy rollout.
+                model._last_original_obs = self._last_original_obs[s].copy()
+                model._last_episode_starts = np.ones(self.n_envs, dtype=bool)
             if self.lines is not None:
                 model.ep_info_buffer = deque(self.lines.episodes[s], maxlen=model._stats_window_size)
                 model.ep_success_buffer = deque(maxlen=model._stats_window_size)
