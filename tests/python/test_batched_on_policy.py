@@ -204,7 +204,10 @@ def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
     try:
         for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):
             torch.testing.assert_close(p, q, rtol=0, atol=0)
-        assert again.optimizer.state and again.num_timesteps == total
+        assert again.num_timesteps == total
+        for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):  # Adam's moments and step, as saved
+            ours, theirs = again.optimizer.state[p], tr.optimizer.state[q]
+            assert sorted(ours) == sorted(theirs) and all(torch.equal(ours[k], theirs[k]) for k in ours)
     finally:
         again.close()
 
