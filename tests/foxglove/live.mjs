@@ -85,7 +85,7 @@ client.on("parameterValues", ({ id, parameters }) => say({ event: "parameters", 
 client.on("error", (error) => say({ event: "error", error: String(error?.message ?? error) }));
 client.on("close", () => {
   say({ event: "close" });
-  process.exit(0);
+  process.stdout.write("", () => process.exit(0));
 });
 client.on("status", (s) => say({ event: "status", level: s.level, message: s.message }));
 client.on("time", (t) => say({ event: "time", time: t.timestamp }));
@@ -183,5 +183,6 @@ process.stdin.on("data", () => {});
 process.stdin.on("end", () => {
   if (mode === "stall") ws._socket.destroy();
   client.close();
-  process.exit(0);
+  // Exit once what was written has gone out (a line cut short would be unreadable).
+  process.stdout.write("", () => process.exit(0));
 });

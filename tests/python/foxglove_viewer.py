@@ -70,7 +70,10 @@ class Viewer:
     def _read(self) -> None:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
-            event = json.loads(line)
+            try:
+                event = json.loads(line)
+            except ValueError:  # a line cut short as the viewer was ended: kept, to show
+                event = {"event": "unreadable", "line": line[:200].decode(errors="replace")}
             with self.lock:
                 self.events.append(event)
                 self.lock.notify_all()
