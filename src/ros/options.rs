@@ -64,7 +64,7 @@ pub struct NodeArgs {
     /// hosted line evolves by it. Parameter `evolution_file`.
     #[arg(long, value_name = "FILE")]
     pub evolution: Option<PathBuf>,
-    /// Serve the Foxglove WebSocket live view on [ADDR:]PORT (default address 127.0.0.1; port 0:
+    /// Serve the Foxglove WebSocket live view on `[ADDR:]PORT` (default address 127.0.0.1; port 0:
     /// any free port, logged); off unless given. Parameter `foxglove` (docs/foxglove.md).
     #[arg(long, value_name = "[ADDR:]PORT")]
     pub foxglove: Option<String>,
