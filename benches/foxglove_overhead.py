@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """What the Foxglove live view costs the node (docs/foxglove.md): lock-step round trips of one
 rclpy client (benches/node_lockstep.py's client) against a node without the live view, with it
-and no viewer, and with it and one viewer subscribed to every channel (tests/foxglove/live.mjs,
-Foxglove's own client and decoders). Reports per configuration the round trips per second, the
+and no viewer, and with it and one viewer subscribed to every channel (tests/foxglove/live.mjs in its `count`
+mode: Foxglove's own client decoding every message, on the same two cores). Reports per configuration the round trips per second, the
 p50/p99 round-trip latency and the node's CPU time per round trip (utime + stime of the node's
 process, all its threads: the live view's forwarding and server threads included).
 
@@ -45,7 +45,7 @@ def measure(session: h.RosSession, config: str, lines: int, ticks: int, runs: in
     client = bench.LockstepClient(session, bench.line_namespaces(ns, lines), "spin-block", True)
     try:
         if config == "on, one viewer":
-            viewer = Viewer("record", live_view_url(node), log_dir / f"viewer_{ns.strip('/')}.log")
+            viewer = Viewer("count", live_view_url(node), log_dir / f"viewer_{ns.strip('/')}.log")
             viewer.wait_for(lambda: viewer.of("subscribed"), 10.0, "a subscription")
         client.connect_and_reset()
         for _ in range(min(500, max(50, ticks // 10))):
@@ -72,7 +72,7 @@ def measure(session: h.RosSession, config: str, lines: int, ticks: int, runs: in
     finally:
         client.destroy()
         if viewer is not None:
-            viewer.close()
+            viewer.close(timeout=30.0)
         bench.stop_node(node)
 
 

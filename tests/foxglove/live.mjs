@@ -6,6 +6,8 @@
 //
 //   node live.mjs record URL   every channel subscribed as advertised; each message decoded:
 //                              {"event":"message","topic","schema","log_time","data","value"}
+//   node live.mjs count URL    as `record`, but reports only the messages decoded per topic when
+//                              its stdin closes: {"event":"counts","counts":{topic: n}} (for benches)
 //   node live.mjs stall URL    every channel subscribed, then the socket is no longer read
 //                              (a viewer that hangs): {"event":"stalled"} once it stops reading
 //   node live.mjs garbage URL  malformed and unsupported client messages, then what the server
@@ -34,8 +36,8 @@ const { MessageReader } = serialization;
 
 const [mode, url] = process.argv.slice(2);
 const [serviceName, seed] = process.argv.slice(4);
-if (!["record", "stall", "garbage", "params", "reset"].includes(mode) || !url || (mode === "reset" && !seed)) {
-  process.stderr.write("usage: node live.mjs record|stall|garbage|params ws://HOST:PORT | reset URL SERVICE SEED\n");
+if (!["record", "count", "stall", "garbage", "params", "reset"].includes(mode) || !url || (mode === "reset" && !seed)) {
+  process.stderr.write("usage: node live.mjs record|count|stall|garbage|params URL | reset URL SERVICE SEED\n");
   process.exit(2);
 }
 
@@ -120,6 +122,7 @@ client.on("advertise", (advertised) => {
   }
 });
 let stalled = false;
+const counts = {}; // topic -> messages decoded (`count` mode)
 
 client.on("message", ({ subscriptionId, timestamp, data }) => {
   const channel = channels.get(subscriptionId);
@@ -130,6 +133,10 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
     value = channel.reader.readMessage(bytes);
   } catch (error) {
     say({ event: "decode_error", topic: channel.topic, error: String(error) });
+    return;
+  }
+  if (mode === "count") {
+    counts[channel.topic] = (counts[channel.topic] ?? 0) + 1;
     return;
   }
   say({
@@ -181,6 +188,7 @@ function sendGarbage() {
 
 process.stdin.on("data", () => {});
 process.stdin.on("end", () => {
+  if (mode === "count") say({ event: "counts", counts });
   if (mode === "stall") ws._socket.destroy();
   client.close();
   // Exit once what was written has gone out (a line cut short would be unreadable).

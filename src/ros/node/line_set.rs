@@ -53,8 +53,6 @@ pub(super) struct LineSet {
     batch_state: Publisher<LineStates>,
     /// Its name, for the log and the live view.
     batch_state_topic: String,
-    /// The live view's scene of every line.
-    scene_topic: String,
     batch_reset: Rc<ServiceServer<ResetLinesRequest, ResetLinesResponse>>,
     clock: ClockPublisher,
 }
@@ -78,9 +76,8 @@ impl LineSet {
             requests(&batch_reset).map(move |r| Event::BatchReset(r.map_err(err))).boxed_local(),
         ]);
         let modes = BatchModes::of(params.line.variant, !params.evolution.is_empty());
-        let (batch_state_topic, scene_topic) =
-            (show_topic(&names.namespace, "batch/state"), show_topic(&names.namespace, "scene"));
-        Ok(LineSet { lines, modes, batch_state, batch_state_topic, scene_topic, batch_reset, clock })
+        let batch_state_topic = show_topic(&names.namespace, "batch/state");
+        Ok(LineSet { lines, modes, batch_state, batch_state_topic, batch_reset, clock })
     }
 
     /// The lines as built: their episode-0 events applied (announced, and line 0's parameters
@@ -93,13 +90,8 @@ impl LineSet {
         self.publish_clock(graph);
     }
 
-    /// /clock, after any line ticked or was reset; with the live view on, the lines' scene too.
     pub(super) fn publish_clock(&mut self, graph: &Graph) {
         self.clock.publish(graph, &self.lines);
-        if let Some(live) = &graph.live {
-            let newest = self.lines.iter().map(|line| line.host.stamp()).max().unwrap_or_default();
-            live.offer_scene(&self.scene_topic, &self.lines, newest);
-        }
     }
 
     /// `batch/state`, when a vectorised client reads it (per-line clients and realtime lines

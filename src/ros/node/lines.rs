@@ -49,6 +49,8 @@ pub(super) struct Line {
     mode_cmd: Option<oneshot::Sender<()>>,
     ratio_topic: String,
     mode_topic: String,
+    /// The live view's scene of the line (no DDS topic).
+    scene_topic: String,
 }
 
 impl Line {
@@ -96,6 +98,7 @@ impl Line {
             mode_cmd: None,
             ratio_topic: t("sensors/ratio"),
             mode_topic: t("cmd/sort_mode"),
+            scene_topic: show_topic(&namespace, "scene"),
             namespace,
         };
         Ok((line, streams))
@@ -167,6 +170,9 @@ impl Line {
                 .count_published(graph.offer(ratio, &topic("sensors/ratio"), || line_messages::material_ratio(host)));
         }
         counters.count_published(graph.offer(&self.state, &topic("state"), || line_messages::line_state(host)));
+        if let Some(live) = &graph.live {
+            live.offer_scene(&self.scene_topic, self);
+        }
     }
 
     /// `events/reset`, for bags: the line's new episode (`seeded`: whether the reset named a seed).

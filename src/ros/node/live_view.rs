@@ -2,7 +2,7 @@
 //! Foxglove WebSocket server (the `foxglove` crate, the SDK Foxglove ships) with one channel per
 //! topic the node publishes, each with its `ros2msg` schema (`ros::ros2msg`) and the very CDR
 //! bytes the node writes to DDS; /clock's time as the server's time, so Foxglove's timeline is the
-//! simulated one; /diagnostics; and the line as a scene (`super::scene`).
+//! simulated one; /diagnostics; and each line as a scene (`super::scene`).
 //!
 //! Never in the line's way: the node's thread only serialises a message and offers it to a
 //! bounded queue (a full queue drops it, counted on /diagnostics as `dropped_queue_full`); a
@@ -41,7 +41,7 @@ use super::lines::Line;
 use super::log::{outbox_full_reports, refused_client_messages};
 use super::parameters::ParameterValues;
 use super::scene;
-use crate::ros::messages::{DiagnosticStatus, KeyValue, ResetLineRequest, ResetLineResponse, Time};
+use crate::ros::messages::{DiagnosticStatus, KeyValue, ResetLineRequest, ResetLineResponse};
 use crate::ros::ros2msg;
 
 /// Messages waiting between the node's thread and the server (a few ticks of every topic of a
@@ -312,17 +312,17 @@ impl LiveView {
         self.send(channel, bytes, time);
     }
 
-    /// Offers the scene of `lines` on `topic` (a `foxglove.SceneUpdate`, protobuf, as the
-    /// Foxglove SDK encodes it), stamped `stamp`.
-    pub(super) fn offer_scene(&self, topic: &str, lines: &[Line], stamp: Time) {
+    /// Offers the scene of `line`'s current tick on `topic` (a `foxglove.SceneUpdate`, protobuf,
+    /// as the Foxglove SDK encodes it).
+    pub(super) fn offer_scene(&self, topic: &str, line: &Line) {
         let describe = || Some((SceneUpdate::get_schema()?, "protobuf"));
         let Some(channel) = self.channel(topic, describe) else { return };
         let mut bytes = Vec::new();
-        if let Err(e) = scene::scene(lines, stamp).encode(&mut bytes) {
+        if let Err(e) = scene::scene(line).encode(&mut bytes) {
             super::log::log("ERROR", format!("live view: cannot encode the scene: {e}"));
             return;
         }
-        self.send(channel, bytes, u64::try_from(stamp.nanos()).unwrap_or_default());
+        self.send(channel, bytes, u64::try_from(line.host.stamp().nanos()).unwrap_or_default());
     }
 
     /// `bytes` become the channel's latest and go to the server if a viewer subscribed.

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::lines::Line;
 use super::parameters::ParameterValues;
-use crate::ros::messages::{DiagnosticStatus, ResetLineResponse, Time};
+use crate::ros::messages::{DiagnosticStatus, ResetLineResponse};
 
 /// Never made: there is no live view to call.
 pub(super) struct ResetCall {
@@ -50,7 +50,7 @@ impl LiveView {
         match self.0 {}
     }
 
-    pub(super) fn offer_scene(&self, _topic: &str, _lines: &[Line], _stamp: Time) {
+    pub(super) fn offer_scene(&self, _topic: &str, _line: &Line) {
         match self.0 {}
     }
 

@@ -1,5 +1,5 @@
-//! The line as a 3D scene for the live view (a `foxglove.SceneUpdate` each time the lines tick,
-//! on `<namespace>/scene`): what the paper's Figure 1 draws, per hosted line: the input hopper
+//! A line as a 3D scene for the live view (a `foxglove.SceneUpdate` each time the line ticks, on
+//! the line's `scene`): what the paper's Figure 1 draws: the input hopper
 //! with the batch coming in, the belt carrying its batch (material A blue, B orange, as long as
 //! the amounts), the sorting machine coloured by its sort mode, and the two containers, each a
 //! stack of what it holds rightly (its colour) and wrongly (the other), as tall as its share of
@@ -10,7 +10,6 @@ use foxglove::messages::Timestamp;
 use foxglove::messages::{Color, CubePrimitive, Pose, Quaternion, SceneEntity, SceneUpdate, TextPrimitive, Vector3};
 
 use super::lines::Line;
-use crate::ros::messages::Time;
 use crate::sim::SortMode;
 
 /// The scene's frame (Foxglove's 3D panel shows it when it is the display frame).
@@ -153,8 +152,9 @@ fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
     }
 }
 
-/// The scene of every line at `stamp` (the newest line's tick).
-pub(super) fn scene(lines: &[Line], stamp: Time) -> SceneUpdate {
+/// The scene of `line` at its current tick (one entity, `line_<k>`, which the next replaces).
+pub(super) fn scene(line: &Line) -> SceneUpdate {
+    let stamp = line.host.stamp();
     let timestamp = Some(Timestamp::new(stamp.sec.max(0) as u32, stamp.nanosec));
-    SceneUpdate { deletions: Vec::new(), entities: lines.iter().map(|line| line_entity(line, timestamp)).collect() }
+    SceneUpdate { deletions: Vec::new(), entities: vec![line_entity(line, timestamp)] }
 }
