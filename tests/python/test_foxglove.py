@@ -405,3 +405,33 @@ def test_the_layout_shows_what_the_node_serves():
     assert config["3D!scene"]["followTf"] == "sorting_line"  # the scene's frame (src/ros/node/scene.rs)
     assert config["DiagnosticSummary!diagnostics"]["topicToRender"] == "/diagnostics"
     assert {p["value"] for p in config["StateTransitions!mode"]["paths"]} >= {"/state.mode"}
+
+
+def test_an_env_asks_its_node_for_the_live_view(make_env, tmp_path):
+    """`foxglove=PORT`: the node the env spawns serves the live view there; a viewer sees the
+    env's steps. Only a spawned node (ROS backend) can: the other ways say why."""
+    import gymnasium
+
+    with socket.socket() as probe_port:  # a port free now (the test's network namespace is its own)
+        probe_port.bind(("127.0.0.1", 0))
+        port = probe_port.getsockname()[1]
+    env = make_env(None, setup="B", foxglove=port)
+    env.reset(seed=3)
+    state_topic = join_ns(env.bank.namespace, "state")
+    viewer = Viewer("record", f"ws://127.0.0.1:{port}", tmp_path / "viewer.log")
+    try:
+        viewer.wait_for(lambda: viewer.of("subscribed", state_topic), 10.0, f"a subscription to {state_topic}")
+        env.step(4)
+        env.step(7)
+        viewer.wait_for(
+            lambda: any(e["value"]["step"] == 2 for e in viewer.of("message", state_topic)), 10.0, "step 2's state"
+        )
+    finally:
+        assert viewer.close() == 0, viewer.describe()
+    for kwargs, words in [
+        ({"node": "attach", "namespace": "/x"}, "node='spawn'"),
+        ({"backend": "native"}, "backend='ros'"),
+        ({"foxglove": True}, "allowed a port"),
+    ]:
+        with pytest.raises(ValueError, match=words):
+            gymnasium.make("sorting_line_gym:SortingLine-v0", **{"foxglove": 8765, **kwargs})

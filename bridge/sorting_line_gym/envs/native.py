@@ -77,6 +77,8 @@ def check_native_options(options: LineOptions, render_mode: str | None = None) -
         )
     if render_mode is not None:
         raise ValueError(f"render_mode = {render_mode!r}: the dashboard needs backend='ros' (its sensor topics)")
+    if options.foxglove is not None:
+        raise ValueError(f"foxglove = {options.foxglove!r}: the live view is the node's: it needs backend='ros'")
 
 
 class NativeLineEnv(gym.Env):

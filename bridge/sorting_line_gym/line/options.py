@@ -56,6 +56,11 @@ class LineOptions:
     obs_noise: float | None = option(None, "the input sensor's relative noise instead of the setup's (0.0 ..= 1.0)")
     action_penalty: float | None = option(None, "the switching penalty instead of the setup's (0.0 ..= 10.0)")
     evolution: str | None = option(None, "an evolution schedule file the node runs the line by (--evolution)")
+    foxglove: int | str | None = option(
+        None,
+        'serve the Foxglove live view of the node the env spawns on this port, or "ADDR:PORT" (node="spawn", '
+        "backend='ros'; docs/foxglove.md)",
+    )
 
     def __post_init__(self) -> None:
         check_variant(self.variant)
@@ -71,6 +76,14 @@ class LineOptions:
             raise ValueError("node='attach' needs the namespace of the running node")
         if self.input is not None:
             check("input", self.input, INPUTS)
+        if self.foxglove is not None:
+            if isinstance(self.foxglove, bool) or not isinstance(self.foxglove, (int, str)):
+                raise ValueError(f"foxglove = {self.foxglove!r} is not valid: allowed a port or 'ADDR:PORT'")
+            if self.node != "spawn":
+                raise ValueError(
+                    f"foxglove = {self.foxglove!r} with node = {self.node!r}: the live view is served by a node the "
+                    "env spawns (node='spawn'); give a node you start yourself --foxglove instead"
+                )
         for name, (low, high, high_allowed) in SETTING_RANGES.items():
             value = getattr(self, name)
             if value is not None and not (low <= value <= high and (high_allowed or value < high)):
@@ -89,4 +102,6 @@ class LineOptions:
         options["max_steps"] = self.max_episode_steps if self.max_episode_steps is not None else MAX_EPISODE_STEPS
         if self.evolution is not None:
             options["evolution"] = self.evolution
+        if self.foxglove is not None:
+            options["foxglove"] = str(self.foxglove)  # the node checks the port and address at start
         return options
