@@ -28,7 +28,14 @@ least 5 training seeds a side), with each side's gradient steps per transition.
 
 Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
 interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
-``--jobs N`` runs N cells at once (each its own node and process). When the cells are in, it
+``--jobs N`` runs N cells at once (each its own node and process).
+
+``--engine batched`` trains the RL cells that differ only by training seed (same line, algorithm,
+lines and budget) together, in one run of the batched trainer (``sorting-line-train --engine
+batched``, native lines only), then evaluates and saves each seed's cell as ``--engine sb3`` (the
+default) does; the cells are named ``..._batched_seed<S>`` and their records name the engine, so
+the two engines' cells never mix, and a batch that was cut leaves its evaluated cells saved: a
+rerun trains the missing seeds, as one smaller batch. When the cells are in, it
 writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Table 1 and the
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
 ``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
@@ -74,6 +81,8 @@ from .cell_store import write_atomic
 
 #: Five training seeds per RL cell, for interval estimates over runs; the paper's 42 first.
 DEFAULT_SEEDS = (42, 43, 44, 45, 46)
+#: Who trains the RL cells: SB3 cell by cell, or the batched trainer with the seeds of a line at once.
+ENGINES = ("sb3", "batched")
 #: Where --check-n-envs compares one line with N: ((setups), (variants)), agent.
 AGREEMENT_CELLS = tuple(((("B",), ("advanced",)), a) for a in ALGOS) + tuple(((("D",), ("basic",)), a) for a in ALGOS)
 
@@ -90,6 +99,8 @@ class Cell:
     n_envs: int = 1
     #: How the one-line hyperparameters go to ``n_envs`` lines (``hyperparams.MAPPINGS``).
     mapping: str = DEFAULT_MAPPING
+    #: Who trains it (``ENGINES``); in the name of a batched cell, so the engines' cells never mix.
+    engine: str = "sb3"
 
     @property
     def lines(self) -> str:
@@ -102,15 +113,26 @@ class Cell:
     def name(self) -> str:
         lines = self.lines
         seed = f"_seed{self.train_seed}" if self.train_seed is not None else ""
-        return f"{self.setup}_{self.variant}_{self.agent}{lines}{seed}"
+        engine = f"_{self.engine}" if self.engine != "sb3" else ""
+        return f"{self.setup}_{self.variant}_{self.agent}{lines}{engine}{seed}"
+
+    def fields(self) -> dict[str, Any]:
+        """The cell as its record holds it: an SB3 cell without the engine, as before there were two."""
+        fields = asdict(self)
+        if self.engine == "sb3":
+            del fields["engine"]
+        return fields
 
 
-def plan(setups, variants, agents, train_seeds, n_envs: int = 1, mapping: str = DEFAULT_MAPPING) -> list[Cell]:
+def plan(
+    setups, variants, agents, train_seeds, n_envs: int = 1, mapping: str = DEFAULT_MAPPING, engine: str = "sb3"
+) -> list[Cell]:
     """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
-    so a partial run has whole rows: one algorithm on every line before the next."""
+    so a partial run has whole rows: one algorithm on every line before the next. Baselines train
+    nothing, so they are the same cells for both engines."""
     cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
     cells += [
-        Cell(s, v, a, seed, n_envs, mapping if n_envs > 1 else DEFAULT_MAPPING)
+        Cell(s, v, a, seed, n_envs, mapping if n_envs > 1 else DEFAULT_MAPPING, engine)
         for seed in train_seeds
         for a in agents
         if a in ALGOS
@@ -128,10 +150,9 @@ def run_cell(
     native backend draws no dashboard."""
     from ..training import hyperparams
     from ..training.train import train
-    from .evaluate import evaluate
 
     start = time.perf_counter()
-    record: dict[str, Any] = {"cell": asdict(cell), "timesteps": timesteps if cell.agent in ALGOS else None}
+    record: dict[str, Any] = {"cell": cell.fields(), "timesteps": timesteps if cell.agent in ALGOS else None}
     spec = cell.agent
     if cell.agent in ALGOS:
         params = hyperparams.load(
@@ -154,6 +175,16 @@ def run_cell(
         )
         record["training"] = asdict(run)
         spec = f"{cell.agent}:{run.model_path}"
+    return _evaluated(cell, spec, record, out, heldout, backend, start)
+
+
+def _evaluated(
+    cell: Cell, spec: str, record: dict[str, Any], out: Path, heldout: Heldout, backend: str, start: float
+) -> dict[str, Any]:
+    """``record`` with the evaluations of agent ``spec`` (the paper's seeds, the held-out ones) and
+    the wall time since ``start``, written as the cell's file."""
+    from .evaluate import evaluate
+
     dashboard = out / "dashboards" / f"{cell.name}.png" if backend == "ros" else None  # episode 1, seed 42
     if dashboard is not None:
         dashboard.parent.mkdir(parents=True, exist_ok=True)
@@ -166,6 +197,57 @@ def run_cell(
     return record
 
 
+def run_batch(
+    cells: list[Cell], out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str = "native"
+) -> list[dict[str, Any]]:
+    """Trains the RL ``cells``, which differ only by training seed, at once with the batched
+    trainer (its progress bar counts the steps of a seed and shows the steps/s of all), then
+    evaluates and writes each seed's cell as ``run_cell`` does, one after the other: a batch cut
+    during the evaluations leaves the cells done so far saved. A cell's ``wall_s`` is its share of
+    the training and its own evaluations. Runs in a worker."""
+    from ..training import hyperparams
+    from ..training.train_batched import train_batched
+
+    first = cells[0]
+    shared = (first.setup, first.variant, first.agent, first.n_envs, first.mapping, first.engine)
+    if first.agent not in ALGOS or any((c.setup, c.variant, c.agent, c.n_envs, c.mapping, c.engine) != shared
+                                       for c in cells):  # fmt: skip
+        raise ValueError(f"cells {[c.name for c in cells]}: allowed RL cells that differ only by training seed")
+    start = time.perf_counter()
+    params = hyperparams.load(
+        first.agent, first.variant, overrides=[f"n_timesteps={timesteps}", f"n_envs={first.n_envs}"],
+        mapping=first.mapping,
+    )  # fmt: skip
+    seeds = [c.train_seed for c in cells]
+    models = out / f"models{first.lines}_{first.engine}"  # beside, not over, the SB3 cells' models
+    runs = train_batched(first.agent, first.setup, first.variant, seeds=seeds, out=models, params=params,
+                         progress=progress)  # fmt: skip
+    share = (time.perf_counter() - start) / len(cells)
+    records = []
+    for cell, run in zip(cells, runs, strict=True):
+        record = {"cell": cell.fields(), "timesteps": timesteps, "engine": cell.engine, "training": asdict(run)}
+        spec = f"{cell.agent}:{run.model_path}"
+        records.append(_evaluated(cell, spec, record, out, heldout, backend, time.perf_counter() - share))
+    return records
+
+
+def batches(todo: list[Cell]) -> list[list[Cell]]:
+    """The cells as ``--engine batched`` runs them: a baseline alone, the RL cells that differ only
+    by training seed together, in the order of each group's first cell."""
+    groups: dict[Any, list[Cell]] = {}
+    for c in todo:
+        key = (c.setup, c.variant, c.agent, c.n_envs, c.mapping, c.engine) if c.agent in ALGOS else c
+        groups.setdefault(key, []).append(c)
+    return list(groups.values())
+
+
+def run_unit(cells: list[Cell], out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str):
+    """The records of one of ``batches``: a batch of RL cells, or one cell. Runs in a worker."""
+    if cells[0].agent in ALGOS and cells[0].engine == "batched":
+        return run_batch(cells, out, timesteps, heldout, progress, backend)
+    return [run_cell(cells[0], out, timesteps, heldout, progress, backend)]
+
+
 def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[str, Any] | None:
     """The saved record of ``cell`` if it was run with the same budget and held-out seeds."""
     path = out / "cells" / f"{cell.name}.json"
@@ -176,6 +258,8 @@ def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[s
     except json.JSONDecodeError:
         return None
     if cell.agent in ALGOS and record.get("timesteps") != timesteps:
+        return None
+    if cell.agent in ALGOS and record.get("engine", "sb3") != cell.engine:  # an SB3 record names none
         return None
     saved = record.get("heldout")
     if not saved or (saved["seed"], saved["episodes"]) != (heldout.seed, heldout.episodes):
@@ -218,10 +302,16 @@ def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> d
 
 
 def write_report(
-    out: Path, records: list[dict[str, Any]], timesteps: int, agents=AGENTS, heldout: Heldout | None = None
+    out: Path,
+    records: list[dict[str, Any]],
+    timesteps: int,
+    agents=AGENTS,
+    heldout: Heldout | None = None,
+    engine: str = "sb3",
 ) -> list[Path]:
     """Table 1 (``table.md``, ``table.json``) and the figures from the cells' ``records``, with the
-    oracle on the same seeds (held-out: by default the benchmark's)."""
+    oracle on the same seeds (held-out: by default the benchmark's); the --n-envs check compares
+    the saved cells of ``engine``."""
     from ..reports.plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure, runs_figure
 
     heldout = heldout or Heldout()
@@ -234,7 +324,7 @@ def write_report(
     poi = improvements(records)
     normalized = normalized_runs(records, oracles)
     aggregate = aggregates(normalized)
-    checks = agreement(saved_records(out), timesteps)
+    checks = agreement([r for r in saved_records(out) if r.get("engine", "sb3") == engine], timesteps)
     table = out / "table.md"
     table.write_text(
         f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}"
@@ -319,9 +409,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     p.add_argument(
         "--backend",
-        default="ros",
+        default=None,
         choices=BACKENDS,
-        help="ros: each cell on nodes over ROS 2; native: the line in-process (same records) (default ros)",
+        help="ros: each cell on nodes over ROS 2; native: the line in-process (same records) "
+        "(default ros; native with --engine batched)",
+    )
+    p.add_argument(
+        "--engine",
+        default="sb3",
+        choices=ENGINES,
+        help="who trains the RL cells: sb3, cell by cell (default), or batched: the training seeds of a line at "
+        "once (sorting-line-train --engine batched; native lines), each seed still a cell of its own",
     )
     return p
 
@@ -349,6 +447,9 @@ def heldout_of(args) -> Heldout:
 
 def run_all(todo: list[Cell], args, finished, bar) -> None:
     """Runs the cells, ``args.jobs`` at a time; ``finished(cell, record or exception)`` for each."""
+    if args.engine == "batched":
+        _run_batches(todo, args, finished, bar)
+        return
     if args.jobs == 1:
         # In this process, with SB3's progress bar for each training.
         for cell in todo:
@@ -369,6 +470,35 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
     )
 
 
+def _run_batches(todo: list[Cell], args, finished, bar) -> None:
+    """``run_all`` with ``--engine batched``: ``batches(todo)``, ``args.jobs`` at a time."""
+
+    def unit_finished(cells: list[Cell], outcome) -> None:
+        for i, cell in enumerate(cells):
+            finished(cell, outcome if isinstance(outcome, Exception) else outcome[i])
+
+    def names(units: list[list[Cell]]) -> str:
+        return ", ".join(f"{u[0].name} ({len(u)} seeds)" if len(u) > 1 else u[0].name for u in units)
+
+    units = batches(todo)
+    if args.jobs == 1:
+        for unit in units:
+            bar.set_postfix_str(names([unit]))
+            try:
+                outcome = run_unit(unit, args.out, args.timesteps, heldout_of(args), True, args.backend)
+            except Exception as e:  # noqa: BLE001 - report every failed batch, keep the others
+                outcome = e
+            unit_finished(unit, outcome)
+        return
+    cell_pool.run_parallel(
+        units,
+        lambda unit: (run_unit, unit, args.out, args.timesteps, heldout_of(args), False, args.backend),
+        args.jobs,
+        unit_finished,
+        lambda running: bar.set_postfix_str(names(running)),
+    )
+
+
 def _invalid(args) -> str | None:
     """What is wrong with the command line's values, if anything."""
     for flag, value in (
@@ -383,7 +513,17 @@ def _invalid(args) -> str | None:
         return f"--n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048"
     if args.heldout_seed < 0:
         return f"--heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more"
-    # Before any cell runs: a cell that cannot be saved would be found out only after its minutes of work.
+    if args.engine == "batched" and args.backend != "native":
+        return (
+            f"--engine batched --backend {args.backend} is not valid: the batched trainer trains on native lines; "
+            "allowed --backend native with --engine batched (or --engine sb3 for ROS)"
+        )
+    return None
+
+
+def _unwritable(args) -> str | None:
+    """Why ``--out`` cannot take the cells, if it cannot: found before any cell runs, as a cell that
+    cannot be saved would be found out only after its minutes of work."""
     try:
         (args.out / "cells").mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -393,12 +533,14 @@ def _invalid(args) -> str | None:
 
 def _cells_of(args) -> list[Cell]:
     """The cells the command line asks for, the one-line cells of --check-n-envs last."""
-    cells = plan(args.setups, args.variants, args.agents, args.train_seeds, args.n_envs, args.lines_mapping)
+    cells = plan(
+        args.setups, args.variants, args.agents, args.train_seeds, args.n_envs, args.lines_mapping, args.engine
+    )
     if args.check_n_envs and args.n_envs > 1:
         cells += [
             c
             for line, agent in AGREEMENT_CELLS
-            for c in plan(*line, [agent], args.train_seeds, 1)
+            for c in plan(*line, [agent], args.train_seeds, 1, engine=args.engine)
             if c.agent in args.agents and c.setup in args.setups and c.variant in args.variants
         ]
     return cells
@@ -437,6 +579,8 @@ def _run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: lis
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.backend is None:
+        args.backend = "native" if args.engine == "batched" else "ros"
     problem = _invalid(args)
     if problem:
         print(f"sorting-line-benchmark: {problem}", file=sys.stderr)
@@ -453,9 +597,13 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    problem = _unwritable(args)  # after the checks above, which write nothing
+    if problem:
+        print(f"sorting-line-benchmark: {problem}", file=sys.stderr)
+        return 2
+    at_once = f"{args.jobs} at a time" if args.engine == "sb3" else f"{args.jobs} batch(es) at a time, batched"
     print(
-        f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, "
-        f"{args.jobs} at a time -> {args.out}",
+        f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, {at_once} -> {args.out}",
         file=sys.stderr,
     )
     failures = []
@@ -471,7 +619,7 @@ def main(argv: list[str] | None = None) -> int:
     if not records:
         print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
         return 1
-    for path in write_report(args.out, records, args.timesteps, args.agents, heldout):
+    for path in write_report(args.out, records, args.timesteps, args.agents, heldout, args.engine):
         print(f"written: {path}", file=sys.stderr)
     print((args.out / "table.md").read_text())
     if failures:

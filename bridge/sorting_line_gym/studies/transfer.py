@@ -21,6 +21,10 @@ command skips the finished cells and goes on, and a run with other result-changi
 schedules) into the same `--out` is refused. `--max-cells N` stops after N cells (to split a study
 into sittings); Ctrl-C keeps the finished cells. A progress bar (plain lines when stderr is not a
 terminal) projects the end time.
+`--engine batched` trains the cells of one scenario, kind and algorithm (their seeds differ) at once
+with the batched trainer, on native lines (its default backend; `--backend ros` is refused), and
+saves each seed's cell as `--engine sb3` (the default) does, with the engine in its record and in
+the store's key, so the two engines' cells never mix; a rerun trains only the missing seeds.
 Writes `transfer.json` (the statistics), `transfer.md` (the tables), `transfer.png`/`.svg` (training
 curves around the change) and `transfer_runs.png`/`.svg` (each strategy's runs beside its interval).
 """
@@ -64,8 +68,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--backend",
         choices=BACKENDS,
-        default="ros",
-        help="ros: each cell's line a node over ROS 2; native: the line in-process (same cells) (default ros)",
+        default=None,
+        help="ros: each cell's line a node over ROS 2; native: the line in-process (same cells) "
+        "(default ros; native with --engine batched)",
+    )
+    p.add_argument(
+        "--engine",
+        choices=tc.ENGINES,
+        default="sb3",
+        help="who trains the agents: sb3, cell by cell (default), or batched: the seeds of a scenario, kind and "
+        "algorithm at once (training/batched; native lines), each seed still a cell of its own",
     )
     p.add_argument("--seeds", type=int, nargs="+", help=f"training seeds (default {DEFAULTS['seeds']})")
     p.add_argument("--before", type=int, help=f"episodes before the change (default {DEFAULTS['before']})")
@@ -107,6 +119,13 @@ def options(argv: list[str] | None):
         parser.error(f"--jobs = {args.jobs} is not valid: allowed 1 or more")
     if args.max_cells is not None and args.max_cells < 1:
         parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
+    if args.backend is None:
+        args.backend = "native" if args.engine == "batched" else "ros"
+    if args.engine == "batched" and args.backend != "native":
+        parser.error(
+            f"--engine batched --backend {args.backend} is not valid: the batched trainer trains on native lines; "
+            "allowed --backend native with --engine batched (or --engine sb3 for ROS)"
+        )
     args.settings = tc.Settings(args.before, args.after, args.evaluations, args.ppo_settings, args.backend)
     return args
 
@@ -143,7 +162,9 @@ def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]
 
     try:
         batch = todo[: args.max_cells]
-        if args.jobs == 1:
+        if args.engine == "batched":
+            _run_batches(batch, args, finished, running, progress)
+        elif args.jobs == 1:
             for cell in batch:
                 running([cell])
                 finished(cell, _outcome(cell, args))
@@ -157,6 +178,53 @@ def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]
     finally:
         progress.close()
     return 1 if failed else 0
+
+
+def _run_batches(todo: list[tc.Cell], args, finished, running, progress: CellProgress) -> None:
+    """``run_cells`` with ``--engine batched``: ``tc.batches(todo)``, ``--jobs`` at a time; in this
+    process each cell is saved as soon as it is evaluated."""
+
+    def unit_finished(cells: list[tc.Cell], outcome) -> None:
+        if isinstance(outcome, Exception):
+            for cell in cells:
+                if cell.name not in saved:
+                    finished(cell, outcome)
+            return
+        for cell, record in zip(cells, outcome, strict=True):
+            if cell.name not in saved:
+                finished(cell, record)
+        batch = outcome[-1].get("batch")
+        if batch:
+            progress.line(f"batch of {len(batch['seeds'])} seeds: {batch['steps_per_s']:,.0f} steps/s over all seeds")
+
+    saved: set[str] = set()
+
+    def one(cell: tc.Cell, record) -> None:
+        saved.add(cell.name)
+        finished(cell, record)
+
+    units = tc.batches(todo)
+    if args.jobs == 1:
+        for unit in units:
+            running(unit)
+            try:
+                if unit[0].kind == "baselines":
+                    outcome = [tc.run_cell(unit[0], args.settings, args.out)]
+                else:
+                    outcome = tc.run_batch(unit, args.settings, args.out, progress.tty, one)
+            except Exception as e:  # noqa: BLE001 - report every failed batch, keep the others
+                outcome = e
+            unit_finished(unit, outcome)
+        return
+    cell_pool.run_parallel(units, lambda unit: (_unit, unit, args.settings, args.out), args.jobs, unit_finished,
+                           lambda units: running([c for u in units for c in u]))  # fmt: skip
+
+
+def _unit(cells: list[tc.Cell], settings: tc.Settings, out: Path) -> list[dict]:
+    """The records of one of ``tc.batches`` (in a worker)."""
+    if cells[0].kind == "baselines":
+        return [tc.run_cell(cells[0], settings, out)]
+    return tc.run_batch(cells, settings, out)
 
 
 def _outcome(cell: tc.Cell, args):
@@ -188,6 +256,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     key = args.settings.key()
+    if args.engine != "sb3":  # an SB3 store's key stays as it was before there were two engines
+        key["engine"] = args.engine
     earlier = args.out / "transfer.json"
     if earlier.is_file() and "runs" in json.loads(earlier.read_text()):
         print(

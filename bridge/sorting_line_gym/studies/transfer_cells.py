@@ -21,6 +21,11 @@ buffer with its exploration already decayed to its floor (its epsilon schedule r
 budget), which would measure the schedule as much as the transfer. A2C takes no masks: before the
 machine upgrade a mode 1 or 2 it picks runs as mode 0 (the node refuses the mode and keeps mode 0,
 as the library does), and its frozen snapshot is evaluated the same way.
+
+Engines (``--engine``): ``sb3`` trains each cell with SB3 (``run_cell``); ``batched`` trains the
+cells of one scenario, kind and algorithm that differ only by seed at once with the batched trainer
+(``training/batched``, native lines; ``run_batch``), then evaluates each seed's SB3 model exactly as
+``sb3`` does and gives each its own record, naming the engine.
 """
 
 from __future__ import annotations
@@ -50,6 +55,8 @@ PPO_PARAMS = {"n_steps": 10 * EPISODE_STEPS, "batch_size": 100, "n_epochs": 5}
 #: coefficient (the benchmark's `hyperparams/ppo.yml`) on the same rollouts, which must stay whole
 #: episodes dividing --before so that the frozen snapshot is taken exactly at the change.
 PPO_SETTINGS = ("study", "paper")
+#: Who trains the agents: SB3 cell by cell, or the batched trainer with a cell's seeds at once.
+ENGINES = ("sb3", "batched")
 
 
 @dataclass(frozen=True)
@@ -314,3 +321,137 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
 def schedule_paths(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     """Where ``schedules`` wrote the scenario's two schedules (the study writes them at its start)."""
     return out / "schedules" / f"{scenario}-at-{before + 1}.yaml", out / "schedules" / f"{scenario}-after.yaml"
+
+
+# ------------------------------------------------------------------------------------------
+# --engine batched
+
+
+def batches(todo: list[Cell]) -> list[list[Cell]]:
+    """The cells as ``--engine batched`` runs them: baselines alone, the cells of one scenario, kind
+    and algorithm together (their seeds differ), in the order of each group's first cell."""
+    groups: dict[Any, list[Cell]] = {}
+    for c in todo:
+        groups.setdefault(c if c.kind == "baselines" else (c.scenario, c.kind, c.algo), []).append(c)
+    return list(groups.values())
+
+
+class Curves:
+    """Every finished training episode's return per seed, as ``Monitor.get_episode_rewards`` gives
+    them (summed in float32 by the lines, as VecMonitor does: Monitor's sums differ in the 7th
+    digit), read from the trainer's lines after each update."""
+
+    def __init__(self, n_seeds: int):
+        self.curves: list[list[float]] = [[] for _ in range(n_seeds)]
+        self.seen = [0] * n_seeds
+
+    def __call__(self, trainer) -> None:
+        lines = trainer.lines
+        for s, count in enumerate(int(c) for c in lines.episode_counts):
+            new = count - self.seen[s]
+            if new > len(lines.episodes[s]):  # more episodes in one update than its statistics window holds
+                raise RuntimeError(
+                    f"{new} episodes in one update: the curve would miss some (window {len(lines.episodes[s])})"
+                )
+            self.curves[s] += [float(e["r"]) for e in list(lines.episodes[s])[len(lines.episodes[s]) - new :]]
+            self.seen[s] = count
+
+
+def _trainer(cell: Cell, seeds: list[int], settings: Settings, schedule: Path):
+    from ..training.batched.on_policy import OnPolicyTrainer
+
+    return OnPolicyTrainer(
+        "maskable_ppo" if cell.algo == "ppo" else cell.algo,  # the study's PPO is MaskablePPO
+        seeds,
+        setup="B",
+        variant="advanced",
+        params=hyperparameters(cell.algo, settings.ppo_settings),
+        lines_per_seed=1,
+        episode_steps=EPISODE_STEPS,
+        evolution=str(schedule),
+    )
+
+
+def _learn(trainer, steps: int, curves: Curves, progress: bool, reset: bool = True) -> None:
+    """``trainer.learn``, with the training command's bar (a seed's steps, the steps/s of all) if ``progress``."""
+    from ..training.train_batched import progress_bar
+
+    bar, update = progress_bar(steps, len(trainer.seeds)) if progress else (None, None)
+    start = trainer.num_timesteps if not reset else 0
+
+    def each(t) -> None:
+        curves(t)
+        if update is not None:
+            update(_Offset(t, start))
+
+    try:
+        trainer.learn(steps, each, reset_num_timesteps=reset)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+class _Offset:
+    """A trainer seen by the progress bar as if its steps counted from ``start`` (a continued learn)."""
+
+    def __init__(self, trainer, start: int):
+        self.num_timesteps = trainer.num_timesteps - start
+
+
+def run_batch(
+    cells: list[Cell], settings: Settings, out: Path, progress: bool = False, finished=None
+) -> list[dict[str, Any]]:
+    """Trains the ``cells`` (one scenario, kind and algorithm; their seeds differ) at once with the
+    batched trainer on native lines, then evaluates each seed as ``run_cell`` does; returns their
+    records (``finished(cell, record)`` as each is evaluated, so a cut batch keeps those). A
+    record's ``train_seconds`` is its share of the batch's training."""
+    import torch
+
+    first = cells[0]
+    if first.kind == "baselines" or any((c.scenario, c.kind, c.algo) != (first.scenario, first.kind, first.algo)
+                                        for c in cells):  # fmt: skip
+        raise ValueError(f"cells {[c.name for c in cells]}: allowed trained cells that differ only by seed")
+    torch.set_num_threads(1)
+    started = time.monotonic()
+    evolving, changed = schedule_paths(first.scenario, settings.before, out)
+    seeds = [int(c.seed) for c in cells]  # type: ignore[arg-type]
+    curves = Curves(len(cells))
+    snapshots: list[Path] = []
+    trainer = _trainer(first, seeds, settings, evolving if first.kind == "transfer" else changed)
+    try:
+        if first.kind == "transfer":
+            _learn(trainer, settings.before * EPISODE_STEPS, curves, progress)
+            models = out / "models"
+            models.mkdir(parents=True, exist_ok=True)
+            snapshots = trainer.save([models / f"{c.name}-at-the-change.zip" for c in cells])
+            _learn(trainer, settings.after * EPISODE_STEPS, curves, progress, reset=False)
+        else:
+            _learn(trainer, settings.after * EPISODE_STEPS, curves, progress)
+        rate = trainer.num_timesteps * len(cells) / max(time.monotonic() - started, 1e-9)
+        trained = trainer.sync_models()  # each seed's SB3 model with its trained weights
+    finally:
+        trainer.close()
+    share = (time.monotonic() - started) / len(cells)
+    batch = {"seeds": seeds, "steps_per_s": rate}
+    records = []
+    for s, cell in enumerate(cells):
+        evaluated = time.monotonic()
+        eval_env = make_env(changed, "native")
+        try:
+            if cell.kind == "transfer":
+                frozen_model = algorithm_class(cell.algo).load(snapshots[s], device="cpu")
+                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
+                continued = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
+                result = {"continued_curve": curves.curves[s], "continued_eval": continued, "frozen_eval": frozen}
+            else:
+                final = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
+                result = {"scratch_curve": curves.curves[s], "scratch_eval": final}
+        finally:
+            eval_env.close()
+        own = time.monotonic() - evaluated
+        timing = {"train_seconds": share, "eval_seconds": own}
+        record = {"cell": asdict(cell), **result, **timing, "seconds": share + own, "engine": "batched", "batch": batch}
+        records.append(record)
+        if finished is not None:
+            finished(cell, record)
+    return records

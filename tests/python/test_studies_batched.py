@@ -1,0 +1,114 @@
+"""`sorting-line-benchmark --engine batched` and `sorting-line-transfer --engine batched`, on tiny
+budgets (A2C, two training seeds, native lines): the seeds of a line are trained in one batched
+run, each is saved as a cell of its own naming the engine, and a batch that was cut is resumed by
+training only the missing seed. The default engine (sb3) keeps its cells and records:
+test_training.py, test_native_tools.py and the transfer tests hold it.
+
+What must hold:
+- one cell per seed (the benchmark's named ``..._batched_seed<S>``), its record naming the engine;
+- a rerun with a cell missing trains that seed alone (a batch of one) and leaves the others;
+- a transfer cell's evaluations equal SB3's cell of the same seed (its curve to float32);
+- bad input fails at start: an unknown engine, or the batched engine on the ROS backend.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+ARGV = [
+    "--engine", "batched", "--setups", "D", "--variants", "basic", "--agents", "a2c",
+    "--train-seeds", "42", "43", "--timesteps", "200", "--heldout-episodes", "3",
+]  # fmt: skip
+
+
+def test_a_batched_benchmark_saves_a_cell_per_seed_and_resumes_the_missing_one(tmp_path, capsys):
+    from sorting_line_gym.studies import benchmark
+
+    out = tmp_path / "bench"
+    argv = [*ARGV, "--out", str(out)]
+    assert benchmark.main(argv) == 0
+    assert "2 to run" in capsys.readouterr().err
+    cells = {s: out / "cells" / f"D_basic_a2c_batched_seed{s}.json" for s in (42, 43)}
+    first = {s: json.loads(path.read_text()) for s, path in cells.items()}
+    for seed, record in first.items():
+        assert record["engine"] == "batched" and record["cell"]["engine"] == "batched"
+        assert record["cell"]["train_seed"] == seed and record["timesteps"] == 200
+        assert record["training"]["seed"] == seed
+        assert record["training"]["versions"]["engine"] == "batched (2 seeds at once)"
+        assert record["training"]["model_path"].endswith(f"models_batched/a2c_D_basic_seed{seed}.zip")
+        assert len(record["heldout"]["per_episode"]) == 3 and len(record["evaluation"]["per_episode"]) == 10
+    assert (out / "table.md").is_file()
+
+    # A batch cut after seed 42's cell was saved: the rerun trains seed 43 alone.
+    cells[43].unlink()
+    kept = cells[42].stat().st_mtime_ns
+    assert benchmark.main(argv) == 0
+    assert "1 already done, 1 to run" in capsys.readouterr().err
+    assert cells[42].stat().st_mtime_ns == kept
+    again = json.loads(cells[43].read_text())
+    assert again["training"]["versions"]["engine"] == "batched (1 seeds at once)"
+    # Each seed is a run of its own: trained alone, it scores as it did beside seed 42.
+    assert again["heldout"]["per_episode"] == first[43]["heldout"]["per_episode"]
+
+
+def test_bad_engine_input_fails_at_start(tmp_path, capsys):
+    from sorting_line_gym.studies import benchmark
+
+    with pytest.raises(SystemExit) as stopped:
+        benchmark.main(["--engine", "jax", "--out", str(tmp_path)])
+    assert stopped.value.code == 2
+    assert "'jax'" in (err := capsys.readouterr().err) and "'sb3', 'batched'" in err
+    assert benchmark.main([*ARGV, "--backend", "ros", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--engine batched --backend ros is not valid" in err and "allowed --backend native" in err
+    assert not (tmp_path / "cells").exists() or not any((tmp_path / "cells").iterdir())
+
+
+TRANSFER = ["--engine", "batched", "--scenarios", "upgrade", "--algos", "a2c", "--seeds", "1", "2",
+            "--before", "10", "--after", "10", "--evaluations", "2"]  # fmt: skip
+
+
+def test_a_batched_transfer_saves_a_cell_per_seed_equal_to_sb3s_and_resumes(tmp_path, capsys):
+    from sorting_line_gym.studies import transfer
+    from sorting_line_gym.studies import transfer_cells as tc
+
+    out = tmp_path / "transfer"
+    argv = [*TRANSFER, "--out", str(out)]
+    assert transfer.main(argv) == 0
+    assert "2 seeds" in capsys.readouterr().err
+    store = json.loads((out / "study.json").read_text())
+    assert store["key"]["engine"] == "batched"
+    names = [f"upgrade_a2c_{kind}_seed{s}" for kind in ("transfer", "scratch") for s in (1, 2)]
+    first = {n: json.loads((out / "cells" / f"{n}.json").read_text()) for n in names}
+    for record in first.values():
+        assert record["engine"] == "batched" and record["batch"]["seeds"] == [1, 2]
+    # SB3's scratch cell of seed 2, on the same native line: the same evaluations, the same curve.
+    cell = tc.Cell("upgrade", "scratch", "a2c", 2)
+    sb3 = tc.run_cell(cell, tc.Settings(10, 10, 2, backend="native"), out)
+    batched = first[cell.name]
+    assert batched["scratch_eval"] == sb3["scratch_eval"]
+    assert batched["scratch_curve"] == pytest.approx(sb3["scratch_curve"], rel=1e-5, abs=1e-5)
+
+    # A batch cut after seed 1's cell was saved: the rerun trains seed 2 alone.
+    (out / "cells" / "upgrade_a2c_transfer_seed2.json").unlink()
+    assert transfer.main(argv) == 0
+    assert "4 already done, 1 to run" in capsys.readouterr().err
+    again = json.loads((out / "cells" / "upgrade_a2c_transfer_seed2.json").read_text())
+    assert again["batch"]["seeds"] == [2] and again["invocation"] == 2
+    for key in ("continued_curve", "continued_eval", "frozen_eval"):
+        assert again[key] == first["upgrade_a2c_transfer_seed2"][key], key
+    # The store of one engine refuses the other's options.
+    assert transfer.main([*TRANSFER[2:], "--backend", "native", "--out", str(out)]) == 2
+    assert "engine: saved 'batched', asked None" in capsys.readouterr().err
+
+
+def test_the_transfer_refuses_the_batched_engine_on_ros(tmp_path, capsys):
+    from sorting_line_gym.studies import transfer
+
+    with pytest.raises(SystemExit) as stopped:
+        transfer.main([*TRANSFER, "--backend", "ros", "--out", str(tmp_path)])
+    assert stopped.value.code == 2
+    assert "--engine batched --backend ros is not valid" in capsys.readouterr().err
+    assert not (tmp_path / "cells").exists()
