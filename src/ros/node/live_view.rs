@@ -90,10 +90,12 @@ struct Listener {
 }
 
 impl ServerListener for Listener {
+    /// (Sent under the lock: see [`LiveView::send`]; the send only queues it for the viewer.)
     fn on_subscribe(&self, client: Client, channel: ChannelView) {
-        let latest = self.latest.lock().unwrap_or_else(|p| p.into_inner()).get(&u64::from(channel.id())).cloned();
-        if let (Some((bytes, time)), Some(raw)) = (latest, self.context.get_channel_by_topic(channel.topic())) {
-            raw.log_with_meta_to_sink(&bytes, PartialMetadata::with_log_time(time), client.sink_id());
+        let latest = self.latest.lock().unwrap_or_else(|p| p.into_inner());
+        let raw = self.context.get_channel_by_topic(channel.topic());
+        if let (Some((bytes, time)), Some(raw)) = (latest.get(&u64::from(channel.id())), raw) {
+            raw.log_with_meta_to_sink(bytes, PartialMetadata::with_log_time(*time), client.sink_id());
         }
     }
 }
@@ -326,14 +328,19 @@ impl LiveView {
     }
 
     /// `bytes` become the channel's latest and go to the server if a viewer subscribed.
+    ///
+    /// Under the lock of the latest messages, which a new subscription's `on_subscribe` takes
+    /// too: the server registers a subscription before it calls that, so a message is either
+    /// the latest it then sends or finds the subscriber registered and is queued for it (a
+    /// viewer subscribing while a message is offered may get it twice, never not at all).
     fn send(&self, channel: Arc<RawChannel>, bytes: Vec<u8>, time: u64) {
-        let subscribed = channel.has_sinks();
         let id = u64::from(channel.id());
-        if subscribed {
-            self.latest.lock().unwrap_or_else(|p| p.into_inner()).insert(id, (bytes.clone(), time));
+        let mut latest = self.latest.lock().unwrap_or_else(|p| p.into_inner());
+        if channel.has_sinks() {
+            latest.insert(id, (bytes.clone(), time));
             self.enqueue(Outgoing::Message(channel, bytes, time));
         } else {
-            self.latest.lock().unwrap_or_else(|p| p.into_inner()).insert(id, (bytes, time));
+            latest.insert(id, (bytes, time));
         }
     }
 
