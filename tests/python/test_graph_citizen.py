@@ -216,6 +216,8 @@ def test_the_node_follows_the_discovery_range(ros, start_node, namespace, range_
         else:
             ros.spin_for(3.0)
             assert not seen(), f"found under {range_}\n{node.describe()}"
-        assert f"discovery range {range_}" in node.log(), node.describe()
+        # The node logs its start line after its endpoints exist, so a peer may see it first: wait for the line.
+        line = f"discovery range {range_}"
+        ros.spin_until(lambda: line in node.log(), 10.0, f"the node's start line naming {line!r}", node.describe)
     finally:
         ros.destroy_node(probe)
