@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import torch
 
+from batched_training import Clock  # this folder is on sys.path when a bench runs as a script
 from sorting_line_gym.training import hyperparams
 from sorting_line_gym.training.batched.dqn import BatchedDQN
 from sorting_line_gym.training.train import make_training_env
@@ -32,21 +32,6 @@ LINE = dict(setup="B", variant="advanced")
 
 def paper_settings() -> tuple[dict, dict]:
     return hyperparams.split(hyperparams.load("dqn", LINE["variant"]))
-
-
-class Clock:
-    """Wall and CPU time (this process's) of a block: on a busy machine the CPU time is the steadier
-    figure, the wall time what a user waits."""
-
-    def __enter__(self):
-        self.wall, self.cpu = time.perf_counter(), time.process_time()
-        return self
-
-    def __exit__(self, *exc):
-        self.wall, self.cpu = time.perf_counter() - self.wall, time.process_time() - self.cpu
-
-    def per(self, n: int) -> tuple[float, float]:
-        return self.wall / n, self.cpu / n
 
 
 def gradient_step_times(seeds: list[int], rounds: int) -> dict[int, tuple[float, float]]:
