@@ -13,6 +13,7 @@ recorder's bags read by Foxglove's MCAP reader:
 from __future__ import annotations
 
 import json
+import signal
 import socket
 import statistics
 import time
@@ -254,13 +255,15 @@ def test_a_viewer_that_stops_reading_does_not_slow_the_line(ros, start_node, nam
         stalled = tick_rates(time.monotonic(), 3, "3 reports of the line's tick rate with the stalled viewer")
         status = next({kv.key: kv.value for kv in st.values} for st in stamped[-1][1].status if st.name == LIVE)
         assert status["viewers"] == "1", status  # still connected, never read from
+        # Nor does it hold the node when it leaves: SIGINT, exit 0 within 5 s (node.stop's limit).
+        assert node.running(), node.describe()
+        assert node.stop(signal.SIGINT, timeout=5.0) == 0, node.describe()
     finally:
         viewer.close()
     # A tick waiting for the viewer would stop the line (lock-step) or drop its rate to what the
     # viewer reads (nothing); the margin is for a machine busy with other work.
     print(f"tick rates: alone {alone}, with the stalled viewer {stalled}; live view {status}")
     assert statistics.median(stalled) >= 0.5 * statistics.median(alone), (alone, stalled)
-    assert node.running(), node.describe()
 
 
 def test_garbage_from_a_viewer_is_answered_and_counted(ros, start_node, namespace, client_factory, probe, tmp_path):

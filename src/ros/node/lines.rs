@@ -171,7 +171,7 @@ impl Line {
         }
         counters.count_published(graph.offer(&self.state, &topic("state"), || line_messages::line_state(host)));
         if let Some(live) = &graph.live {
-            live.offer_scene(&self.scene_topic, self);
+            live.offer_scene(&self.scene_topic, &self.host, self.index, &self.namespace);
         }
     }
 

@@ -37,16 +37,19 @@ use foxglove::{
 use futures::channel::mpsc::{unbounded, UnboundedReceiver, UnboundedSender};
 use serde::Serialize;
 
-use super::lines::Line;
 use super::log::{outbox_full_reports, refused_client_messages};
 use super::parameters::ParameterValues;
 use super::scene;
 use crate::ros::messages::{DiagnosticStatus, KeyValue, ResetLineRequest, ResetLineResponse};
+use crate::ros::protocol::HostedLine;
 use crate::ros::ros2msg;
 
 /// Messages waiting between the node's thread and the server (a few ticks of every topic of a
 /// 64-line node); beyond it they are dropped and counted.
 const QUEUE: usize = 4096;
+
+/// How long the node, leaving, waits for its viewers to close their connections.
+const STOP_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// Messages the server buffers per viewer before it drops the viewer's oldest.
 const VIEWER_BACKLOG: usize = 1024;
@@ -314,17 +317,17 @@ impl LiveView {
         self.send(channel, bytes, time);
     }
 
-    /// Offers the scene of `line`'s current tick on `topic` (a `foxglove.SceneUpdate`, protobuf,
-    /// as the Foxglove SDK encodes it).
-    pub(super) fn offer_scene(&self, topic: &str, line: &Line) {
+    /// Offers the scene of line `index` (in `namespace`) at its current tick on `topic` (a
+    /// `foxglove.SceneUpdate`, protobuf, as the Foxglove SDK encodes it).
+    pub(super) fn offer_scene(&self, topic: &str, host: &HostedLine, index: usize, namespace: &str) {
         let describe = || Some((SceneUpdate::get_schema()?, "protobuf"));
         let Some(channel) = self.channel(topic, describe) else { return };
         let mut bytes = Vec::new();
-        if let Err(e) = scene::scene(line).encode(&mut bytes) {
+        if let Err(e) = scene::scene(host, index, namespace).encode(&mut bytes) {
             super::log::log("ERROR", format!("live view: cannot encode the scene: {e}"));
             return;
         }
-        self.send(channel, bytes, u64::try_from(line.host.stamp().nanos()).unwrap_or_default());
+        self.send(channel, bytes, u64::try_from(host.stamp().nanos()).unwrap_or_default());
     }
 
     /// `bytes` become the channel's latest and go to the server if a viewer subscribed.
@@ -385,7 +388,18 @@ impl Drop for LiveView {
             let _ = forwarder.join();
         }
         if let Some(handle) = self.handle.take().and_then(Arc::into_inner) {
-            handle.stop().wait_blocking();
+            // Viewers get the server's goodbye; one that has stopped reading would hold a full
+            // wait for as long as its connection lives, so the node leaves without it after
+            // STOP_WAIT (its task ends with the process).
+            let shutdown = handle.stop();
+            let (done, finished) = std::sync::mpsc::channel();
+            let waiter = std::thread::Builder::new().name("foxglove-stop".into()).spawn(move || {
+                shutdown.wait_blocking();
+                let _ = done.send(());
+            });
+            if waiter.is_ok() && finished.recv_timeout(STOP_WAIT).is_err() {
+                super::log::log("WARN", "live view: a viewer did not take the goodbye in time; leaving without it");
+            }
         }
     }
 }

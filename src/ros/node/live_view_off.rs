@@ -6,9 +6,9 @@ use std::net::SocketAddr;
 
 use serde::Serialize;
 
-use super::lines::Line;
 use super::parameters::ParameterValues;
 use crate::ros::messages::{DiagnosticStatus, ResetLineResponse};
+use crate::ros::protocol::HostedLine;
 
 /// Never made: there is no live view to call.
 pub(super) struct ResetCall {
@@ -50,7 +50,7 @@ impl LiveView {
         match self.0 {}
     }
 
-    pub(super) fn offer_scene(&self, _topic: &str, _line: &Line) {
+    pub(super) fn offer_scene(&self, _topic: &str, _host: &HostedLine, _index: usize, _namespace: &str) {
         match self.0 {}
     }
 

@@ -28,15 +28,17 @@
 //!   batched), every line's tick, ResetSimulation.
 //! - `lines`: one hosted line: its endpoints and state, the commands it takes, its hardware
 //!   endpoints at upgrades, what it publishes per tick; `evolution`: its evolution announcements.
-//! - `live_view`: the Foxglove live view (with the `foxglove` feature; a stand-in without it);
-//!   `scene`: the lines drawn as a 3D scene for it.
 //! - `line_messages`: what a hosted line's tick looks like in each message (the wire types in
 //!   `ros::messages` are plain mirrors of the .msg files).
 //! - `graph`: what the parts share of the ROS graph: the ROS node, the inputs the node waits on,
 //!   publishing only to topics with a reader; `parameters`: the declared parameters and their
 //!   updates by the evolution schedule.
 //! - `events`: everything that can wake the node, as one type; `endpoints`: creating publishers,
-//!   subscriptions and servers, and the input streams that own them; `log`: the node's log lines.
+//!   subscriptions and servers, and the input streams that own them.
+//! - `live_view`: the Foxglove live view (with the `foxglove` feature; a stand-in without it), which
+//!   the graph, the lines and the events hand to; `scene`: a line drawn as a 3D scene for it (it
+//!   uses `parameters`' shared values, nothing else of the parts).
+//! - `log`: the node's log lines.
 
 mod action;
 mod control;

@@ -9,7 +9,7 @@
 use foxglove::messages::Timestamp;
 use foxglove::messages::{Color, CubePrimitive, Pose, Quaternion, SceneEntity, SceneUpdate, TextPrimitive, Vector3};
 
-use super::lines::Line;
+use crate::ros::protocol::HostedLine;
 use crate::sim::SortMode;
 
 /// The scene's frame (Foxglove's 3D panel shows it when it is the display frame).
@@ -77,10 +77,10 @@ fn mode_name(mode: SortMode) -> &'static str {
     }
 }
 
-/// One line's entity.
-fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
-    let model = line.host.line();
-    let y = line.index as f64 * LINE_SPACING;
+/// The entity of line `index` (in `namespace`).
+fn line_entity(host: &HostedLine, index: usize, namespace: &str, timestamp: Option<Timestamp>) -> SceneEntity {
+    let model = host.line();
+    let y = index as f64 * LINE_SPACING;
     let (input, belt, containers) = (model.input(), model.belt(), model.containers());
     let mut cubes = Vec::new();
     let mut texts = Vec::new();
@@ -105,7 +105,7 @@ fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
     ));
     // The sorting machine, coloured by its mode.
     let machine_x = start + BELT_LENGTH + 0.75;
-    let (machine, label) = match (line.host.takes_modes(), model.mode()) {
+    let (machine, label) = match (host.takes_modes(), model.mode()) {
         (false, _) => (STEEL, "sorter".to_string()),
         (true, SortMode::Basic) => (STEEL, format!("mode {}", mode_name(SortMode::Basic))),
         (true, SortMode::Positive) => (A, format!("mode {}", mode_name(SortMode::Positive))),
@@ -132,7 +132,7 @@ fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
         (0.0, y - 1.2, 0.0),
         format!(
             "{} episode {} step {}  reward {:+.2} (total {:+.2})  purity {:.3}",
-            line.namespace,
+            namespace,
             model.episode(),
             model.step_count(),
             model.last_step().map_or(0.0, |s| s.reward),
@@ -143,7 +143,7 @@ fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
     SceneEntity {
         timestamp,
         frame_id: FRAME.to_string(),
-        id: format!("line_{}", line.index),
+        id: format!("line_{index}"),
         lifetime: None, // until replaced: the next tick's update
         frame_locked: false,
         cubes,
@@ -152,9 +152,10 @@ fn line_entity(line: &Line, timestamp: Option<Timestamp>) -> SceneEntity {
     }
 }
 
-/// The scene of `line` at its current tick (one entity, `line_<k>`, which the next replaces).
-pub(super) fn scene(line: &Line) -> SceneUpdate {
-    let stamp = line.host.stamp();
+/// The scene of line `index` (in `namespace`) at its current tick: one entity, `line_<index>`,
+/// which the next tick's replaces.
+pub(super) fn scene(host: &HostedLine, index: usize, namespace: &str) -> SceneUpdate {
+    let stamp = host.stamp();
     let timestamp = Some(Timestamp::new(stamp.sec.max(0) as u32, stamp.nanosec));
-    SceneUpdate { deletions: Vec::new(), entities: vec![line_entity(line, timestamp)] }
+    SceneUpdate { deletions: Vec::new(), entities: vec![line_entity(host, index, namespace, timestamp)] }
 }
