@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """What the Foxglove live view costs the node (docs/foxglove.md): lock-step round trips of one
 rclpy client (benches/node_lockstep.py's client) against a node without the live view, with it
-and no viewer, and with it and one viewer subscribed to every channel (tests/foxglove/live.mjs in its `count`
-mode: Foxglove's own client decoding every message, on the same two cores). Reports per configuration the round trips per second, the
-p50/p99 round-trip latency and the node's CPU time per round trip (utime + stime of the node's
-process, all its threads: the live view's forwarding and server threads included).
+and no viewer, and with it and one viewer subscribed to every channel (tests/foxglove/live.mjs in
+its `count` mode: Foxglove's own client decoding every message, on the same two cores). Reports
+per configuration the round trips per second, the p50/p99 round-trip latency and the node's CPU
+time per round trip (utime + stime of the node's process, all its threads: the live view's
+forwarding and server threads included).
 
 Like node_lockstep.py it refuses to run outside an isolated loopback-only network namespace, and
 as root re-executes itself under `unshare -n` with `lo` up.
