@@ -4,7 +4,8 @@ recorder's bags read by Foxglove's MCAP reader:
 
 - every channel decodes by the schema the server advertised, to the values an rclpy subscriber
   gets over DDS for the same ticks, from the same CDR bytes; /clock is the server's time;
-- a viewer that stops reading does not slow the line (its outbox overflows; the ticks go on);
+- a viewer that stops reading does not slow the line (its outbox overflows; the ticks go on), nor
+  the other viewers: several at once each get every tick;
 - malformed and unsupported client messages are answered and counted, the line unaffected;
 - bad `--foxglove` values fail at start naming the value;
 - plain, zstd and split bags: every message decoded, counts equal to metadata.yaml.
@@ -264,6 +265,42 @@ def test_a_viewer_that_stops_reading_does_not_slow_the_line(ros, start_node, nam
     # viewer reads (nothing); the margin is for a machine busy with other work.
     print(f"tick rates: alone {alone}, with the stalled viewer {stalled}; live view {status}")
     assert statistics.median(stalled) >= 0.5 * statistics.median(alone), (alone, stalled)
+
+
+def test_several_viewers_at_once_each_get_every_tick(ros, start_node, namespace, client_factory, probe, tmp_path):
+    """Three viewers at once, one of which subscribes and never reads: the other two each get every tick of
+    the episode, with the same bytes, and /diagnostics counts three viewers."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    ns = namespace("viewers")
+    node = start_node("--max-steps", "4", "--foxglove", "0", "--ros-args", "-r", f"__ns:={ns}")
+    url, state_topic = live_view_url(node), join_ns(ns, "state")
+    stalled = Viewer("stall", url, tmp_path / "stalled.log")
+    readers = [Viewer("record", url, tmp_path / f"viewer{k}.log") for k in range(2)]
+    try:
+        stalled.wait_for(lambda: stalled.of("stalled"), 10.0, "the third viewer subscribed and stopped reading")
+        for viewer in readers:
+            viewer.wait_for(lambda v=viewer: v.of("subscribed", state_topic), 10.0, f"a subscription to {state_topic}")
+        diagnostics = TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
+        live_status(diagnostics, lambda v: v["viewers"] == "3", 10.0, "the live view with three viewers")
+        client = client_factory(ns, "basic", node_proc=node)
+        client.wait_connected()
+        client.reset(seed=3)
+        stamps = [stamp_ns(client.step(speed).header.stamp) for speed in (0.3, 0.6, 0.9, 0.5)]
+        got = []
+        for viewer in readers:
+            viewer.wait_for(
+                lambda v=viewer: {stamp_ns_of(e) for e in v.of("message", state_topic)} >= set(stamps),
+                10.0,
+                f"{state_topic} of each of the episode's 4 steps",
+            )
+            got.append({stamp_ns_of(e): message_bytes(e) for e in viewer.of("message", state_topic)})
+        assert all(got[0][t] == got[1][t] for t in stamps), "two viewers got different bytes for one tick"
+        assert stalled.proc.poll() is None and node.running(), node.describe()
+    finally:
+        codes = [viewer.close() for viewer in readers]
+        stalled.close()
+    assert codes == [0, 0], [viewer.describe() for viewer in readers]
 
 
 def test_garbage_from_a_viewer_is_answered_and_counted(ros, start_node, namespace, client_factory, probe, tmp_path):
