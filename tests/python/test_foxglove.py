@@ -53,7 +53,6 @@ def live_status(recorder: TopicRecorder, predicate, timeout: float, what: str) -
 
 def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, client_factory, probe, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
 
     from sorting_line_gym.bag.transport.rosnode import rclpy_class
@@ -103,6 +102,14 @@ def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, c
         assert viewer.close() == 0, viewer.describe()
 
     assert not viewer.of("decode_error") and not viewer.of("unreadable"), viewer.describe()
+    expected = check_the_advertised_channels(viewer, ns, state)
+    check_the_line_topics(viewer, ns, client, raw)
+    check_clock_and_the_arrays(viewer, ns, client, clock, diagnostics, expected)
+
+
+def check_the_advertised_channels(viewer: Viewer, ns: str, state) -> dict[str, str]:
+    """Every topic advertised with its schema and encodings (the scene as protobuf, drawn from `state`); returns
+    the ros2msg types by topic."""
     advertised = {e["topic"]: e for e in viewer.of("advertise")}
     expected = {join_ns(ns, t): ros_type for t, ros_type in LINE_TYPES.items()} | {
         join_ns(ns, "batch/state"): "sorting_line_interfaces/msg/LineStates",
@@ -117,9 +124,13 @@ def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, c
     got = advertised[scene_topic]
     assert (got["schema"], got["encoding"], got["schemaEncoding"]) == ("foxglove.SceneUpdate", "protobuf", "protobuf")
     check_scene(viewer, scene_topic, state)
+    return expected
 
-    # The line's topics: each DDS message of the episode is on its channel with the same CDR
-    # bytes, and Foxglove's decoder reads the values rclpy read.
+
+def check_the_line_topics(viewer: Viewer, ns: str, client, raw: dict[str, list[bytes]]) -> None:
+    """Each DDS message of the line's topics is on its channel with the same CDR bytes, decoded to rclpy's values."""
+    from rclpy.serialization import serialize_message
+
     compared = 0
     for rel, ros_type in LINE_TYPES.items():
         topic = join_ns(ns, rel)
@@ -144,6 +155,13 @@ def test_every_channel_decodes_to_what_dds_carries(ros, start_node, namespace, c
     # The three steps' ticks of four topics at least (the raw readers are matched by the node
     # a little later than the client's, so the reset's own tick may precede them).
     assert compared >= 3 * 4, compared
+
+
+def check_clock_and_the_arrays(viewer: Viewer, ns: str, client, clock, diagnostics, expected: dict[str, str]) -> None:
+    """/clock's values are the server's time; /diagnostics and batch/state decode alike in Foxglove and in the
+    bag tools."""
+    from rclpy.serialization import serialize_message
+
     # /clock: the DDS values, and the server's time follows them.
     live_clock = {time_ns(e["value"]["clock"]) for e in viewer.of("message", "/clock")}
     dds_clock = {stamp_ns(m.clock) for m in clock.msgs if stamp_ns(m.clock) >= client.first_reset}

@@ -407,6 +407,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_check_options(p)
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
+    _add_engine_options(p)
+    return p
+
+
+def _add_engine_options(p: argparse.ArgumentParser) -> None:
+    """Where the lines run and who trains on them."""
     p.add_argument(
         "--backend",
         default=None,
@@ -421,7 +427,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="who trains the RL cells: sb3, cell by cell (default), or batched: the training seeds of a line at "
         "once (sorting-line-train --engine batched; native lines), each seed still a cell of its own",
     )
-    return p
 
 
 def _add_check_options(p: argparse.ArgumentParser) -> None:
