@@ -48,7 +48,7 @@ from ...envs.env import action_space, observation_space
 from ...line.vocabulary import check_setup, check_variant
 from .checks import available_memory, check_seeds
 from .lines import BatchedLines
-from .models import spaces_vec_env
+from .models import check_model_file, spaces_vec_env
 from .replay import BatchedReplayBuffer, ReplaySamples
 from .stacked import (
     StackedSequential,
@@ -181,23 +181,9 @@ def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], varian
     """SB3's ``DQN.load(path, env)`` for each path (with ``seed=s`` where one is given: SB3's load
     reseeds with the saved seed otherwise), refused with the path named when a file is not a DQN
     model of this line's spaces."""
-    from ...agents.learned_policy import PolicyFileError, read_sb3_zip
-
     loaded = []
     for path, seed in zip(paths, seeds, strict=True):
-        try:
-            parts = read_sb3_zip(path)
-        except PolicyFileError as e:
-            raise ValueError(str(e)) from None
-        if parts.algorithm != "dqn":
-            raise ValueError(f"{path}: a {parts.algorithm} model; allowed here: DQN models (this engine trains DQN)")
-        spaces = observation_space(variant), action_space(variant)
-        theirs = parts.data["observation_space"], parts.data["action_space"]
-        if theirs != spaces:
-            raise ValueError(
-                f"{path}: a model of observation space {theirs[0]} and action space {theirs[1]}; allowed here: "
-                f"{spaces[0]} and {spaces[1]} (the {variant} line's)"
-            )
+        check_model_file(path, "dqn", (observation_space(variant), action_space(variant)))
         extra = {} if seed is None else {"seed": seed}
         env = spaces_env(variant, n_envs)
         loaded.append(_keeping_global_generators(lambda p=path, e=env, x=extra: DQN.load(p, env=e, device="cpu", **x)))

@@ -74,29 +74,35 @@ def new_models(algo: str, seeds: Sequence[int], params: dict[str, Any], spaces: 
     return built
 
 
+def check_model_file(path: str | Path, algo: str, spaces: tuple) -> None:
+    """Refuses, naming ``path``, a file that is not an SB3 ``algo`` model of ``spaces`` (observation,
+    action): what every engine checks before it loads a model to go on training it."""
+    from ...agents.learned_policy import PolicyFileError, read_sb3_zip
+
+    try:
+        parts = read_sb3_zip(path)
+    except PolicyFileError as e:
+        raise ValueError(str(e)) from None
+    if parts.algorithm != algo:
+        raise ValueError(f"{path}: a {parts.algorithm} model; allowed here: {algo} models (the algorithm trained)")
+    observation_space, action_space = spaces
+    theirs = parts.data["observation_space"], parts.data["action_space"]
+    if theirs[0] != observation_space or theirs[1] != action_space:
+        raise ValueError(
+            f"{path}: a model of observation space {theirs[0]} and action space {theirs[1]}; allowed here: "
+            f"{observation_space} and {action_space} (this line's)"
+        )
+
+
 def load_models(algo: str, paths: Sequence[str | Path], seeds: Sequence[int], spaces: tuple, n_lines: int):
     """The SB3 models in ``paths`` (one per seed), refused with the path named when a file is not an
     ``algo`` model of the line's spaces. Seed s continues from generators seeded with s (SB3's
     ``load`` does not restore generator states, so an SB3 run that continues draws from wherever
     the process's generators are)."""
-    from ...agents.learned_policy import PolicyFileError, read_sb3_zip
-
     cls = algorithm_class(algo)
     loaded = []
     for path, seed in zip(paths, seeds, strict=True):
-        try:
-            parts = read_sb3_zip(path)
-        except PolicyFileError as e:
-            raise ValueError(str(e)) from None
-        if parts.algorithm != algo:
-            raise ValueError(f"{path}: a {parts.algorithm} model; allowed here: {algo} models (the algorithm trained)")
-        observation_space, action_space = spaces
-        theirs = parts.data["observation_space"], parts.data["action_space"]
-        if theirs[0] != observation_space or theirs[1] != action_space:
-            raise ValueError(
-                f"{path}: a model of observation space {theirs[0]} and action space {theirs[1]}; allowed here: "
-                f"{observation_space} and {action_space} (this line's)"
-            )
+        check_model_file(path, algo, spaces)
         model = cls.load(path, env=spaces_vec_env(*spaces, n_lines), device="cpu")
         generator = torch.Generator().manual_seed(seed)
         loaded.append(SeedModel(model, generator.get_state(), np.random.RandomState(seed).get_state()))
