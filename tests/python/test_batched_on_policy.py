@@ -35,13 +35,7 @@ PPO = dict(n_steps=40, batch_size=24, n_epochs=3, gamma=0.85, learning_rate=7e-4
 A2C = dict(gamma=0.9, learning_rate=5e-4, ent_coef=0.06)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_torch_thread():
-    """One torch thread, as sorting-line-train runs: on a busy machine a second one only waits."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def trainer(algo: str, params: dict, seeds=SEEDS, lines: int = LINES, **kwargs) -> OnPolicyTrainer:

@@ -22,19 +22,15 @@ import time
 import pytest
 import yaml
 
+import ros_harness
 from foxglove_viewer import Viewer, live_view_url, message_bytes, read_bags
 from ros_harness import TopicRecorder, diagnostic_values, join_ns, run_node_expecting_failure, stamp_ns
 from sorting_line_gym.bag.format.options import WriteOptions
 from sorting_line_gym.bag.storage import schema
 from sorting_line_gym.bag.storage.rewrite import rewrite_bag
 
-LINE_TYPES = {
-    "input": "sorting_line_interfaces/msg/MaterialInput",
-    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
-    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
-    "state": "sorting_line_interfaces/msg/LineState",
-    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
-}
+#: The topics a line publishes (the harness's, less the commands it subscribes to).
+LINE_TYPES = {rel: ros_type for rel, ros_type in ros_harness.LINE_TYPES.items() if not rel.startswith("cmd/")}
 LIVE = "sorting_line: foxglove"  # the live view's status on /diagnostics
 
 
