@@ -455,24 +455,7 @@ def run_all(todo: list[Cell], args, finished, bar) -> None:
     if args.engine == "batched":
         _run_batches(todo, args, finished, bar)
         return
-    if args.jobs == 1:
-        # In this process, with SB3's progress bar for each training.
-        for cell in todo:
-            bar.set_postfix_str(cell.name)
-            try:
-                outcome = run_cell(cell, args.out, args.timesteps, heldout_of(args), True, args.backend)
-            except Exception as e:  # noqa: BLE001 - report every failed cell, keep the others
-                outcome = e
-            finished(cell, outcome)
-        return
-    # Only this bar, with the cells running (each worker is a fresh interpreter with its own node).
-    cell_pool.run_parallel(
-        todo,
-        lambda cell: (run_cell, cell, args.out, args.timesteps, heldout_of(args), False, args.backend),
-        args.jobs,
-        finished,
-        lambda cells: bar.set_postfix_str(", ".join(c.name for c in cells)),
-    )
+    _run_units(todo, run_cell, args, finished, bar, lambda cells: ", ".join(c.name for c in cells))
 
 
 def _run_batches(todo: list[Cell], args, finished, bar) -> None:
@@ -485,21 +468,28 @@ def _run_batches(todo: list[Cell], args, finished, bar) -> None:
     def names(units: list[list[Cell]]) -> str:
         return ", ".join(f"{u[0].name} ({len(u)} seeds)" if len(u) > 1 else u[0].name for u in units)
 
-    units = batches(todo)
+    _run_units(batches(todo), run_unit, args, unit_finished, bar, names)
+
+
+def _run_units(units: list, runner, args, finished, bar, names) -> None:
+    """``runner(unit, ...)`` for each unit (a cell, or a batch of cells), ``args.jobs`` at a time;
+    ``finished(unit, outcome or exception)`` for each; ``names(units)`` labels the bar."""
     if args.jobs == 1:
+        # In this process, with SB3's (or the batched trainer's) progress bar for each training.
         for unit in units:
             bar.set_postfix_str(names([unit]))
             try:
-                outcome = run_unit(unit, args.out, args.timesteps, heldout_of(args), True, args.backend)
-            except Exception as e:  # noqa: BLE001 - report every failed batch, keep the others
+                outcome = runner(unit, args.out, args.timesteps, heldout_of(args), True, args.backend)
+            except Exception as e:  # noqa: BLE001 - report every failed unit, keep the others
                 outcome = e
-            unit_finished(unit, outcome)
+            finished(unit, outcome)
         return
+    # Only this bar, with the units running (each worker is a fresh interpreter with its own node).
     cell_pool.run_parallel(
         units,
-        lambda unit: (run_unit, unit, args.out, args.timesteps, heldout_of(args), False, args.backend),
+        lambda unit: (runner, unit, args.out, args.timesteps, heldout_of(args), False, args.backend),
         args.jobs,
-        unit_finished,
+        finished,
         lambda running: bar.set_postfix_str(names(running)),
     )
 
