@@ -73,6 +73,22 @@ def test_normalization_and_performance_profile():
     assert profile == pytest.approx([1.0, 0.5, 0.25])
 
 
+def test_normalization_per_task_and_the_tasks_without_a_scale():
+    """Each task by its own worst (0) and best (1); a task where best == worst has no scale and is left
+    out (mask False), whatever the scores on it; a best below the worst is refused."""
+    scores = np.array([[1.0, 2.0, 3.0], [3.0, 9.0, 5.0]])
+    values, kept = stats.normalized_per_task(scores, worst=[1.0, 2.0, 3.0], best=[3.0, 2.0, 7.0])
+    assert kept.tolist() == [True, False, True]
+    assert values.tolist() == [[0.0, 0.0], [1.0, 0.5]]
+    # Within the rounding threshold is no scale either; no scale anywhere leaves no task.
+    values, kept = stats.normalized_per_task(scores, worst=[1.0, 2.0, 3.0], best=[1.0, 2.0 + 1e-12, 3.0])
+    assert values.shape == (2, 0) and not kept.any()
+    with pytest.raises(ValueError, match="best 0.5 is below worst 1.0 on task 0"):
+        stats.normalized_per_task(scores, worst=[1.0, 2.0, 3.0], best=[0.5, 3.0, 4.0])
+    with pytest.raises(ValueError, match="one value per task"):
+        stats.normalized_per_task(scores, worst=[1.0], best=[2.0])
+
+
 def test_bad_shapes_are_refused():
     with pytest.raises(ValueError, match="runs x tasks"):
         stats.iqm_interval(np.array([1.0, 2.0]))

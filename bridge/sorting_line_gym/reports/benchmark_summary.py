@@ -1,7 +1,9 @@
 """The benchmark's results as numbers: per line and agent the mean over runs and the held-out
 IQM with its interval (``summarize``), the oracle's row, the probability that an RL agent beats
 rba-hold, the score normalized between the random agent and the oracle and its aggregate over the
-lines, and where one line and N lines were both trained, whether they agree.
+lines, and where one line and N lines were both trained, whether they agree. The score is also
+normalized per held-out seed (``references``, ``normalized_summary``): (R - R_random) /
+(R_oracle - R_random) on each seed, the random agent's and the exact oracle's rewards on it.
 
 Pure analysis of the records ``studies.benchmark`` saves (one JSON per cell): no ROS, no training.
 The statistics are ``stats``'; the tables ``benchmark_tables``, the figures ``plots``.
@@ -50,9 +52,84 @@ def _group(records: list[dict[str, Any]]) -> dict[Key, list[dict[str, Any]]]:
     return groups
 
 
+def by_cell(records: list[dict[str, Any]]) -> dict[Key, list[dict[str, Any]]]:
+    """The records by (setup, variant, agent), each cell's runs in the order of their training seeds."""
+    return _group(records)
+
+
 def episode_rewards(records: list[dict[str, Any]], which: str = "heldout") -> np.ndarray:
     """Runs x evaluation seeds: each record's (training seed's) per-episode rewards."""
     return np.array([[e["reward"] for e in r[which]["per_episode"]] for r in records])
+
+
+@dataclass(frozen=True)
+class References:
+    """A line's references for the score normalized per held-out seed: on each seed (``seeds``),
+    the random agent's reward (0) and the exact oracle's (1)."""
+
+    seeds: tuple[int, ...]
+    random: np.ndarray
+    oracle: np.ndarray
+
+    def normalize(self, seeds, scores) -> tuple[np.ndarray, list[int]]:
+        """``(R - R_random) / (R_oracle - R_random)`` per seed of ``scores`` (runs x ``seeds``, which
+        must be this line's seeds in order), over the seeds that have a scale, and the seeds left
+        out (where the oracle does no better than the random agent: ``stats.normalized_per_task``)."""
+        if tuple(int(s) for s in seeds) != self.seeds:
+            raise ValueError(f"scores on seeds {_seed_span(seeds)}, allowed the references' {_seed_span(self.seeds)}")
+        values, kept = stats.normalized_per_task(scores, self.random, self.oracle)
+        return values, [s for s, k in zip(self.seeds, kept, strict=True) if not k]
+
+
+def _seed_span(seeds) -> str:
+    """Seeds as ``first..last`` when they are consecutive, else listed."""
+    seeds = [int(s) for s in seeds]
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}..{seeds[-1]} ({len(seeds)} seeds)"
+    return ", ".join(map(str, seeds)) or "none"
+
+
+def episode_seeds(record: dict[str, Any], which: str = "heldout") -> list[int]:
+    """The evaluation seeds of a record, in its episodes' order."""
+    return [int(e["seed"]) for e in record[which]["per_episode"]]
+
+
+def references(
+    records: list[dict[str, Any]], oracles: dict[tuple[str, str], dict[str, Any]]
+) -> dict[tuple[str, str], References]:
+    """Per line with a random cell and an oracle: the random agent's and the oracle's reward on each
+    held-out seed (the random agent is one deterministic run). Refuses a random cell and an
+    oracle on different seeds."""
+    found = {}
+    for (setup, variant, agent), rs in _group([r for r in records if "heldout" in r]).items():
+        if agent != "random" or (setup, variant) not in oracles:
+            continue
+        seeds = episode_seeds(rs[0])
+        oracle = oracles[(setup, variant)]["per_episode"]
+        if [int(e["seed"]) for e in oracle] != seeds:
+            raise ValueError(
+                f"{setup} {variant}: the oracle is on seeds {_seed_span(e['seed'] for e in oracle)}, "
+                f"the random cell on {_seed_span(seeds)}: allowed the same seeds"
+            )
+        found[(setup, variant)] = References(
+            tuple(seeds), episode_rewards(rs[:1])[0], np.array([e["reward"] for e in oracle], dtype=float)
+        )
+    return found
+
+
+def normalized_summary(refs: References, seeds, scores) -> dict[str, Any]:
+    """The normalized score of one cell (runs x held-out seeds): mean and IQM over runs x seeds with
+    their intervals over whole runs, as the rewards', each run's mean (``per_run``), and the seeds
+    left out."""
+    values, left_out = refs.normalize(seeds, scores)
+    summary: dict[str, Any] = {"seeds": values.shape[1], "left_out_seeds": left_out}
+    if values.shape[1]:
+        summary |= {
+            "mean": stats.mean_interval(values).as_dict(),
+            "iqm": stats.iqm_interval(values).as_dict(),
+            "per_run": values.mean(axis=1).tolist(),
+        }
+    return summary
 
 
 def summarize(
@@ -61,9 +138,11 @@ def summarize(
     """Per (setup, variant, agent). On the paper's seeds 42..51: the mean over training seeds of
     each model's mean, with the std across training seeds (the per-episode std for one run). On
     the held-out seeds: mean and IQM over runs x episodes with their bootstrap intervals over
-    whole runs, each run's mean (``per_seed``: one per training seed), and the gap to the oracle of
-    the same seeds."""
+    whole runs, each run's mean (``per_seed``: one per training seed), the gap to the oracle of
+    the same seeds, and (where the line has a random cell) the score normalized per seed
+    (``normalized``: :func:`normalized_summary`)."""
     rows = {}
+    refs = references(records, oracles)
     for key, rs in _group(records).items():
         evals = [r["evaluation"] for r in rs]
         means = [e["reward_mean"] for e in evals]
@@ -92,6 +171,8 @@ def summarize(
                 "oracle_mean": float(oracle_rewards.mean()),
                 "gap_mean": float((oracle_rewards[None, :] - scores).mean()),
             }
+            if key[:2] in refs:
+                row["heldout"]["normalized"] = normalized_summary(refs[key[:2]], episode_seeds(rs[0]), scores)
         rows[key] = row
     return rows
 

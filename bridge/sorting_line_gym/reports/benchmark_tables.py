@@ -87,7 +87,43 @@ def table_markdown(
                 cells = [TABLE_1_INDEX.get(key, ""), setup, _env(variant), agent, *_our_cells(row, agent, best)]
                 cells += [f"{paper[2]:.2f}" if paper else "", f"{ref[0]:.2f} +- {ref[1]:.2f}" if ref else ""]
                 lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n" + _table_note(timesteps, heldout) + "\n"
+    return "\n".join(lines) + "\n" + _table_note(timesteps, heldout) + "\n" + normalized_markdown(rows, agents)
+
+
+def normalized_markdown(rows: dict[Key, dict[str, Any]], agents=AGENTS) -> str:
+    """Table 1's held-out scores normalized per seed (``benchmark_summary.normalized_summary``),
+    per line and agent; empty when no line has a random cell."""
+    out = [
+        "",
+        "## Table 1, normalized per held-out seed: (R - R_random) / (R_oracle - R_random)",
+        "",
+        "| setup | env | agent | runs | seeds | normalized: mean [95% CI] | normalized: IQM [95% CI] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    left_out: dict[str, list[int]] = {}
+    for setup in SETUPS:
+        for variant in VARIANTS:
+            for agent in [a for a in TABLE_ORDER if a in agents]:
+                n = rows.get((setup, variant, agent), {}).get("heldout", {}).get("normalized")
+                if n is None:
+                    continue
+                left_out[f"{setup} {_env(variant)}"] = n["left_out_seeds"]
+                scores = [_interval(n["mean"]), _interval(n["iqm"])] if n["seeds"] else ["no seed has a scale"] * 2
+                cells = [setup, _env(variant), agent, str(rows[(setup, variant, agent)]["seeds"]), str(n["seeds"])]
+                out.append("| " + " | ".join(cells + scores) + " |")
+    if not left_out:
+        return ""
+    dropped = "; ".join(f"{line}: {', '.join(map(str, seeds))}" for line, seeds in left_out.items() if seeds)
+    out += [
+        "",
+        "Per held-out seed, R = the agent's reward, R_random = the random agent's on that seed (0), R_oracle ="
+        " `sorting_line oracle`'s (1, the clairvoyant optimum); mean and IQM over runs x seeds, interval: whole runs"
+        " resampled, as Table 1's. A seed where the oracle does no better than the random agent (R_oracle - R_random"
+        " <= 1e-9) has no scale and is left out for every agent of its line"
+        f" ({'left out: ' + dropped if dropped else 'none here'}). Lines without a random cell have no row.",
+        "",
+    ]
+    return "\n".join(out)
 
 
 def _improvement_markdown(poi) -> list[str]:

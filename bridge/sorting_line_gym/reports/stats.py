@@ -209,6 +209,34 @@ def normalized(score, worst: float, best: float):
     return (np.asarray(score, dtype=float) - worst) / (best - worst)
 
 
+#: A task whose best score exceeds its worst by no more than this has no scale to normalize by:
+#: there (score - worst) / (best - worst) is 0 / 0, or a difference of rounding blown up to any size.
+DEGENERATE_SCALE = 1e-9
+
+
+def normalized_per_task(scores, worst, best) -> tuple[np.ndarray, np.ndarray]:
+    """Each task's scores normalized by that task's own ``worst`` (0) and ``best`` (1):
+    ``(score - worst[t]) / (best[t] - worst[t])`` for a ``runs x tasks`` array and one ``worst``
+    and ``best`` per task. Returns the normalized ``runs x kept tasks`` and the mask of the kept
+    tasks: a task where ``best - worst <= DEGENERATE_SCALE`` is left out (it has no scale; every
+    agent normalized by the same references leaves out the same tasks, so their tasks stay
+    aligned). ``best < worst`` beyond that is refused: a best (the exact oracle) below the worst
+    (the random agent) means the two were not scored on the same tasks."""
+    values = _runs_by_task(scores)
+    worst, best = np.asarray(worst, dtype=float), np.asarray(best, dtype=float)
+    if worst.shape != (values.shape[1],) or best.shape != worst.shape:
+        raise ValueError(
+            f"worst and best need one value per task ({values.shape[1]}), got shapes {worst.shape}, {best.shape}"
+        )
+    scale = best - worst
+    below = np.flatnonzero(scale < -DEGENERATE_SCALE)
+    if below.size:
+        t = below[0]
+        raise ValueError(f"best {best[t]} is below worst {worst[t]} on task {t}: allowed best >= worst on every task")
+    kept = scale > DEGENERATE_SCALE
+    return (values[:, kept] - worst[kept]) / scale[kept], kept
+
+
 def performance_profile(scores, thresholds) -> np.ndarray:
     """Fraction of all runs x tasks scoring above each threshold (rliable's score distribution)."""
     values = np.asarray(scores, dtype=float).ravel()
