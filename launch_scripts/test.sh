@@ -100,7 +100,8 @@ if ! command -v shellcheck >/dev/null 2>&1; then
   { apt-get update -qq && apt-get install -y -qq --no-install-recommends shellcheck; } >/dev/null ||
     { echo "test.sh: could not install shellcheck with apt-get" >&2; exit 1; }
 fi
-mapfile -t shell_scripts < <(git ls-files '*.sh' .ci/run)
+# .githooks/: the hooks contributors install (CONTRIBUTING.md), bash scripts without the suffix.
+mapfile -t shell_scripts < <(git ls-files '*.sh' .ci/run .githooks)
 shellcheck -x "${shell_scripts[@]}" || { echo "test.sh: fix what shellcheck reports above (or disable a rule on its line, saying why)" >&2; exit 1; }
 echo "test.sh: shellcheck $(shellcheck --version | sed -n 's/^version: //p'): ${#shell_scripts[@]} scripts clean"
 

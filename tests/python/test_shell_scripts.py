@@ -1,11 +1,11 @@
 """No shell entry point lets a step's failure pass unnoticed.
 
-Each script the repository runs (every tracked ``*.sh`` and ``.ci/run``) starts with ``set -euo pipefail``, and
-so does every script it hands to a shell of its own (``bash -c '...'``, inside a network namespace or not): run.sh
-once ran its job in such a child shell without errexit and reported success over two failed steps. A script that
-is only sourced (env.sh, jobs.sh) says so to shellcheck instead. No script calls one of its own functions as
-``[[ ... ]] && function``: bash runs a function called from an ``&&`` list without errexit, so a failing command
-inside it would not end the script. shellcheck (test.sh's lint step) checks the rest.
+Each script the repository runs (every tracked ``*.sh``, ``.ci/run`` and the git hooks in ``.githooks/``) starts
+with ``set -euo pipefail``, and so does every script it hands to a shell of its own (``bash -c '...'``, inside a
+network namespace or not): run.sh once ran its job in such a child shell without errexit and reported success over
+two failed steps. A script that is only sourced (env.sh, jobs.sh) says so to shellcheck instead. No script calls one
+of its own functions as ``[[ ... ]] && function``: bash runs a function called from an ``&&`` list without errexit,
+so a failing command inside it would not end the script. shellcheck (test.sh's lint step) checks the rest.
 """
 
 from __future__ import annotations
@@ -24,7 +24,12 @@ STRICT = "set -euo pipefail"
 
 def scripts() -> list[str]:
     listed = subprocess.run(
-        ["git", "ls-files", "*.sh", ".ci/run"], cwd=ROOT, capture_output=True, text=True, check=True, timeout=30
+        ["git", "ls-files", "*.sh", ".ci/run", ".githooks"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=30,
     ).stdout.split()
     assert "launch_scripts/run.sh" in listed, listed
     return sorted(listed)
