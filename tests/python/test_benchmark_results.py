@@ -6,6 +6,8 @@ only, a few seconds of evaluation) and compares a CSV made from the table's own 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -164,3 +166,53 @@ def test_a_file_that_does_not_fit_the_table_is_refused_naming_the_value():
     )
     with pytest.raises(ValueError, match="has 1 run"):
         comparison.compare(one, ours)
+
+
+def test_the_benchmark_writes_results_csv_and_compares_a_users_file(tmp_path, capsys):
+    """`sorting-line-benchmark` on the native backend (random and rba-hold on B advanced, 20 held-out
+    seeds): results.csv has a row per agent and seed, the oracle's among them; rba-hold's rows as
+    two runs of "mine" compare from --report-only as equal to rba-hold (P = 0.5 exactly: every
+    resample pairs equal runs); a file on other seeds, or without a reward column, is refused with
+    exit 2 before anything is drawn."""
+    from sorting_line_gym.studies import benchmark
+
+    out = tmp_path / "bench"
+    argv = "--backend native --setups B --variants advanced --agents random rba-hold --heldout-episodes 20".split()
+    assert benchmark.main([*argv, "--out", str(out)]) == 0
+    ours = results_csv.read(out / "results.csv")
+    assert sorted({r.agent for r in ours}) == ["oracle", "random", "rba-hold"] and len(ours) == 60
+    cached = json.loads(next((out / "oracle").glob("B_advanced_seed10000_x20.json")).read_text())
+    assert [r.reward for r in ours if r.agent == "oracle"] == [e["reward"] for e in cached["per_episode"]]
+    assert {r.normalized for r in ours if r.agent == "random"} == {0.0}
+    hold = [r for r in ours if r.agent == "rba-hold"]
+    mine = [
+        results_csv.ResultRow(r.setup, r.variant, "mine", s, r.heldout_seed, r.reward) for s in (1, 2) for r in hold
+    ]
+    results_csv.write(tmp_path / "mine.csv", mine)
+    capsys.readouterr()
+    compare = [*argv, "--out", str(out), "--report-only", "--compare"]
+    assert benchmark.main([*compare, str(tmp_path / "mine.csv")]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads((out / "compare" / "mine.json").read_text())
+    (line,) = report["lines"]
+    # Equal but for rounding: the mean of two copies of the 20 rewards against the mean of the 20.
+    assert line["yours"]["mine"]["mean"] == pytest.approx(line["ours"]["rba-hold"]["mean"], rel=1e-12)
+    assert line["yours"]["mine"]["probability_of_improvement"]["rba-hold"] == {"point": 0.5, "low": 0.5, "high": 0.5}
+    table = json.loads((out / "table.json").read_text())
+    (row,) = [r for r in table["rows"] if r["agent"] == "rba-hold"]
+    assert line["yours"]["mine"]["normalized"]["iqm"] == pytest.approx(row["heldout"]["normalized"]["iqm"], rel=1e-12)
+    assert "| B | Adv | mine | " in printed and (out / "compare" / "mine.png").stat().st_size > 10_000
+    # Other seeds: refused, naming them, before anything is drawn (the table is not rewritten).
+    (out / "table.md").unlink()
+    shifted = [
+        results_csv.ResultRow(r.setup, r.variant, r.agent, r.train_seed, r.heldout_seed + 1, r.reward) for r in mine
+    ]
+    results_csv.write(tmp_path / "shifted.csv", shifted)
+    assert benchmark.main([*compare, str(tmp_path / "shifted.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "held-out seeds 10001..10020, but the table's are 10000..10019" in err and "(missing: 10000)" in err, err
+    assert not (out / "table.md").exists() and not (out / "compare" / "shifted.md").exists()
+    (tmp_path / "bad.csv").write_text("setup,variant,agent,train_seed,heldout_seed\nB,advanced,mine,1,10000\n")
+    with pytest.raises(SystemExit) as exit_code:
+        benchmark.main([*compare, str(tmp_path / "bad.csv")])
+    assert exit_code.value.code == 2 and "argument --compare: " in capsys.readouterr().err

@@ -41,7 +41,9 @@ reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and
 ``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
 and interval per line and agent), ``runs`` (each cell's runs, a dot per training seed, beside its
 interval; and the --n-envs check's), ``aggregate`` (aggregate IQM and performance profiles) and the
-seed-42 dashboard of every agent in ``<out>/dashboards/``. ``--report-only`` redraws from saved cells.
+seed-42 dashboard of every agent in ``<out>/dashboards/``, and ``results.csv``: every run's reward and
+normalized score on every held-out seed (``reports.results_csv``). ``--report-only`` redraws from saved
+cells; ``--compare MY_RESULTS`` puts a user's agent beside the table (``benchmark_compare``).
 Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
 cells that finished are kept.
 """
@@ -60,6 +62,7 @@ from typing import Any
 from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
 from ..envs.native import BACKENDS
 from ..line.vocabulary import SETUPS, VARIANTS
+from ..reports import results_csv
 from ..reports.benchmark_summary import (
     AGENTS,
     BASELINES,
@@ -76,7 +79,7 @@ from ..reports.benchmark_summary import (
 )
 from ..reports.benchmark_tables import statistics_markdown, table_markdown
 from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
-from . import cell_pool
+from . import benchmark_compare, cell_pool
 from .cell_store import write_atomic
 
 #: Five training seeds per RL cell, for interval estimates over runs; the paper's 42 first.
@@ -345,7 +348,7 @@ def write_report(
         )
         + "\n"
     )
-    written = [table, out / "table.json"]
+    written = [table, out / "table.json", results_csv.write(out / "results.csv", results_csv.rows_of(records, oracles))]
     written += benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
     written += interval_figure(rows, out / "intervals")
     written += runs_figure(rows, checks, out / "runs")
@@ -408,6 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_check_options(p)
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     _add_engine_options(p)
+    benchmark_compare.add_option(p)
     return p
 
 
@@ -614,9 +618,10 @@ def main(argv: list[str] | None = None) -> int:
     if not records:
         print("sorting-line-benchmark: no finished cells to report", file=sys.stderr)
         return 1
-    for path in write_report(args.out, records, args.timesteps, args.agents, heldout, args.engine):
-        print(f"written: {path}", file=sys.stderr)
-    print((args.out / "table.md").read_text())
+    if code := benchmark_compare.report(
+        args, records, lambda: write_report(args.out, records, args.timesteps, args.agents, heldout, args.engine)
+    ):
+        return code
     if failures:
         print(
             f"sorting-line-benchmark: {len(failures)} cell(s) failed: {', '.join(c.name for c, _ in failures)}",
