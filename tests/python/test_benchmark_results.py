@@ -7,6 +7,7 @@ only, a few seconds of evaluation) and compares a CSV made from the table's own 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -216,3 +217,28 @@ def test_the_benchmark_writes_results_csv_and_compares_a_users_file(tmp_path, ca
     with pytest.raises(SystemExit) as exit_code:
         benchmark.main([*compare, str(tmp_path / "bad.csv")])
     assert exit_code.value.code == 2 and "argument --compare: " in capsys.readouterr().err
+
+
+def test_the_documented_snippet_writes_a_file_compare_takes(tmp_path):
+    """docs/benchmark.md's `my_results.py` (on 3 held-out seeds instead of 100) writes rows that
+    --compare accepts, its rewards those of `sorting_line eval` for the same constant action."""
+    import re
+    import subprocess
+    import sys
+
+    from sorting_line_gym.line.process import find_node_binary
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "benchmark.md").read_text()
+    (code,) = re.findall(r"<!-- test: my-results -->\n```python\n(.*?)\n```", page, re.S)
+    assert "range(10000, 10100)" in code
+    script = tmp_path / "my_results.py"
+    script.write_text(code.replace("range(10000, 10100)", "range(10000, 10003)"))
+    subprocess.run([sys.executable, str(script)], cwd=tmp_path, check=True, timeout=120)
+    mine = results_csv.read(tmp_path / "my_results.csv")
+    assert len(mine) == 3 * 3 and {r.agent for r in mine} == {"mine"}
+    argv = [find_node_binary(), "eval", "--agent", "constant:1:1", "--setup", "B", "--variant", "advanced"]
+    library = subprocess.run([*argv, "--seed", "10000", "--episodes", "3", "--json"], capture_output=True, check=True)
+    expected = [e["reward"] for e in json.loads(library.stdout)["per_episode"]]
+    assert [r.reward for r in mine if r.train_seed == 1] == expected
+    ours = [results_csv.ResultRow("B", "advanced", "rba-hold", None, 10_000 + i, 1.0) for i in range(3)]
+    assert comparison.mismatch(mine, ours) is None
