@@ -196,14 +196,24 @@ def markdown(result: dict[str, Any], source: str) -> str:
 
 
 def figure(result: dict[str, Any], stem: Path) -> list[Path]:
-    """A strip plot per line: every run of ours and of theirs (its held-out mean) over its IQM
-    interval, the oracle's mean as a line."""
+    """Strip plots per line: every run of ours and of theirs (its held-out mean) over its IQM
+    interval, the oracle's mean as a line; beside it, where the line has a random cell, the same
+    runs normalized per seed (random 0, oracle 1)."""
     panels = []
     for line in result["lines"]:
-        strips = [Strip(a, s["per_run"], s["iqm"], AGENT_COLORS.get(a, "#444444")) for a, s in line["ours"].items()]
-        strips += [Strip(f"yours: {a}", s["per_run"], s["iqm"], YOURS_COLOR) for a, s in line["yours"].items()]
+        named = [(a, s, AGENT_COLORS.get(a, "#444444")) for a, s in line["ours"].items()]
+        named += [(f"yours: {a}", s, YOURS_COLOR) for a, s in line["yours"].items()]
+        title = f"{line['setup']} {line['variant']}"
         refs = [("oracle", line["oracle_mean"])] if line["oracle_mean"] is not None else []
-        panels.append(StripPanel(f"{line['setup']} {line['variant']}", strips, refs))
+        strips = [Strip(a, s["per_run"], s["iqm"], c) for a, s, c in named]
+        panels.append(StripPanel(f"{title}: held-out reward", strips, refs))
+        normalized = [(a, s["normalized"], c) for a, s, c in named if s.get("normalized", {}).get("seeds")]
+        if normalized:
+            strips = [Strip(a, n["per_run"], n["iqm"], c) for a, n, c in normalized]
+            panels.append(StripPanel(f"{title}: normalized per seed", strips, [("random", 0.0), ("oracle", 1.0)]))
     return strip_figure(
-        panels, stem, "held-out episode reward: a dot per run (its mean over the seeds), tick: IQM, bar: its 95% CI"
+        panels,
+        stem,
+        "dot: a run's mean over the held-out seeds; tick: IQM; bar: its 95% CI over runs",
+        columns=2,
     )
