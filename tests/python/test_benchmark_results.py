@@ -63,6 +63,10 @@ def test_the_score_normalized_per_seed_has_its_known_value():
     table = normalized_markdown(rows)
     assert "| B | Adv | ppo | 2 | 3 | 0.75 [0.50, 1.00] | 0.75 [0.50, 1.00] |" in table
     assert f"left out: B Adv: {FIRST + 3}" in table
+    # Over the lines (one here): each run's mean normalized score, the runs drawn within the line.
+    aggregate = benchmark_summary.aggregates(benchmark_summary.normalized_per_seed_runs(rows))
+    assert aggregate["ppo"]["mean"] == pytest.approx({"point": 0.75, "low": 0.5, "high": 1.0})
+    assert "| ppo | 1 | 0.75 [0.50, 1.00] | 0.75 [0.50, 1.00] |" in table
     alone = benchmark_summary.summarize(records[1:], oracles)
     assert "normalized" not in alone[("B", "advanced", "ppo")]["heldout"] and normalized_markdown(alone) == ""
 
@@ -201,6 +205,8 @@ def test_the_benchmark_writes_results_csv_and_compares_a_users_file(tmp_path, ca
     assert line["yours"]["mine"]["probability_of_improvement"]["rba-hold"] == {"point": 0.5, "low": 0.5, "high": 0.5}
     table = json.loads((out / "table.json").read_text())
     (row,) = [r for r in table["rows"] if r["agent"] == "rba-hold"]
+    per_seed = table["aggregate_normalized_per_seed"]["rba-hold"]  # one line, one run: its mean
+    assert per_seed["lines"] == 1 and per_seed["iqm"]["point"] == row["heldout"]["normalized"]["per_run"][0]
     assert line["yours"]["mine"]["normalized"]["iqm"] == pytest.approx(row["heldout"]["normalized"]["iqm"], rel=1e-12)
     assert "| B | Adv | mine | " in printed and (out / "compare" / "mine.png").stat().st_size > 10_000
     # Other seeds: refused, naming them, before anything is drawn (the table is not rewritten).

@@ -249,6 +249,17 @@ def aggregates(normalized: dict[str, dict[tuple[str, str], np.ndarray]]) -> dict
     return found
 
 
+def normalized_per_seed_runs(rows: dict[Key, dict[str, Any]]) -> dict[str, dict[tuple[str, str], np.ndarray]]:
+    """Per agent and line: each run's mean of the score normalized per seed (``summarize``'s
+    ``heldout.normalized.per_run``), the input of :func:`aggregates` as :func:`normalized_runs` is."""
+    per_agent: dict[str, dict[tuple[str, str], np.ndarray]] = {}
+    for (setup, variant, agent), row in rows.items():
+        normalized = row.get("heldout", {}).get("normalized") or {}
+        if normalized.get("per_run"):
+            per_agent.setdefault(agent, {})[(setup, variant)] = np.array(normalized["per_run"])
+    return per_agent
+
+
 def _updates_per_transition(agent: str, records: list[dict[str, Any]]) -> float:
     r = records[0]["training"]
     return gradient_steps_per_transition(agent, {**r["hyperparams"], "n_envs": r["n_envs"]})

@@ -7,7 +7,16 @@ from typing import Any
 
 from ..line.vocabulary import SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
-from .benchmark_summary import AGENTS, AGREEMENT_RUNS, TABLE_ORDER, Heldout, Key, agreement_by_algorithm
+from .benchmark_summary import (
+    AGENTS,
+    AGREEMENT_RUNS,
+    TABLE_ORDER,
+    Heldout,
+    Key,
+    aggregates,
+    agreement_by_algorithm,
+    normalized_per_seed_runs,
+)
 
 TABLE_HEADER = [
     "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"
@@ -123,7 +132,26 @@ def normalized_markdown(rows: dict[Key, dict[str, Any]], agents=AGENTS) -> str:
         f" ({'left out: ' + dropped if dropped else 'none here'}). Lines without a random cell have no row.",
         "",
     ]
-    return "\n".join(out)
+    return "\n".join(out + _normalized_aggregate_markdown(aggregates(normalized_per_seed_runs(rows)), agents))
+
+
+def _normalized_aggregate_markdown(aggregate: dict[str, dict[str, Any]], agents) -> list[str]:
+    out = [
+        "### Over the lines, normalized per seed",
+        "",
+        "| agent | lines | IQM [95% CI] | mean [95% CI] |",
+        "|---|---|---|---|",
+    ]
+    for agent in [a for a in TABLE_ORDER if a in agents and a in aggregate]:
+        a = aggregate[agent]
+        out.append(f"| {agent} | {a['lines']} | {_interval(a['iqm'])} | {_interval(a['mean'])} |")
+    return out + [
+        "",
+        "Per run and line: its mean over the seeds of the score normalized per seed; IQM and mean over runs x lines,"
+        " interval: whole runs resampled within each line, as the aggregate below (which normalizes a run's mean"
+        " reward by the line's mean rewards of random and the oracle instead).",
+        "",
+    ]
 
 
 def _improvement_markdown(poi) -> list[str]:

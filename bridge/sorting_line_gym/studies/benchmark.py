@@ -73,6 +73,7 @@ from ..reports.benchmark_summary import (
     agreement,
     agreement_by_algorithm,
     improvements,
+    normalized_per_seed_runs,
     normalized_runs,
     oracle_rows,
     summarize,
@@ -341,6 +342,7 @@ def write_report(
                     {"setup": s, "variant": v, "agent": a, **p} for (s, v, a), p in sorted(poi.items())
                 ],
                 "aggregate_normalized": aggregate,
+                "aggregate_normalized_per_seed": aggregates(normalized_per_seed_runs(rows)),
                 "n_envs_agreement": checks,
                 "n_envs_agreement_by_algorithm": agreement_by_algorithm(checks),
             },
