@@ -21,10 +21,12 @@ import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
+jax = pytest.importorskip("jax")
 pytest.importorskip("sb3_contrib")
 
 from stable_baselines3.common.logger import Logger  # noqa: E402
 
+from sorting_line_gym.training.batched.actor_critic import evaluate_actions, exponential_noise  # noqa: E402
 from sorting_line_gym.training.batched.on_policy import OnPolicyTrainer  # noqa: E402
 from sorting_line_gym.training.train import make_training_env  # noqa: E402
 
@@ -76,10 +78,10 @@ def fill(tr: OnPolicyTrainer, rng: np.random.Generator, masked: bool = False) ->
 
 def assert_weights_equal_sb3(tr: OnPolicyTrainer, rtol: float = 1e-5) -> None:
     """Every stacked weight's slice s equals seed s's SB3 weight, to ``rtol`` of the tensor's scale."""
-    for p, per_seed in tr.pairs:
+    for p, per_seed in tr.weights():
         for s, q in enumerate(per_seed):
             scale = q.detach().abs().max().item()
-            assert (p[s].detach() - q.detach()).abs().max().item() <= rtol * scale, (s, tuple(q.shape))
+            assert np.abs(p[s] - q.detach().numpy()).max() <= rtol * scale, (s, tuple(q.shape))
 
 
 def sb3_train(tr: OnPolicyTrainer, progress: float, numpy_seeds: list[int]) -> None:
@@ -115,12 +117,12 @@ def test_one_update_equals_sb3s_for_every_seed(algo, params):
         for s, m in enumerate(tr.models):  # returns and advantages: SB3's, exactly
             np.testing.assert_array_equal(tr.buffer.advantages[:, s], m.rollout_buffer.advantages)
             np.testing.assert_array_equal(tr.buffer.returns[:, s], m.rollout_buffer.returns)
-        before = [p.detach().clone() for p, _ in tr.pairs]
+        before = [p.copy() for p, _ in tr.weights()]
         sb3_train(tr, 0.6, [100 + s for s in range(len(SEEDS))])
         assert_weights_equal_sb3(tr)
         assert tr.n_updates == tr.models[0]._n_updates
         # The weights moved, every seed's: the comparison is not of untouched initial weights.
-        assert all(max((p[s] - b[s]).abs().max().item() for (p, _), b in zip(tr.pairs, before, strict=True)) > 1e-4
+        assert all(max(np.abs(p[s] - b[s]).max() for (p, _), b in zip(tr.weights(), before, strict=True)) > 1e-4
                    for s in range(len(SEEDS)))  # fmt: skip
     finally:
         tr.close()
@@ -149,15 +151,17 @@ def test_masks_act_as_maskable_ppos():
         obs = np.stack([rng.random((S, B)), rng.integers(0, 3, (S, B))], axis=-1).astype(np.float32)
         masks = rng.random((S, B, 30)) < 0.3
         masks[..., 3] = True
-        actions, _, log_probs = tr.policy.act(torch.as_tensor(obs), tr.generators, torch.as_tensor(masks))
-        assert np.take_along_axis(masks, actions.numpy()[..., None], axis=-1).all()
+        noise = exponential_noise(tr.generators, (B, 30))  # Categorical.sample's draws, from each seed's generator
+        actions, _, log_probs = (np.asarray(a) for a in tr.compiled["act"](tr.params, obs, noise, masks))
+        assert np.take_along_axis(masks, actions[..., None], axis=-1).all()
         chosen = tr.predict(obs, masks)
+        _, _, mine = jax.vmap(lambda p, o, a, k: evaluate_actions(tr.specs, p, o, a, k))(tr.params, obs, actions, masks)
         for s, m in enumerate(tr.models):
             with torch.no_grad():
-                _, lp, ent = m.policy.evaluate_actions(torch.as_tensor(obs[s]), actions[s], action_masks=masks[s])
-            torch.testing.assert_close(log_probs[s], lp, rtol=1e-5, atol=1e-6)
-            _, _, mine = tr.policy.evaluate_actions(torch.as_tensor(obs), actions, torch.as_tensor(masks))
-            torch.testing.assert_close(mine[s].detach(), ent, rtol=1e-5, atol=1e-6)
+                _, lp, ent = m.policy.evaluate_actions(torch.as_tensor(obs[s]), torch.as_tensor(actions[s]),
+                                                       action_masks=masks[s])  # fmt: skip
+            torch.testing.assert_close(torch.as_tensor(log_probs[s]), lp, rtol=1e-5, atol=1e-6)
+            torch.testing.assert_close(torch.as_tensor(np.asarray(mine[s])), ent, rtol=1e-5, atol=1e-6)
             np.testing.assert_array_equal(chosen[s], m.predict(obs[s], action_masks=masks[s], deterministic=True)[0])
     finally:
         tr.close()
@@ -196,12 +200,15 @@ def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
         np.testing.assert_array_equal(saved.predict(obs, deterministic=True)[0], engine_actions[s])
     again = trainer(algo, {}, lines=1, models=paths)
     try:
-        for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):
-            torch.testing.assert_close(p, q, rtol=0, atol=0)
+        for (p, _), (q, _) in zip(again.weights(), tr.weights(), strict=True):
+            np.testing.assert_array_equal(p, q)
         assert again.num_timesteps == total
-        for (p, _), (q, _) in zip(again.pairs, tr.pairs, strict=True):  # Adam's moments and step, as saved
-            ours, theirs = again.optimizer.state[p], tr.optimizer.state[q]
-            assert sorted(ours) == sorted(theirs) and all(torch.equal(ours[k], theirs[k]) for k in ours)
+        # The optimizer's moments and step, as saved
+        assert sorted(again.opt_state) == sorted(tr.opt_state) and again.opt_steps == tr.opt_steps > 0
+        for key in again.opt_state:
+            for ours, theirs in zip(jax.tree_util.tree_leaves(again.opt_state[key]),
+                                    jax.tree_util.tree_leaves(tr.opt_state[key]), strict=True):  # fmt: skip
+                np.testing.assert_array_equal(np.asarray(ours), np.asarray(theirs))
     finally:
         again.close()
 

@@ -6,8 +6,12 @@ is held to, so that a seed's update equals SB3's for that seed.
 
 One concept per module:
 
-- ``stacked``: S networks as stacked weights over a leading seed axis, the per-seed gradient
-  clip, the optimizer over the stacked weights and its state per seed (the base of all learners);
+- ``params``: S SB3 networks as stacked JAX arrays (a leading seed axis) and one seed's forward
+  pass; ``optim``: torch's Adam, RMSprop and gradient-norm clip as per-seed JAX functions, their
+  state moved from and to S torch optimizers; ``torch_math``: tanh, exp, logsumexp and softmax
+  as torch rounds them (the base of the JAX learners: jit + vmap over seeds);
+- ``stacked``: the same in eager torch (stacked weights, per-seed clip, the optimizer over the
+  stacked weights), what DQN still runs on;
 - ``lines``: the S x L native lines, seeded, auto-reset and counted per seed as SB3's VecEnv;
 - ``checks``: what the trainer accepts (algorithms, seeds, hyperparameters, memory);
 - ``models``: the SB3 models behind the seeds (built, loaded, written back as SB3's zips);

@@ -1,7 +1,8 @@
 """A2C's update for S seeds at once: ``A2C.train`` (stable_baselines3/a2c/a2c.py) on a filled
 rollout buffer: one gradient step on the whole rollout, no minibatches, with the policy's
-optimizer (SB3's default for A2C: RMSprop, alpha 0.99, eps 1e-5, weight decay 0, built by SB3
-and copied by ``stacked.stacked_optimizer``).
+optimizer (SB3's default for A2C: RMSprop, alpha 0.99, eps 1e-5, weight decay 0, mirrored by
+``optim``). The loss is written once, for one seed (:func:`a2c_loss`); the update is one compiled
+JAX computation, vmapped over seeds (each seed's gradient, clip and step its own).
 
 SB3's ``rollout_buffer.get(batch_size=None)`` shuffles the rollout before yielding it whole; the
 means of the loss do not depend on the order, so the samples are taken in buffer order (the sums
@@ -10,14 +11,19 @@ may differ from SB3's in the last float bit, far inside the tests' 1e-5).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 from dataclasses import dataclass
+from typing import Any
 
-import torch
-import torch.nn.functional as F
+import jax
+import jax.numpy as jnp
+import numpy as np
 
-from .actor_critic import StackedActorCritic
+from . import optim
+from .actor_critic import evaluate_actions
+from .params import Spec
 from .rollout import FlatRollout
-from .stacked import clip_grad_norm_per_seed
 
 
 @dataclass(frozen=True)
@@ -28,26 +34,60 @@ class A2CSettings:
     max_grad_norm: float
 
 
-def a2c_loss(policy: StackedActorCritic, data: FlatRollout, s: A2CSettings) -> torch.Tensor:
-    """The S losses (S,) of A2C.train."""
-    values, log_prob, entropy = policy.evaluate_actions(data.observations, data.actions, data.action_masks)
-    advantages = data.advantages
-    if s.normalize_advantage:
-        advantages = (advantages - advantages.mean(dim=1, keepdim=True)) / (advantages.std(dim=1, keepdim=True) + 1e-8)
-    # Policy gradient loss; value loss using the TD(gae_lambda) target; entropy loss
-    policy_loss = -(advantages * log_prob).mean(dim=1)
-    value_loss = F.mse_loss(data.returns, values, reduction="none").mean(dim=1)
-    entropy_loss = -entropy.mean(dim=1)
-    return policy_loss + s.ent_coef * entropy_loss + s.vf_coef * value_loss
+def a2c_loss(specs: dict[str, Spec], normalize: bool, p: Any, data: dict[str, Any], hp: dict[str, Any]) -> jax.Array:
+    """One seed's loss of A2C.train."""
+    # actions = rollout_data.actions.long().flatten(); values = values.flatten()
+    values, log_prob, entropy = evaluate_actions(specs, p, data["observations"], data["actions"],
+                                                 data.get("action_masks"))  # fmt: skip
+    advantages = data["advantages"]
+    if normalize:
+        advantages = (advantages - advantages.mean()) / (jnp.std(advantages, ddof=1) + np.float32(1e-8))
+    # Policy gradient loss
+    policy_loss = -(advantages * log_prob).mean()
+    # Value loss using the TD(gae_lambda) target: F.mse_loss(rollout_data.returns, values)
+    value_loss = jnp.mean((data["returns"] - values) ** 2)
+    # Entropy loss favors exploration: -th.mean(entropy)
+    entropy_loss = -jnp.mean(entropy)
+    return policy_loss + hp["ent_coef"] * entropy_loss + hp["vf_coef"] * value_loss
+
+
+@functools.lru_cache(maxsize=32)
+def compiled_update(specs: tuple[tuple[str, Spec], ...], opt: optim.Settings, normalize: bool):
+    """The jitted update of S seeds: (params, state, data, coef (S,), hp) -> (params, state)."""
+    spec = dict(specs)
+
+    def one_seed(p, state, data, coef, hp):
+        # Optimization step: zero_grad, loss.backward(), clip_grad_norm_(policy.parameters()), step()
+        grads = jax.grad(a2c_loss, argnums=2)(spec, normalize, p, data, hp)
+        grads, _ = optim.clip_grad_norm(grads, hp["max_grad_norm"])
+        return optim.step(opt, p, grads, state, coef)
+
+    return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, 0, None)))
 
 
 def a2c_update(
-    policy: StackedActorCritic, optimizer: torch.optim.Optimizer, data: FlatRollout, settings: A2CSettings
-) -> int:
-    """One A2C.train: loss, backward, each seed's gradient clipped by its own norm, one step."""
-    loss = a2c_loss(policy, data, settings)
-    optimizer.zero_grad()
-    loss.sum().backward()
-    clip_grad_norm_per_seed(policy.parameters(), settings.max_grad_norm)
-    optimizer.step()
-    return 1
+    specs: dict[str, Spec],
+    opt: optim.Settings,
+    params: Any,
+    state: dict[str, Any],
+    coef: dict[str, np.ndarray],
+    data: FlatRollout,
+    settings: A2CSettings,
+) -> tuple[Any, dict[str, Any]]:
+    """One A2C.train for every seed; ``coef``: the optimizer's scalars of this one step (S, 1)."""
+    fields = {
+        "observations": data.observations,
+        "actions": data.actions.astype(np.int32),
+        "advantages": data.advantages,
+        "returns": data.returns,
+    }
+    if data.action_masks is not None:
+        fields["action_masks"] = data.action_masks
+    hp = {
+        "ent_coef": np.float32(settings.ent_coef),
+        "vf_coef": np.float32(settings.vf_coef),
+        "max_grad_norm": np.float32(settings.max_grad_norm),
+    }
+    update = compiled_update(tuple(sorted(specs.items())), dataclasses.replace(opt, lr=0.0),
+                             settings.normalize_advantage)  # fmt: skip
+    return update(params, state, fields, {key: c[:, 0] for key, c in coef.items()}, hp)

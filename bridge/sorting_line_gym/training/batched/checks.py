@@ -42,7 +42,7 @@ ONLY_VALUE: dict[str, Any] = {
     "device": "cpu",
 }
 #: policy_kwargs keys the trainer implements (the policy SB3 builds from them is then checked:
-#: actor_critic.check_policy, stacked.stacked_optimizer).
+#: actor_critic.check_policy, optim.settings_of).
 POLICY_KWARGS = ("net_arch", "activation_fn", "ortho_init", "optimizer_class", "optimizer_kwargs")
 
 

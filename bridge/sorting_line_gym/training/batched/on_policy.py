@@ -11,6 +11,10 @@ A seed is a run of its own: SB3's initial weights for that seed (``models.new_mo
 action-sampling generator (torch) and minibatch generator (numpy), optimizer state, gradient
 clip, episode bookkeeping and lines (``lines.BatchedLines``); all seeds share the step count, so
 one learning-rate and clip-range schedule (SB3's own, of seed 0's model) serves them all.
+
+The arithmetic runs in JAX (``params``, ``optim``, ``actor_critic``, ``ppo``, ``a2c``): the S
+networks live as stacked arrays, a rollout step is one compiled forward of all S x L lines, an
+update one compiled call. The SB3 models hold the weights again after :meth:`sync_models`.
 """
 
 from __future__ import annotations
@@ -20,18 +24,22 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 import torch
 
 from ...envs.env import action_space, observation_space
-from . import checks
+from . import checks, optim, params
 from .a2c import A2CSettings, a2c_update
-from .actor_critic import StackedActorCritic, per_seed_modules
+from .actor_critic import check_policy, compiled, exponential_noise, networks
 from .lines import BatchedLines
 from .models import finish_model, load_models, new_models
 from .ppo import PPOSettings, minibatch_orders, ppo_update
 from .rollout import RolloutBuffer, bootstrap_truncated
-from .stacked import optimizer_state_from_seeds, optimizer_state_to_seeds, parameter_pairs, stacked_optimizer
+
+#: Steps of exponential draws taken from each seed's generator at once (their order is the
+#: generator's either way: actor_critic.exponential_noise); bounds the draws' memory.
+NOISE_CHUNK = 64
 
 #: progress(trainer): called after each update (steps per seed: trainer.num_timesteps).
 Progress = Callable[["OnPolicyTrainer"], None]
@@ -88,10 +96,21 @@ class OnPolicyTrainer:
     def _setup(self, built: list) -> None:
         self.models = [b.model for b in built]
         self.template = self.models[0]  # its schedules and settings are every seed's (one config)
-        self.policy = StackedActorCritic([m.policy for m in self.models])
-        self.pairs = parameter_pairs(self.policy, [per_seed_modules(m.policy) for m in self.models])
-        self.optimizer = stacked_optimizer(self.template.policy.optimizer, self.policy.parameters())
-        optimizer_state_from_seeds(self.optimizer, self.pairs, [m.policy.optimizer for m in self.models])
+        for m in self.models:
+            check_policy(m.policy)
+        nets = [networks(m.policy) for m in self.models]
+        self.specs = params.specs_of(nets)
+        self.compiled = compiled(tuple(sorted(self.specs.items())))
+        #: Each seed's live torch parameters, as ``params`` trees (what sync_models writes into).
+        self.trees = [params.torch_tree(n) for n in nets]
+        self.params = params.stack(self.trees)
+        self.optimizers = [m.policy.optimizer for m in self.models]
+        self.opt_settings = optim.settings_of(self.template.policy.optimizer)
+        for opt in self.optimizers[1:]:
+            if optim.settings_of(opt) != self.opt_settings:
+                raise ValueError(f"the models' optimizers differ: {optim.settings_of(opt)} vs {self.opt_settings}")
+        self.opt_state, self.opt_steps = optim.state_from_torch(self.opt_settings, self.optimizers, self.trees)
+        self.lr = self.opt_settings.lr
         self.generators = [torch.Generator().set_state(b.torch_state) for b in built]
         self.np_rngs = []
         for b in built:
@@ -141,39 +160,52 @@ class OnPolicyTrainer:
         """OnPolicyAlgorithm.collect_rollouts for all seeds: n_steps steps of every line."""
         assert self._last_obs is not None
         buffer, lines, gamma = self.buffer, self.lines, self.template.gamma
+        act, values_of = self.compiled["act"], self.compiled["values"]
         buffer.reset()
         obs = self._last_obs
+        truncations: list[tuple[int, np.ndarray, np.ndarray]] = []
+        noise = np.empty(0)
         while not buffer.full:
+            k = buffer.pos % NOISE_CHUNK
+            if k == 0:  # Categorical.sample's draws of the next steps, from each seed's generator
+                steps = min(NOISE_CHUNK, buffer.n_steps - buffer.pos)
+                noise = exponential_noise(self.generators, (steps, lines.n_lines, lines.n_actions))
             masks = lines.action_masks() if self.masked else None  # sb3-contrib: get_action_masks(env)
-            obs_t = torch.from_numpy(obs)
-            mask_t = None if masks is None else torch.from_numpy(masks)
-            actions, values, log_probs = self.policy.act(obs_t, self.generators, mask_t)
-            actions_np = actions.numpy()
-            step = lines.step(actions_np)
+            actions, values, log_probs = (np.asarray(a) for a in act(self.params, obs, noise[:, k], masks))
+            actions = actions.astype(np.int64)
+            step = lines.step(actions)
             self.num_timesteps += lines.n_lines  # env.num_envs per seed
-            rewards = step.rewards
             if step.truncated.any():  # timeout: bootstrap from the terminal observation (SB3 issue #633)
-                with torch.no_grad():
-                    terminal_values = self.policy.predict_values(torch.from_numpy(step.terminal_obs)).numpy()
-                bootstrap_truncated(rewards, step.truncated, terminal_values, gamma)
-            buffer.add(obs, actions_np, rewards, self._last_episode_starts, values.numpy(), log_probs.numpy(), masks)
+                truncations.append((buffer.pos, step.truncated, step.terminal_obs))
+            buffer.add(obs, actions, step.rewards, self._last_episode_starts, values, log_probs, masks)
             obs = step.obs
             self._last_episode_starts = step.dones
         self._last_obs = obs
-        with torch.no_grad():
-            last_values = self.policy.predict_values(torch.from_numpy(obs)).numpy()
-        buffer.compute_returns_and_advantage(last_values, self._last_episode_starts, gamma, self.template.gae_lambda)
+        # The values of the truncated episodes' terminal observations and of the last observation,
+        # in one call (the policy did not change during the rollout, so when they are computed does not matter);
+        # padded to a power of two of blocks, so that few shapes are ever compiled.
+        blocks = [t[2] for t in truncations] + [obs]
+        blocks += [np.zeros_like(obs)] * ((1 << (len(blocks) - 1).bit_length()) - len(blocks))
+        values = np.asarray(values_of(self.params, np.concatenate(blocks, axis=1)))
+        values = values.reshape(len(self.seeds), len(blocks), -1)
+        for i, (pos, truncated, _) in enumerate(truncations):
+            bootstrap_truncated(buffer.rewards[pos], truncated, values[:, i], gamma)
+        buffer.compute_returns_and_advantage(values[:, -1], self._last_episode_starts, gamma, self.template.gae_lambda)
 
     def train(self) -> None:
         """PPO.train, MaskablePPO.train or A2C.train on the filled buffer, for every seed."""
         t, p = self.template, self.progress_remaining
         # BaseAlgorithm._update_learning_rate
-        for group in self.optimizer.param_groups:
-            group["lr"] = t.lr_schedule(p)
+        self.lr = t.lr_schedule(p)
         data = self.buffer.flat()
+        n_seeds = len(self.seeds)
         if self.algo == "a2c":
-            a2c_update(self.policy, self.optimizer, data, A2CSettings(t.normalize_advantage, t.ent_coef, t.vf_coef,
-                                                                      t.max_grad_norm))  # fmt: skip
+            coef = optim.coefficients(self.opt_settings, self.lr, self.opt_steps, 1, n_seeds)
+            self.params, self.opt_state = a2c_update(
+                self.specs, self.opt_settings, self.params, self.opt_state, coef, data,
+                A2CSettings(t.normalize_advantage, t.ent_coef, t.vf_coef, t.max_grad_norm),
+            )  # fmt: skip
+            self.opt_steps += 1
             self.n_updates += 1
             return
         settings = PPOSettings(
@@ -187,23 +219,34 @@ class OnPolicyTrainer:
             max_grad_norm=t.max_grad_norm,
             maskable=self.masked,
         )
-        ppo_update(self.policy, self.optimizer, data, settings, minibatch_orders(self.np_rngs, t.n_epochs, data.size))
+        steps = t.n_epochs * -(-data.size // t.batch_size)  # minibatches: the last one possibly shorter
+        coef = optim.coefficients(self.opt_settings, self.lr, self.opt_steps, steps, n_seeds)
+        orders = minibatch_orders(self.np_rngs, t.n_epochs, data.size)
+        self.params, self.opt_state = ppo_update(self.specs, self.opt_settings, self.params, self.opt_state, coef,
+                                                 data, settings, orders)  # fmt: skip
+        self.opt_steps += steps
         self.n_updates += t.n_epochs
 
     # --- what a run gives -----------------------------------------------------------------------------------------
 
     def predict(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """(S, B) actions of each seed's ``predict(obs, deterministic=True)`` for ``obs`` (S, B, obs_dim)."""
-        mask_t = None if masks is None else torch.as_tensor(masks, dtype=torch.bool)
-        return self.policy.predict(torch.as_tensor(obs, dtype=torch.float32), mask_t).numpy()
+        obs = np.asarray(obs, dtype=np.float32)
+        return np.asarray(
+            self.compiled["predict"](self.params, obs, None if masks is None else np.asarray(masks, bool))
+        )
+
+    def weights(self) -> list[tuple[np.ndarray, list[torch.Tensor]]]:
+        """Each stacked array (S, ...) with the S torch parameters it stands for (slice s: seed s's),
+        in the trees' order: what the tests compare with SB3's weights."""
+        arrays = [np.asarray(a) for a in jax.tree_util.tree_leaves(self.params)]
+        per_seed = [jax.tree_util.tree_leaves(tree, is_leaf=torch.is_tensor) for tree in self.trees]
+        return [(a, [leaves[i] for leaves in per_seed]) for i, a in enumerate(arrays)]
 
     def sync_models(self) -> list[Any]:
         """Each seed's SB3 model with the trained weights, optimizer state and counters written in."""
-        with torch.no_grad():
-            for p, per_seed in self.pairs:
-                for s, q in enumerate(per_seed):
-                    q.copy_(p[s])
-        optimizer_state_to_seeds(self.optimizer, self.pairs, [m.policy.optimizer for m in self.models])
+        params.write_back(self.params, self.trees)
+        optim.state_to_torch(self.opt_settings, self.opt_state, self.opt_steps, self.lr, self.optimizers, self.trees)
         for s, model in enumerate(self.models):
             last_obs = None if self._last_obs is None else self._last_obs[s].copy()
             finish_model(

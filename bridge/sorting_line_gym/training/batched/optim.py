@@ -170,7 +170,7 @@ def clip_grad_norm(grads: Any, max_norm: float) -> tuple[Any, jax.Array]:
     # _get_total_norm: vector_norm(stack([vector_norm(g) for g in grads]))
     total = jnp.linalg.norm(jnp.stack([jnp.linalg.norm(g.ravel()) for g in leaves]))
     # _clip_grads_with_norm_: clip_coef = max_norm / (total_norm + 1e-6); clamp(clip_coef, max=1.0)
-    coef = jnp.minimum(np.float32(max_norm) / (total + np.float32(1e-6)), np.float32(1.0))
+    coef = jnp.minimum(jnp.asarray(max_norm, jnp.float32) / (total + np.float32(1e-6)), np.float32(1.0))
     return jax.tree_util.tree_map(lambda g: g * coef, grads), total
 
 

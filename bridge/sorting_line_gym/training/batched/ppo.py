@@ -1,24 +1,30 @@
 """PPO's update for S seeds at once: ``PPO.train`` (stable_baselines3/ppo/ppo.py) on a filled
 rollout buffer, and with action masks ``MaskablePPO.train`` (sb3_contrib/ppo_mask/ppo_mask.py).
 
-Every seed's loss is SB3's loss of that seed's minibatch; the S losses are summed for one backward
-pass (no parameter is shared, so seed s's gradient is the gradient of its own loss), then each
-seed's gradient is clipped by its own norm and one optimizer over the stacked weights steps them
-all (elementwise: ``stacked``). Each seed shuffles its rollout with its own generator.
+The loss is written once, for one seed (:func:`ppo_loss`), line for line as SB3's; a whole update
+(every epoch, every minibatch, each seed's gradient, its own clip and its own optimizer step) is
+one compiled JAX computation (:func:`compiled_update`): ``vmap`` over seeds of a ``lax.scan`` over
+the epochs and, inside, over the minibatches, so that nothing of one seed reaches another and the
+Python loop of SB3 (15,600 minibatch steps per 100k steps) runs as one call per update. Each seed
+shuffles its rollout with its own numpy generator, exactly as SB3 draws (:func:`minibatch_orders`).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
+import jax
+import jax.numpy as jnp
 import numpy as np
-import torch
-import torch.nn.functional as F
 
-from .actor_critic import StackedActorCritic
+from . import optim, torch_math
+from .actor_critic import evaluate_actions
+from .params import Spec
 from .rollout import FlatRollout
-from .stacked import clip_grad_norm_per_seed
 
 
 @dataclass(frozen=True)
@@ -37,55 +43,147 @@ class PPOSettings:
     maskable: bool = False
 
 
-def minibatch_orders(rngs: Sequence[np.random.RandomState], n_epochs: int, size: int) -> list[np.ndarray]:
-    """Per epoch, each seed's permutation of its ``size`` samples: RolloutBuffer.get draws
-    ``np.random.permutation(buffer_size * n_envs)`` once per call, and PPO.train calls it once an
-    epoch; here from the seed's own generator. (n_epochs arrays of shape (S, size).)"""
-    return [np.stack([rng.permutation(size) for rng in rngs]) for _ in range(n_epochs)]
+def minibatch_orders(rngs: Sequence[np.random.RandomState], n_epochs: int, size: int) -> np.ndarray:
+    """(S, n_epochs, size): per epoch, each seed's permutation of its ``size`` samples.
+    RolloutBuffer.get draws ``np.random.permutation(buffer_size * n_envs)`` once per call, and
+    PPO.train calls it once an epoch; here from the seed's own generator, epoch after epoch."""
+    return np.stack([np.stack([rng.permutation(size) for rng in rngs]) for _ in range(n_epochs)], axis=1)
 
 
-def ppo_loss(policy: StackedActorCritic, batch: FlatRollout, s: PPOSettings) -> torch.Tensor:
-    """The S losses (S,) of PPO.train's inner loop on one minibatch per seed."""
-    # actions = rollout_data.actions.long().flatten(); values.flatten()
-    values, log_prob, entropy = policy.evaluate_actions(batch.observations, batch.actions, batch.action_masks)
-    advantages = batch.advantages
-    # Normalize advantage (per seed, per minibatch; torch's std is the unbiased one, as SB3's).
-    if s.normalize_advantage and (advantages.shape[1] > 1 or s.maskable):
-        advantages = (advantages - advantages.mean(dim=1, keepdim=True)) / (advantages.std(dim=1, keepdim=True) + 1e-8)
-    # ratio between old and new policy; clipped surrogate loss
-    ratio = torch.exp(log_prob - batch.log_probs)
+def ppo_loss(
+    specs: dict[str, Spec], normalize: bool, clip_vf: bool, p: Any, mb: dict[str, Any], hp: dict[str, Any]
+) -> jax.Array:
+    """One seed's loss on one minibatch ``mb`` (PPO.train's inner loop). ``normalize``: whether
+    this minibatch's advantages are normalized (decided by the caller from its size, as SB3)."""
+    # actions = rollout_data.actions.long().flatten(); values = values.flatten()
+    values, log_prob, entropy = evaluate_actions(specs, p, mb["observations"], mb["actions"], mb.get("action_masks"))
+    advantages = mb["advantages"]
+    # Normalize advantage (per minibatch; torch's std is the unbiased one)
+    if normalize:
+        advantages = (advantages - advantages.mean()) / (jnp.std(advantages, ddof=1) + np.float32(1e-8))
+    # ratio between old and new policy, should be one at the first iteration
+    ratio = torch_math.exp(log_prob - mb["log_probs"])
+    # clipped surrogate loss
     policy_loss_1 = advantages * ratio
-    policy_loss_2 = advantages * torch.clamp(ratio, 1 - s.clip_range, 1 + s.clip_range)
-    policy_loss = -torch.min(policy_loss_1, policy_loss_2).mean(dim=1)
-    if s.clip_range_vf is None:
+    policy_loss_2 = advantages * jnp.clip(ratio, hp["clip_low"], hp["clip_high"])
+    policy_loss = -jnp.minimum(policy_loss_1, policy_loss_2).mean()
+    if not clip_vf:
+        # No clipping
         values_pred = values
-    else:  # clip the difference between old and new value
-        values_pred = batch.values + torch.clamp(values - batch.values, -s.clip_range_vf, s.clip_range_vf)
-    # F.mse_loss(rollout_data.returns, values_pred), per seed
-    value_loss = F.mse_loss(batch.returns, values_pred, reduction="none").mean(dim=1)
-    entropy_loss = -entropy.mean(dim=1)
-    return policy_loss + s.ent_coef * entropy_loss + s.vf_coef * value_loss
+    else:
+        # Clip the difference between old and new value; NOTE: this depends on the reward scaling
+        values_pred = mb["values"] + jnp.clip(values - mb["values"], -hp["clip_range_vf"], hp["clip_range_vf"])
+    # Value loss using the TD(gae_lambda) target: F.mse_loss(rollout_data.returns, values_pred)
+    value_loss = jnp.mean((mb["returns"] - values_pred) ** 2)
+    # Entropy loss favors exploration: -th.mean(entropy)
+    entropy_loss = -jnp.mean(entropy)
+    return policy_loss + hp["ent_coef"] * entropy_loss + hp["vf_coef"] * value_loss
+
+
+def hyperparameters(s: PPOSettings) -> dict[str, np.float32]:
+    """The float settings as the float32 scalars torch's ops turn SB3's Python floats into
+    (``th.clamp(ratio, 1 - clip_range, 1 + clip_range)``: the bounds in float64, then float32)."""
+    return {
+        "clip_low": np.float32(1 - s.clip_range),
+        "clip_high": np.float32(1 + s.clip_range),
+        "clip_range_vf": np.float32(0.0 if s.clip_range_vf is None else s.clip_range_vf),
+        "ent_coef": np.float32(s.ent_coef),
+        "vf_coef": np.float32(s.vf_coef),
+        "max_grad_norm": np.float32(s.max_grad_norm),
+    }
+
+
+def minibatch_step(
+    specs: dict[str, Spec], opt: optim.Settings, normalize: bool, clip_vf: bool, data: dict[str, Any], hp: dict
+):
+    """One seed's gradient step on the minibatch ``idx``: SB3's optimizer.zero_grad(),
+    loss.backward(), clip_grad_norm_(policy.parameters(), max_grad_norm), optimizer.step()."""
+
+    def step(carry, xs):
+        p, state = carry
+        idx, coef = xs
+        mb = {k: jnp.take(v, idx, axis=0) for k, v in data.items()}  # RolloutBuffer._get_samples(batch_inds)
+        grads = jax.grad(ppo_loss, argnums=3)(specs, normalize, clip_vf, p, mb, hp)
+        grads, _ = optim.clip_grad_norm(grads, hp["max_grad_norm"])
+        return optim.step(opt, p, grads, state, coef), None
+
+    return step
+
+
+@functools.lru_cache(maxsize=32)
+def compiled_update(
+    specs: tuple[tuple[str, Spec], ...],
+    opt: optim.Settings,
+    normalize: tuple[bool, bool],
+    clip_vf: bool,
+    n_rest: int,
+):
+    """The jitted update of S seeds: (params, state, data, full (S, E, K, B), rest (S, E, R),
+    coef_full (S, E, K), coef_rest (S, E), hp) -> (params, state). K full minibatches of B and,
+    when B does not divide the rollout, a last one of R = n_rest samples, each epoch (SB3's
+    RolloutBuffer.get: consecutive slices of the permutation, the last one possibly shorter)."""
+    spec = dict(specs)
+
+    def one_seed(p, state, data, full, rest, coef_full, coef_rest, hp):
+        full_step = minibatch_step(spec, opt, normalize[0], clip_vf, data, hp)
+        rest_step = minibatch_step(spec, opt, normalize[1], clip_vf, data, hp)
+
+        def epoch(carry, xs):
+            idx_full, idx_rest, c_full, c_rest = xs
+            carry, _ = jax.lax.scan(full_step, carry, (idx_full, c_full))
+            if n_rest:
+                carry, _ = rest_step(carry, (idx_rest, c_rest))
+            return carry, None
+
+        (p, state), _ = jax.lax.scan(epoch, (p, state), (full, rest, coef_full, coef_rest))
+        return p, state
+
+    return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, 0, 0, 0, 0, None)))
 
 
 def ppo_update(
-    policy: StackedActorCritic,
-    optimizer: torch.optim.Optimizer,
+    specs: dict[str, Spec],
+    opt: optim.Settings,
+    params: Any,
+    state: dict[str, Any],
+    coef: dict[str, np.ndarray],
     data: FlatRollout,
     settings: PPOSettings,
-    orders: Sequence[np.ndarray],
-) -> int:
-    """PPO.train's epochs and minibatches (``orders``: :func:`minibatch_orders`), all seeds in
-    lock-step; the optimizer's learning rate is set by the caller (``_update_learning_rate``).
-    Returns the gradient steps taken."""
-    steps = 0
-    for order in orders:
-        indices = torch.from_numpy(order)
-        # RolloutBuffer.get: consecutive slices of the permutation, the last one possibly shorter.
-        for start in range(0, data.size, settings.batch_size):
-            loss = ppo_loss(policy, data.select(indices[:, start : start + settings.batch_size]), settings)
-            optimizer.zero_grad()
-            loss.sum().backward()
-            clip_grad_norm_per_seed(policy.parameters(), settings.max_grad_norm)
-            optimizer.step()
-            steps += 1
-    return steps
+    orders: np.ndarray,
+) -> tuple[Any, dict[str, Any]]:
+    """PPO.train's epochs and minibatches (``orders``: :func:`minibatch_orders`), all seeds at once;
+    ``coef``: the optimizer's scalars of the update's steps (``optim.coefficients``, (S, steps)),
+    whose learning rate the caller set (``_update_learning_rate``). Returns (params, state)."""
+    n_seeds, n_epochs, size = orders.shape
+    b = settings.batch_size
+    k, r = size // b, size % b
+    per_epoch = k + (r > 0)
+    # PPO.train: `if self.normalize_advantage and len(advantages) > 1` (MaskablePPO: without the size test)
+    normalize = (settings.normalize_advantage and (b > 1 or settings.maskable),
+                 settings.normalize_advantage and (r > 1 or settings.maskable))  # fmt: skip
+    fields = {
+        "observations": data.observations,
+        "actions": data.actions.astype(np.int32),
+        "values": data.values,
+        "log_probs": data.log_probs,
+        "advantages": data.advantages,
+        "returns": data.returns,
+    }
+    if data.action_masks is not None:
+        fields["action_masks"] = data.action_masks
+    steps = {key: c.reshape(n_seeds, n_epochs, per_epoch) for key, c in coef.items()}
+    full = orders[:, :, : k * b].reshape(n_seeds, n_epochs, k, b).astype(np.int32)
+    rest = orders[:, :, k * b :].astype(np.int32)
+    # the learning rate is in ``coef``: one compiled update serves every lr (the cache key leaves it out)
+    key = (tuple(sorted(specs.items())), dataclasses.replace(opt, lr=0.0))
+    update = compiled_update(*key, normalize, settings.clip_range_vf is not None, r)
+    return update(
+        params,
+        state,
+        fields,
+        full,
+        rest,
+        {key: c[:, :, :k] for key, c in steps.items()},
+        {key: c[:, :, k] if r else c[:, :, 0] for key, c in steps.items()},
+        hyperparameters(settings),
+    )

@@ -5,7 +5,8 @@ episode from its terminal observation (``OnPolicyAlgorithm.collect_rollouts``).
 Arrays are (n_steps, S, L, ...) numpy float32 as SB3 keeps them, so that the returns and
 advantages are computed by SB3's own arithmetic, elementwise over seeds and lines. :meth:`flat`
 gives each seed's data in the order SB3's ``get()`` indexes it (``swap_and_flatten``: line-major,
-index = line * n_steps + step), as torch tensors (S, L * n_steps, ...).
+index = line * n_steps + step), as arrays (S, L * n_steps, ...) that the JAX updates take whole
+(they gather each minibatch themselves, inside one compiled update).
 """
 
 from __future__ import annotations
@@ -13,38 +14,23 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 
 @dataclass
 class FlatRollout:
     """One rollout per seed as the learners read it: each field (S, N, ...), N = L * n_steps."""
 
-    observations: torch.Tensor
-    actions: torch.Tensor
-    values: torch.Tensor
-    log_probs: torch.Tensor
-    advantages: torch.Tensor
-    returns: torch.Tensor
-    action_masks: torch.Tensor | None
-
-    def select(self, indices: torch.Tensor) -> FlatRollout:
-        """The samples ``indices`` (S, B) of each seed (SB3's ``_get_samples(batch_inds)``)."""
-        rows = torch.arange(indices.shape[0]).unsqueeze(1)
-        masks = None if self.action_masks is None else self.action_masks[rows, indices]
-        return FlatRollout(
-            self.observations[rows, indices],
-            self.actions[rows, indices],
-            self.values[rows, indices],
-            self.log_probs[rows, indices],
-            self.advantages[rows, indices],
-            self.returns[rows, indices],
-            masks,
-        )
+    observations: np.ndarray
+    actions: np.ndarray
+    values: np.ndarray
+    log_probs: np.ndarray
+    advantages: np.ndarray
+    returns: np.ndarray
+    action_masks: np.ndarray | None
 
     @property
     def size(self) -> int:
-        return self.actions.shape[1]
+        return int(self.actions.shape[1])
 
 
 class RolloutBuffer:
@@ -122,10 +108,10 @@ class RolloutBuffer:
         if not self.full:
             raise RuntimeError(f"the rollout buffer holds {self.pos} of {self.n_steps} steps")
 
-        def seed_major(a: np.ndarray) -> torch.Tensor:
+        def seed_major(a: np.ndarray) -> np.ndarray:
             # (n_steps, S, L, ...) -> (S, L, n_steps, ...) -> (S, L * n_steps, ...)
             moved = np.moveaxis(a, 0, 2)
-            return torch.from_numpy(np.ascontiguousarray(moved).reshape(self.n_seeds, -1, *a.shape[3:]))
+            return np.ascontiguousarray(moved).reshape(self.n_seeds, -1, *a.shape[3:])
 
         masks = None if self.action_masks is None else seed_major(self.action_masks)
         return FlatRollout(
