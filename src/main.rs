@@ -14,7 +14,7 @@ use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::evolution::{category_code, At, Schedule};
-use sorting_line::sim::rba::{analysis, RbaTable};
+use sorting_line::sim::rba::analysis;
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
 #[derive(Parser)]
@@ -318,20 +318,7 @@ fn run_table(args: TableArgs) -> Result<(), String> {
 /// and `level = round(reading * 100)` clamped to 0..=100 (`observation::level`). The basic line
 /// decides from category slot 0.
 fn run_policy(args: PolicyArgs) -> Result<(), String> {
-    use sorting_line::sim::observation::LEVELS;
-    use sorting_line::sim::speed::SPEED_COUNT;
-    let config = LineConfig::for_setup(args.setup, args.variant);
-    let table = RbaTable::build(&config);
-    let (best, hold) = table.cells();
-    let pair = |a: &sorting_line::sim::Action| [a.speed_index, a.mode.index()];
-    let policy = serde_json::json!({
-        "setup": args.setup,
-        "variant": args.variant,
-        "levels": LEVELS,
-        "rba": best.iter().map(pair).collect::<Vec<_>>(),
-        "rba_hold": hold.chunks(SPEED_COUNT).map(|c| c.iter().map(pair).collect::<Vec<_>>()).collect::<Vec<_>>(),
-        "config": config,
-    });
+    let policy = sorting_line::sim::rba::policy(args.setup, args.variant);
     let mut out = io::stdout().lock();
     writeln!(out, "{policy}").map_err(|e| e.to_string())
 }

@@ -385,10 +385,7 @@ fn cells(rows: &[AnalysisRow]) -> Vec<&[AnalysisRow]> {
 fn rba_matches_analysis(config: &LineConfig) -> Result<(), String> {
     let table = RbaTable::build(config);
     let rows = analysis(config);
-    let options = match config.variant {
-        Variant::Basic => SPEED_COUNT,
-        Variant::Advanced => SPEED_COUNT * 3,
-    };
+    let options = Action::count(config.variant);
     for cell in cells(&rows) {
         let here = format!("{config:?}, occupancy {}, category {:?}", cell[0].occupancy, cell[0].category);
         if cell.len() != options {

@@ -131,10 +131,7 @@ impl Agent {
             Agent::RbaHold(table) => table.decide_holding(observation, current_speed),
             Agent::Bayes(agent) => agent.act(observation, current_speed),
             Agent::Random { rng, variant } => {
-                let n = match variant {
-                    Variant::Basic => SPEED_COUNT,
-                    Variant::Advanced => SPEED_COUNT * 3,
-                };
+                let n = Action::count(*variant);
                 Action::from_discrete(*variant, integer(rng, 0, n as u32) as usize).expect("in range")
             }
             Agent::Constant { speed_index, mode } => Action::new(

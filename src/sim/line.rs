@@ -77,25 +77,49 @@ impl Action {
         Action { speed_index, mode }
     }
 
+    /// How many Gymnasium actions a line whose actions decode as `variant` has: the ten speeds,
+    /// times the three sort modes on the advanced line. The one count every action space, mask,
+    /// random agent and range check of the crate and the extension is sized by.
+    pub const fn count(variant: Variant) -> usize {
+        match variant {
+            Variant::Basic => SPEED_COUNT,
+            Variant::Advanced => SPEED_COUNT * SORT_MODES.len(),
+        }
+    }
+
     /// Decodes a Gymnasium action: basic `speed_index`, advanced `speed_index * 3 + mode`.
     pub fn from_discrete(variant: Variant, action: usize) -> Option<Self> {
-        match variant {
-            Variant::Basic => (action < SPEED_COUNT).then(|| Action::new(action, SortMode::Basic)),
-            Variant::Advanced => (action < SPEED_COUNT * 3)
-                .then(|| Action::new(action / 3, SortMode::from_index((action % 3) as u8).unwrap())),
-        }
+        let modes = SORT_MODES.len();
+        (action < Action::count(variant)).then(|| match variant {
+            Variant::Basic => Action::new(action, SortMode::Basic),
+            Variant::Advanced => Action::new(action / modes, SORT_MODES[action % modes]),
+        })
     }
 
     pub fn to_discrete(self, variant: Variant) -> usize {
         match variant {
             Variant::Basic => self.speed_index,
-            Variant::Advanced => self.speed_index * 3 + self.mode.index(),
+            Variant::Advanced => self.speed_index * SORT_MODES.len() + self.mode.index(),
         }
     }
 
     pub fn speed(self) -> f64 {
         SPEEDS[self.speed_index]
     }
+}
+
+/// Whether a line takes sort mode `mode` now: any mode while it has sort modes, only mode 0
+/// (basic) without (an evolving line before its upgrade). The one mask rule: [`Line::mode_allowed`]
+/// checks commands with it, and [`action_mask`] masks Gymnasium actions with it.
+pub fn mode_allowed(sort_modes: bool, mode: SortMode) -> bool {
+    sort_modes || mode == SortMode::Basic
+}
+
+/// Which Gymnasium actions of `variant`'s encoding a line with (or without) sort modes takes,
+/// action 0 first: [`mode_allowed`] of each action's mode (every basic action has mode 0).
+pub fn action_mask(variant: Variant, sort_modes: bool) -> impl Iterator<Item = bool> {
+    (0..Action::count(variant))
+        .map(move |a| Action::from_discrete(variant, a).is_some_and(|action| mode_allowed(sort_modes, action.mode)))
 }
 
 /// What the agent sees: the noisy input reading and (advanced) the exact ratio category.
@@ -473,11 +497,15 @@ impl Line {
     }
     /// Whether `mode` is a valid command now: any mode with sort modes, only mode 0 without.
     pub fn mode_allowed(&self, mode: SortMode) -> bool {
-        self.sort_modes || mode == SortMode::Basic
+        mode_allowed(self.sort_modes, mode)
     }
     /// The valid actions of the advanced action space (`speed_index * 3 + mode`) now.
-    pub fn action_mask(&self) -> [bool; SPEED_COUNT * 3] {
-        std::array::from_fn(|a| self.mode_allowed(SORT_MODES[a % 3]))
+    pub fn action_mask(&self) -> [bool; Action::count(Variant::Advanced)] {
+        let mut mask = [false; Action::count(Variant::Advanced)];
+        for (m, allowed) in mask.iter_mut().zip(action_mask(Variant::Advanced, self.sort_modes)) {
+            *m = allowed;
+        }
+        mask
     }
     /// Everything events can change, as it is now.
     pub fn settings(&self) -> Settings {

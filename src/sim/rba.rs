@@ -15,10 +15,10 @@
 use serde::Serialize;
 
 use super::accuracy::{accuracy_law, noiseless_accuracy, ModeEffect};
-use super::config::{InputKind, LineConfig, Variant};
+use super::config::{InputKind, LineConfig, Setup, Variant};
 use super::input::{prior, MAX_TOTAL};
 use super::line::{Action, Observation};
-use super::material::{Category, SortMode, CATEGORIES, SORT_MODES};
+use super::material::{Category, SortMode, CATEGORIES};
 use super::observation::{level, likelihood, LEVELS};
 use super::reward::expected_reward;
 use super::speed::SPEED_COUNT;
@@ -48,12 +48,9 @@ pub struct RbaTable {
 }
 
 /// The actions an agent chooses among: speeds, times the modes of the advanced line.
+/// (In the order of the Gymnasium actions: the table's ties go to the first, the slowest.)
 fn options(variant: Variant) -> Vec<Action> {
-    let modes: &[SortMode] = match variant {
-        Variant::Basic => &[SortMode::Basic],
-        Variant::Advanced => &SORT_MODES,
-    };
-    (0..SPEED_COUNT).flat_map(|s| modes.iter().map(move |&m| Action::new(s, m))).collect()
+    (0..Action::count(variant)).map(|a| Action::from_discrete(variant, a).expect("below the count")).collect()
 }
 
 /// The expected value of `action` on a batch of `total` units and `category` (noiseless table).
@@ -145,6 +142,25 @@ impl RbaTable {
     pub fn cells(&self) -> (&[Action], &[Action]) {
         (&self.best, &self.hold)
     }
+}
+
+/// The tables of `rba` and `rba-hold` for one of the paper's setups as one JSON object, what
+/// `sorting_line policy` prints and the extension's `policy` returns: `setup`, `variant`, `levels`,
+/// `rba` (`[speed_index, mode]` per cell `level * 3 + category`), `rba_hold` (per cell, one pair
+/// per current speed 0..=9) and the line's `config`.
+pub fn policy(setup: Setup, variant: Variant) -> serde_json::Value {
+    let config = LineConfig::for_setup(setup, variant);
+    let table = RbaTable::build(&config);
+    let (best, hold) = table.cells();
+    let pair = |a: &Action| [a.speed_index, a.mode.index()];
+    serde_json::json!({
+        "setup": setup,
+        "variant": variant,
+        "levels": LEVELS,
+        "rba": best.iter().map(pair).collect::<Vec<_>>(),
+        "rba_hold": hold.chunks(SPEED_COUNT).map(|c| c.iter().map(pair).collect::<Vec<_>>()).collect::<Vec<_>>(),
+        "config": config,
+    })
 }
 
 /// How many steps a reading's regime is expected to last, counting the current one: the horizon
