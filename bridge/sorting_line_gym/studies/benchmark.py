@@ -29,6 +29,9 @@ least 5 training seeds a side), with each side's gradient steps per transition.
 Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
 interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
 ``--jobs N`` runs N cells at once (each its own node and process).
+Each RL cell records its learning curve: every ``--curve-every`` steps (5000; 0: none) the
+policy's mean on the first ``--curve-episodes`` (20) held-out seeds, scored as the final
+evaluation (``curves``); the cells' format is ``benchmark_cells``'.
 
 ``--engine batched`` trains the RL cells that differ only by training seed (same line, algorithm,
 lines and budget) together, in one run of the batched trainer (``sorting-line-train --engine
@@ -55,7 +58,7 @@ import json
 import signal
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +68,6 @@ from ..line.vocabulary import SETUPS, VARIANTS
 from ..reports import results_csv
 from ..reports.benchmark_summary import (
     AGENTS,
-    BASELINES,
     HELDOUT_EPISODES,
     HELDOUT_SEED,
     Heldout,
@@ -81,79 +83,40 @@ from ..reports.benchmark_summary import (
 from ..reports.benchmark_tables import statistics_markdown, table_markdown
 from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
 from . import benchmark_compare, cell_pool
+from .benchmark_cells import (  # noqa: F401 (re-exported: the benchmark's cells as callers know them)
+    CELL_FORMAT,
+    ENGINES,
+    Cell,
+    CellFormatError,
+    batches,
+    load_cell,
+    plan,
+    saved_records,
+)
 from .cell_store import write_atomic
+from .curves import DEFAULT_EPISODES, DEFAULT_EVERY, CurveSettings
 
 #: Five training seeds per RL cell, for interval estimates over runs; the paper's 42 first.
 DEFAULT_SEEDS = (42, 43, 44, 45, 46)
-#: Who trains the RL cells: SB3 cell by cell, or the batched trainer with the seeds of a line at once.
-ENGINES = ("sb3", "batched")
 #: Where --check-n-envs compares one line with N: ((setups), (variants)), agent.
 AGREEMENT_CELLS = tuple(((("B",), ("advanced",)), a) for a in ALGOS) + tuple(((("D",), ("basic",)), a) for a in ALGOS)
 
 
-@dataclass(frozen=True)
-class Cell:
-    """One evaluation of the benchmark: an agent on a line (and its training seed and number of
-    training lines, for RL)."""
-
-    setup: str
-    variant: str
-    agent: str
-    train_seed: int | None = None
-    n_envs: int = 1
-    #: How the one-line hyperparameters go to ``n_envs`` lines (``hyperparams.MAPPINGS``).
-    mapping: str = DEFAULT_MAPPING
-    #: Who trains it (``ENGINES``); in the name of a batched cell, so the engines' cells never mix.
-    engine: str = "sb3"
-
-    @property
-    def lines(self) -> str:
-        """``_n<N>`` for N lines, with the mapping when it is not the default; empty for one line."""
-        if self.n_envs == 1:
-            return ""
-        return f"_n{self.n_envs}" + (f"_{self.mapping}" if self.mapping != DEFAULT_MAPPING else "")
-
-    @property
-    def name(self) -> str:
-        lines = self.lines
-        seed = f"_seed{self.train_seed}" if self.train_seed is not None else ""
-        engine = f"_{self.engine}" if self.engine != "sb3" else ""
-        return f"{self.setup}_{self.variant}_{self.agent}{lines}{engine}{seed}"
-
-    def fields(self) -> dict[str, Any]:
-        """The cell as its record holds it: an SB3 cell without the engine, as before there were two."""
-        fields = asdict(self)
-        if self.engine == "sb3":
-            del fields["engine"]
-        return fields
-
-
-def plan(
-    setups, variants, agents, train_seeds, n_envs: int = 1, mapping: str = DEFAULT_MAPPING, engine: str = "sb3"
-) -> list[Cell]:
-    """Baselines first (quick), then RL cells by training seed and algorithm, in the order given,
-    so a partial run has whole rows: one algorithm on every line before the next. Baselines train
-    nothing, so they are the same cells for both engines."""
-    cells = [Cell(s, v, a) for s in setups for v in variants for a in agents if a in BASELINES]
-    cells += [
-        Cell(s, v, a, seed, n_envs, mapping if n_envs > 1 else DEFAULT_MAPPING, engine)
-        for seed in train_seeds
-        for a in agents
-        if a in ALGOS
-        for s in setups
-        for v in variants
-    ]
-    return cells
-
-
 def run_cell(
-    cell: Cell, out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str = "ros"
+    cell: Cell,
+    out: Path,
+    timesteps: int,
+    heldout: Heldout,
+    progress: bool,
+    backend: str = "ros",
+    curve: CurveSettings | None = None,
 ) -> dict[str, Any]:
     """Trains (RL) and evaluates one cell on ``backend``; writes and returns its record. Runs in a
     worker. Both backends give the same record but for wall times (a cell store may mix them); the
-    native backend draws no dashboard."""
+    native backend draws no dashboard. ``curve``: the RL cell's learning curve (``curves``)."""
     from ..training import hyperparams
     from ..training.train import train
+    from .curves import sb3_callback
 
     start = time.perf_counter()
     record: dict[str, Any] = {"cell": cell.fields(), "timesteps": timesteps if cell.agent in ALGOS else None}
@@ -166,6 +129,7 @@ def run_cell(
             mapping=cell.mapping,
         )
         models = out / f"models{cell.lines}"
+        recorder = sb3_callback(cell.agent, cell.setup, cell.variant, curve) if curve and curve.on else None
         run = train(
             cell.agent,
             cell.setup,
@@ -176,8 +140,11 @@ def run_cell(
             tensorboard=out / "tensorboard",
             progress=progress,
             backend=backend,
+            callbacks=[recorder] if recorder is not None else [],
         )
         record["training"] = asdict(run)
+        if recorder is not None:
+            record["curve"] = recorder.curve.record()
         spec = f"{cell.agent}:{run.model_path}"
     return _evaluated(cell, spec, record, out, heldout, backend, start)
 
@@ -197,20 +164,28 @@ def _evaluated(
         evaluate(spec, cell.setup, cell.variant, seed=heldout.seed, episodes=heldout.episodes, backend=backend)
     )
     record["wall_s"] = time.perf_counter() - start
+    record["format"] = CELL_FORMAT
     write_atomic(out / "cells" / f"{cell.name}.json", record)  # whole or absent, even if the run is killed
     return record
 
 
 def run_batch(
-    cells: list[Cell], out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str = "native"
+    cells: list[Cell],
+    out: Path,
+    timesteps: int,
+    heldout: Heldout,
+    progress: bool,
+    backend: str = "native",
+    curve: CurveSettings | None = None,
 ) -> list[dict[str, Any]]:
     """Trains the RL ``cells``, which differ only by training seed, at once with the batched
     trainer (its progress bar counts the steps of a seed and shows the steps/s of all), then
     evaluates and writes each seed's cell as ``run_cell`` does, one after the other: a batch cut
     during the evaluations leaves the cells done so far saved. A cell's ``wall_s`` is its share of
-    the training and its own evaluations. Runs in a worker."""
+    the training and its own evaluations; its curve's, its share of the curves'. Runs in a worker."""
     from ..training import hyperparams
     from ..training.train_batched import train_batched
+    from .curves import BatchedCurves
 
     first = cells[0]
     shared = (first.setup, first.variant, first.agent, first.n_envs, first.mapping, first.engine)
@@ -224,62 +199,28 @@ def run_batch(
     )  # fmt: skip
     seeds = [c.train_seed for c in cells]
     models = out / f"models{first.lines}_{first.engine}"  # beside, not over, the SB3 cells' models
+    curves = BatchedCurves(first.setup, first.variant, len(seeds), timesteps, curve) if curve and curve.on else None
     runs = train_batched(first.agent, first.setup, first.variant, seeds=seeds, out=models, params=params,
-                         progress=progress)  # fmt: skip
+                         progress=progress, on_update=curves)  # fmt: skip
     share = (time.perf_counter() - start) / len(cells)
     records = []
-    for cell, run in zip(cells, runs, strict=True):
+    for i, (cell, run) in enumerate(zip(cells, runs, strict=True)):
         record = {"cell": cell.fields(), "timesteps": timesteps, "engine": cell.engine, "training": asdict(run)}
+        if curves is not None:
+            record["curve"] = curves.curves[i].record()
         spec = f"{cell.agent}:{run.model_path}"
         records.append(_evaluated(cell, spec, record, out, heldout, backend, time.perf_counter() - share))
     return records
 
 
-def batches(todo: list[Cell]) -> list[list[Cell]]:
-    """The cells as ``--engine batched`` runs them: a baseline alone, the RL cells that differ only
-    by training seed together, in the order of each group's first cell."""
-    groups: dict[Any, list[Cell]] = {}
-    for c in todo:
-        key = (c.setup, c.variant, c.agent, c.n_envs, c.mapping, c.engine) if c.agent in ALGOS else c
-        groups.setdefault(key, []).append(c)
-    return list(groups.values())
-
-
-def run_unit(cells: list[Cell], out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str):
+def run_unit(
+    cells: list[Cell], out: Path, timesteps: int, heldout: Heldout, progress: bool, backend: str,
+    curve: CurveSettings | None = None,
+):  # fmt: skip
     """The records of one of ``batches``: a batch of RL cells, or one cell. Runs in a worker."""
     if cells[0].agent in ALGOS and cells[0].engine == "batched":
-        return run_batch(cells, out, timesteps, heldout, progress, backend)
-    return [run_cell(cells[0], out, timesteps, heldout, progress, backend)]
-
-
-def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[str, Any] | None:
-    """The saved record of ``cell`` if it was run with the same budget and held-out seeds."""
-    path = out / "cells" / f"{cell.name}.json"
-    if not path.is_file():
-        return None
-    try:
-        record = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        return None
-    if cell.agent in ALGOS and record.get("timesteps") != timesteps:
-        return None
-    if cell.agent in ALGOS and record.get("engine", "sb3") != cell.engine:  # an SB3 record names none
-        return None
-    saved = record.get("heldout")
-    if not saved or (saved["seed"], saved["episodes"]) != (heldout.seed, heldout.episodes):
-        return None
-    return record
-
-
-def saved_records(out: Path) -> list[dict[str, Any]]:
-    """Every finished cell in ``out`` (any budget or number of lines), for the agreement check."""
-    records = []
-    for path in sorted((out / "cells").glob("*.json")):
-        try:
-            records.append(json.loads(path.read_text()))
-        except json.JSONDecodeError:
-            continue
-    return records
+        return run_batch(cells, out, timesteps, heldout, progress, backend, curve)
+    return [run_cell(cells[0], out, timesteps, heldout, progress, backend, curve)]
 
 
 def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> dict[str, Any]:
@@ -410,6 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
     )
+    _add_curve_options(p)
     _add_check_options(p)
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
     _add_engine_options(p)
@@ -435,6 +377,22 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_curve_options(p: argparse.ArgumentParser) -> None:
+    """The RL cells' learning curves (studies/curves.py)."""
+    p.add_argument(
+        "--curve-every",
+        type=int,
+        default=DEFAULT_EVERY,
+        help=f"a learning-curve point every K training steps, in each RL cell (default {DEFAULT_EVERY}; 0: none)",
+    )
+    p.add_argument(
+        "--curve-episodes",
+        type=int,
+        help=f"a curve point's episodes: the first M held-out seeds (default {DEFAULT_EPISODES}, or all of them "
+        "when --heldout-episodes is fewer)",
+    )
+
+
 def _add_check_options(p: argparse.ArgumentParser) -> None:
     """The options of the one-line against N-line check."""
     p.add_argument(
@@ -454,6 +412,12 @@ def _add_check_options(p: argparse.ArgumentParser) -> None:
 
 def heldout_of(args) -> Heldout:
     return Heldout(args.heldout_seed, args.heldout_episodes)
+
+
+def curve_of(args) -> CurveSettings:
+    """The learning curves the command line asks for, on the first held-out seeds."""
+    episodes = min(DEFAULT_EPISODES, args.heldout_episodes) if args.curve_episodes is None else args.curve_episodes
+    return CurveSettings(args.curve_every, episodes, args.heldout_seed)
 
 
 def run_all(todo: list[Cell], args, finished, bar) -> None:
@@ -485,7 +449,7 @@ def _run_units(units: list, runner, args, finished, bar, names) -> None:
         for unit in units:
             bar.set_postfix_str(names([unit]))
             try:
-                outcome = runner(unit, args.out, args.timesteps, heldout_of(args), True, args.backend)
+                outcome = runner(unit, args.out, args.timesteps, heldout_of(args), True, args.backend, curve_of(args))
             except Exception as e:  # noqa: BLE001 - report every failed unit, keep the others
                 outcome = e
             finished(unit, outcome)
@@ -493,7 +457,7 @@ def _run_units(units: list, runner, args, finished, bar, names) -> None:
     # Only this bar, with the units running (each worker is a fresh interpreter with its own node).
     cell_pool.run_parallel(
         units,
-        lambda unit: (runner, unit, args.out, args.timesteps, heldout_of(args), False, args.backend),
+        lambda unit: (runner, unit, args.out, args.timesteps, heldout_of(args), False, args.backend, curve_of(args)),
         args.jobs,
         finished,
         lambda running: bar.set_postfix_str(names(running)),
@@ -514,6 +478,13 @@ def _invalid(args) -> str | None:
         return f"--n-envs = {args.n_envs} is not valid: allowed a power of two, 1 .. 2048"
     if args.heldout_seed < 0:
         return f"--heldout-seed = {args.heldout_seed} is not valid: allowed 0 or more"
+    if args.curve_every < 0:
+        return f"--curve-every = {args.curve_every} is not valid: allowed 0 (no curves) or more"
+    if args.curve_episodes is not None and not 1 <= args.curve_episodes <= args.heldout_episodes:
+        return (
+            f"--curve-episodes = {args.curve_episodes} is not valid: allowed 1 .. --heldout-episodes "
+            f"({args.heldout_episodes}): a curve is scored on the first held-out seeds"
+        )
     if args.engine == "batched" and args.backend != "native":
         return (
             f"--engine batched --backend {args.backend} is not valid: the batched trainer trains on native lines; "
@@ -547,7 +518,7 @@ def _cells_of(args) -> list[Cell]:
     return cells
 
 
-def _run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: list, args) -> bool:
+def run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: list, args) -> bool:
     """Runs ``todo`` under a progress bar, adding to ``done`` and ``failures``; False if interrupted."""
     from tqdm import tqdm
 
@@ -588,7 +559,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     heldout = heldout_of(args)
     cells = _cells_of(args)
-    done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
+    try:
+        done = {c: r for c in cells if (r := load_cell(c, args.out, args.timesteps, heldout)) is not None}
+    except CellFormatError as e:
+        print(f"sorting-line-benchmark: {e}", file=sys.stderr)
+        return 2
     todo = [] if args.report_only else [c for c in cells if c not in done]
     missing = missing_training_stack() if any(c.agent in ALGOS for c in todo) else []
     if missing:
@@ -608,7 +583,7 @@ def main(argv: list[str] | None = None) -> int:
         file=sys.stderr,
     )
     failures = []
-    if todo and not _run_with_bar(todo, cells, done, failures, args):
+    if todo and not run_with_bar(todo, cells, done, failures, args):
         print(
             f"sorting-line-benchmark: interrupted; {len(done)} of {len(cells)} cells are saved in {args.out}: "
             "the same command goes on from there",

@@ -154,13 +154,38 @@ def evaluate(
     """Evaluates ``agent_spec`` on a node of its own (``backend="native"``: on the line in this
     process, the same episodes); saves the first episode's dashboard to ``dashboard`` if given (ROS
     backend only)."""
+    check_setup(setup)
+    check_variant(variant)
+    if episodes < 1 or steps < 1:
+        raise ValueError(f"episodes = {episodes}, steps = {steps}: both must be 1 or more")
+    agent = make_agent(agent_spec, setup, variant, seed)
+    return evaluate_agent(
+        agent, agent_spec, setup, variant, episodes=episodes, seed=seed, steps=steps, dashboard=dashboard,
+        on_episode=on_episode, backend=backend,
+    )  # fmt: skip
+
+
+def evaluate_agent(
+    agent: Agent,
+    name: str,
+    setup: str,
+    variant: str,
+    *,
+    episodes: int = EPISODES,
+    seed: int = FIRST_SEED,
+    steps: int = EPISODE_STEPS,
+    dashboard: Path | None = None,
+    on_episode: Callable[[EpisodeStats], None] | None = None,
+    backend: str = "ros",
+) -> Evaluation:
+    """``evaluate`` of an agent already made (``name`` is its spec in the result): what a learning
+    curve scores a model in training with, so that its points are scored as the final evaluation."""
     from ..envs.backends import line_env
 
     check_setup(setup)
     check_variant(variant)
     if episodes < 1 or steps < 1:
         raise ValueError(f"episodes = {episodes}, steps = {steps}: both must be 1 or more")
-    agent = make_agent(agent_spec, setup, variant, seed)
     per_episode = []
     env = line_env(  # a node of its own, which stops with the evaluation
         backend=backend,
@@ -181,7 +206,7 @@ def evaluate(
                 on_episode(per_episode[-1])
     finally:
         env.close()
-    return Evaluation.of(agent_spec, setup, variant, seed, per_episode)
+    return Evaluation.of(name, setup, variant, seed, per_episode)
 
 
 def file_stem(agent_spec: str, setup: str, variant: str) -> str:

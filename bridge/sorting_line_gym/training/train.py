@@ -25,6 +25,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -79,9 +80,11 @@ def train(
     torch_threads: int = 1,
     verbose: int = 0,
     backend: str = "ros",
+    callbacks: Sequence[Any] = (),
 ) -> TrainingRun:
     """Trains ``algo`` on the line (setup, variant) with ``params`` (as ``hyperparams.load`` gives them,
-    which checks them; default: the packaged hyperparameters) and saves the model; returns what it did."""
+    which checks them; default: the packaged hyperparameters) and saves the model; returns what it did.
+    ``callbacks``: SB3 callbacks run beside the KPI one (a study's learning curve)."""
     import torch
 
     from .callbacks import LineKpiCallback
@@ -101,29 +104,20 @@ def train(
         )
         kpis = LineKpiCallback()
         start = time.perf_counter()
-        model.learn(total_timesteps=own["n_timesteps"], callback=kpis, progress_bar=progress, tb_log_name=stem)
+        model.learn(
+            total_timesteps=own["n_timesteps"], callback=[kpis, *callbacks], progress_bar=progress, tb_log_name=stem
+        )
         wall = time.perf_counter() - start
         model_path = out / f"{stem}.zip"
         model.save(model_path)
     finally:
         env.close()
     run = TrainingRun(
-        algo=algo,
-        setup=setup,
-        variant=variant,
-        seed=seed,
-        n_timesteps=own["n_timesteps"],
-        n_envs=own["n_envs"],
-        episode_steps=own["episode_steps"],
-        policy=own["policy"],
-        hyperparams=kwargs,
-        wall_s=wall,
-        steps_per_s=own["n_timesteps"] / wall,
-        episodes=kpis.episodes,
-        model_path=str(model_path),
-        torch_threads=torch_threads,
-        versions=versions(),
-    )
+        algo=algo, setup=setup, variant=variant, seed=seed, n_timesteps=own["n_timesteps"], n_envs=own["n_envs"],
+        episode_steps=own["episode_steps"], policy=own["policy"], hyperparams=kwargs, wall_s=wall,
+        steps_per_s=own["n_timesteps"] / wall, episodes=kpis.episodes, model_path=str(model_path),
+        torch_threads=torch_threads, versions=versions(),
+    )  # fmt: skip
     (out / f"{stem}.json").write_text(json.dumps(asdict(run), indent=2) + "\n")
     return run
 

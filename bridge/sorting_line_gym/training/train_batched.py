@@ -14,7 +14,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -61,6 +61,18 @@ def progress_bar(total: int, n_seeds: int):
     return bar, update
 
 
+def _both(first: Callable[[Any], None] | None, second: Callable[[Any], None] | None):
+    """One progress callback calling ``first`` then ``second`` (either may be None; None if both are)."""
+    if first is None or second is None:
+        return first or second
+
+    def both(engine) -> None:
+        first(engine)
+        second(engine)
+
+    return both
+
+
 def train_batched(
     algo: str,
     setup: str,
@@ -71,9 +83,10 @@ def train_batched(
     params: dict[str, Any] | None = None,
     progress: bool = True,
     torch_threads: int = 1,
+    on_update: Callable[[Any], None] | None = None,
 ) -> list[TrainingRun]:
-    """Trains ``algo`` for every seed of ``seeds`` at once on native lines and saves each seed's
-    model and record; returns the records (``wall_s`` is the batch's wall time, shared)."""
+    """Trains ``algo`` for all ``seeds`` at once on native lines, saves each seed's model and record, returns
+    the records (``wall_s``: the batch's); ``on_update(engine)`` before the first step and after each update."""
     import torch
 
     check_setup(setup)
@@ -85,7 +98,9 @@ def train_batched(
     try:
         bar, update = progress_bar(own["n_timesteps"], len(engine.seeds)) if progress else (None, None)
         start = time.perf_counter()
-        engine.learn(own["n_timesteps"], update)
+        if on_update is not None:  # a study's learning curves: step 0, then after each update
+            on_update(engine)
+        engine.learn(own["n_timesteps"], _both(update, on_update))
         wall = time.perf_counter() - start
         if bar is not None:
             bar.close()

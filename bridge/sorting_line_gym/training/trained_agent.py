@@ -33,6 +33,14 @@ class TrainedAgent(Agent):
                 f"the model {path!r} acts in {self.model.action_space}, the {variant} line needs {expected}"
             )
 
+    @classmethod
+    def of_model(cls, algo: str, model, variant: str, name: str) -> TrainedAgent:
+        """The agent of an SB3 ``model`` in memory (one in training: its learning curve), acting as
+        the same model loaded from its file would."""
+        agent = cls.__new__(cls)
+        agent.variant, agent.name, agent.model = check_variant(variant), name, model
+        return agent
+
     def predict(self, obs: Sequence[float], current_speed_index: int) -> int:
         action, _ = self.model.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
         return int(action)
