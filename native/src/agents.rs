@@ -1,13 +1,15 @@
 //! The library's non-learning agents and its offline evaluation, callable from Python without the
 //! `sorting_line` CLI: `Agent` (rba, rba-hold, bayes, random, constant:K[:M|:cat], the names of
 //! `sorting_line eval --agent`), `evaluate` and `oracle_eval` (the JSON of `sorting_line eval
-//! --json` and `sorting_line oracle --json`, as dicts), and `oracle` (one seed's optimum).
+//! --json` and `sorting_line oracle --json`, as dicts), `oracle` (one seed's optimum) and
+//! `policy` (the tables of `sorting_line policy`).
 
 use pyo3::prelude::*;
 use sorting_line::eval::{add_oracle, evaluate as run_eval, evaluate_oracle};
 use sorting_line::sim::agent::{Agent as LibAgent, AgentSpec};
 use sorting_line::sim::material::Category;
-use sorting_line::sim::{oracle as lib_oracle, Observation, Variant};
+use sorting_line::sim::rba::policy as lib_policy;
+use sorting_line::sim::{oracle as lib_oracle, Observation, Setup, Variant};
 
 use crate::{value_error, LineSettings, Spec};
 
@@ -103,8 +105,18 @@ fn oracle(py: Python<'_>, settings: LineSettings, seed: u64) -> PyResult<(f64, V
     Ok((best.reward, actions))
 }
 
+/// The tables of `rba` and `rba-hold` for a setup and variant, as `sorting_line policy --json`
+/// prints them (`sim::rba::policy`), as a dict.
+#[pyfunction]
+fn policy<'py>(py: Python<'py>, setup: &str, variant: &str) -> PyResult<Bound<'py, PyAny>> {
+    let setup: Setup = setup.parse().map_err(value_error)?;
+    let variant: Variant = variant.parse().map_err(value_error)?;
+    json_to_py(py, &lib_policy(setup, variant))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeAgent>()?;
+    m.add_function(wrap_pyfunction!(policy, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_eval, m)?)?;
     m.add_function(wrap_pyfunction!(oracle, m)?)?;

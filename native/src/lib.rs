@@ -6,6 +6,9 @@
 //! - [`lines::NativeLines`]: a batch of lines stepped in one call with the GIL released, writing
 //!   into numpy arrays allocated once (the vector envs' path).
 //! - [`agents`]: the rule-based agents, offline evaluation and the exact oracle.
+//! - [`vocabulary`]: the line's facts (constants, ranges, action counts, info keys, start
+//!   contents) and its observation and mask builders, which the Python package re-exports;
+//!   [`info`]: the one builder of a step's info.
 //!
 //! Nothing here may panic into Python: every input is checked first and a bad one raises
 //! `ValueError` (or the bridge's `BridgeError` for a line used out of order) naming the value and
@@ -17,8 +20,10 @@ use sorting_line::sim::evolution::Schedule;
 use sorting_line::sim::{InputKind, LineConfig, Variant};
 
 mod agents;
+mod info;
 mod line;
 mod lines;
+mod vocabulary;
 
 /// A line's settings as the Python side passes them: one dict, `LineOptions.node_options` without
 /// `lines` (variant, input, obs_noise, action_penalty, threshold, max_steps, optional evolution: a
@@ -99,5 +104,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<line::NativeLine>()?;
     m.add_class::<lines::NativeLines>()?;
     agents::register(m)?;
+    vocabulary::register(m)?;
     Ok(())
 }

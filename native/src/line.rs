@@ -6,21 +6,14 @@
 use numpy::PyArray1;
 use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyTuple};
+use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use sorting_line::sim::evolution::CATEGORY_UNKNOWN_OBSERVATION;
 use sorting_line::sim::evolution::{category_code, event_changes, At, Settings, CATEGORY_UNKNOWN_CODE};
-use sorting_line::sim::speed::SPEED_COUNT;
+use sorting_line::sim::line::action_mask;
 use sorting_line::sim::{Action, Line, Variant};
 
+use crate::info::{info_of, Value, INFO};
 use crate::{bridge_error, LineSettings, Spec};
-
-/// Gymnasium actions of a line whose actions decode as `encoding`.
-pub(crate) fn action_count(encoding: Variant) -> usize {
-    match encoding {
-        Variant::Basic => SPEED_COUNT,
-        Variant::Advanced => SPEED_COUNT * 3,
-    }
-}
 
 /// The category code a line reports (the ROS node's `observation_category`): the true category of
 /// the next batch, or on an evolving line the ratio sensor's reading (3: no sensor yet).
@@ -36,8 +29,17 @@ pub(crate) fn category_of(line: &Line, evolving: bool) -> u8 {
 pub(crate) fn write_observation(line: &Line, evolving: bool, out: &mut [f32]) {
     out[0] = line.observation().quantity as f32;
     if out.len() > 1 {
-        let code = category_of(line, evolving);
-        out[1] = if code == CATEGORY_UNKNOWN_CODE { CATEGORY_UNKNOWN_OBSERVATION as f32 } else { f32::from(code) };
+        out[1] = category_observation(i64::from(category_of(line, evolving)));
+    }
+}
+
+/// The observation slot of a category code: the code, or [`CATEGORY_UNKNOWN_OBSERVATION`] for
+/// the unknown one (no ratio sensor yet): inside the advanced Box(0, 2) and no category's value.
+pub(crate) fn category_observation(code: i64) -> f32 {
+    if code == i64::from(CATEGORY_UNKNOWN_CODE) {
+        CATEGORY_UNKNOWN_OBSERVATION as f32
+    } else {
+        code as f32
     }
 }
 
@@ -96,7 +98,7 @@ impl NativeLine {
     /// One step: (observation, reward, terminated, truncated, info), or `ValueError` for an
     /// action outside the action space (the line is left as it was).
     fn step<'py>(&mut self, py: Python<'py>, action: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyTuple>> {
-        let count = action_count(self.encoding);
+        let count = Action::count(self.encoding);
         let index = action.extract::<i64>().ok().filter(|a| (0..count as i64).contains(a));
         let Some(index) = index else {
             let shown = action.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
@@ -122,8 +124,7 @@ impl NativeLine {
     /// settings yet).
     fn action_mask<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
         let modes = !self.evolving || (self.reset_done && self.line.sort_modes_at_next_step());
-        let v: Vec<bool> = (0..action_count(self.encoding)).map(|a| modes || a % 3 == 0).collect();
-        PyArray1::from_vec(py, v)
+        PyArray1::from_vec(py, action_mask(self.encoding, modes).collect())
     }
 
     /// The settings the next step runs with (evolving line's `settings`).
@@ -152,27 +153,18 @@ impl NativeLine {
         PyArray1::from_slice(py, &out[..dim])
     }
 
-    /// `vocabulary.state_info` of the step just taken, as the single-line env reports it.
+    /// The info of the step just taken ([`crate::info`]), as the single-line env reports it.
     fn info<'py>(&self, py: Python<'py>, outcome: &sorting_line::sim::StepOutcome) -> PyResult<Bound<'py, PyDict>> {
-        let line = &self.line;
-        let c = line.containers();
-        let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
         let info = PyDict::new(py);
-        info.set_item(intern!(py, "accuracy"), outcome.accuracy)?;
-        info.set_item(intern!(py, "purity"), c.purity())?;
-        info.set_item(intern!(py, "recall_a"), c.recall_a())?;
-        info.set_item(intern!(py, "recall_b"), c.recall_b())?;
-        info.set_item(intern!(py, "speed"), line.speed())?;
-        info.set_item(intern!(py, "speed_index"), line.speed_index())?;
-        info.set_item(intern!(py, "mode"), line.mode() as u8)?;
-        info.set_item(intern!(py, "occupancy"), outcome.occupancy)?;
-        info.set_item(intern!(py, "containers"), (count(c.a), count(c.a_false), count(c.b), count(c.b_false)))?;
-        info.set_item(intern!(py, "speed_changes"), line.speed_changes())?;
-        info.set_item(intern!(py, "cumulative_reward"), line.cumulative_reward())?;
-        info.set_item(intern!(py, "step"), line.step_count())?;
-        // The node stamps tick k at k * tick_period (1 s): the seconds since the reset are the steps.
-        info.set_item(intern!(py, "sim_time"), f64::from(line.step_count()))?;
-        info.set_item(intern!(py, "seed"), line.seed())?;
+        for ((key, _, _), value) in INFO.iter().zip(info_of(&self.line, outcome.accuracy, outcome.occupancy)) {
+            let key = PyString::intern(py, key);
+            match value {
+                Value::Float(v) => info.set_item(key, v)?,
+                Value::Int(v) => info.set_item(key, v)?,
+                Value::Containers(v) => info.set_item(key, PyTuple::new(py, v)?)?,
+                Value::Seed(v) => info.set_item(key, v)?,
+            }
+        }
         Ok(info)
     }
 

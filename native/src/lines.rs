@@ -2,22 +2,36 @@
 //! and writes the results into numpy arrays allocated once, at construction (no Python object per
 //! line or per step). Python reads them as views and copies what it hands out.
 //!
-//! The arrays (entry k = line k): `observations` (N, 1|2) float32; `floats` (9, N) float64 with
-//! rows [`FLOAT_ROWS`]; `ints` (4, N) int64 with rows [`INT_ROWS`]; `containers` (N, 4) uint32 (a,
-//! a_false, b, b_false); `seeds` (N,) uint64; `truncated` (N,) bool; `masks` (N, actions) bool.
+//! The arrays (entry k = line k): `observations` (N, 1|2) float32; `floats` (rows, N) float64
+//! with rows `float_rows` (the reward, then the info's float keys); `ints` (rows, N) int64 with
+//! rows `int_rows` (the info's int keys); `containers` (N, 4) uint32 (a, a_false, b, b_false);
+//! `seeds` (N,) uint64; `truncated` (N,) bool; `masks` (N, actions) bool. `info()` is the info of
+//! the last step as the vector envs hand it out, copies of these in the order of [`INFO`].
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
+use sorting_line::sim::line::action_mask;
 use sorting_line::sim::{Action, Line, Variant};
 
-use crate::line::{action_count, not_steppable, write_observation};
+use crate::info::{info_of, keys_of, Kind, Value, INFO};
+use crate::line::{not_steppable, write_observation};
 use crate::{bridge_error, value_error, LineSettings, Spec};
 
+/// The row of `floats` that holds the step's reward (the info's float keys follow it).
+const REWARD_ROW: &str = "reward";
+
 /// The rows of `floats`, in order.
-pub const FLOAT_ROWS: [&str; 9] =
-    ["reward", "accuracy", "purity", "recall_a", "recall_b", "speed", "occupancy", "cumulative_reward", "sim_time"];
+fn float_rows() -> Vec<&'static str> {
+    let mut rows = vec![REWARD_ROW];
+    rows.extend(keys_of(&[Kind::Float, Kind::Time]));
+    rows
+}
+
 /// The rows of `ints`, in order.
-pub const INT_ROWS: [&str; 4] = ["speed_index", "mode", "speed_changes", "step"];
+fn int_rows() -> Vec<&'static str> {
+    keys_of(&[Kind::Int])
+}
 
 /// N lines (see the module docs).
 #[pyclass(module = "sorting_line_gym._native")]
@@ -70,12 +84,12 @@ impl NativeLines {
             encoding,
             evolving,
             observations: PyArray2::zeros(py, [lines, dim], false).unbind(),
-            floats: PyArray2::zeros(py, [FLOAT_ROWS.len(), lines], false).unbind(),
-            ints: PyArray2::zeros(py, [INT_ROWS.len(), lines], false).unbind(),
+            floats: PyArray2::zeros(py, [float_rows().len(), lines], false).unbind(),
+            ints: PyArray2::zeros(py, [int_rows().len(), lines], false).unbind(),
             containers: PyArray2::zeros(py, [lines, 4], false).unbind(),
             seeds: PyArray1::zeros(py, lines, false).unbind(),
             truncated: PyArray1::zeros(py, lines, false).unbind(),
-            masks: PyArray2::from_vec2(py, &vec![vec![true; action_count(encoding)]; lines])?.unbind(),
+            masks: PyArray2::from_vec2(py, &vec![vec![true; Action::count(encoding)]; lines])?.unbind(),
             lines: made,
         })
     }
@@ -92,12 +106,13 @@ impl NativeLines {
             return Err(value_error(format!("line index {bad} is out of range: allowed 0 ..= {}", n - 1)));
         }
         let (indices, seeds) = (indices.to_vec(), seeds.to_vec());
+        let encoding = self.encoding;
         self.with_out(py, |lines, reset_done, evolving, out| {
             for (&k, &seed) in indices.iter().zip(&seeds) {
                 let k = k as usize;
                 lines[k].reset(Some(seed));
                 reset_done[k] = true;
-                write_line(&lines[k], k, evolving, out, true);
+                write_line(&lines[k], k, (encoding, evolving), out, true);
             }
         })
     }
@@ -113,7 +128,7 @@ impl NativeLines {
                 actions.len()
             )));
         }
-        let count = action_count(self.encoding) as i64;
+        let count = Action::count(self.encoding) as i64;
         if let Some((k, a)) = actions.iter().enumerate().find(|(_, a)| !(0..count).contains(*a)) {
             return Err(value_error(format!(
                 "action {a} of line {k} is not in Discrete({count}): allowed integers 0 ..= {}",
@@ -131,7 +146,7 @@ impl NativeLines {
         self.with_out(py, |lines, _, evolving, out| {
             for (k, (line, action)) in lines.iter_mut().zip(decoded).enumerate() {
                 line.step(action);
-                write_line(line, k, evolving, out, false);
+                write_line(line, k, (encoding, evolving), out, false);
             }
         })
     }
@@ -139,12 +154,46 @@ impl NativeLines {
     /// The row names of `floats` and `ints`.
     #[classattr]
     fn float_rows() -> Vec<&'static str> {
-        FLOAT_ROWS.to_vec()
+        float_rows()
     }
 
     #[classattr]
     fn int_rows() -> Vec<&'static str> {
-        INT_ROWS.to_vec()
+        int_rows()
+    }
+
+    /// The step's reward per line, a copy.
+    fn rewards<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let floats = self.floats.bind(py).try_readonly()?;
+        let n = self.lines.len();
+        Ok(PyArray1::from_slice(py, &floats.as_slice()?[..n]))
+    }
+
+    /// The info of the last step, keys in the order of the single line's (one array per key,
+    /// entry k = line k; each a copy, so the next step leaves it as it was).
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.lines.len();
+        let floats = self.floats.bind(py).try_readonly()?;
+        let ints = self.ints.bind(py).try_readonly()?;
+        let (floats, ints) = (floats.as_slice()?, ints.as_slice()?);
+        let (mut float_row, mut int_row) = (1, 0); // row 0 of `floats` is the reward
+        let info = PyDict::new(py);
+        for (key, kind, _) in INFO {
+            let key = PyString::intern(py, key);
+            match kind {
+                Kind::Float | Kind::Time => {
+                    info.set_item(key, PyArray1::from_slice(py, &floats[float_row * n..(float_row + 1) * n]))?;
+                    float_row += 1;
+                }
+                Kind::Int => {
+                    info.set_item(key, PyArray1::from_slice(py, &ints[int_row * n..(int_row + 1) * n]))?;
+                    int_row += 1;
+                }
+                Kind::Containers => info.set_item(key, self.containers.bind(py).to_owned_array().into_pyarray(py))?,
+                Kind::Seed => info.set_item(key, self.seeds.bind(py).to_owned_array().into_pyarray(py))?,
+            }
+        }
+        Ok(info)
     }
 
     fn __len__(&self) -> usize {
@@ -180,42 +229,38 @@ impl NativeLines {
     }
 }
 
-/// Line `k`'s state into the output arrays (after a step, or a reset: no step yet, KPIs 0).
-fn write_line(line: &Line, k: usize, evolving: bool, out: &mut Out<'_>, reset: bool) {
+/// Line `k`'s state into the output arrays (after a step, or a reset: no step yet, KPIs 0);
+/// `line_kind` is how its actions decode and whether it evolves.
+fn write_line(line: &Line, k: usize, line_kind: (Variant, bool), out: &mut Out<'_>, reset: bool) {
+    let (encoding, evolving) = line_kind;
     let n = out.seeds.len();
     let dim = out.obs.len() / n;
     write_observation(line, evolving, &mut out.obs[k * dim..(k + 1) * dim]);
     out.seeds[k] = line.seed();
     out.truncated[k] = !reset && line.truncated();
-    let actions = out.masks.len() / n;
+    let actions = Action::count(encoding);
     let modes = !evolving || line.sort_modes_at_next_step();
-    for (a, m) in out.masks[k * actions..(k + 1) * actions].iter_mut().enumerate() {
-        *m = modes || a % 3 == 0;
+    for (m, allowed) in out.masks[k * actions..(k + 1) * actions].iter_mut().zip(action_mask(encoding, modes)) {
+        *m = allowed;
     }
     if reset {
         return;
     }
-    let c = line.containers();
     let last = line.last_step().expect("a line that stepped has a last step");
-    let floats = [
-        last.reward,
-        last.accuracy,
-        c.purity(),
-        c.recall_a(),
-        c.recall_b(),
-        line.speed(),
-        last.occupancy,
-        line.cumulative_reward(),
-        f64::from(line.step_count()),
-    ];
-    for (row, v) in floats.into_iter().enumerate() {
-        out.floats[row * n + k] = v;
+    out.floats[k] = last.reward; // the reward row
+    let (mut float_row, mut int_row) = (1, 0);
+    for value in info_of(line, last.accuracy, last.occupancy) {
+        match value {
+            Value::Float(v) => {
+                out.floats[float_row * n + k] = v;
+                float_row += 1;
+            }
+            Value::Int(v) => {
+                out.ints[int_row * n + k] = v;
+                int_row += 1;
+            }
+            Value::Containers(v) => out.containers[k * 4..k * 4 + 4].copy_from_slice(&v),
+            Value::Seed(_) => {} // written above, at a reset too
+        }
     }
-    let ints =
-        [line.speed_index() as i64, line.mode() as i64, i64::from(line.speed_changes()), i64::from(line.step_count())];
-    for (row, v) in ints.into_iter().enumerate() {
-        out.ints[row * n + k] = v;
-    }
-    let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-    out.containers[k * 4..k * 4 + 4].copy_from_slice(&[count(c.a), count(c.a_false), count(c.b), count(c.b_false)]);
 }
