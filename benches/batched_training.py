@@ -1,7 +1,9 @@
 """Speed of the batched trainer (training/batched) against SB3, side by side in one run: wall time
 per seed of a training at the paper's settings (hyperparams/<algo>.yml: one line per seed,
-250-step episodes, 100k steps), the engine with S = 1, 4, 16 seeds at once against SB3's own
-``learn`` on ``sorting-line-train --backend native``'s env, one torch thread, native backend:
+250-step episodes, 100k steps), the engine with S = 1, 4, 16, 32 seeds at once against SB3's own
+``learn`` on ``sorting-line-train --backend native``'s env, one torch thread and one XLA thread
+(the engine's arithmetic is JAX's: a per-core figure, as SB3 trains with one torch thread),
+native backend:
 
     .venv/bin/python benches/batched_training.py                           # PPO and A2C, 100k steps
     .venv/bin/python benches/batched_training.py --algos ppo --seeds 1 16 --timesteps 20000
@@ -9,10 +11,13 @@ per seed of a training at the paper's settings (hyperparams/<algo>.yml: one line
 
 Before the trainings, one PPO update (10 epochs of 32 minibatches of 64 over a 2048-step rollout)
 and one 2048-step rollout are timed per seed, engine at each S against SB3's ``train()`` and
-``collect_rollouts``. Model building is excluded on both sides; neither side writes logs or shows
-a progress bar. Prints wall and CPU time (this process's: the steadier figure on a shared machine),
-the ratios, the command and the load average before and after: the figures move with what else
-runs, so both sides are measured in the same run.
+``collect_rollouts``, with the rollout's share spent stepping the lines (the same 2048 steps of
+the S x L lines alone) and the first update's time with JAX's compilation. Model building is
+excluded on both sides; neither side writes logs or shows a progress bar. JAX runs asynchronously:
+every engine time waits for its results (``jax.block_until_ready``). Prints wall and CPU time
+(this process's: the steadier figure on a shared machine), the ratios, the command and the load
+average before and after: the figures move with what else runs, so both sides are measured in
+the same run.
 """
 
 from __future__ import annotations
@@ -22,11 +27,17 @@ import os
 import sys
 import time
 
-import torch
+# One XLA thread, set before JAX starts its CPU backend: the figures are per core, as SB3's with one
+# torch thread (on a shared machine a second thread would only wait).
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
 
-from sorting_line_gym.training import hyperparams
-from sorting_line_gym.training.train import make_training_env
-from sorting_line_gym.training.train_batched import trainer
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from sorting_line_gym.training import hyperparams  # noqa: E402
+from sorting_line_gym.training.train import make_training_env  # noqa: E402
+from sorting_line_gym.training.train_batched import trainer  # noqa: E402
 
 LINE = dict(setup="B", variant="advanced")
 
@@ -58,7 +69,8 @@ def sb3_model(algo: str, seed: int = 42):
 
 
 def update_times(seed_counts: list[int]) -> dict[str, dict[int, tuple[float, float]]]:
-    """Seconds per seed of one PPO rollout and one PPO update: SB3 (key 0) and the engine at each S."""
+    """Seconds per seed of one PPO rollout and one PPO update: SB3 (key 0) and the engine at each S;
+    the engine's line steps alone ("lines") and its first update with compilation ("first")."""
     from stable_baselines3.common.callbacks import ConvertCallback
     from stable_baselines3.common.logger import Logger
 
@@ -72,17 +84,26 @@ def update_times(seed_counts: list[int]) -> dict[str, dict[int, tuple[float, flo
     with Clock() as update:
         model.train()
     env.close()
-    out = {"rollout": {0: rollout.per(1)}, "update": {0: update.per(1)}}
+    out: dict[str, dict[int, tuple[float, float]]] = {"rollout": {0: rollout.per(1)}, "update": {0: update.per(1)},
+                                                      "lines": {0: (0.0, 0.0)}, "first": {0: (0.0, 0.0)}}  # fmt: skip
     own, kwargs = paper("ppo")
     for n in seed_counts:
         engine = trainer("ppo", LINE["setup"], LINE["variant"], list(range(42, 42 + n)), own, kwargs)
-        engine.learn(2048)
+        with Clock() as first:  # a rollout and the first update, compiling both
+            engine.learn(2048)
+            jax.block_until_ready(engine.params)
         with Clock() as rollout:
             engine.collect_rollout()
         with Clock() as update:
             engine.train()
+            jax.block_until_ready(engine.params)
+        actions = np.zeros((n, engine.lines.n_lines), dtype=np.int64)
+        with Clock() as lines:
+            for _ in range(2048):
+                engine.lines.step(actions)
         engine.close()
-        out["rollout"][n], out["update"][n] = rollout.per(n), update.per(n)
+        out["rollout"][n], out["update"][n], out["lines"][n] = rollout.per(n), update.per(n), lines.per(n)
+        out["first"][n] = (first.wall - rollout.wall - update.wall, first.cpu - rollout.cpu - update.cpu)
     return out
 
 
@@ -98,6 +119,7 @@ def training_times(algo: str, seed_counts: list[int], timesteps: int) -> dict[in
         engine = trainer(algo, LINE["setup"], LINE["variant"], list(range(42, 42 + n)), own, kwargs)
         with Clock() as clock:
             engine.learn(timesteps)
+            jax.block_until_ready(engine.params)
         engine.close()
         out[n] = clock.per(n)
     return out
@@ -117,17 +139,23 @@ def report(what: str, times: dict[int, tuple[float, float]], scale: float, unit:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--algos", nargs="+", default=["ppo", "a2c"], choices=hyperparams.ALGOS, help="(default ppo a2c)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 4, 16], help="S, seeds at once (default 1 4 16)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 4, 16, 32], help="S, seeds at once (default 1 4 16 32)")
     p.add_argument("--timesteps", type=int, default=100_000, help="steps per seed of a training (default 100000)")
     p.add_argument("--update-only", action="store_true", help="time one PPO rollout and update only")
     args = p.parse_args()
     torch.set_num_threads(1)
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
+    print(f"XLA_FLAGS={os.environ['XLA_FLAGS']}; JAX {jax.__version__} on {jax.devices()[0].platform}")
     print(f"load average before: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores", flush=True)
     if "ppo" in args.algos:
         times = update_times(args.seeds)
         report("PPO 2048-step rollout", times["rollout"], 1.0, "s")
         report("PPO update (10 epochs x 32 minibatches)", times["update"], 1.0, "s")
+        for n in args.seeds:
+            (lw, lc), (rw, _) = times["lines"][n], times["rollout"][n]
+            print(f"S={n}: the lines' 2048 steps alone, per seed: wall {lw:.3f} s, CPU {lc:.3f} s "
+                  f"({100 * lw / rw:.0f}% of the rollout's wall time); JAX's compilation and first "
+                  f"calls: about {times['first'][n][0]:.1f} s wall once per training", flush=True)  # fmt: skip
     if not args.update_only:
         for algo in args.algos:
             report(f"{algo.upper()} {args.timesteps}-step training", training_times(algo, args.seeds, args.timesteps),
