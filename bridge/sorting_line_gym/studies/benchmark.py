@@ -28,7 +28,8 @@ least 5 training seeds a side), with each side's gradient steps per transition.
 
 Each finished cell is saved at once in ``<out>/cells/`` (models in ``<out>/models/``), so an
 interrupted run picks up where it stopped: a rerun skips cells already done with the same budget.
-``--jobs N`` runs N cells at once (each its own node and process).
+``--jobs N`` runs N cells at once (each its own node and process); ``--ray ADDRESS`` runs each cell
+(or batch) as a task of that Ray cluster instead (``ray_cells``), the store and resume staying here.
 Each RL cell records its learning curve: every ``--curve-every`` steps (5000; 0: none) the
 policy's mean on the first ``--curve-episodes`` (20) held-out seeds, scored as the final
 evaluation (``curves``); the cells' format is ``benchmark_cells``'.
@@ -354,8 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_curve_options(p)
     _add_check_options(p)
     p.add_argument("--report-only", action="store_true", help="only redraw the table and figures from saved cells")
-    _add_engine_options(p)
     benchmark_compare.add_option(p)
+    _add_engine_options(p)
     return p
 
 
@@ -374,6 +375,13 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
         choices=ENGINES,
         help="who trains the RL cells: sb3, cell by cell (default), or batched: the training seeds of a line at "
         "once (sorting-line-train --engine batched; native lines), each seed still a cell of its own",
+    )
+    p.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run each cell (with --engine batched: each batch) as a task of the Ray cluster at ADDRESS "
+        "(HOST:PORT, ray://HOST[:PORT] or auto, as ray.init takes it), one CPU each, as many at once as it has; "
+        "the cells, models and resume stay here in --out; not with --jobs (docs/benchmark.md)",
     )
 
 
@@ -444,6 +452,9 @@ def _run_batches(todo: list[Cell], args, finished, bar) -> None:
 def _run_units(units: list, runner, args, finished, bar, names) -> None:
     """``runner(unit, ...)`` for each unit (a cell, or a batch of cells), ``args.jobs`` at a time;
     ``finished(unit, outcome or exception)`` for each; ``names(units)`` labels the bar."""
+    if args.ray is not None:
+        _run_on_cluster(units, runner, args, finished, bar, names)
+        return
     if args.jobs == 1:
         # In this process, with SB3's (or the batched trainer's) progress bar for each training.
         for unit in units:
@@ -460,6 +471,26 @@ def _run_units(units: list, runner, args, finished, bar, names) -> None:
         lambda unit: (runner, unit, args.out, args.timesteps, heldout_of(args), False, args.backend, curve_of(args)),
         args.jobs,
         finished,
+        lambda running: bar.set_postfix_str(names(running)),
+    )
+
+
+def _run_on_cluster(units: list, runner, args, finished, bar, names) -> None:
+    """``_run_units`` with ``--ray``: each unit a task of the cluster, in a scratch directory of its
+    host; its models come back into ``--out`` and its records are saved here, as they would be there."""
+    from . import ray_cells
+
+    def saved(unit, outcome) -> None:
+        if not isinstance(outcome, Exception):
+            for record in outcome if isinstance(outcome, list) else [outcome]:
+                write_atomic(args.out / "cells" / f"{Cell(**record['cell']).name}.json", record)
+        finished(unit, outcome)
+
+    ray_cells.run_on_cluster(
+        units,
+        lambda unit: (runner, unit, args.out, args.timesteps, heldout_of(args), False, args.backend, curve_of(args)),
+        args.out,
+        saved,
         lambda running: bar.set_postfix_str(names(running)),
     )
 
@@ -490,6 +521,11 @@ def _invalid(args) -> str | None:
             f"--engine batched --backend {args.backend} is not valid: the batched trainer trains on native lines; "
             "allowed --backend native with --engine batched (or --engine sb3 for ROS)"
         )
+    if args.ray is not None and args.jobs != 1:
+        return (
+            f"--jobs {args.jobs} with --ray is not valid: on a cluster as many cells run at once as it has CPUs; "
+            "allowed --ray without --jobs (or --jobs without --ray, on this machine)"
+        )
     return None
 
 
@@ -500,6 +536,20 @@ def _unwritable(args) -> str | None:
         (args.out / "cells").mkdir(parents=True, exist_ok=True)
     except OSError as e:
         return f"--out {args.out} cannot be written: {e.strerror} ({e.filename})"
+    return None
+
+
+def _unjoinable(args) -> str | None:
+    """Why the Ray cluster of ``--ray`` cannot be joined, if it cannot (None without ``--ray``):
+    found before any cell runs, naming the address."""
+    if args.ray is None:
+        return None
+    from .ray_cells import ClusterError, connect
+
+    try:
+        connect(args.ray)
+    except ClusterError as e:
+        return str(e)
     return None
 
 
@@ -573,11 +623,13 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    problem = _unwritable(args)  # after the checks above, which write nothing
+    problem = _unwritable(args) or (_unjoinable(args) if todo else None)  # after the checks above: they write nothing
     if problem:
         print(f"sorting-line-benchmark: {problem}", file=sys.stderr)
         return 2
     at_once = f"{args.jobs} at a time" if args.engine == "sb3" else f"{args.jobs} batch(es) at a time, batched"
+    if args.ray is not None:
+        at_once = f"on the Ray cluster at {args.ray}" + (", batched" if args.engine == "batched" else "")
     print(
         f"benchmark: {len(cells)} cells, {len(done)} already done, {len(todo)} to run, {at_once} -> {args.out}",
         file=sys.stderr,

@@ -20,7 +20,8 @@ command skips the finished cells and goes on, and a run with other result-changi
 (`--before`, `--after`, `--evaluations`, `--ppo-settings` and the other hyperparameters, the
 schedules) into the same `--out` is refused. `--max-cells N` stops after N cells (to split a study
 into sittings); Ctrl-C keeps the finished cells. A progress bar (plain lines when stderr is not a
-terminal) projects the end time.
+terminal) projects the end time. `--ray ADDRESS` runs each cell (or batch) as a task of that Ray
+cluster (``ray_cells``; the schedules go with it, its models come back), the store staying here.
 `--engine batched` trains the cells of one scenario, kind and algorithm (their seeds differ) at once
 with the batched trainer, on native lines (its default backend; `--backend ros` is refused), and
 saves each seed's cell as `--engine sb3` (the default) does, with the engine in its record and in
@@ -93,6 +94,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--jobs", type=int, default=1, help="cells run at once, each in its own process and node (default 1)"
     )
+    p.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run each cell (with --engine batched: each batch) as a task of the Ray cluster at ADDRESS "
+        "(HOST:PORT, ray://HOST[:PORT] or auto), one CPU each; the cells, models and resume stay here in --out; "
+        "not with --jobs (docs/benchmark.md)",
+    )
     p.add_argument("--max-cells", type=int, help="stop after running this many cells (the rest on the next run)")
     p.add_argument("--report-only", action="store_true", help="train nothing: the report of the cells saved in --out")
     return p
@@ -117,6 +125,11 @@ def options(argv: list[str] | None):
         parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
     if args.jobs < 1:
         parser.error(f"--jobs = {args.jobs} is not valid: allowed 1 or more")
+    if args.ray is not None and args.jobs != 1:
+        parser.error(
+            f"--jobs {args.jobs} with --ray is not valid: on a cluster as many cells run at once as it has CPUs; "
+            "allowed --ray without --jobs (or --jobs without --ray, on this machine)"
+        )
     if args.max_cells is not None and args.max_cells < 1:
         parser.error(f"--max-cells = {args.max_cells} is not valid: allowed 1 or more")
     if args.backend is None:
@@ -141,11 +154,16 @@ def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]
     finishes; 0, 1 if a cell failed (the others go on), 130 if interrupted. The projection is of
     the whole study."""
     times = {n: r["seconds"] for n, r in done.items()}
-    progress = CellProgress([c.name for c in todo], times, kind_of, "transfer", parallel=args.jobs)
+    parallel, at_once = args.jobs, f"{args.jobs} at a time"
+    if args.ray is not None:
+        from .ray_cells import capacity
+
+        parallel, at_once = capacity(), f"on the Ray cluster at {args.ray} ({capacity()} CPUs now)"
+    progress = CellProgress([c.name for c in todo], times, kind_of, "transfer", parallel=parallel)
     limit = f" ({args.max_cells} of them now: --max-cells)" if args.max_cells is not None else ""
     progress.line(
         f"transfer: {len(todo) + len(done)} cells, {len(done)} already done, {len(todo)} to run{limit}, "
-        f"{args.jobs} at a time -> {args.out}"
+        f"{at_once} -> {args.out}"
     )
     failed = []
 
@@ -162,7 +180,9 @@ def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]
 
     try:
         batch = todo[: args.max_cells]
-        if args.engine == "batched":
+        if args.ray is not None:
+            _run_on_cluster(batch, args, finished, running)
+        elif args.engine == "batched":
             _run_batches(batch, args, finished, running, progress)
         elif args.jobs == 1:
             for cell in batch:
@@ -178,6 +198,31 @@ def run_cells(todo: list[tc.Cell], store: CellStore, args, done: dict[str, dict]
     finally:
         progress.close()
     return 1 if failed else 0
+
+
+def _run_on_cluster(todo: list[tc.Cell], args, finished, running) -> None:
+    """``run_cells`` with ``--ray``: each cell (with ``--engine batched``, each of ``tc.batches``) a
+    task of the cluster, with the scenarios' schedules; the records are saved here as they come."""
+    from . import ray_cells
+
+    schedules = {p.relative_to(args.out).as_posix(): p.read_bytes() for p in (args.out / "schedules").glob("*")}
+    if args.engine != "batched":
+        call = lambda c: (tc.run_cell, c, args.settings, args.out)  # noqa: E731
+        ray_cells.run_on_cluster(todo, call, args.out, finished, running, schedules)
+        return
+
+    def unit_finished(cells: list[tc.Cell], outcome) -> None:
+        for i, cell in enumerate(cells):
+            finished(cell, outcome if isinstance(outcome, Exception) else outcome[i])
+
+    ray_cells.run_on_cluster(
+        tc.batches(todo),
+        lambda unit: (_unit, unit, args.settings, args.out),
+        args.out,
+        unit_finished,
+        lambda units: running([c for u in units for c in u]),
+        schedules,
+    )
 
 
 def _run_batches(todo: list[tc.Cell], args, finished, running, progress: CellProgress) -> None:
@@ -276,6 +321,14 @@ def main(argv: list[str] | None = None) -> int:
     todo = [] if args.report_only else [c for c in cells if c.name not in done]
     status = 0
     if todo:
+        if args.ray is not None:
+            from .ray_cells import ClusterError, connect
+
+            try:
+                connect(args.ray)
+            except ClusterError as e:
+                print(f"sorting-line-transfer: {e}", file=sys.stderr)
+                return 2
         store.begin(sys.argv if argv is None else ["sorting-line-transfer", *argv])
         for scenario in args.scenarios:
             tc.schedules(scenario, args.before, args.out)
