@@ -141,6 +141,32 @@ cargo test --release --locked --no-default-features --lib --tests
 # full one from the cache (seconds), which the ROS tests below run.
 cargo build --release --locked
 
+step "Vendored crates' own unit tests (vendor/rustdds, vendor/ros2-client, with our patches)"
+# Both copies' library unit tests, those that show our patches among them (vendor/upstream-reports/);
+# their tests/ and examples/ are not vendored, and their doc tests are left out (each compiles a
+# program of its own). vendor/Cargo.toml makes the two a workspace of their own (ros2-client on our
+# rustdds), locked by vendor/Cargo.lock. A debug build in target/vendor: about 7 CPU-minutes cold
+# (6.7 measured, the crates' dev-dependencies too), then about 15 s of tests. Built here (crates from the
+# registry), run in a network namespace of their own: they open participants and UDP sockets on
+# fixed ports, and two need multicast, which that namespace's loopback is given, so nothing leaves
+# the machine and the host's network does not matter. Every test passes with our patches; one that
+# fails upstream too would be skipped here by name (`--skip PATH`, exact), its reason beside it.
+vendor_test_skips=()
+if ! unshare -n true 2>/dev/null; then
+  echo "test.sh: cannot create a network namespace for the vendored crates' tests (unshare -n needs root)" >&2
+  exit 1
+fi
+vendor_tests=(--locked --manifest-path vendor/Cargo.toml --target-dir target/vendor --workspace --lib)
+cargo test "${vendor_tests[@]}" --no-run
+unshare -n bash -c '
+  set -euo pipefail
+  ip link set lo up
+  ip link set lo multicast on
+  ip route add 224.0.0.0/4 dev lo
+  cargo test --offline "$@"
+' test.sh "${vendor_tests[@]}" -- --exact "${vendor_test_skips[@]}" ||
+  { echo "test.sh: the vendored crates' unit tests failed (above): a patch of vendor/ broke one, see CONTRIBUTING.md" >&2; exit 1; }
+
 [[ $RUST_ONLY == 1 ]] && exit 0
 
 step "Ray RLlib for the RLlib tests"

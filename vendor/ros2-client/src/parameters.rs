@@ -804,6 +804,52 @@ mod tests {
     assert_eq!(s.get("p"), Some(ParameterValue::Integer(5)));
   }
 
+  // [sorting_line patch] A descriptor the node gives is what `describe` answers (description,
+  // read-only flag, range), with the type of the current value; a parameter without one still
+  // gets the placeholder. Before the patch every parameter got the placeholder.
+  #[test]
+  fn given_descriptors_are_described_with_the_values_type() {
+    use super::{NumericRange, ParameterDescriptor, ParameterType};
+
+    let given = ParameterDescriptor {
+      name: "rate".to_string(),
+      param_type: ParameterType::NotSet,
+      description: "ticks per second".to_string(),
+      additional_constraints: "".to_string(),
+      read_only: true,
+      dynamic_typing: false,
+      range: NumericRange::FloatingPointRange {
+        from_value: 0.1,
+        to_value: 100.0,
+        step: 0.0,
+      },
+    };
+    let s = ParameterStore::new(
+      vec![
+        param("rate", ParameterValue::Double(10.0)),
+        param("seed", ParameterValue::Integer(42)),
+      ],
+      false,
+      None,
+      None,
+    )
+    .unwrap()
+    .with_descriptors(vec![given]);
+    let names = ["rate", "seed", "nope"].map(String::from);
+    let [rate, seed, nope] = <[ParameterDescriptor; 3]>::try_from(s.describe(&names)).unwrap();
+    assert_eq!(rate.description, "ticks per second");
+    assert!(rate.read_only);
+    assert_eq!(rate.param_type, ParameterType::Double);
+    assert!(matches!(
+      rate.range,
+      NumericRange::FloatingPointRange { from_value, to_value, .. } if from_value == 0.1 && to_value == 100.0
+    ));
+    assert_eq!(seed.description, "(description missing, not implemented)");
+    assert_eq!(seed.param_type, ParameterType::Integer);
+    assert!(!seed.read_only);
+    assert_eq!(nope.param_type, ParameterType::NotSet);
+  }
+
   #[test]
   fn validator_and_set_action() {
     let applied = Arc::new(Mutex::new(Vec::new()));

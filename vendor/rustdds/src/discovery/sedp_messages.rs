@@ -1478,6 +1478,53 @@ mod tests {
     assert_eq!(sdata, sdata2);
   }
 
+  // [sorting_line patch] A local endpoint's USER_DATA (ROS 2 Jazzy: `typehash=RIHS01_<hex>;`)
+  // goes out in its SEDP data as a CDR sequence<octet> and comes back from it; an empty one is
+  // not emitted. Before the patch both serializers dropped the field, so the round trip gave an
+  // empty USER_DATA. (The parser hands up the parameter's value as it came, still CDR: the
+  // little-endian length, the octets, padding to 4.)
+  #[test]
+  fn endpoint_user_data_is_announced() {
+    let user_data = b"typehash=RIHS01_0123456789abcdef;".to_vec();
+    let mut on_the_wire = (user_data.len() as u32).to_le_bytes().to_vec();
+    on_the_wire.extend_from_slice(&user_data);
+    on_the_wire.resize(on_the_wire.len().next_multiple_of(4), 0);
+
+    let mut writer_proxy = writer_proxy_data().unwrap();
+    let pub_topic_data = publication_builtin_topic_data().unwrap();
+    writer_proxy.remote_writer_guid = pub_topic_data.key;
+    let mut dwd = DiscoveredWriterData {
+      last_updated: Instant::now(),
+      writer_proxy,
+      publication_topic_data: pub_topic_data,
+      user_data: Vec::new(),
+    };
+    let without = dwd.to_pl_cdr_bytes(RepresentationIdentifier::PL_CDR_LE).unwrap();
+    dwd.user_data = user_data.clone();
+    let with = dwd.to_pl_cdr_bytes(RepresentationIdentifier::PL_CDR_LE).unwrap();
+    assert!(with.len() > without.len());
+    let dwd2: DiscoveredWriterData =
+      PlCdrDeserializerAdapter::from_bytes(&with, RepresentationIdentifier::PL_CDR_LE).unwrap();
+    assert_eq!(dwd2.user_data, on_the_wire);
+    let dwd0: DiscoveredWriterData =
+      PlCdrDeserializerAdapter::from_bytes(&without, RepresentationIdentifier::PL_CDR_LE).unwrap();
+    assert!(dwd0.user_data.is_empty());
+
+    let mut reader_proxy = reader_proxy_data().unwrap();
+    let sub_topic_data = subscription_builtin_topic_data().unwrap();
+    reader_proxy.remote_reader_guid = sub_topic_data.key;
+    let drd = DiscoveredReaderData {
+      reader_proxy,
+      subscription_topic_data: sub_topic_data,
+      content_filter: None,
+      user_data: user_data.clone(),
+    };
+    let sdata = drd.to_pl_cdr_bytes(RepresentationIdentifier::PL_CDR_LE).unwrap();
+    let drd2: DiscoveredReaderData =
+      PlCdrDeserializerAdapter::from_bytes(&sdata, RepresentationIdentifier::PL_CDR_LE).unwrap();
+    assert_eq!(drd2.user_data, on_the_wire);
+  }
+
   // Do not test ser/deser. This is never seen on the wire out of
   // DiscoveredTopicData #[test]
   // fn td_topic_data_ser_deser() {

@@ -647,4 +647,29 @@ mod tests {
       SendOutcome::Dropped
     );
   }
+
+  // [sorting_line patch] Localhost only: loopback and the static peers pass as they are, this
+  // host's own addresses go to loopback instead, and every other destination (another host, a
+  // multicast group) is dropped before any send; without the restriction everything passes.
+  #[test]
+  fn this_host_only_lets_through_loopback_own_addresses_and_static_peers() {
+    let mut sender = UDPSender::new(0).expect("failed to create UDPSender");
+    let at = |a: [u8; 4]| SocketAddr::new(IpAddr::V4(Ipv4Addr::from(a)), 7412);
+    let elsewhere = at([192, 168, 77, 9]);
+    assert_eq!(sender.permitted_destination(elsewhere), Some(elsewhere));
+
+    let own = IpAddr::V4(Ipv4Addr::new(192, 168, 77, 2));
+    let peer = IpAddr::V4(Ipv4Addr::new(10, 0, 0, 7));
+    sender.restrict_to_this_host(vec![own], vec![peer]);
+    assert_eq!(sender.permitted_destination(at([127, 0, 0, 1])), Some(at([127, 0, 0, 1])));
+    assert_eq!(sender.permitted_destination(at([127, 0, 0, 5])), Some(at([127, 0, 0, 5])));
+    assert_eq!(sender.permitted_destination(at([192, 168, 77, 2])), Some(at([127, 0, 0, 1])));
+    assert_eq!(sender.permitted_destination(at([10, 0, 0, 7])), Some(at([10, 0, 0, 7])));
+    assert_eq!(sender.permitted_destination(elsewhere), None);
+    assert_eq!(sender.permitted_destination(at([239, 255, 0, 1])), None);
+    assert_eq!(
+      sender.raw_send(SocketId::Unicast, elsewhere, &[0u8; 4]),
+      SendOutcome::Dropped
+    );
+  }
 }
