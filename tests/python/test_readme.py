@@ -4,8 +4,8 @@ Each snippet is the fenced block right after a `<!-- readme-test: NAME -->` mark
 and `ros2 topic echo`), `ros-controller` (a user's rclpy controller, run against that node), `gymnasium` (an
 episode) and `ppo` (SB3 PPO, its budget cut to four rollouts of 64 steps). Everything runs in a ROS domain of its
 own, derived from the test's, because the quickstart uses the root namespace. About 25 s in all on a quiet machine
-(at load 14 on 2 cores: 60 s), mostly importing torch and SB3. Also: every relative link of README.md and docs/
-resolves.
+(at load 14 on 2 cores: 60 s), mostly importing torch and SB3. Also: every relative link of README.md, CONTRIBUTING.md,
+docs/ and vendor/'s pages resolves.
 """
 
 from __future__ import annotations
@@ -215,9 +215,11 @@ def test_every_readme_command_is_run_by_a_test():
 
 
 def test_links_in_readme_and_docs_resolve():
-    """Every relative link of README.md and docs/*.md names a file that exists (and a heading that exists)."""
+    """Every relative link of README.md, CONTRIBUTING.md, docs/*.md and vendor/'s pages (the patches and their
+    upstream reports) names a file that exists (and a heading that exists)."""
     broken = []
-    for page in [README, *sorted((ROOT / "docs").glob("*.md"))]:
+    vendor = [ROOT / "vendor" / "README.md", *sorted((ROOT / "vendor" / "upstream-reports").glob("*.md"))]
+    for page in [README, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").glob("*.md")), *vendor]:
         text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
         for target in re.findall(r"\]\(([^)\s]+)\)", text):
             if target.startswith(("http://", "https://", "mailto:")):
