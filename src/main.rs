@@ -43,8 +43,8 @@ enum Command {
     /// (the reference other paths are compared with).
     Trace(TraceArgs),
     /// Print the line's vocabulary as one JSON object: setups, variants, inputs, speeds, sort
-    /// modes, start speed, threshold and episode lengths (what other languages' copies are
-    /// checked against).
+    /// modes, start speed, threshold and episode lengths, and the node's topics, services and
+    /// actions (what other languages' copies are checked against).
     Vocabulary,
 }
 
@@ -393,7 +393,8 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
 
 /// `{"variants", "inputs", "setups": {name: {input, obs_noise, action_penalty}}, "speeds",
 /// "start_speed_index", "modes"/"categories": {name: number}, "threshold", "episode_steps",
-/// "max_episode_steps"}`, every value taken from the library's own constants.
+/// "max_episode_steps"}`, every value taken from the library's own constants; with the node (the
+/// `ros` feature) also its endpoints, `"topics"` and `"qos_profiles"` (`ros::topics::vocabulary`).
 fn run_vocabulary() -> Result<(), String> {
     use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, SETUPS, VARIANTS};
     use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
@@ -417,7 +418,7 @@ fn run_vocabulary() -> Result<(), String> {
     let modes = numbered(SORT_MODES.iter().map(|&m| (m, m.index())));
     let categories = numbered(CATEGORIES.iter().map(|&c| (c, c.index())));
     let defaults = LineConfig::default();
-    let vocabulary = serde_json::json!({
+    let mut vocabulary = serde_json::json!({
         "variants": VARIANTS,
         "inputs": INPUT_KINDS,
         "setups": setups,
@@ -431,6 +432,13 @@ fn run_vocabulary() -> Result<(), String> {
         "category_unknown_code": sorting_line::sim::evolution::CATEGORY_UNKNOWN_CODE,
         "category_unknown_observation": sorting_line::sim::evolution::CATEGORY_UNKNOWN_OBSERVATION,
     });
+    // The node's endpoints (`ros::topics`: "topics" and "qos_profiles"), with the node only.
+    #[cfg(feature = "ros")]
+    if let (Some(all), serde_json::Value::Object(topics)) =
+        (vocabulary.as_object_mut(), sorting_line::ros::topics::vocabulary())
+    {
+        all.extend(topics);
+    }
     let mut out = io::stdout().lock();
     writeln!(out, "{vocabulary}").map_err(|e| e.to_string())
 }

@@ -10,7 +10,8 @@
 //! - `simulation`: the node as a standard simulator (simulation_interfaces: state, step, reset,
 //!   features), as rules without I/O; `simulation_interfaces`: the standard's types on the wire.
 //! - `messages`, `qos`, `clock`, `diagnostics`: what goes on the wire; `ros2msg`: the types'
-//!   schemas as Foxglove reads them (the live view).
+//!   schemas as Foxglove reads them (the live view); `topics`: the table of every endpoint's
+//!   name, type, direction and QoS (what `sorting_line vocabulary` prints).
 //! - `node`: the running node: the DDS participant, the endpoints, and the server whose loop
 //!   handles every event (one module per concern, listed there).
 
@@ -29,6 +30,7 @@ pub mod ros2msg;
 pub mod ros_args;
 pub mod simulation;
 pub mod simulation_interfaces;
+pub mod topics;
 pub mod type_hash;
 pub mod type_hash_table;
 

@@ -154,7 +154,7 @@ impl SimService {
         [SimService::Features, SimService::GetState, SimService::SetState, SimService::Step, SimService::Reset];
 
     /// The service's name in the private namespace.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             SimService::Features => "get_simulator_features",
             SimService::GetState => "get_simulation_state",
@@ -165,7 +165,7 @@ impl SimService {
     }
 
     /// The type's name in `simulation_interfaces/srv`.
-    pub fn type_name(self) -> &'static str {
+    pub const fn type_name(self) -> &'static str {
         match self {
             SimService::Features => "GetSimulatorFeatures",
             SimService::GetState => "GetSimulationState",

@@ -17,11 +17,12 @@ use super::events::{Event, Input};
 use super::log::log;
 use crate::ros::names::Names;
 use crate::ros::qos::{action_status_profile, default_profile};
+use crate::ros::simulation_interfaces::SimulateStepsResult;
 use crate::ros::simulation_interfaces::{action_type, SimResult, SimulateStepsFeedback, SimulateStepsGoal};
-use crate::ros::simulation_interfaces::{SimulateStepsResult, ACTION};
+use crate::ros::topics::SIMULATE_STEPS;
 
 /// The action's name in the private namespace.
-pub(super) const NAME: &str = ACTION.0;
+pub(super) const NAME: &str = SIMULATE_STEPS.name;
 
 type SimulateStepsServer = AsyncActionServer<SimulateStepsGoal, SimulateStepsResult, SimulateStepsFeedback>;
 pub(super) type StepsGoal = ExecutingGoalHandle<SimulateStepsGoal>;

@@ -15,6 +15,7 @@ use super::log::{log, show_client, show_stamp};
 use crate::ros::messages::{DiagnosticArray, DiagnosticStatus, Header, KeyValue};
 use crate::ros::names::Names;
 use crate::ros::params::NodeParams;
+use crate::ros::topics::DIAGNOSTICS;
 
 /// How often /diagnostics is published (wall time).
 const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
@@ -34,7 +35,7 @@ fn kv(key: &str, value: String) -> KeyValue {
 impl Diagnostics {
     pub(super) fn new(node: &mut Node, names: &Names, params: &NodeParams) -> Result<Self, String> {
         Ok(Diagnostics {
-            publisher: publisher(node, &names.global("/diagnostics"))?,
+            publisher: publisher(node, &DIAGNOSTICS, &names.global(DIAGNOSTICS.name))?,
             timer: StreamExt::fuse(smol::Timer::never()),
             started: Instant::now(),
             params: params.clone(),
@@ -63,10 +64,10 @@ impl Diagnostics {
         let stamp = lines.iter().map(|line| line.host.stamp()).max().unwrap_or_default();
         let array = DiagnosticArray { header: Header { stamp, frame_id: String::new() }, status };
         if let Some(live) = &graph.live {
-            live.offer("/diagnostics", &ros_type::<DiagnosticArray>(), &array);
+            live.offer(DIAGNOSTICS.name, &ros_type::<DiagnosticArray>(), &array);
         }
         if let Err(e) = self.publisher.publish(array) {
-            log("WARN", format!("cannot publish /diagnostics: {e:?}"));
+            log("WARN", format!("cannot publish {}: {e:?}", DIAGNOSTICS.name));
         }
     }
 }

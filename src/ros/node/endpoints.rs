@@ -1,6 +1,6 @@
 //! Creating the node's DDS endpoints (publishers, subscriptions, service servers, all with the
-//! default QoS), and the input streams that own them, so the node's event set can hold them for
-//! as long as it serves.
+//! default QoS) from their rows of `ros::topics`, and the input streams that own them, so the
+//! node's event set can hold them for as long as it serves.
 
 use std::rc::Rc;
 use std::time::Duration;
@@ -16,15 +16,30 @@ use serde::Serialize;
 use super::log::log;
 use crate::ros::messages::Typed;
 use crate::ros::qos::default_profile;
+use crate::ros::topics::{Kind, Qos, Topic};
 
 pub(super) fn topic_name(absolute: &str) -> Result<Name, String> {
     Name::parse(absolute).map_err(|e| format!("'{absolute}' is not a valid topic name: {e:?}"))
 }
 
+/// That `topic`'s row is what the node is about to create at `absolute` (a wrong row is a bug of
+/// the node's, caught by its first start in any test).
+fn fits(topic: &Topic, kind: Kind, type_name: (&str, &str), absolute: &str) -> Result<(), String> {
+    let row = (topic.kind, topic.qos, (topic.ty.package, topic.ty.name));
+    if row == (kind, Qos::Default, type_name) {
+        Ok(())
+    } else {
+        Err(format!("{absolute}: created as {kind:?} of {type_name:?} with the default QoS, but its row is {topic:?}"))
+    }
+}
+
 pub(super) fn publisher<M: Message + Serialize + Typed>(
     node: &mut Node,
+    topic: &Topic,
     absolute: &str,
 ) -> Result<Publisher<M>, String> {
+    let t = M::type_name();
+    fits(topic, Kind::Publishes, (t.package_name(), t.type_name()), absolute)?;
     let qos = default_profile();
     let topic = node
         .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
@@ -32,10 +47,12 @@ pub(super) fn publisher<M: Message + Serialize + Typed>(
     node.create_publisher(&topic, Some(qos)).map_err(|e| format!("cannot publish {absolute}: {e:?}"))
 }
 
-pub(super) fn subscription<M>(node: &mut Node, absolute: &str) -> Result<Subscription<M>, String>
+pub(super) fn subscription<M>(node: &mut Node, topic: &Topic, absolute: &str) -> Result<Subscription<M>, String>
 where
     M: Message + Typed + DeserializeOwned + 'static,
 {
+    let t = M::type_name();
+    fits(topic, Kind::Subscribes, (t.package_name(), t.type_name()), absolute)?;
     let qos = default_profile();
     let topic = node
         .create_topic(&topic_name(absolute)?, M::type_name(), &qos)
@@ -46,6 +63,7 @@ where
 /// A service server, shared (`Rc`) between the stream of its requests and whoever answers them.
 pub(super) fn service<Req, Resp>(
     node: &mut Node,
+    topic: &Topic,
     absolute: &str,
     service: ServiceTypeName,
 ) -> Result<Rc<ServiceServer<Req, Resp>>, String>
@@ -53,6 +71,7 @@ where
     Req: Message + Clone + DeserializeOwned + 'static,
     Resp: Message + Serialize + 'static,
 {
+    fits(topic, Kind::Service, (service.package_name(), service.type_name()), absolute)?;
     let qos = default_profile();
     node.create_server(
         ServiceMapping::Enhanced, // what rmw_fastrtps_cpp (Jazzy's default) speaks

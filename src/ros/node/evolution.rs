@@ -11,6 +11,7 @@ use super::log::{log, show_topic};
 use crate::ros::diagnostics::LineCounters;
 use crate::ros::messages::EvolutionEvent;
 use crate::ros::protocol::HostedLine;
+use crate::ros::topics::EVOLUTION_EVENT;
 use crate::sim::evolution::{At, Settings};
 
 /// One line's announcements and the bookkeeping that says which were made and counted.
@@ -111,7 +112,7 @@ impl LineEvolution {
         if !at_reset {
             self.counted_tick = Some(tick);
         }
-        let sent = graph.offer(publisher, &|| show_topic(&self.namespace, "events/evolution"), || message);
+        let sent = graph.offer(publisher, &|| show_topic(&self.namespace, EVOLUTION_EVENT.name), || message);
         counters.count_published(sent);
         if self.moves_parameters {
             graph.update_parameters(settings);

@@ -23,6 +23,7 @@ use crate::ros::options::TickMode;
 use crate::ros::params::NodeParams;
 use crate::ros::protocol::{batch_commands, batch_resets, BatchModes, Client, Command, Rejection, TimerTick};
 use crate::ros::simulation::ResetScope;
+use crate::ros::topics::{self, Topic};
 
 /// /clock: follows the line that is furthest ahead and goes back only when the simulation's time
 /// is reset.
@@ -33,14 +34,15 @@ pub(super) struct ClockPublisher {
 
 impl ClockPublisher {
     pub(super) fn new(node: &mut Node, names: &Names) -> Result<Self, String> {
-        Ok(ClockPublisher { publisher: publisher(node, &names.global("/clock"))?, last: None })
+        let clock = publisher(node, &topics::CLOCK, &names.global(topics::CLOCK.name))?;
+        Ok(ClockPublisher { publisher: clock, last: None })
     }
 
     fn publish(&mut self, graph: &Graph, lines: &[Line]) {
         let newest = lines.iter().map(|line| line.host.stamp()).max().unwrap_or_default();
         if self.last.is_none_or(|last| newest > last) {
             self.last = Some(newest);
-            graph.offer(&self.publisher, &|| "/clock".to_string(), || Clock { clock: newest });
+            graph.offer(&self.publisher, &|| topics::CLOCK.name.to_string(), || Clock { clock: newest });
         }
     }
 }
@@ -68,15 +70,16 @@ impl LineSet {
         inputs: &mut Vec<Input>,
     ) -> Result<Self, String> {
         let err = |e| format!("{e:?}");
-        let batch_cmd = subscription(node, &names.topic(&names.namespace, "batch/cmd"))?;
-        let batch_state = publisher(node, &names.topic(&names.namespace, "batch/state"))?;
-        let batch_reset = service(node, &names.topic(&names.namespace, "batch/reset"), batch_reset_service_type())?;
+        let at = |topic: &Topic| names.topic(&names.namespace, topic.name);
+        let batch_cmd = subscription(node, &topics::BATCH_CMD, &at(&topics::BATCH_CMD))?;
+        let batch_state = publisher(node, &topics::BATCH_STATE, &at(&topics::BATCH_STATE))?;
+        let batch_reset = service(node, &topics::BATCH_RESET, &at(&topics::BATCH_RESET), batch_reset_service_type())?;
         inputs.extend([
             messages(batch_cmd).map(move |r| Event::Batch(r.map_err(err))).boxed_local(),
             requests(&batch_reset).map(move |r| Event::BatchReset(r.map_err(err))).boxed_local(),
         ]);
         let modes = BatchModes::of(params.line.variant, !params.evolution.is_empty());
-        let batch_state_topic = show_topic(&names.namespace, "batch/state");
+        let batch_state_topic = show_topic(&names.namespace, topics::BATCH_STATE.name);
         Ok(LineSet { lines, modes, batch_state, batch_state_topic, batch_reset, clock })
     }
 
@@ -146,14 +149,14 @@ impl LineSet {
         let (cmd, client) = match received {
             Ok((cmd, info)) => (cmd, client_of(&info)),
             Err(error) => {
-                self.lines[0].settle(graph, "batch/cmd", Err(malformed(&error)));
+                self.lines[0].settle(graph, topics::BATCH_CMD.name, Err(malformed(&error)));
                 return false;
             }
         };
         let entries = match batch_commands(&cmd, self.lines.len(), self.modes) {
             Ok(entries) => entries,
             Err(detail) => {
-                self.lines[0].settle(graph, "batch/cmd", Err((Rejection::Malformed, detail)));
+                self.lines[0].settle(graph, topics::BATCH_CMD.name, Err((Rejection::Malformed, detail)));
                 return false;
             }
         };
@@ -161,7 +164,7 @@ impl LineSet {
         for (line, entry) in self.lines.iter_mut().zip(entries) {
             for command in entry.commands() {
                 let result = line.apply(client, entry.stamp, command);
-                stepped |= line.settle(graph, "batch/cmd", result);
+                stepped |= line.settle(graph, topics::BATCH_CMD.name, result);
             }
         }
         stepped
@@ -181,11 +184,11 @@ impl LineSet {
             Err(message) => {
                 // Counted like a malformed batch/cmd (on line 0), logged by the counters.
                 let refusal = (Rejection::Malformed, format!("request ({message})"));
-                self.lines[0].settle(graph, "batch/reset", Err(refusal));
+                self.lines[0].settle(graph, topics::BATCH_RESET.name, Err(refusal));
                 ResetLinesResponse { success: false, message, states: self.states() }
             }
         };
-        respond(&self.batch_reset, "batch/reset", id, response).await;
+        respond(&self.batch_reset, topics::BATCH_RESET.name, id, response).await;
         self.publish_batch_state(graph);
         self.publish_clock(graph);
     }

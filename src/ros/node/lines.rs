@@ -21,6 +21,7 @@ use crate::ros::messages::*;
 use crate::ros::names::Names;
 use crate::ros::params::NodeParams;
 use crate::ros::protocol::{Accepted, Client, Command, HostedLine, Rejection};
+use crate::ros::topics::{self, Topic};
 use crate::sim::Observation;
 
 /// A rejected command: why, and what it said (for the log).
@@ -62,15 +63,19 @@ impl Line {
         k: u32,
     ) -> Result<(Self, Vec<Input>), String> {
         let namespace = names.line_namespace(k, params.lines);
-        let t = |relative: &str| names.topic(&namespace, relative);
-        let reset = service(node, &t("reset"), reset_service_type())?;
-        let input = publisher(node, &t("input"))?;
-        let belt = publisher(node, &t("belt/occupancy"))?;
-        let state = publisher(node, &t("state"))?;
-        let reset_event = publisher(node, &t("events/reset"))?;
+        let t = |topic: &Topic| names.topic(&namespace, topic.name);
+        let reset = service(node, &topics::RESET, &t(&topics::RESET), reset_service_type())?;
+        let input = publisher(node, &topics::INPUT, &t(&topics::INPUT))?;
+        let belt = publisher(node, &topics::BELT_OCCUPANCY, &t(&topics::BELT_OCCUPANCY))?;
+        let state = publisher(node, &topics::STATE, &t(&topics::STATE))?;
+        let reset_event = publisher(node, &topics::RESET_EVENT, &t(&topics::RESET_EVENT))?;
         let evolving = !params.evolution.is_empty();
-        let evolution = if evolving { Some(publisher(node, &t("events/evolution"))?) } else { None };
-        let speed_cmd = subscription::<SpeedCommand>(node, &t("cmd/speed"))?;
+        let evolution = if evolving {
+            Some(publisher(node, &topics::EVOLUTION_EVENT, &t(&topics::EVOLUTION_EVENT))?)
+        } else {
+            None
+        };
+        let speed_cmd = subscription::<SpeedCommand>(node, &topics::SPEED_CMD, &t(&topics::SPEED_CMD))?;
         let clock = SimClock::new(params.tick_period);
         let seed = params.seed + u64::from(k);
         let index = k as usize;
@@ -80,7 +85,7 @@ impl Line {
             |(cmd, info): (SpeedCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Speed(cmd.speed));
         let streams = vec![
             messages(speed_cmd)
-                .map(move |r| Event::Command(index, "cmd/speed", r.map(speed).map_err(err)))
+                .map(move |r| Event::Command(index, topics::SPEED_CMD.name, r.map(speed).map_err(err)))
                 .boxed_local(),
             requests(&reset).map(move |r| Event::Reset(index, r.map_err(err))).boxed_local(),
         ];
@@ -96,8 +101,8 @@ impl Line {
             reset,
             ratio: None,
             mode_cmd: None,
-            ratio_topic: t("sensors/ratio"),
-            mode_topic: t("cmd/sort_mode"),
+            ratio_topic: t(&topics::SENSORS_RATIO),
+            mode_topic: t(&topics::SORT_MODE_CMD),
             scene_topic: show_topic(&namespace, "scene"),
             namespace,
         };
@@ -121,21 +126,21 @@ impl Line {
         if sensor != self.ratio.is_some() {
             self.ratio = None;
             if sensor {
-                match publisher(&mut graph.node, &self.ratio_topic) {
+                match publisher(&mut graph.node, &topics::SENSORS_RATIO, &self.ratio_topic) {
                     Ok(p) => self.ratio = Some(p),
                     Err(e) => log("ERROR", e),
                 }
             }
             if self.host.evolving() {
                 let how = if sensor { "appears (ratio sensor fitted)" } else { "goes (ratio sensor removed)" };
-                log("INFO", format!("{} {how}", self.show("sensors/ratio")));
+                log("INFO", format!("{} {how}", self.show(topics::SENSORS_RATIO.name)));
             }
         }
         let modes = self.host.takes_modes();
         if modes != self.mode_cmd.is_some() {
             self.mode_cmd = None; // ends the old stream, which drops its subscription
             if modes {
-                match subscription::<SortModeCommand>(&mut graph.node, &self.mode_topic) {
+                match subscription::<SortModeCommand>(&mut graph.node, &topics::SORT_MODE_CMD, &self.mode_topic) {
                     Ok(sub) => {
                         let (stop, stopped) = oneshot::channel();
                         graph.events.push(mode_commands(self.index, sub, stopped));
@@ -146,7 +151,7 @@ impl Line {
             }
             if self.host.evolving() {
                 let how = if modes { "appears (machine upgrade: sort modes)" } else { "goes (sort modes removed)" };
-                log("INFO", format!("{} {how}", self.show("cmd/sort_mode")));
+                log("INFO", format!("{} {how}", self.show(topics::SORT_MODE_CMD.name)));
             }
         }
     }
@@ -160,16 +165,17 @@ impl Line {
         self.evolution.announce_tick_events(&self.host, &mut self.counters, graph);
         let host = &self.host;
         let namespace = &self.namespace;
-        let topic = |relative: &'static str| move || show_topic(namespace, relative);
+        let topic = |topic: Topic| move || show_topic(namespace, topic.name);
         let counters = &mut self.counters;
-        counters.count_published(graph.offer(&self.input, &topic("input"), || line_messages::material_input(host)));
-        counters
-            .count_published(graph.offer(&self.belt, &topic("belt/occupancy"), || line_messages::belt_occupancy(host)));
+        let input = graph.offer(&self.input, &topic(topics::INPUT), || line_messages::material_input(host));
+        counters.count_published(input);
+        let belt = graph.offer(&self.belt, &topic(topics::BELT_OCCUPANCY), || line_messages::belt_occupancy(host));
+        counters.count_published(belt);
         if let Some(ratio) = &self.ratio {
-            counters
-                .count_published(graph.offer(ratio, &topic("sensors/ratio"), || line_messages::material_ratio(host)));
+            let sent = graph.offer(ratio, &topic(topics::SENSORS_RATIO), || line_messages::material_ratio(host));
+            counters.count_published(sent);
         }
-        counters.count_published(graph.offer(&self.state, &topic("state"), || line_messages::line_state(host)));
+        counters.count_published(graph.offer(&self.state, &topic(topics::STATE), || line_messages::line_state(host)));
         if let Some(live) = &graph.live {
             live.offer_scene(&self.scene_topic, &self.host, self.index, &self.namespace);
         }
@@ -177,8 +183,9 @@ impl Line {
 
     /// `events/reset`, for bags: the line's new episode (`seeded`: whether the reset named a seed).
     pub(super) fn publish_reset_event(&mut self, graph: &Graph, seeded: bool) {
-        let sent = graph
-            .offer(&self.reset_event, &|| self.show("events/reset"), || line_messages::reset_event(&self.host, seeded));
+        let sent = graph.offer(&self.reset_event, &|| self.show(topics::RESET_EVENT.name), || {
+            line_messages::reset_event(&self.host, seeded)
+        });
         self.counters.count_published(sent);
     }
 
@@ -255,7 +262,7 @@ fn mode_commands(k: usize, sub: ros2_client::Subscription<SortModeCommand>, stop
     let mode =
         |(cmd, info): (SortModeCommand, MessageInfo)| (client_of(&info), cmd.header.stamp, Command::Mode(cmd.mode));
     messages(sub)
-        .map(move |r| Event::Command(k, "cmd/sort_mode", r.map(mode).map_err(|e| format!("{e:?}"))))
+        .map(move |r| Event::Command(k, topics::SORT_MODE_CMD.name, r.map(mode).map_err(|e| format!("{e:?}"))))
         .take_until(stop)
         .boxed_local()
 }

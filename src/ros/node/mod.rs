@@ -69,6 +69,7 @@ use crate::ros::names::{Names, NODE_NAME};
 use crate::ros::options::{NodeArgs, TickMode};
 use crate::ros::params::NodeParams;
 use crate::ros::ros_args::RosArgs;
+use crate::ros::topics;
 use live_view::LiveView;
 use log::{install_records, log};
 use parameters::node_options;
@@ -90,8 +91,9 @@ pub fn run(args: NodeArgs, ros_args: Vec<String>) -> Result<(), String> {
     // Before DDS too: a port in use (or an address not of this host) fails the start at once.
     let live = match params.foxglove {
         Some(address) => {
-            let resets: Vec<String> =
-                (0..params.lines).map(|k| names.topic(&names.line_namespace(k, params.lines), "reset")).collect();
+            let resets: Vec<String> = (0..params.lines)
+                .map(|k| names.topic(&names.line_namespace(k, params.lines), topics::RESET.name))
+                .collect();
             Some(LiveView::start(address, &names.node_name, parameter_values.clone(), &resets)?)
         }
         None => None,

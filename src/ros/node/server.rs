@@ -23,6 +23,7 @@ use super::parameters::ParameterValues;
 use super::stepping::{StepReply, Stepping};
 use crate::ros::names::Names;
 use crate::ros::params::NodeParams;
+use crate::ros::topics;
 
 /// The running node: its parts, its signals, and the ROS graph they share.
 pub(super) struct Server {
@@ -147,7 +148,9 @@ impl Server {
             Event::Batch(received) => lines.on_batch(graph, received),
             Event::Command(k, topic, received) => lines.on_command(graph, (k, topic), received),
             Event::BatchReset(Ok((id, request))) => lines.on_batch_reset(graph, id, request).await,
-            Event::BatchReset(Err(error)) => log("WARN", format!("batch/reset: unreadable request: {error}")),
+            Event::BatchReset(Err(error)) => {
+                log("WARN", format!("{}: unreadable request: {error}", topics::BATCH_RESET.name))
+            }
             Event::Reset(k, Ok((id, request))) => lines.on_reset(graph, k, id, request).await,
             Event::Reset(k, Err(error)) => {
                 log("WARN", format!("{}/reset: unreadable request: {error}", lines.lines[k].namespace));

@@ -14,6 +14,17 @@ use super::events::{SimInput, SimRequest};
 use crate::ros::names::Names;
 use crate::ros::simulation::{self, code, SimState};
 use crate::ros::simulation_interfaces::*;
+use crate::ros::topics::simulation_service;
+
+/// The server of `s`, at its row's name in the private namespace.
+fn serve<Req, Resp>(node: &mut Node, names: &Names, s: SimService) -> Result<Rc<ServiceServer<Req, Resp>>, String>
+where
+    Req: ros2_client::Message + Clone + serde::de::DeserializeOwned + 'static,
+    Resp: ros2_client::Message + serde::Serialize + 'static,
+{
+    let row = simulation_service(s);
+    service(node, row, &names.private(row.name), s.service_type())
+}
 
 /// The servers, one per [`SimService`].
 pub(super) struct SimulationServers {
@@ -30,13 +41,12 @@ pub(super) fn ok() -> SimResult {
 
 impl SimulationServers {
     pub(super) fn new(node: &mut Node, names: &Names) -> Result<Self, String> {
-        let at = |s: SimService| names.private(s.name());
         Ok(SimulationServers {
-            features: service(node, &at(SimService::Features), SimService::Features.service_type())?,
-            get_state: service(node, &at(SimService::GetState), SimService::GetState.service_type())?,
-            set_state: service(node, &at(SimService::SetState), SimService::SetState.service_type())?,
-            step: service(node, &at(SimService::Step), SimService::Step.service_type())?,
-            reset: service(node, &at(SimService::Reset), SimService::Reset.service_type())?,
+            features: serve(node, names, SimService::Features)?,
+            get_state: serve(node, names, SimService::GetState)?,
+            set_state: serve(node, names, SimService::SetState)?,
+            step: serve(node, names, SimService::Step)?,
+            reset: serve(node, names, SimService::Reset)?,
         })
     }
 
