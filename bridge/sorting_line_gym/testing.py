@@ -42,6 +42,7 @@ from pathlib import Path
 
 import pytest
 
+from .line.topics import DIAGNOSTICS, INPUT, RESET, SPEED_CMD, STATE
 from .workarounds.late_matching import retried_handshake
 
 #: Domains a session's tests take in turn, from the first (``--sorting-line-domain``).
@@ -178,10 +179,12 @@ class LineNode:
         from .bag.transport.rosnode import DEEP_QOS, ToolNode
 
         self._tool = tool = ToolNode("sorting_line_test", self.process)
-        self._reset_client = tool.node.create_client(ResetLine, f"{self.namespace}/reset")
-        tool.node.create_subscription(LineState, f"{self.namespace}/state", self.states.append, DEEP_QOS)
+        self._reset_client = tool.node.create_client(ResetLine, f"{self.namespace}/{RESET}")
+        tool.node.create_subscription(LineState, f"{self.namespace}/{STATE}", self.states.append, DEEP_QOS)
         tool.until(
-            lambda: self._reset_client.service_is_ready() and tool.node.count_publishers(f"{self.namespace}/state") > 0,
+            lambda: (
+                self._reset_client.service_is_ready() and tool.node.count_publishers(f"{self.namespace}/{STATE}") > 0
+            ),
             timeout,
             f"the sorting_line node serving {self.namespace}",
         )
@@ -192,10 +195,10 @@ class LineNode:
 
         request = ResetLine.Request(has_seed=seed is not None, seed=int(seed or 0))
         future = self._reset_client.call_async(request)
-        self._tool.until(future.done, timeout, f"the reply of {self.namespace}/reset")
+        self._tool.until(future.done, timeout, f"the reply of {self.namespace}/{RESET}")
         response = future.result()
         if not response.success:
-            raise AssertionError(f"{self.namespace}/reset refused: {response.message}")
+            raise AssertionError(f"{self.namespace}/{RESET} refused: {response.message}")
         return response
 
     def run_episode(self, seed: int | None = None, timeout: float = 60.0, attempts: int = 3) -> list:
@@ -238,7 +241,7 @@ class LineNode:
         self._tool.until(
             lambda: controller_seen(self._tool.node, self.namespace),
             timeout,
-            f"a controller of {self.namespace} (a reader of input, a writer of cmd/speed)",
+            f"a controller of {self.namespace} (a reader of {INPUT}, a writer of {SPEED_CMD})",
         )
         # Seen here is not yet matched by the node, which sends a tick's input only to the readers
         # it has matched: a reset whose input the controller missed is never answered, and here it
@@ -249,7 +252,7 @@ class LineNode:
         self._tool.until(
             lambda: matches.all_matched(self.namespace),
             timeout,
-            f"the node serving {self.namespace} to match every reader of its input (input_readers on /diagnostics)",
+            f"the node serving {self.namespace} to match every reader of its {INPUT} (input_readers on {DIAGNOSTICS})",
         )
 
     def _until_state(self, wanted, timeout: float, what: str) -> None:

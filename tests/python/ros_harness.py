@@ -47,6 +47,7 @@ from typing import Any
 
 from sorting_line_gym.line import vocabulary
 from sorting_line_gym.line.process import with_parent_death_signal
+from sorting_line_gym.line.topics import line_types
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,16 +56,9 @@ NS_PER_S = 1_000_000_000
 # How long a wait goes on spinning once its peer is gone, to take what the peer sent before it went.
 DRAIN_AFTER_ABORT = 0.5
 
-# Every topic of one line (relative to its namespace) and its type.
-LINE_TYPES = {
-    "input": "sorting_line_interfaces/msg/MaterialInput",
-    "belt/occupancy": "sorting_line_interfaces/msg/BeltOccupancy",
-    "sensors/ratio": "sorting_line_interfaces/msg/MaterialRatio",
-    "state": "sorting_line_interfaces/msg/LineState",
-    "events/reset": "sorting_line_interfaces/msg/ResetEvent",
-    "cmd/speed": "sorting_line_interfaces/msg/SpeedCommand",
-    "cmd/sort_mode": "sorting_line_interfaces/msg/SortModeCommand",
-}
+# Every topic of one line that does not evolve (relative to its namespace) and its type: the
+# package's vocabulary (sorting_line_gym.line.topics), tested against the node's by test_topics.py.
+LINE_TYPES = line_types(evolving=False)
 
 
 # --------------------------------------------------------------------------------------------

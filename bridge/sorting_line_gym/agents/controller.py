@@ -54,6 +54,7 @@ from sorting_line_interfaces.msg import (
     SpeedCommand,
 )
 
+from ..line.topics import BELT_OCCUPANCY, EVOLUTION_EVENT, INPUT, SENSORS_RATIO, SORT_MODE_CMD, SPEED_CMD
 from ..line.vocabulary import CATEGORY_UNKNOWN_CODE, SPEEDS, speed_index_of
 from ..ros.links import QOS, publish_commands
 from .controller_diagnostics import ControllerDiagnostics
@@ -122,15 +123,15 @@ class ControllerNode(Node):
         self._newest_input: int | None = None
         self._warned_incomplete = False
 
-        self.speed_pub = self.create_publisher(SpeedCommand, "cmd/speed", QOS)
-        self.mode_pub = self.create_publisher(SortModeCommand, "cmd/sort_mode", QOS) if self.advanced else None
-        self.subs = [self.create_subscription(MaterialInput, "input", self._on_input, QOS)]
+        self.speed_pub = self.create_publisher(SpeedCommand, SPEED_CMD, QOS)
+        self.mode_pub = self.create_publisher(SortModeCommand, SORT_MODE_CMD, QOS) if self.advanced else None
+        self.subs = [self.create_subscription(MaterialInput, INPUT, self._on_input, QOS)]
         if self.advanced:
-            self.subs.append(self.create_subscription(MaterialRatio, "sensors/ratio", self._on_ratio, QOS))
+            self.subs.append(self.create_subscription(MaterialRatio, SENSORS_RATIO, self._on_ratio, QOS))
         if self.needs_speed:
-            self.subs.append(self.create_subscription(BeltOccupancy, "belt/occupancy", self._on_belt, QOS))
+            self.subs.append(self.create_subscription(BeltOccupancy, BELT_OCCUPANCY, self._on_belt, QOS))
         if evolving:
-            self.events = self.create_subscription(EvolutionEvent, "events/evolution", self._on_evolution, QOS)
+            self.events = self.create_subscription(EvolutionEvent, EVOLUTION_EVENT, self._on_evolution, QOS)
             self._hardware(sort_modes=False, ratio_sensor=False)
         self.diagnostics = ControllerDiagnostics(self, agent, fallback)
         self._connect_timer = self.create_timer(0.1, self._check_connected)
@@ -138,8 +139,8 @@ class ControllerNode(Node):
         self.get_logger().info(
             f"{getattr(agent, 'name', type(agent).__name__)} on the {variant} line"
             f"{' of setup ' + agent.setup if hasattr(agent, 'setup') else ''}: reading {topics}; "
-            f"commanding {self.resolve_topic_name('cmd/speed')}"
-            + (f" and {self.resolve_topic_name('cmd/sort_mode')}" if self.advanced else "")
+            f"commanding {self.resolve_topic_name(SPEED_CMD)}"
+            + (f" and {self.resolve_topic_name(SORT_MODE_CMD)}" if self.advanced else "")
         )
 
     # -- graph ---------------------------------------------------------------------------------
@@ -151,7 +152,7 @@ class ControllerNode(Node):
         if self.evolving:
             # The ratio sensor and sort modes come and go with the hardware: not there is no fault.
             pubs = [self.speed_pub]
-            subs = [s for s in self.subs if not s.topic_name.endswith("/sensors/ratio")]
+            subs = [s for s in self.subs if not s.topic_name.endswith(f"/{SENSORS_RATIO}")]
         if all(p.get_subscription_count() > 0 for p in pubs) and all(s.get_publisher_count() > 0 for s in subs):
             self.get_logger().info("connected: every sensor topic has a publisher and every command topic a subscriber")
             self._connect_timer.cancel()
@@ -188,7 +189,7 @@ class ControllerNode(Node):
         if msg.category > 2:
             self.invalid += 1
             self.get_logger().warning(
-                f"sensors/ratio: category {msg.category} is not 0, 1 or 2", throttle_duration_sec=5.0
+                f"{SENSORS_RATIO}: category {msg.category} is not 0, 1 or 2", throttle_duration_sec=5.0
             )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, category=int(msg.category))
@@ -198,7 +199,7 @@ class ControllerNode(Node):
         if index is None:
             self.invalid += 1
             self.get_logger().warning(
-                f"belt/occupancy: speed {msg.speed} is not one of the ten speeds", throttle_duration_sec=5.0
+                f"{BELT_OCCUPANCY}: speed {msg.speed} is not one of the ten speeds", throttle_duration_sec=5.0
             )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, speed_index=index)
@@ -222,11 +223,11 @@ class ControllerNode(Node):
     def _missing(self, tick: _Readings) -> list[str]:
         missing = []
         if tick.quantity is None:
-            missing.append("input")
+            missing.append(INPUT)
         if self.advanced and self.ratio_sensor and tick.category is None:
-            missing.append("sensors/ratio")
+            missing.append(SENSORS_RATIO)
         if self.needs_speed and tick.speed_index is None:
-            missing.append("belt/occupancy")
+            missing.append(BELT_OCCUPANCY)
         return missing
 
     def _complete(self, tick: _Readings) -> bool:

@@ -13,6 +13,8 @@ from __future__ import annotations
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
+from ..line.topics import DIAGNOSTICS
+
 #: Seconds between two status messages (the node's own diagnostics rate).
 PERIOD = 1.0
 
@@ -23,7 +25,7 @@ class ControllerDiagnostics:
     def __init__(self, node: Node, agent, fallback):
         self.node, self.agent, self.fallback = node, agent, fallback
         self.fallbacks = 0
-        self.publisher = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS, 10)
         self.timer = node.create_timer(PERIOD, self.publish)
 
     def status(self) -> DiagnosticStatus:

@@ -33,6 +33,7 @@ from typing import get_args, get_type_hints
 
 from ..line.errors import BridgeError
 from ..line.flags import call_with_flags
+from ..line.topics import BATCH_CMD, CLOCK, DIAGNOSTICS, RESET_EVENT, SORT_MODE_CMD, SPEED_CMD
 from ..line.vocabulary import SETUPS
 from .format.errors import BagError, BagWriteError
 from .format.options import (
@@ -106,9 +107,9 @@ def _record_parser(sub) -> None:
         dest="topics",
         metavar="TOPIC",
         help="record this topic (absolute, or relative to the namespace); repeatable. Default: "
-        "the line's topics, its commands, its resets (events/reset) and /clock",
+        f"the line's topics, its commands, its resets ({RESET_EVENT}) and {CLOCK}",
     )
-    r.add_argument("--diagnostics", action="store_true", help="also record /diagnostics (wall-clock, not replayed)")
+    r.add_argument("--diagnostics", action="store_true", help=f"also record {DIAGNOSTICS} (wall-clock, not replayed)")
     r.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     r.add_argument("--max-ticks", type=int, default=None, help="stop once this many states were recorded")
     r.add_argument("--wait", type=float, default=10.0, help="how long to wait for the line to show up (s)")
@@ -148,7 +149,7 @@ def _play_parser(sub) -> None:
         "--lockstep",
         action="store_true",
         help="tick by tick instead of by time: each tick after the controller answered the previous one "
-        "on cmd/speed (when the bag shows an answer), as a lock-step node would",
+        f"on {SPEED_CMD} (when the bag shows an answer), as a lock-step node would",
     )
     pl.add_argument("--answer-timeout", type=float, default=5.0, help="--lockstep: longest wait for an answer (s)")
 
@@ -253,9 +254,9 @@ def _node_options(args) -> NodeOverrides:
     return NodeOverrides(**{k: getattr(args, k) for k in get_type_hints(NodeOverrides)})
 
 
-CHECK_EPILOG = """\
+CHECK_EPILOG = f"""\
 open loop (default): the bag's node side is played tick by tick (as play --lockstep); each tick the
-  bag shows a command for waits for the controller's answer (cmd/speed, cmd/sort_mode, or batch/cmd)
+  bag shows a command for waits for the controller's answer ({SPEED_CMD}, {SORT_MODE_CMD}, or {BATCH_CMD})
   and compares it with the bag's: the first difference by tick, topic and field, counts of
   matching, differing and missing answers, answer latency p50/p99/max. Passes when every answer
   matches and none is missing.
@@ -269,11 +270,11 @@ examples:
 """
 
 
-RECORD_DESCRIPTION = """\
+RECORD_DESCRIPTION = f"""\
 Records a running line into a ROS 2 bag (metadata.yaml + MCAP) as it goes: whatever arrived more
 than about half a second ago is on disk, so a recorder killed outright (SIGKILL, the OOM killer, a
 pulled plug) leaves a bag that `sorting-line-bag reindex BAG` recovers. At the end it compares what
-it received with the node's own /diagnostics counters and says how many messages it missed, and on
+it received with the node's own {DIAGNOSTICS} counters and says how many messages it missed, and on
 which topics (also shown by `info`). A full disk stops it with exit code 3 and a readable bag."""
 
 

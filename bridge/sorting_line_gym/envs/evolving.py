@@ -55,6 +55,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
+from ..line.topics import EVOLUTION_EVENT
 from ..line.vocabulary import action_mask, decode_action, line_infos, observations, sim_seconds, state_info
 from .env import SEED_BOUND, action_space, observation_space
 from .keywords import Keywords
@@ -153,7 +154,7 @@ class SortingLineEvolvingEnv(gym.Env):
             options,
             lines=1,
             batch=True,
-            watch={"events/evolution": (EvolutionEvent, self._inbox.append)},
+            watch={EVOLUTION_EVENT: (EvolutionEvent, self._inbox.append)},
             on_fresh_node=self._inbox.clear,
             first_proof=self._setup_not_announced,
         )
@@ -183,7 +184,7 @@ class SortingLineEvolvingEnv(gym.Env):
         episode = results[0].episode
         if any(map(announces_setup_of(episode), self._inbox)):
             return None
-        return f"events/evolution: the setup of episode {episode}"
+        return f"{EVOLUTION_EVENT}: the setup of episode {episode}"
 
     def _take(self, match, what: str):
         waiter = self.bank.waiter
@@ -195,7 +196,7 @@ class SortingLineEvolvingEnv(gym.Env):
                 found.append(hits[-1])
             return bool(hits)
 
-        waiter.until(arrived, self.bank.step_timeout, lambda: f"{self.namespace}/events/evolution: {what}")
+        waiter.until(arrived, self.bank.step_timeout, lambda: f"{self.namespace}/{EVOLUTION_EVENT}: {what}")
         message = found[-1]
         self._inbox[:] = [m for m in self._inbox if not match(m)]
         return message

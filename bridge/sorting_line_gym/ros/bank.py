@@ -24,6 +24,7 @@ from ..line.errors import BridgeError
 from ..line.line_server import Lease
 from ..line.options import LineOptions
 from ..line.process import STOP_TIMEOUT, NodeProcess, private_namespace
+from ..line.topics import BELT_OCCUPANCY, INPUT, join
 from ..workarounds.fork_unsafe_dds import fork_error
 from ..workarounds.late_matching import (
     FRESH_NODE_ATTEMPTS,
@@ -149,8 +150,8 @@ class LineBank:
             ]
             if self._watch_sensors:
                 for k, ns in enumerate(spaces):
-                    self.node.create_subscription(MaterialInput, f"{ns}/input", self._keep(k, "input"), QOS)
-                    self.node.create_subscription(BeltOccupancy, f"{ns}/belt/occupancy", self._keep(k, "belt"), QOS)
+                    self.node.create_subscription(MaterialInput, join(ns, INPUT), self._keep(k, "input"), QOS)
+                    self.node.create_subscription(BeltOccupancy, join(ns, BELT_OCCUPANCY), self._keep(k, "belt"), QOS)
         except BaseException:
             self.close()
             raise
@@ -178,7 +179,8 @@ class LineBank:
             lambda: key in store["input"] and key in store["belt"],
             timeout,
             lambda: (
-                f"the input and belt/occupancy messages of tick {key[0]}.{key[1]:09d} s on {self.links[k].namespace}"
+                f"the {INPUT} and {BELT_OCCUPANCY} messages of tick {key[0]}.{key[1]:09d} s "
+                f"on {self.links[k].namespace}"
             ),
         )
         return store["input"][key], store["belt"][key]

@@ -22,6 +22,7 @@ from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, Sor
 from sorting_line_interfaces.srv import ResetLine, ResetLines
 
 from ..line.errors import BridgeError
+from ..line.topics import BATCH_CMD, BATCH_RESET, BATCH_STATE, DIAGNOSTICS, RESET, SORT_MODE_CMD, SPEED_CMD, STATE
 from ..line.vocabulary import SPEEDS  # a speed index i commands SPEEDS[i]
 from .batch_codec import BatchCodec, from_message, row_bytes
 
@@ -78,7 +79,7 @@ def check_not_taken_over(namespace: str, ours: int, seen: int) -> None:
     if seen > ours:
         raise BridgeError(
             f"{namespace}: another client reset this line (episode {seen}; this bridge drives episode "
-            f"{ours}); the node refuses this bridge's commands from now on ('not_owner' on /diagnostics). "
+            f"{ours}); the node refuses this bridge's commands from now on ('not_owner' on {DIAGNOSTICS}). "
             "Call reset() to take the line back, or give each bridge a line of its own"
         )
 
@@ -110,14 +111,14 @@ class LineLink:
         def name(rel):
             return f"{self.namespace}/{rel}"
 
-        self.state_topic = name("state")
+        self.state_topic = name(STATE)
         self.speed_pub = self.mode_pub = self.state_sub = self.reset_client = None
         # States arrive in order; keep a short backlog so nothing is lost while we publish.
         self.inbox: deque[LineState] = deque(maxlen=64)
         if per_line_topics:
-            self.reset_client = node.create_client(ResetLine, name("reset"), qos_profile=QOS)
-            self.speed_pub = node.create_publisher(SpeedCommand, name("cmd/speed"), QOS)
-            self.mode_pub = node.create_publisher(SortModeCommand, name("cmd/sort_mode"), QOS) if advanced else None
+            self.reset_client = node.create_client(ResetLine, name(RESET), qos_profile=QOS)
+            self.speed_pub = node.create_publisher(SpeedCommand, name(SPEED_CMD), QOS)
+            self.mode_pub = node.create_publisher(SortModeCommand, name(SORT_MODE_CMD), QOS) if advanced else None
             self.state_sub = node.create_subscription(LineState, self.state_topic, lambda m: self.inbox.append(m), QOS)
         self.tick: Tick | None = None
         self.last_state: LineState | None = None
@@ -134,10 +135,10 @@ class LineLink:
         if self.reset_client is not None:
             seen["reset service"] = self.reset_client.service_is_ready()
         if self.speed_pub is not None:
-            seen["cmd/speed reader"] = self.speed_pub.get_subscription_count() > 0
+            seen[f"{SPEED_CMD} reader"] = self.speed_pub.get_subscription_count() > 0
             seen["state writer"] = node.count_publishers(self.state_topic) > 0
         if self.mode_pub is not None:
-            seen["cmd/sort_mode reader"] = self.mode_pub.get_subscription_count() > 0
+            seen[f"{SORT_MODE_CMD} reader"] = self.mode_pub.get_subscription_count() > 0
         return seen
 
     # -- reset -------------------------------------------------------------------------------
@@ -154,7 +155,7 @@ class LineLink:
         response = self._reset_future.result()
         self._reset_future = None
         if response is None or not response.success:
-            raise BridgeError(f"{self.namespace}/reset refused: {getattr(response, 'message', 'no response')}")
+            raise BridgeError(f"{self.namespace}/{RESET} refused: {getattr(response, 'message', 'no response')}")
         self.tick = Tick(response.stamp, response.episode, 0)
         # States of earlier ticks can no longer be what anyone waits for. The new episode's
         # step-0 state may already be here (the node publishes it before replying): keep it.
@@ -213,10 +214,10 @@ class BatchLink:
         self.links = links
         n = len(links)
         base = namespace.rstrip("/")
-        self.state_topic = f"{base}/batch/state"
-        self.cmd_pub = node.create_publisher(LineCommands, f"{base}/batch/cmd", QOS)
-        self.reset_client = node.create_client(ResetLines, f"{base}/batch/reset", qos_profile=QOS)
-        self.reset_name = f"{base}/batch/reset"
+        self.state_topic = f"{base}/{BATCH_STATE}"
+        self.cmd_pub = node.create_publisher(LineCommands, f"{base}/{BATCH_CMD}", QOS)
+        self.reset_name = f"{base}/{BATCH_RESET}"
+        self.reset_client = node.create_client(ResetLines, self.reset_name, qos_profile=QOS)
         self._reset_future = None
         self.advanced = links[0].advanced
         self._states = BatchCodec(LineStates, n)
@@ -241,9 +242,9 @@ class BatchLink:
     def matching(self, node: Node) -> dict[str, bool]:
         """Each batch endpoint of the node -> whether this bridge has discovered it."""
         return {
-            "batch/reset service": self.reset_client.service_is_ready(),
-            "batch/cmd reader": self.cmd_pub.get_subscription_count() > 0,
-            "batch/state writer": node.count_publishers(self.state_topic) > 0,
+            f"{BATCH_RESET} service": self.reset_client.service_is_ready(),
+            f"{BATCH_CMD} reader": self.cmd_pub.get_subscription_count() > 0,
+            f"{BATCH_STATE} writer": node.count_publishers(self.state_topic) > 0,
         }
 
     def send_reset(self, seeds: dict[int, int | None]) -> None:

@@ -14,6 +14,7 @@ import numpy as np
 from rclpy.node import Node
 from sorting_line_interfaces.msg import LineState
 
+from ..line.topics import RESET
 from .links import BatchLink, LineLink, ResetResult
 
 
@@ -74,7 +75,7 @@ class PerLineTransport:
 
     def awaited_reply(self, seeds: dict[int, int | None]) -> str:
         return "the reply of " + ", ".join(
-            f"{self.links[k].namespace}/reset" for k in seeds if not self.links[k].reset_done()
+            f"{self.links[k].namespace}/{RESET}" for k in seeds if not self.links[k].reset_done()
         )
 
     def finish_reset(self, seeds: dict[int, int | None]) -> dict[int, ResetResult]:

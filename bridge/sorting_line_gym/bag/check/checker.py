@@ -27,6 +27,7 @@ from rclpy.exceptions import InvalidNamespaceException
 from rclpy.validate_namespace import validate_namespace
 
 from ...line.errors import BridgeError
+from ...line.topics import SORT_MODE_CMD, SPEED_CMD, STATE
 from ..format.errors import BagError
 from ..format.options import NodeOverrides
 from ..format.topics import LINE_TYPES
@@ -138,14 +139,14 @@ def usable_bag(path: str | Path, closed_loop: bool) -> Bag:
     bag = open_bag(path)
     if not bag.messages:
         raise BagError(f"{bag.path}: the bag is empty (no messages): record a line with a controller driving it")
-    if LINE_TYPES["state"] not in bag.types.values():
+    if LINE_TYPES[STATE] not in bag.types.values():
         listed = ", ".join(f"{t} ({ty})" for t, ty in sorted(bag.types.items()))
         raise BagError(
-            f"{bag.path}: not a bag of a sorting line: no topic of type {LINE_TYPES['state']} (it has {listed})"
+            f"{bag.path}: not a bag of a sorting line: no topic of type {LINE_TYPES[STATE]} (it has {listed})"
         )
     if not closed_loop and not expected_commands(bag):
         raise BagError(
-            f"{bag.path}: the bag has no commands (no cmd/speed or cmd/sort_mode of its line): open "
+            f"{bag.path}: the bag has no commands (no {SPEED_CMD} or {SORT_MODE_CMD} of its line): open "
             "loop compares the controller's answers with the bag's commands, so it needs a bag "
             "recorded while a controller drove the line (or use --closed-loop, which compares "
             "episodes instead)"
@@ -168,6 +169,6 @@ def tick_period_ns(bag: Bag) -> int:
     period = (bag.info.node if bag.info else {}).get("tick_period")
     if period:
         return round(float(period) * 1e9)
-    stamps = sorted({stamp_ns(m.plain) for m in bag.messages if m.msgtype == LINE_TYPES["state"]})
+    stamps = sorted({stamp_ns(m.plain) for m in bag.messages if m.msgtype == LINE_TYPES[STATE]})
     gaps = [b - a for a, b in pairwise(stamps) if b > a]
     return min(gaps) if gaps else 1_000_000_000

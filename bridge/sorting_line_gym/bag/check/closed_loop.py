@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 from ...line.errors import BridgeTimeout
+from ...line.topics import DIAGNOSTICS, INPUT, RESET, RESET_EVENT, SPEED_CMD, STATE
 from ...ros.links import LineLink
 from ...workarounds.late_matching import repeated_while_unanswered
 from ..format.options import NodeOverrides
@@ -86,7 +87,7 @@ def run_closed_loop(
         run = _Run(plan, verdict, tool, watch, Path(scratch.name), o.answer_timeout, o.wait, o.stop)
         run.start_node()
         if record is not None:
-            speed = join(verdict.namespace, "cmd/speed")
+            speed = join(verdict.namespace, SPEED_CMD)
             recorder = CheckRecorder(verdict.namespace, record, o.wait, {speed: tool.node.count_publishers(speed)})
         started = time.monotonic()
         run.drive(o.progress)
@@ -123,8 +124,8 @@ class _Run:
         self.link = LineLink(tool.node, self.namespace, advanced=False)
         self.states: list[dict] = []
         self.newest: dict[int, tuple[int, bool]] = {}  # run episode -> (newest step, ended)
-        self.state_sub = tool.raw_subscription(join(self.namespace, "state"), LINE_TYPES["state"], self._on_state)
-        self.resets = plan.rel_msgs.get("events/reset", [])
+        self.state_sub = tool.raw_subscription(join(self.namespace, STATE), LINE_TYPES[STATE], self._on_state)
+        self.resets = plan.rel_msgs.get(RESET_EVENT, [])
         self.episodes: dict[int, int] = {}  # bag episode -> run episode
 
     def start_node(self) -> None:
@@ -150,7 +151,7 @@ class _Run:
         )
 
     def _on_state(self, data: bytes, _received: int) -> None:
-        s = decode(data, LINE_TYPES["state"])
+        s = decode(data, LINE_TYPES[STATE])
         self.states.append(s)
         step, _ = self.newest.get(s["episode"], (-1, False))
         self.newest[s["episode"]] = (max(step, s["step"]), bool(s["terminated"] or s["truncated"]))
@@ -167,7 +168,7 @@ class _Run:
             self.tool.until(
                 lambda: controller_seen(node, ns, own_speed_writers=1),
                 wait,
-                f"a controller in {ns} (a reader of input, a writer of cmd/speed)",
+                f"a controller in {ns} (a reader of {INPUT}, a writer of {SPEED_CMD})",
             )
         except BridgeTimeout as e:
             raise BridgeTimeout(f"{e}: start one there, or pass --controller CMD") from None
@@ -177,7 +178,7 @@ class _Run:
         self.tool.until(
             lambda: matches.all_matched(ns),
             STARTUP_TIMEOUT,
-            f"the check's node serving {ns} to match every reader of its input (input_readers on /diagnostics)",
+            f"the check's node serving {ns} to match every reader of its {INPUT} (input_readers on {DIAGNOSTICS})",
         )
         self.tool.spin_for(SETTLE)
 
@@ -203,7 +204,9 @@ class _Run:
 
         def attempt(_k: int) -> tuple[int, int | None]:
             self.link.send_reset(seed)
-            self.tool.until(self.link.reset_done, max(5.0, self.answer_timeout), f"the reply of {self.namespace}/reset")
+            self.tool.until(
+                self.link.reset_done, max(5.0, self.answer_timeout), f"the reply of {self.namespace}/{RESET}"
+            )
             episode = self.link.finish_reset().episode
             self.episodes[int(recorded["episode"])] = episode
             return episode, self._follow(episode, target, bar)
@@ -244,7 +247,7 @@ class _Run:
         a = Answer(
             stamp // self.plan.period,
             stamp,
-            "cmd/speed",
+            SPEED_CMD,
             "speed",
             None,
             episode=int(recorded["episode"]),

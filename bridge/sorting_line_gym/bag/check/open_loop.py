@@ -20,6 +20,7 @@ import time
 from collections import defaultdict
 
 from ...line.errors import BridgeTimeout
+from ...line.topics import BATCH_CMD, SORT_MODE_CMD, SPEED_CMD
 from ...line.vocabulary import speed_index_of
 from ..format.topics import LINE_TYPES, join
 from ..storage.reader import Bag
@@ -31,8 +32,8 @@ from .options import RunOptions
 from .verdict import Answer, Verdict, node_reason
 
 #: The fields a command topic answers with: topic -> (field, batch/cmd array).
-FIELDS = {"cmd/speed": ("speed", "speeds"), "cmd/sort_mode": ("mode", "modes")}
-BATCH = "batch/cmd"
+FIELDS = {SPEED_CMD: ("speed", "speeds"), SORT_MODE_CMD: ("mode", "modes")}
+BATCH = BATCH_CMD
 BATCH_TYPE = "sorting_line_interfaces/msg/LineCommands"
 
 
@@ -46,7 +47,7 @@ def expected_commands(bag: Bag) -> dict[int, dict[str, dict]]:
             plain, stamp = m.plain, stamp_ns(m.plain)
             held = out[stamp].get(topic)
             if held is None or (
-                topic == "cmd/speed"
+                topic == SPEED_CMD
                 and speed_index_of(held["speed"]) is None
                 and speed_index_of(plain["speed"]) is not None
             ):
@@ -82,8 +83,8 @@ class _Answers:
             return
         stamp = {"sec": plain["stamp_sec"][k], "nanosec": plain["stamp_nanosec"][k]}
         if len(plain["modes"]) > k:
-            self.on_command("cmd/sort_mode", BATCH, {"header": {"stamp": stamp}, "mode": plain["modes"][k]}, received)
-        self.on_command("cmd/speed", BATCH, {"header": {"stamp": stamp}, "speed": plain["speeds"][k]}, received)
+            self.on_command(SORT_MODE_CMD, BATCH, {"header": {"stamp": stamp}, "mode": plain["modes"][k]}, received)
+        self.on_command(SPEED_CMD, BATCH, {"header": {"stamp": stamp}, "speed": plain["speeds"][k]}, received)
 
     def answered(self, stamp: int, topics) -> bool:
         return stamp in self.wrong_during or all(t in self.got.get(stamp, {}) for t in topics)
@@ -258,7 +259,7 @@ def _judge(
 
 def _compare(topic: str, recorded, answered) -> tuple[str, str | None]:
     """(matching or differing, the node's reason to refuse the answer if it would)."""
-    if topic == "cmd/speed":
+    if topic == SPEED_CMD:
         index = speed_index_of(answered)
         if index is None:
             return "differing", node_reason("invalid_speed")

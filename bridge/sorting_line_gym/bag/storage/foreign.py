@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+from ...line.topics import DIAGNOSTICS, PARAMETER_EVENTS, RESET_EVENT, SENSORS_RATIO, STATE
 from ...line.vocabulary import SETUPS, THRESHOLD
 from ..format.options import NodeOverrides
 from ..format.topics import LINE_OPTIONS, LINE_TYPES, join
@@ -30,8 +31,6 @@ from .schema import stamp_ns
 REQUIRED = ("variant", "input", "obs_noise", "action_penalty", "threshold", "max_steps", "seed", "tick_period")
 #: The options a setup (``--setup A..D``) stands for.
 SETUP_OPTIONS = ("input", "obs_noise", "action_penalty", "threshold")
-PARAMETER_EVENTS = "/parameter_events"
-DIAGNOSTICS = "/diagnostics"
 
 Messages = Mapping[str, list]  # topic -> the bag's messages on it (BagMessage: .plain decodes)
 
@@ -39,10 +38,10 @@ Messages = Mapping[str, list]  # topic -> the bag's messages on it (BagMessage: 
 def line_namespace_of(types: Mapping[str, str]) -> str | None:
     """The namespace of the one line a bag recorded (``<ns>/state`` of type LineState), or None
     when it has none or several."""
-    states = [t for t, ty in types.items() if ty == LINE_TYPES["state"] and t.endswith("/state")]
+    states = [t for t, ty in types.items() if ty == LINE_TYPES[STATE] and t.endswith(f"/{STATE}")]
     if len(states) != 1:
         return None
-    return states[0][: -len("/state")] or "/"
+    return states[0][: -len(f"/{STATE}")] or "/"
 
 
 def options_from_topics(namespace: str, messages: Messages) -> tuple[dict, dict]:
@@ -51,9 +50,9 @@ def options_from_topics(namespace: str, messages: Messages) -> tuple[dict, dict]
     options: dict = {}
     sources: dict = {}
     finders: list[tuple[str, Callable[[str, Messages], dict]]] = [
-        ("/parameter_events", _from_parameter_events),
-        ("events/reset", _from_first_reset),
-        ("/diagnostics", _from_diagnostics),
+        (PARAMETER_EVENTS, _from_parameter_events),
+        (RESET_EVENT, _from_first_reset),
+        (DIAGNOSTICS, _from_diagnostics),
         ("states", _from_states),
     ]
     for name, find in finders:
@@ -144,7 +143,7 @@ def _line_index(namespace: str, lines) -> int:
 
 
 def _from_first_reset(namespace: str, messages: Messages) -> dict:
-    resets = messages.get(join(namespace, "events/reset"), [])
+    resets = messages.get(join(namespace, RESET_EVENT), [])
     first = resets[0].plain if resets else None
     return {"seed": int(first["seed"])} if first and first.get("seeded") else {}
 
@@ -178,7 +177,7 @@ def _from_diagnostics(namespace: str, messages: Messages) -> dict:
 def _from_states(namespace: str, messages: Messages) -> dict:
     out: dict = {}
     previous = None
-    for m in messages.get(join(namespace, "state"), []):
+    for m in messages.get(join(namespace, STATE), []):
         s = m.plain
         if s.get("truncated") and "max_steps" not in out:
             out["max_steps"] = int(s["step"])
@@ -191,6 +190,6 @@ def _from_states(namespace: str, messages: Messages) -> dict:
         previous = s
         if len(out) == 2:
             break
-    if join(namespace, "sensors/ratio") in messages:
+    if join(namespace, SENSORS_RATIO) in messages:
         out["variant"] = "advanced"
     return out

@@ -19,11 +19,12 @@ import json
 import struct
 from collections import deque
 
+from ...line.topics import BELT_OCCUPANCY, DIAGNOSTICS, EVOLUTION_EVENT, INPUT, SENSORS_RATIO, STATE
 from ..format.description import RECORDING_KEY
 from ..format.topics import PUBLISHED, relative_to
 
 #: Topics with exactly one message per tick (the ratio sensor only on a non-evolving advanced line).
-PER_TICK = ("input", "belt/occupancy", "state")
+PER_TICK = (INPUT, BELT_OCCUPANCY, STATE)
 #: Latest stamps kept per topic: far more than arrive between the last report and the end.
 RECENT = 4096
 
@@ -48,11 +49,11 @@ class LossCounter:
         self.namespace = namespace
         self.period = max(1, round(tick_period * 1e9))
         rel = {relative_to(namespace, t) for t in recorded}
-        published = [t for t in PUBLISHED if t != "events/evolution" or evolving]
+        published = [t for t in PUBLISHED if t != EVOLUTION_EVENT or evolving]
         if variant == "basic" and not evolving:
-            published.remove("sensors/ratio")
+            published.remove(SENSORS_RATIO)
         self.missing_topics = [t for t in published if t not in rel]
-        self.per_tick = list(PER_TICK) + (["sensors/ratio"] if variant == "advanced" and not evolving else [])
+        self.per_tick = list(PER_TICK) + ([SENSORS_RATIO] if variant == "advanced" and not evolving else [])
         self.first: tuple[int, int] | None = None  # (sim_time, published) of the first report
         self.last: tuple[int, int] | None = None
         # Per topic: messages stamped after the first report, and the latest stamps (for those
@@ -92,7 +93,7 @@ class LossCounter:
                 "why": f"not every topic of the line was recorded ({', '.join(self.missing_topics)} left out)",
             }
         if self.first is None or self.last is None or self.last == self.first:
-            return {"compared": False, "why": "fewer than two /diagnostics reports of the line arrived"}
+            return {"compared": False, "why": f"fewer than two {DIAGNOSTICS} reports of the line arrived"}
         (t0, p0), (t1, p1) = self.first, self.last
         received = {rel: n - sum(1 for s in self.recent[rel] if s > t1) for rel, n in self.after_first.items()}
         ticks = (t1 - t0) // self.period

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 from rclpy.duration import Duration
 
+from ...line.topics import INPUT, PARAMETER_EVENTS, ROSOUT, SPEED_CMD
 from ..format.errors import BagError
 from ..format.topics import COMMANDS, LINE_TYPES, join, relative_to
 from ..storage.reader import Bag, BagMessage, open_bag, topics_of
@@ -88,9 +89,9 @@ def play(
         pubs = {t: tool.publisher(selection.target(t), selection.bag.types[t]) for t in selection.chosen}
         answered: set[int] = set()
         if lockstep:
-            answers = LINE_TYPES["cmd/speed"]
+            answers = LINE_TYPES[SPEED_CMD]
             tool.raw_subscription(
-                join(selection.out_ns, "cmd/speed"),
+                join(selection.out_ns, SPEED_CMD),
                 answers,
                 lambda data, _t: answered.add(stamp_ns(decode(data, answers))),
             )
@@ -142,12 +143,12 @@ class Selection:
             chosen = [t for t in bag.types if (relative_to(line_ns, t) if line_ns else None) not in COMMANDS]
             skipped = {t: why for t in chosen if (why := _not_played_by_default(bag, t))}
             chosen = [t for t in chosen if t not in skipped]
-        waits = wait_for if wait_for is not None else (["input"] if join(line_ns, "input") in chosen else [])
+        waits = wait_for if wait_for is not None else ([INPUT] if join(line_ns, INPUT) in chosen else [])
         recorded_answers: set[int] = set()
         if lockstep:
-            answers = join(line_ns, "cmd/speed") if line_ns else None
+            answers = join(line_ns, SPEED_CMD) if line_ns else None
             if answers not in bag.types:
-                raise BagError(f"{bag.path}: --lockstep needs the bag's cmd/speed, the answers it waits for")
+                raise BagError(f"{bag.path}: --lockstep needs the bag's {SPEED_CMD}, the answers it waits for")
             recorded_answers = {stamp_ns(m.plain) for m in bag.on(answers)}
         messages = [m for m in bag.messages if m.topic in chosen]
         return cls(bag, line_ns, namespace, chosen, waits, messages, recorded_answers, skipped)
@@ -155,7 +156,7 @@ class Selection:
 
 #: Topics of a recorded graph's nodes, not of the line: played again they would describe nodes
 #: that are not there.
-GRAPH_TOPICS = ("/rosout", "/parameter_events")
+GRAPH_TOPICS = (ROSOUT, PARAMETER_EVENTS)
 
 
 def _unplayable(bag: Bag, topic: str) -> str | None:
@@ -262,7 +263,7 @@ class Pace:
     def _await_answer(self, stamp: int | None) -> None:
         if stamp is None or stamp not in self.selection.recorded_answers:
             return
-        topic = join(self.selection.out_ns, "cmd/speed")
+        topic = join(self.selection.out_ns, SPEED_CMD)
         try:
             self.tool.until(
                 lambda: stamp in self.answered or self.stop(),

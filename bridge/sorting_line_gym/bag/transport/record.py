@@ -40,6 +40,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
 
+from ...line.topics import DIAGNOSTICS, SENSORS_RATIO, STATE
 from ...workarounds.late_matching import retried_handshake
 from ..format.description import META_KEY, LineInfo
 from ..format.errors import BagError
@@ -113,7 +114,7 @@ def node_options(tool: ToolNode, namespace: str, timeout: float) -> dict | None:
 
     The call is repeated (it is idempotent): right after discovery the node may match our request
     writer before our reply reader, and a reply sent before that is lost for good (volatile)."""
-    state = join(namespace, "state")
+    state = join(namespace, STATE)
     # Until the node's ros_discovery_info arrives, its endpoints belong to "_CREATED_BY_BARE_DDS_APP_".
     named = []
 
@@ -215,7 +216,7 @@ def record(
             namespace, list(types), info.node.get("variant"), evolving, float(info.node.get("tick_period") or 1.0)
         )
         diag = _line_reports(tool, namespace, counter)
-        subs, states = _subscribe(tool, writer, counter, types, join(namespace, "state"))
+        subs, states = _subscribe(tool, writer, counter, types, join(namespace, STATE))
         _await_matched(tool, namespace, subs, wait, evolving=evolving)
         on_ready(f"recording {len(types)} topics of {namespace} into {out}")
         started = time.monotonic()
@@ -254,7 +255,7 @@ def _compare_and_close(tool: ToolNode, writer: BagWriter, counter: LossCounter, 
     """Waits for one more report of the node's counters, compares, stores the result, closes the bag."""
     last = counter.last
     with contextlib.suppress(TimeoutError):  # a report after the drain: the window covers (nearly) all
-        tool.until(lambda: counter.last != last, 1.5, "a /diagnostics report of the line")
+        tool.until(lambda: counter.last != last, 1.5, f"a {DIAGNOSTICS} report of the line")
         tool.spin_for(0.3)  # the line's messages sent before that report (other topics may come later)
     tool.node.destroy_subscription(diag)
     losses = counter.report()
@@ -282,14 +283,14 @@ def _line_reports(tool: ToolNode, namespace: str, counter: LossCounter):
             if status.hardware_id == namespace:
                 counter.on_status({kv.key: kv.value for kv in status.values})
 
-    return tool.node.create_subscription(DiagnosticArray, "/diagnostics", on, 10)
+    return tool.node.create_subscription(DiagnosticArray, DIAGNOSTICS, on, 10)
 
 
 def _match(
     tool: ToolNode, namespace: str, topics: list[str] | None, diagnostics: bool, wait: float
 ) -> tuple[dict | None, dict[str, str]]:
     """The line's node options (None if it does not tell) and the recorded topics with their types."""
-    state = join(namespace, "state")
+    state = join(namespace, STATE)
     tool.until(
         lambda: tool.node.count_publishers(state) > 0,
         wait,
@@ -306,10 +307,10 @@ def _match(
     variant = (
         options["variant"]
         if options
-        else ("advanced" if tool.node.count_publishers(join(namespace, "sensors/ratio")) else "basic")
+        else ("advanced" if tool.node.count_publishers(join(namespace, SENSORS_RATIO)) else "basic")
     )
     evolving = bool(options and options.get("evolution_file"))
-    wanted = topics if topics else [*line_topics(variant, evolving), CLOCK] + (["/diagnostics"] if diagnostics else [])
+    wanted = topics if topics else [*line_topics(variant, evolving), CLOCK] + ([DIAGNOSTICS] if diagnostics else [])
     types = {}
     for name in {join(namespace, t): t for t in wanted}:
         rel = relative_to(namespace, name)
@@ -324,7 +325,7 @@ def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float, evol
     seen_status = []
     diag = tool.node.create_subscription(
         DiagnosticArray,
-        "/diagnostics",
+        DIAGNOSTICS,
         lambda a: seen_status.append(1) if any(s.hardware_id == namespace for s in a.status) else None,
         10,
     )
@@ -338,7 +339,7 @@ def _await_matched(tool: ToolNode, namespace: str, subs: dict, wait: float, evol
         lambda: all(subs[n].get_publisher_count() > 0 for n in node_side) and seen_status,
         wait,
         lambda: (
-            f"the topics of {namespace} to match and a /diagnostics status of the line "
+            f"the topics of {namespace} to match and a {DIAGNOSTICS} status of the line "
             f"(unmatched: {[n for n in node_side if subs[n].get_publisher_count() == 0]})"
         ),
     )

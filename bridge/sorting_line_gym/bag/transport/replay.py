@@ -50,6 +50,7 @@ from pathlib import Path
 
 from ...line.errors import BridgeTimeout
 from ...line.process import private_namespace
+from ...line.topics import DIAGNOSTICS, RESET, RESET_EVENT, SENSORS_RATIO, SORT_MODE_CMD, SPEED_CMD, STATE
 from ...ros.links import LineLink
 from ...workarounds.late_matching import repeated_while_unanswered, retried_handshake
 from ..format.options import NodeOverrides
@@ -118,8 +119,8 @@ class _Capture:
 
         def keep(data: bytes, _received: int) -> None:
             store.append(data)
-            if rel == "state":
-                m = decode(data, LINE_TYPES["state"])
+            if rel == STATE:
+                m = decode(data, LINE_TYPES[STATE])
                 self.states[stamp_ns(m)] = m
 
         return keep
@@ -152,7 +153,7 @@ def replay(
     scratch = tempfile.TemporaryDirectory(prefix="sorting_line_replay_")
     if plan.evolution is not None:
         result.notes.append(
-            "evolving line: replayed with the schedule stored in the bag; sensors/ratio not compared "
+            f"evolving line: replayed with the schedule stored in the bag; {SENSORS_RATIO} not compared "
             "(its publisher appears with the sensor upgrade; the reading is compared in state)"
         )
     run = None
@@ -206,7 +207,7 @@ class _Replay:
             plan,
             self.namespace,
             scratch,
-            ("-r", f"/clock:={self.namespace}/clock", "-r", f"/diagnostics:={self.namespace}/diagnostics"),
+            ("-r", f"{CLOCK}:={self.namespace}{CLOCK}", "-r", f"{DIAGNOSTICS}:={self.namespace}{DIAGNOSTICS}"),
         )
         self.tool = None
         try:
@@ -218,7 +219,7 @@ class _Replay:
         except BaseException:
             self.close()
             raise
-        self.publishers = {"cmd/speed": self.link.speed_pub, "cmd/sort_mode": self.link.mode_pub}
+        self.publishers = {SPEED_CMD: self.link.speed_pub, SORT_MODE_CMD: self.link.mode_pub}
         self.store = typestore()
         self.sent = 0  # drivers sent so far
         #: Why the bag's first reset is not proven (None: it is; see take_first_reset).
@@ -284,7 +285,7 @@ class _Replay:
         try:
             for rel, m in plan.drivers[self.sent :]:
                 bar.update(1)
-                sent = self._reset(m) if rel == "events/reset" else self._command(rel, m)
+                sent = self._reset(m) if rel == RESET_EVENT else self._command(rel, m)
                 if not sent:
                     return self.capture
             later = [s for s in plan.bag_states if s >= plan.start]
@@ -304,7 +305,7 @@ class _Replay:
             self.tool.until(
                 lambda: want in self.capture.states,
                 self.step_timeout,
-                f"{self.namespace}/state of tick {want // period} ({why})",
+                f"{self.namespace}/{STATE} of tick {want // period} ({why})",
             )
             return True
         except BridgeTimeout:
@@ -317,7 +318,7 @@ class _Replay:
         if result.resets and earlier and not self._reached(max(earlier), "the last state before a reset"):
             return False
         self.link.send_reset(int(plain["seed"]) if plain.get("seeded", True) else None)
-        self.tool.until(self.link.reset_done, self.step_timeout, f"the reply of {self.namespace}/reset")
+        self.tool.until(self.link.reset_done, self.step_timeout, f"the reply of {self.namespace}/{RESET}")
         reply = self.link.finish_reset()
         if result.resets == 0:
             result.tick_shift = (stamp - (reply.stamp.sec * 1_000_000_000 + reply.stamp.nanosec)) // self.plan.period
@@ -333,13 +334,13 @@ class _Replay:
         pub = self.publishers.get(rel)
         if pub is None:  # a sort mode sent to a basic line: the node refuses it, as it did then
             pub = self.publishers[rel] = self.tool.publisher(join(self.namespace, rel), LINE_TYPES[rel])
-        if self.plan.evolution is not None and rel == "cmd/sort_mode":
+        if self.plan.evolution is not None and rel == SORT_MODE_CMD:
             if not self.plan.had_sort_modes(stamp):
                 return True  # the recorded node had no cmd/sort_mode then: it never got this command
             self.tool.until(
                 lambda: pub.get_subscription_count() > 0,
                 self.step_timeout,
-                f"{self.namespace}/cmd/sort_mode, subscribed since the machine upgrade, to match",
+                f"{self.namespace}/{SORT_MODE_CMD}, subscribed since the machine upgrade, to match",
             )
         pub.publish(_restamped(self.store, m, stamp - self.result.tick_shift * self.plan.period))
         self.result.commands += 1
@@ -376,7 +377,7 @@ def _handshake(tool: ToolNode, link: LineLink, seed: int, timeout: float) -> Non
 
     def attempt(limit: float) -> None:
         link.send_reset(seed)
-        tool.until(link.reset_done, limit, f"the reply of {link.namespace}/reset (handshake)")
+        tool.until(link.reset_done, limit, f"the reply of {link.namespace}/{RESET} (handshake)")
         link.finish_reset()
         tool.until(link.saw_state_of_current_tick, limit, f"{link.state_topic} after the handshake reset")
 
@@ -398,9 +399,9 @@ def _restamped(store, m: BagMessage, stamp: int) -> bytes:
 
 
 def _missing_state(stamp: int, period: int, rel_msgs: dict[str, list[BagMessage]]) -> Difference:
-    recorded = next((m.plain for m in rel_msgs.get("state", []) if stamp_ns(m.plain) == stamp), {})
+    recorded = next((m.plain for m in rel_msgs.get(STATE, []) if stamp_ns(m.plain) == stamp), {})
     return Difference(
-        "state",
+        STATE,
         stamp // period,
         stamp,
         "<message>",

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...line.process import NodeProcess
+from ...line.topics import EVOLUTION_EVENT, RESET_EVENT, SENSORS_RATIO, STATE
 from ..format.errors import BagError
 from ..format.options import NodeOverrides
 from ..format.topics import CLOCK, COMMANDS, LINE_TYPES, PUBLISHED, join
@@ -23,10 +24,10 @@ def line_namespace(bag: Bag) -> str:
     """The recorded line's namespace: from the bag's description, else the one ``.../state``."""
     if bag.info:
         return bag.info.namespace
-    states = [t for t, ty in bag.types.items() if ty == LINE_TYPES["state"]]
+    states = [t for t, ty in bag.types.items() if ty == LINE_TYPES[STATE]]
     if len(states) != 1:
         raise BagError(f"{bag.path}: cannot tell which line the bag recorded (state topics: {states or 'none'})")
-    return states[0][: -len("/state")] or "/"
+    return states[0][: -len(f"/{STATE}")] or "/"
 
 
 def evolution_text(bag: Bag) -> str | None:
@@ -69,7 +70,7 @@ def order_drivers(resets: list[BagMessage], commands: list[tuple[str, BagMessage
     received. (Stamps, not receive times, place a command relative to the resets: receive times
     of different writers' messages are only roughly ordered.)"""
     starts = [stamp_ns(r.plain) for r in resets]
-    keyed = [((k, 0, r.log_time), ("events/reset", r)) for k, r in enumerate(resets)]
+    keyed = [((k, 0, r.log_time), (RESET_EVENT, r)) for k, r in enumerate(resets)]
     for rel, m in commands:
         group = sum(1 for s in starts if s <= stamp_ns(m.plain)) - 1
         keyed.append(((group, 1, m.log_time), (rel, m)))
@@ -122,18 +123,18 @@ def plan_replay(bag: Bag, overrides: NodeOverrides | None) -> ReplayPlan:
     rel_msgs = bag.by_relative_topic()
     evolution = evolution_text(bag)
     if evolution is not None:
-        announced = [m.plain for m in rel_msgs.get("events/evolution", [])]
+        announced = [m.plain for m in rel_msgs.get(EVOLUTION_EVENT, [])]
         first = next((e for e in announced if e["at_reset"]), None)
         if first is None or (first["episode"], first["tick"]) != (1, 0):
-            where = f"episode {first['episode']}, tick {first['tick']}" if first else "no events/evolution at a reset"
+            where = f"episode {first['episode']}, tick {first['tick']}" if first else f"no {EVOLUTION_EVENT} at a reset"
             raise BagError(
                 f"{bag.path} records an evolving line from {where}: its schedule counts episodes and ticks "
                 "from the node's start, so a replay needs the recording to start at the node's first reset "
                 "(episode 1, tick 0)"
             )
-    resets = rel_msgs.get("events/reset", [])
+    resets = rel_msgs.get(RESET_EVENT, [])
     if not resets:
-        raise BagError(f"{bag.path}: no {join(namespace, 'events/reset')} in the bag: a replay starts at a reset")
+        raise BagError(f"{bag.path}: no {join(namespace, RESET_EVENT)} in the bag: a replay starts at a reset")
     first = resets[0].plain
     start = stamp_ns(first)
     if not first.get("seeded", True) and (start != period or first["episode"] != 1):
@@ -142,14 +143,14 @@ def plan_replay(bag: Bag, overrides: NodeOverrides | None) -> ReplayPlan:
             "the node's random streams had already moved on, so that episode cannot be reproduced. Record from a "
             "fresh node, or start the recording with a seeded reset"
         )
-    bag_states = {stamp_ns(m.plain): m.plain for m in rel_msgs.get("state", [])}
+    bag_states = {stamp_ns(m.plain): m.plain for m in rel_msgs.get(STATE, [])}
     # A command for a tick the recorded node never stepped from (the episode was over, a reset
     # came first, or the recording ended) changed nothing there; sent here it might step the node.
     stepped = {s - period for s, m in bag_states.items() if m["step"] > 0}
     commands = [(rel, m) for rel in COMMANDS for m in rel_msgs.get(rel, []) if stamp_ns(m.plain) >= start]
     effective = [c for c in commands if stamp_ns(c[1].plain) in stepped]
-    compared = [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t) and not (evolution and t == "sensors/ratio")]
-    modes = sort_modes_by_stamp([m.plain for m in rel_msgs.get("events/evolution", [])]) if evolution else []
+    compared = [t for t in (*PUBLISHED, CLOCK) if rel_msgs.get(t) and not (evolution and t == SENSORS_RATIO)]
+    modes = sort_modes_by_stamp([m.plain for m in rel_msgs.get(EVOLUTION_EVENT, [])]) if evolution else []
     at_start = {t: sum(1 for m in rel_msgs[t] if stamp_ns(m.plain) == start) for t in compared}
     return ReplayPlan(
         bag,

@@ -16,6 +16,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ...line.process import NodeProcess
+from ...line.topics import BATCH_CMD, DIAGNOSTICS, INPUT, SPEED_CMD
 from ...ros.context import check_domain_id
 from ...ros.waits import Waiter
 from ..format.topics import COMMANDS, join
@@ -50,9 +51,9 @@ def controller_seen(node, namespace: str, own_speed_writers: int = 0) -> bool:
     """Whether ``node`` sees a controller of the line in ``namespace``: a reader of its input and a
     writer of its speed commands, on the line's own topic (besides the caller's own
     ``own_speed_writers``) or on the node's batch topic."""
-    speed = node.count_publishers(join(namespace, "cmd/speed")) > own_speed_writers
-    batch = node.count_publishers(join(namespace, "batch/cmd")) > 0
-    return node.count_subscribers(join(namespace, "input")) > 0 and (speed or batch)
+    speed = node.count_publishers(join(namespace, SPEED_CMD)) > own_speed_writers
+    batch = node.count_publishers(join(namespace, BATCH_CMD)) > 0
+    return node.count_subscribers(join(namespace, INPUT)) > 0 and (speed or batch)
 
 
 class InputMatches:
@@ -65,7 +66,7 @@ class InputMatches:
     def __init__(self, node):
         self.node = node
         self.readers: dict[str, int] = {}
-        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics", self._on, 10)
+        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS, self._on, 10)
 
     def _on(self, msg) -> None:
         for status in msg.status:
@@ -78,7 +79,7 @@ class InputMatches:
 
         Judged by the node's last status of that line against this process's view of the graph."""
         matched = self.readers.get(namespace.rstrip("/"))
-        return matched is not None and matched >= max(1, self.node.count_subscribers(join(namespace, "input")))
+        return matched is not None and matched >= max(1, self.node.count_subscribers(join(namespace, INPUT)))
 
 
 class CommandMatches:
@@ -100,7 +101,7 @@ class CommandMatches:
         self.node = node
         self.readers: dict[tuple[str, str], int] = {}  # (writer's node, key) -> readers matched
         self.first_seen: dict[tuple[str, str], float] = {}
-        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics", self._on, 10)
+        node.create_subscription(rclpy_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS, self._on, 10)
 
     def _on(self, msg) -> None:
         for status in msg.status:
