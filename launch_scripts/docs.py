@@ -5,8 +5,9 @@
 
 The pages and their renderers (standard library only, so this runs before any set-up):
 docs/interfaces.md from msg/'s definitions (msg/reference.py), docs/python-api.md from the source
-of sorting_line_gym (bridge/api_reference.py). The tests check the same (test_interfaces_reference,
-test_python_api_reference).
+of sorting_line_gym (bridge/api_reference.py); and a section of pages: the node's topic table in
+README.md and docs/ros-node.md, between markers, from the topic vocabulary
+(bridge/topics_reference.py). tests/python/test_generated_docs.py checks the same.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RENDERERS = (ROOT / "msg" / "reference.py", ROOT / "bridge" / "api_reference.py")
+#: Renderers of a section of pages: their PAGES, each rewritten by rewrite(text, page).
+SECTIONS = (ROOT / "bridge" / "topics_reference.py",)
 
 
 def load(path: Path):
@@ -40,6 +43,14 @@ def main(argv: list[str] | None = None) -> int:
             page.write_text(text)
         elif not page.is_file() or page.read_text() != text:
             stale.append(page.relative_to(ROOT))
+    for renderer in map(load, SECTIONS):
+        for page in map(Path, renderer.PAGES):
+            old = page.read_text()
+            text = renderer.rewrite(old, page)
+            if not args.check:
+                page.write_text(text)
+            elif old != text:
+                stale.append(page.relative_to(ROOT))
     for page in stale:
         print(f"{page} is stale: run python3 launch_scripts/docs.py", file=sys.stderr)
     return 1 if stale else 0

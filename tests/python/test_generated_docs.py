@@ -1,6 +1,7 @@
 """The docs pages generated from sources (launch_scripts/docs.py) are current and complete:
 docs/interfaces.md from msg/ (msg/reference.py), docs/python-api.md from sorting_line_gym
-(bridge/api_reference.py)."""
+(bridge/api_reference.py), and the topic table of README.md and docs/ros-node.md from the topic
+vocabulary (bridge/topics_reference.py)."""
 
 from __future__ import annotations
 
@@ -48,3 +49,13 @@ def test_every_python_module_is_on_its_page_in_a_layer():
     for path in paths:
         name = ".".join(["sorting_line_gym", *path.relative_to(reference.PACKAGE).with_suffix("").parts])
         assert f"### `{name.removesuffix('.__init__')}`\n" in page, name
+
+
+def test_the_topic_tables_are_the_vocabularys():
+    """README.md and docs/ros-node.md hold the same table, with a row naming every endpoint."""
+    reference = _load(h.ROOT / "bridge" / "topics_reference.py")
+    block = reference.render()
+    for page in reference.PAGES:
+        assert block in page.read_text(), page
+    for endpoint in reference.vocabulary().ENDPOINTS:
+        assert f"`{'~/' if endpoint.scope == 'private' else ''}{endpoint.name}`" in block, endpoint.name
