@@ -15,6 +15,7 @@ import pytest
 import ros_harness as h
 from line_client import LineClient
 from ros_harness import LINE_TYPES, show_ns, stamp_ns
+from sorting_line_gym.line.vocabulary import START_CONTENTS
 
 REASONS = [
     "invalid_speed",
@@ -27,8 +28,8 @@ REASONS = [
     "malformed",
 ]
 
-# The fixed line contents after a reset (src/sim/line.rs).
-START_BELT = (40, 20)
+# The fixed line contents after a reset (src/sim/line.rs, as the library exports them).
+START_BELT = START_CONTENTS["belt"]
 
 
 def ns_args(ns: str) -> list[str]:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from sorting_line_gym.envs import render
-from sorting_line_gym.line.vocabulary import SPEEDS
+from sorting_line_gym.line.vocabulary import SPEEDS, START_ACCURACY
 
 DashboardFrame = render.DashboardFrame
 LiveDashboard = render.LiveDashboard
@@ -48,8 +48,8 @@ def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> Dashboar
         belt_ab=(70, 12),
         machine_ab=(5, 60),
         containers=containers,
-        belt_accuracy=accuracy[-1] if steps else 0.75,
-        sorter_accuracy=0.75,
+        belt_accuracy=accuracy[-1] if steps else START_ACCURACY,
+        sorter_accuracy=START_ACCURACY,
         occupancy=0.82,
         speed=speed[-1] if steps else 0.6,
         mode=(modes[-1] if steps else 0) if advanced else None,

@@ -1,10 +1,10 @@
 """Non-learning agents for the sorting line, all with one interface.
 
 - :class:`RuleBasedAgent` is the project's rule-based agent, ``rba`` (highest expected immediate
-  reward) or ``rba-hold`` (changes speed only when that pays back the switching penalty). It uses
-  the very table the Rust library decides with (``sorting_line policy`` prints it), so it makes the
-  same decisions as ``sorting_line eval --agent rba|rba-hold``, and is what the controller node
-  (``sorting-line-controller``) and Python evaluations run.
+  reward) or ``rba-hold`` (changes speed only when that pays back the switching penalty). It is
+  the Rust library's agent, called in this process through the extension (``_native.Agent``), so
+  it makes the same decisions as ``sorting_line eval --agent rba|rba-hold``, and is what the
+  controller node (``sorting-line-controller``) and Python evaluations run.
 - :class:`ConstantAgent` keeps one speed (and a fixed mode, or the mode matching the observed
   ratio category): a baseline, and a predictable agent for tests.
 - :class:`RandomAgent` draws uniformly from the action space with its own seeded NumPy generator:
@@ -31,20 +31,21 @@ the env's ``info`` (or the ``belt/occupancy`` topic's ``speed``) is the current 
 from __future__ import annotations
 
 import functools
-import json
 import math
-import subprocess
 from collections.abc import Sequence
 
 import numpy as np
 
-from ..line.process import find_node_binary
+from .. import _native
 from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,
+    EPISODE_STEPS,
     MODES,
+    SETUPS,
     SPEED_COUNT,
     START_SPEED_INDEX,  # noqa: F401  (re-exported: the belt's speed index after a reset)
+    THRESHOLD,
     check,
     check_setup,
     check_variant,
@@ -53,48 +54,35 @@ from ..line.vocabulary import (
 )
 
 #: Reading levels 0.00, 0.01, ..., 1.00 of the input sensor (the rows of the rule table).
-LEVELS = 101
+LEVELS: int = _native.LEVELS
 
-
-def level(quantity: float) -> int:
-    """The table row of a reading, exactly as the Rust side computes it (``observation::level``):
-    ``round(quantity * 100)`` with halves rounded away from zero (Rust's ``f64::round``, not
-    Python's round-half-to-even), clamped to 0..100; NaN gives 0."""
-    x = float(quantity) * 100.0
-    if not x > 0.0:  # NaN, negative or zero
-        return 0
-    if x >= 100.0:
-        return LEVELS - 1
-    whole = math.floor(x)
-    return int(whole) + (1 if x - whole >= 0.5 else 0)
+#: The table row of a reading, the library's own (``observation::level``): ``round(quantity *
+#: 100)`` with halves rounded away from zero (Rust's ``f64::round``, not Python's
+#: round-half-to-even), clamped to 0..100; NaN gives 0.
+level = _native.level
 
 
 @functools.cache
 def load_policy(setup: str, variant: str) -> dict:
-    """The decision tables of ``sorting_line policy --setup SETUP --variant VARIANT``, read once per
-    (setup, variant) and process. Keys: setup, variant, levels, rba (``[speed_index, mode]`` per
-    cell ``level * 3 + category``), rba_hold (per cell, one pair per current speed 0..9), config."""
-    check_setup(setup)
-    check_variant(variant)
-    argv = [find_node_binary(), "policy", "--setup", setup, "--variant", variant]
-    result = subprocess.run(argv, capture_output=True, text=True, timeout=120)
-    if result.returncode != 0:
-        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
-    policy = json.loads(result.stdout)
-    cells = policy["levels"] * 3
-    if (
-        policy["setup"] != setup
-        or policy["variant"] != variant
-        or policy["levels"] != LEVELS
-        or len(policy["rba"]) != cells
-        or len(policy["rba_hold"]) != cells
-        or any(len(row) != SPEED_COUNT for row in policy["rba_hold"])
-    ):
-        raise RuntimeError(f"`{' '.join(argv)}` printed a table of an unexpected shape")
+    """The decision tables of ``sorting_line policy --setup SETUP --variant VARIANT``, from the
+    library in this process (no CLI), read once per (setup, variant) and process. Keys: setup,
+    variant, levels, rba (``[speed_index, mode]`` per cell ``level * 3 + category``), rba_hold (per
+    cell, one pair per current speed 0..9), config."""
+    policy = _native.policy(check_setup(setup), check_variant(variant))
     # Tuples: the cached tables are shared by every agent of this process and must not change.
     policy["rba"] = tuple(tuple(pair) for pair in policy["rba"])
     policy["rba_hold"] = tuple(tuple(tuple(pair) for pair in row) for row in policy["rba_hold"])
     return policy
+
+
+@functools.cache
+def library_agent(name: str, setup: str, variant: str):
+    """The library's ``rba`` or ``rba-hold`` for a setup (``_native.Agent``: the same object
+    ``sorting_line eval --agent`` decides with), built once per process: both keep no state
+    between decisions, so every agent of that name and setup shares it."""
+    settings = dict(SETUPS[check_setup(setup)], variant=check_variant(variant))
+    settings.update(threshold=THRESHOLD, max_steps=EPISODE_STEPS)
+    return _native.Agent(name, settings)
 
 
 class Agent:
@@ -120,16 +108,14 @@ class Agent:
 class RuleBasedAgent(Agent):
     """``rba`` (``hold=False``) or ``rba-hold`` (``hold=True``) for one of the paper's setups.
 
-    The table is the Rust library's (loaded once per process through ``sorting_line policy``), so
-    decisions equal ``sorting_line eval``'s for the same observations. ``rba`` ignores
+    The decisions are the Rust library's agent's, in this process (``_native.Agent``, built once
+    per process), so they equal ``sorting_line eval``'s for the same observations. ``rba`` ignores
     ``current_speed_index``; ``rba-hold`` needs the belt's current speed."""
 
     def __init__(self, setup: str, variant: str, hold: bool = False):
         self.setup, self.variant, self.hold = setup, check_variant(variant), hold
-        policy = load_policy(setup, variant)
-        self.config = policy["config"]
-        self._rba = policy["rba"]
-        self._hold = policy["rba_hold"]
+        self._agent = library_agent(self.name, setup, variant)
+        self.config = load_policy(setup, variant)["config"]
 
     @property
     def name(self) -> str:
@@ -140,12 +126,16 @@ class RuleBasedAgent(Agent):
             category = 0  # the basic line has no ratio sensor: its table has one category slot
         else:
             check("category", category, CATEGORIES.values())
-        cell = level(quantity) * 3 + category
         if not self.hold:
-            return self._rba[cell]
-        if not (isinstance(current_speed_index, (int, np.integer)) and 0 <= current_speed_index < SPEED_COUNT):
+            current_speed_index = 0  # rba decides without it
+        elif not (isinstance(current_speed_index, (int, np.integer)) and 0 <= current_speed_index < SPEED_COUNT):
             raise ValueError(f"current_speed_index = {current_speed_index!r} is not valid: allowed 0..9")
-        return self._hold[cell][int(current_speed_index)]
+        # The table's rows clamp a reading to 0..1 (NaN: row 0); the agent takes only what a sensor
+        # reads, so the same clamp first: any float decides as before.
+        q = float(quantity)
+        q = 0.0 if math.isnan(q) else min(max(q, 0.0), 1.0)
+        action = self._agent.act(q, int(category), int(current_speed_index))
+        return decode_action(self.variant, action)
 
 
 class ConstantAgent(Agent):

@@ -65,6 +65,11 @@ from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,
     ENV_IDS,
+    EPISODE_STEPS,
+    START_ACCURACY,
+    START_CONTENTS,
+    START_OCCUPANCY,
+    START_SPEED,
     action_mask,
     check_variant,
     decode_action,
@@ -187,7 +192,8 @@ class _History:
     sensor readings of a tick are looked up when a frame is drawn, not when its state arrives:
     they travel on their own topics and may come later."""
 
-    START_INPUT, START_BELT, START_MACHINE = (30, 50), (40, 20), (75, 25)
+    # What a reset puts on the line, the library's (src/sim/line.rs): shown before the first step.
+    START_INPUT, START_BELT, START_MACHINE = (START_CONTENTS[place] for place in ("input", "belt", "machine"))
 
     def __init__(self, bank):
         self.bank = bank
@@ -230,10 +236,10 @@ class _History:
                 if last
                 else (0, 0, 0, 0)
             ),
-            belt_accuracy=last.accuracy if last else 0.75,
-            sorter_accuracy=s[-2].accuracy if len(s) > 1 else 0.75,
-            occupancy=last.occupancy if last else 0.6,
-            speed=last.speed if last else 0.6,
+            belt_accuracy=last.accuracy if last else START_ACCURACY,
+            sorter_accuracy=s[-2].accuracy if len(s) > 1 else START_ACCURACY,
+            occupancy=last.occupancy if last else START_OCCUPANCY,
+            speed=last.speed if last else START_SPEED,
             mode=int(last.mode) if (last and variant == "advanced") else (0 if variant == "advanced" else None),
             purity=last.purity if last else 0.0,
             history_reward=[x.reward for x in s],
@@ -241,5 +247,5 @@ class _History:
             history_accuracy=[x.accuracy for x in s],
             history_occupancy=[x.occupancy for x in s],
             history_mode=[int(x.mode) for x in s] if variant == "advanced" else None,
-            max_steps=max(50, len(s)),
+            max_steps=max(EPISODE_STEPS, len(s)),
         )

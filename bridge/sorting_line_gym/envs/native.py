@@ -10,7 +10,7 @@ trajectory (``Line::step`` is what the node runs; tests/python/test_native.py ho
   observation and the info dict.
 - :class:`NativeLines`: N lines with the face of ``vector.Lines``, so the Gymnasium ``VectorEnv``
   and the SB3 ``VecEnv`` run on it unchanged; a step of all lines is one call with the GIL released,
-  writing into arrays allocated once.
+  writing into arrays allocated once, and its info is built in Rust too.
 
 Nothing here imports rclpy: the native backend works in a venv without the ROS wheels.
 """
@@ -20,6 +20,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
+from .. import _native  # always built with the package (line.vocabulary says how, if not)
 from ..line.errors import BridgeError
 from ..line.options import LineOptions
 from .env import SEED_BOUND, action_space, observation_space
@@ -27,18 +28,6 @@ from .seeding import SeededLines
 
 #: The backends an environment runs on.
 BACKENDS = ("ros", "native")
-
-
-def native_module():
-    """The extension, or an ImportError saying how to build it."""
-    try:
-        from .. import _native
-    except ImportError as e:
-        raise ImportError(
-            "backend='native' needs the extension sorting_line_gym._native, which this installation lacks: "
-            "build it with launch_scripts/setup.sh, or install the wheel of `pip wheel ./bridge`"
-        ) from e
-    return _native
 
 
 #: What the ROS backend needs beyond this package: the ROS 2 Python wheels and our interfaces.
@@ -94,7 +83,7 @@ class NativeLineEnv(gym.Env):
         self.action_space = action_space(self.variant)
         self.render_mode = None
         self.setup = options.setup
-        self._line = native_module().NativeLine(line_settings(options))
+        self._line = _native.NativeLine(line_settings(options))
         self._evolving = options.evolution is not None
         self._closed = False
 
@@ -137,11 +126,8 @@ class NativeLines(SeededLines):
         check_native_options(options)
         super().__init__(num_envs)
         self.variant = options.variant
-        self._lines = native_module().NativeLines(num_envs, line_settings(options))
-        lines = self._lines
-        self._obs, self._floats, self._ints = lines.observations, lines.floats, lines.ints
-        self._float_rows = {name: i for i, name in enumerate(lines.float_rows)}
-        self._int_rows = {name: i for i, name in enumerate(lines.int_rows)}
+        self._lines = _native.NativeLines(num_envs, line_settings(options))
+        self._obs = self._lines.observations
         self._closed = False
 
     def reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
@@ -153,24 +139,8 @@ class NativeLines(SeededLines):
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         self._check_open()
         self._lines.step(checked_actions(actions, len(self.rngs)))
-        floats, ints, f, i = self._floats.copy(), self._ints.copy(), self._float_rows, self._int_rows
-        info = {
-            "accuracy": floats[f["accuracy"]],
-            "purity": floats[f["purity"]],
-            "recall_a": floats[f["recall_a"]],
-            "recall_b": floats[f["recall_b"]],
-            "speed": floats[f["speed"]],
-            "speed_index": ints[i["speed_index"]],
-            "mode": ints[i["mode"]],
-            "occupancy": floats[f["occupancy"]],
-            "containers": self._lines.containers.copy(),
-            "speed_changes": ints[i["speed_changes"]],
-            "cumulative_reward": floats[f["cumulative_reward"]],
-            "step": ints[i["step"]],
-            "sim_time": floats[f["sim_time"]],
-            "seed": self._lines.seeds.copy(),
-        }
-        return self._obs.copy(), floats[f["reward"]], self._lines.truncated.copy(), info
+        # The info is the library's (native/src/info.rs: the single line's keys, one array each).
+        return self._obs.copy(), self._lines.rewards(), self._lines.truncated.copy(), self._lines.info()
 
     def action_masks(self) -> np.ndarray:
         return self._lines.masks.copy()

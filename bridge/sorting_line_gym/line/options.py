@@ -13,16 +13,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from .vocabulary import INPUTS, MAX_EPISODE_STEPS, SETUPS, THRESHOLD, check, check_setup, check_variant
+from .vocabulary import (
+    INPUTS,
+    MAX_EPISODE_STEPS,
+    SETTING_RANGES,
+    SETUPS,
+    THRESHOLD,
+    check,
+    check_setup,
+    check_variant,
+)
 
 #: How an environment reaches its node: ``spawn`` starts, owns and stops a node process in a
 #: namespace of its own; ``shared`` leases a line of this host's line server; ``attach`` uses the
 #: node serving ``namespace``.
 NODE_MODES = ("spawn", "shared", "attach")
-
-#: The line's settings an environment takes beside its setup, as the node's options of the same name,
-#: with their ranges (low, high, whether high is allowed): src/sim/config.rs checks the same.
-SETTING_RANGES = {"obs_noise": (0.0, 1.0, True), "action_penalty": (0.0, 10.0, True), "threshold": (0.0, 1.0, False)}
 
 
 def option(default: Any, meaning: str) -> Any:

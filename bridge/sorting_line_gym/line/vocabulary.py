@@ -4,8 +4,11 @@ the codec between Gymnasium's actions/observations/infos and the node's messages
 
 Every other Python module takes these facts from here; none imports ROS, so tools that never
 talk to a node (plots, argument parsers, the agents' tables) can use them too. The Rust library
-(src/sim) is the source of truth: ``sorting_line vocabulary`` prints its values, and
-tests/python/test_vocabulary.py fails when the two sides differ.
+(src/sim) is the source of truth and this module states none of its facts again: the constants,
+ranges, action counts, info keys, start contents and the observation and mask builders are the
+extension's (``sorting_line_gym._native``, native/src/vocabulary.rs), re-exported here.
+tests/python/test_vocabulary.py holds them to ``sorting_line vocabulary`` (the CLI's own print
+of them), tests/python/test_line_facts.py what Python still states about the line to the library.
 
 The codec works on one line (a ``LineState`` message: Python scalars) and on N lines at once (a
 decoded ``LineStates`` batch: numpy arrays, entry k = line k) with the same functions.
@@ -13,81 +16,90 @@ decoded ``LineStates`` batch: numpy arrays, entry k = line k) with the same func
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
+try:
+    from .. import _native
+except ImportError as e:  # every install builds it (setup.sh, `pip install ./bridge`, the wheel)
+    raise ImportError(
+        "sorting_line_gym needs its extension sorting_line_gym._native (the line's facts and model come from "
+        "the Rust library), which this installation lacks: build it with launch_scripts/setup.sh, or install "
+        "the wheel of `pip wheel ./bridge`"
+    ) from e
+
 # -- The line --------------------------------------------------------------------------------
 
 #: Line variants: ``basic`` (speed only) and ``advanced`` (speed x sort mode, ratio sensor).
-VARIANTS = ("basic", "advanced")
+VARIANTS: tuple[str, ...] = _native.VARIANTS
 
 #: Input generators of the node's ``--input`` (src/sim/config.rs InputKind).
-INPUTS = ("random", "seasonal", "seasonal3")
+INPUTS: tuple[str, ...] = _native.INPUTS
 
 #: The paper's setups: input generator, relative sensor noise, switching penalty
 #: (src/sim/config.rs ``LineConfig::for_setup``). Read-only: every module shares it.
 SETUPS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
-    {
-        "A": MappingProxyType({"input": "random", "obs_noise": 0.0, "action_penalty": 0.0}),
-        "B": MappingProxyType({"input": "seasonal", "obs_noise": 0.0, "action_penalty": 0.5}),
-        "C": MappingProxyType({"input": "random", "obs_noise": 0.3, "action_penalty": 0.0}),
-        "D": MappingProxyType({"input": "seasonal", "obs_noise": 0.3, "action_penalty": 0.5}),
-    }
+    {name: MappingProxyType(dict(setup)) for name, setup in _native.SETUPS.items()}
 )
 
 #: The ten belt speeds; speed index i is speed ``SPEEDS[i]`` (the reference's literals, as
 #: src/sim/speed.rs keeps them: ``0.1 * 3`` is not 0.3).
-SPEEDS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
+SPEEDS: tuple[float, ...] = _native.SPEEDS
 SPEED_COUNT = len(SPEEDS)
 #: How far a speed may be from one of the ten and still count as it (``0.1 * 3`` means 0.3).
-SPEED_TOLERANCE = 1e-6
+SPEED_TOLERANCE: float = _native.SPEED_TOLERANCE
 
 #: Sort modes of the advanced line by name, with their wire values (``cmd/sort_mode``,
 #: ``LineState.mode``).
-MODES: Mapping[str, int] = MappingProxyType({"basic": 0, "positive": 1, "negative": 2})
-MODE_COUNT = len(MODES)
+MODES: Mapping[str, int] = MappingProxyType(dict(_native.MODES))
+MODE_COUNT: int = _native.MODE_COUNT
 #: Ratio categories of a batch (``sensors/ratio``, the advanced observation): the number of the
 #: mode made for them.
-CATEGORIES: Mapping[str, int] = MappingProxyType({"basic": 0, "positive": 1, "negative": 2})
+CATEGORIES: Mapping[str, int] = MappingProxyType(dict(_native.CATEGORIES))
 #: The category code on the wire while an evolving line has no ratio sensor (before its sensor
 #: upgrade), and the value its observation slot then holds: inside the advanced Box(0, 2), and no
 #: category's value, so "no sensor" differs from "mixed batch" (src/sim/evolution.rs).
-CATEGORY_UNKNOWN_CODE = 3
-CATEGORY_UNKNOWN_OBSERVATION = 0.5
+CATEGORY_UNKNOWN_CODE: int = _native.CATEGORY_UNKNOWN_CODE
+CATEGORY_UNKNOWN_OBSERVATION: float = _native.CATEGORY_UNKNOWN_OBSERVATION
 #: What each mode number is for, as the dashboard and reports label it.
 MODE_LABELS: Mapping[int, str] = MappingProxyType({0: "basic", 1: "positive (A-rich)", 2: "negative (B-rich)"})
 
 #: Speed index every reset starts the belt at (speed 0.6).
-START_SPEED_INDEX = 5
+START_SPEED_INDEX: int = _native.START_SPEED_INDEX
 START_SPEED = SPEEDS[START_SPEED_INDEX]
+#: What a reset puts on the line (src/sim/line.rs): (A, B) units in the input, on the belt and in
+#: the sorting machine; the accuracy the first batches travel with and the belt's occupancy.
+START_CONTENTS: Mapping[str, tuple[int, int]] = MappingProxyType(dict(_native.START_CONTENTS))
+START_ACCURACY: float = _native.START_ACCURACY
+START_OCCUPANCY: float = _native.START_OCCUPANCY
 
 #: Accuracy below which a step earns a flat -0.1 (the node's ``--threshold`` default).
-THRESHOLD = 0.7
+THRESHOLD: float = _native.THRESHOLD
 #: Episode length of the paper and the node's ``--max-steps`` default.
-EPISODE_STEPS = 50
+EPISODE_STEPS: int = _native.EPISODE_STEPS
 #: Longest episode the node accepts (src/sim/config.rs MAX_EPISODE_STEPS).
-MAX_EPISODE_STEPS = 1_000_000
+MAX_EPISODE_STEPS: int = _native.MAX_EPISODE_STEPS
+
+#: The line's settings an environment takes beside its setup, as the node's options of the same
+#: name, with their ranges: name -> (low, high, whether high itself is allowed), as
+#: src/sim/config.rs checks them.
+SETTING_RANGES: Mapping[str, tuple[float, float, bool]] = MappingProxyType(dict(_native.SETTING_RANGES))
 
 #: Gymnasium id of each variant (registered in the package's ``__init__``; the keys of the
 #: hyperparameter files).
 ENV_IDS: Mapping[str, str] = MappingProxyType({"basic": "SortingLine-v0", "advanced": "SortingLineAdvanced-v0"})
 
 #: Gymnasium actions per variant: the speed index, or speed index * MODE_COUNT + mode.
-ACTION_COUNTS: Mapping[str, int] = MappingProxyType({"basic": SPEED_COUNT, "advanced": SPEED_COUNT * MODE_COUNT})
+ACTION_COUNTS: Mapping[str, int] = MappingProxyType(dict(_native.ACTION_COUNTS))
 
 
 def speed_index_of(speed: float) -> int | None:
     """The index of one of the ten belt speeds, or None for anything else (NaN, out of
     0.1..1.0, between two speeds): src/sim/speed.rs ``index_of_speed``."""
-    speed = float(speed)
-    if not math.isfinite(speed):
-        return None
-    i = round(speed * 10) - 1
-    return i if 0 <= i < SPEED_COUNT and abs(speed - SPEEDS[i]) <= SPEED_TOLERANCE else None
+    return _native.speed_index_of(float(speed))
 
 
 # -- Checks ----------------------------------------------------------------------------------
@@ -138,23 +150,17 @@ def observations(variant: str, quantity, category) -> np.ndarray:
     """The observation(s) for the input sensor's reading(s) and ratio category(ies): shape
     ``(1,)``/``(2,)`` for one line, ``(N, 1)``/``(N, 2)`` for N (basic: the reading; advanced:
     reading, category), float32 as the observation space. An unknown category (no ratio sensor
-    yet) reads :data:`CATEGORY_UNKNOWN_OBSERVATION`."""
-    q = np.asarray(quantity, dtype=np.float32)
-    if variant == "advanced":
-        c = np.asarray(category, dtype=np.float32)
-        c = np.where(c == CATEGORY_UNKNOWN_CODE, np.float32(CATEGORY_UNKNOWN_OBSERVATION), c).astype(np.float32)
-        return np.stack([q, c], axis=-1)
-    return q[..., None]
+    yet) reads :data:`CATEGORY_UNKNOWN_OBSERVATION`. Built by the library (the native lines'
+    builder)."""
+    return _native.observations(variant, quantity, category)
 
 
 def action_mask(variant: str, sort_modes: bool = True) -> np.ndarray:
     """Which Gymnasium actions the line takes now, as ``action_masks()`` gives them (and what a
     deployed policy is masked with): all of them, but on an advanced line whose machine has no
-    sort modes yet (an evolving line before its upgrade) only the ten with mode 0."""
-    n = ACTION_COUNTS[check_variant(variant)]
-    if variant == "basic" or sort_modes:
-        return np.ones(n, dtype=bool)
-    return np.arange(n) % MODE_COUNT == 0
+    sort modes yet (an evolving line before its upgrade) only the ten with mode 0 (the library's
+    mask rule)."""
+    return _native.action_mask(check_variant(variant), bool(sort_modes))
 
 
 def sim_seconds(sec, nanosec):
@@ -163,26 +169,14 @@ def sim_seconds(sec, nanosec):
 
 
 #: The info keys of a step, in order (docs/gymnasium.md lists them); ``containers`` is (a, a_false, b, b_false).
-INFO_KEYS = (
-    "accuracy",
-    "purity",
-    "recall_a",
-    "recall_b",
-    "speed",
-    "speed_index",
-    "mode",
-    "occupancy",
-    "containers",
-    "speed_changes",
-    "cumulative_reward",
-    "step",
-    "sim_time",
-    "seed",
-)
+INFO_KEYS: tuple[str, ...] = _native.INFO_KEYS
+#: Each info key with the kind of its value (float, int, containers, seed, time) and the
+#: ``LineState`` fields it is read from: what :func:`state_info` builds an info with.
+INFO_FIELDS: tuple[tuple[str, str, tuple[str, ...]], ...] = _native.INFO_FIELDS
 
 
 def state_info(state, sim_time) -> dict[str, Any]:
-    """The KPIs of a state as a step's info, keys :data:`INFO_KEYS`.
+    """The KPIs of a state as a step's info, keys :data:`INFO_KEYS`, read by :data:`INFO_FIELDS`.
 
     ``state`` is one line's ``LineState`` (Python scalars in, Python scalars out, containers a
     tuple) or a batch of N lines with one array per field (arrays out, entry k = line k,
@@ -191,24 +185,20 @@ def state_info(state, sim_time) -> dict[str, Any]:
     same seed and actions must give the same info, and the key ``episode`` belongs to
     episode-statistics wrappers (SB3's Monitor, Gymnasium's RecordEpisodeStatistics)."""
     batched = isinstance(state.accuracy, np.ndarray)
-    as_int = (lambda v: v.astype(np.int64)) if batched else int
-    containers = (state.container_a, state.container_a_false, state.container_b, state.container_b_false)
-    return {
-        "accuracy": state.accuracy,
-        "purity": state.purity,
-        "recall_a": state.recall_a,
-        "recall_b": state.recall_b,
-        "speed": state.speed,
-        "speed_index": as_int(state.speed_index),
-        "mode": as_int(state.mode),
-        "occupancy": state.occupancy,
-        "containers": np.stack(containers, axis=1) if batched else tuple(map(int, containers)),
-        "speed_changes": as_int(state.speed_changes),
-        "cumulative_reward": state.cumulative_reward,
-        "step": as_int(state.step),
-        "sim_time": sim_time,
-        "seed": state.seed if batched else int(state.seed),
-    }
+    info: dict[str, Any] = {}
+    for key, kind, fields in INFO_FIELDS:
+        values = [getattr(state, f) for f in fields]
+        if kind == "time":
+            info[key] = sim_time
+        elif kind == "containers":
+            info[key] = np.stack(values, axis=1) if batched else tuple(map(int, values))
+        elif kind == "int":
+            info[key] = values[0].astype(np.int64) if batched else int(values[0])
+        elif kind == "seed":  # a batch keeps uint64: seeds reach 2**64 - 1
+            info[key] = values[0] if batched else int(values[0])
+        else:
+            info[key] = values[0]
+    return info
 
 
 def line_infos(info: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:

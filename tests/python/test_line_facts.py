@@ -1,0 +1,166 @@
+"""What Python still states about the line, against the Rust library's own exports (the extension
+``sorting_line_gym._native``, native/src/vocabulary.rs): the vocabulary re-exports them, and the few
+places that say a line fact in Python's own words (a docstring, a range in a help text, the
+decoding a policy card writes, the fields the ROS backend reads an info from) say what the
+library says. No ROS, no node: well under a second.
+
+tests/python/test_vocabulary.py holds the same exports to the CLI's ``sorting_line vocabulary``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import fields
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sorting_line_gym import _native
+from sorting_line_gym.agents import policies
+from sorting_line_gym.envs import env as env_module
+from sorting_line_gym.line import vocabulary as v
+from sorting_line_gym.line.options import LineOptions
+from sorting_line_gym.line.policy_card import action_decoding
+
+ROOT = Path(__file__).resolve().parents[2]
+
+#: Each re-export of the vocabulary, by the name the extension gives it.
+REEXPORTED = (
+    "VARIANTS",
+    "INPUTS",
+    "SPEEDS",
+    "SPEED_TOLERANCE",
+    "MODE_COUNT",
+    "CATEGORY_UNKNOWN_CODE",
+    "CATEGORY_UNKNOWN_OBSERVATION",
+    "START_SPEED_INDEX",
+    "START_ACCURACY",
+    "START_OCCUPANCY",
+    "THRESHOLD",
+    "EPISODE_STEPS",
+    "MAX_EPISODE_STEPS",
+    "INFO_KEYS",
+    "INFO_FIELDS",
+)
+#: The read-only mappings among them.
+REEXPORTED_MAPPINGS = ("SETUPS", "MODES", "CATEGORIES", "ACTION_COUNTS", "SETTING_RANGES", "START_CONTENTS")
+
+
+@pytest.mark.parametrize("name", REEXPORTED)
+def test_the_vocabulary_re_exports_the_library(name):
+    assert getattr(v, name) == getattr(_native, name)
+
+
+@pytest.mark.parametrize("name", REEXPORTED_MAPPINGS)
+def test_the_vocabularys_mappings_are_the_librarys_read_only(name):
+    mine = getattr(v, name)
+    assert {k: dict(x) if name == "SETUPS" else x for k, x in mine.items()} == getattr(_native, name)
+    with pytest.raises(TypeError):
+        mine["new"] = None  # shared by every module: nobody may change it
+
+
+def test_what_python_derives_follows_from_the_library():
+    assert v.SPEED_COUNT == len(v.SPEEDS) and v.START_SPEED == v.SPEEDS[v.START_SPEED_INDEX]
+    assert set(v.MODE_LABELS) == set(v.MODES.values()) == set(v.CATEGORIES.values())
+    assert v.ACTION_COUNTS == {"basic": v.SPEED_COUNT, "advanced": v.SPEED_COUNT * v.MODE_COUNT}
+    assert set(v.ENV_IDS) == set(v.VARIANTS)
+    assert v.INFO_KEYS == tuple(key for key, _, _ in v.INFO_FIELDS)
+    assert policies.LEVELS == 101 and policies.level is _native.level
+
+
+@pytest.mark.parametrize("variant", v.VARIANTS)
+def test_the_codec_decodes_as_the_library_masks(variant):
+    actions = np.arange(v.ACTION_COUNTS[variant])
+    speeds, modes = v.decode_actions(variant, actions)
+    # The library's mask without sort modes keeps exactly the actions of mode 0.
+    np.testing.assert_array_equal(v.action_mask(variant, sort_modes=False), modes == 0)
+    assert v.action_mask(variant).all() and v.action_mask(variant).shape == actions.shape
+    # A policy card tells other languages how to decode (line/policy_card.py): the same decoding.
+    text = action_decoding(variant)
+    assert text["n"] == len(actions) and text["speeds"] == list(v.SPEEDS)
+    if variant == "advanced":
+        rules = {name: compile(text[name], name, "eval") for name in ("speed_index", "mode")}
+        assert [eval(rules["speed_index"], {"action": int(a)}) for a in actions] == speeds.tolist()
+        assert [eval(rules["mode"], {"action": int(a)}) for a in actions] == modes.tolist()
+        assert text["modes"] == dict(v.MODES)
+    else:
+        assert text["speed_index"] == "action" and (modes == 0).all()
+
+
+def test_observations_are_the_librarys_for_one_line_and_a_batch():
+    one = v.observations("advanced", 0.25, v.CATEGORY_UNKNOWN_CODE)
+    assert one.dtype == np.float32 and one.tolist() == [0.25, v.CATEGORY_UNKNOWN_OBSERVATION]
+    batch = v.observations("advanced", np.array([0.5, 1.0]), np.array([2, 0], dtype=np.uint8))
+    assert batch.shape == (2, 2) and batch.tolist() == [[0.5, 2.0], [1.0, 0.0]]
+    assert v.observations("basic", np.float64(0.3), 9).tolist() == [np.float32(0.3)]
+    with pytest.raises(ValueError, match="'fancy' is not a valid Variant: allowed basic, advanced"):
+        v.observations("fancy", 0.5, 0)
+
+
+def test_the_info_fields_are_line_state_fields_of_the_message():
+    text = (ROOT / "msg" / "msg" / "LineState.msg").read_text()
+    message = {m.group(2): m.group(1) for m in re.finditer(r"^(\w+)\s+(\w+)", text, re.M)}
+    for key, kind, names in v.INFO_FIELDS:
+        assert kind in {"float", "int", "containers", "seed", "time"}, key
+        assert (kind == "time") == (not names), key
+        for name in names:
+            assert name in message, f"info key {key!r} reads LineState.{name}, which the message lacks"
+        assert kind != "float" or message[names[0]] == "float64", key
+
+
+def test_the_ros_backends_info_and_the_native_lines_agree():
+    """state_info (the ROS backend's, fed by INFO_FIELDS) on a state holding the native line's
+    values gives the native line's info, key for key and type for type."""
+    line = _native.NativeLine(dict(v.SETUPS["D"], variant="advanced", threshold=v.THRESHOLD, max_steps=v.EPISODE_STEPS))
+    line.reset(7)
+    for action in (4, 17, 29):
+        info = line.step(action)[4]
+    state = {}
+    for key, _, names in v.INFO_FIELDS:
+        values = info[key] if len(names) > 1 else (info[key],) * len(names)
+        state.update(zip(names, values, strict=True))
+    mine = v.state_info(SimpleNamespace(**state), info["sim_time"])
+    assert list(mine) == list(info) and mine == info
+    assert all(type(mine[k]) is type(info[k]) for k in info), {k: type(x) for k, x in info.items()}
+
+
+def test_the_setting_ranges_are_the_librarys_checks():
+    """LineOptions accepts a setting exactly where the library's line does, at both ends."""
+    base = dict(v.SETUPS["A"], variant="basic", threshold=v.THRESHOLD, max_steps=v.EPISODE_STEPS)
+    for name, (low, high, high_allowed) in v.SETTING_RANGES.items():
+        for value in (low, math.nextafter(low, -math.inf), high, math.nextafter(high, math.inf)):
+            try:
+                _native.NativeLine({**base, name: value})
+                library = True
+            except ValueError:
+                library = False
+            try:
+                LineOptions(**{name: value})
+                python = True
+            except ValueError:
+                python = False
+            assert python == library, f"{name} = {value!r}: LineOptions says {python}, the library {library}"
+        assert high_allowed == (name != "threshold")
+        meaning = next(f.metadata["meaning"] for f in fields(LineOptions) if f.name == name)
+        assert f"({low} {'..=' if high_allowed else '..<'} {high})" in meaning, meaning
+
+
+def test_the_env_docstring_says_the_librarys_line():
+    doc = env_module.__doc__
+    contents = v.START_CONTENTS
+    start = ", ".join(f"{place} {a}/{b}" for place, (a, b) in contents.items())
+    assert f"Fixed line contents ({start}, speed {v.START_SPEED})" in doc
+    for variant, env_id in v.ENV_IDS.items():
+        assert f"`{env_id}`: `Discrete({v.ACTION_COUNTS[variant]})`" in doc
+    assert f"below the threshold ({v.THRESHOLD})" in doc and f"TimeLimit\nof {v.EPISODE_STEPS} steps" in doc
+    listed = re.sub(r"\(.*?\)", "", doc.split("## Info\n", 1)[1], flags=re.S)  # without the explanations
+    assert tuple(k.strip().rstrip(".") for k in listed.split(",")) == v.INFO_KEYS
+
+
+def test_the_dashboard_starts_with_the_librarys_contents():
+    history = env_module._History
+    assert (history.START_INPUT, history.START_BELT, history.START_MACHINE) == tuple(v.START_CONTENTS.values())
+    assert v.START_OCCUPANCY == sum(v.START_CONTENTS["belt"]) / 100
