@@ -23,6 +23,7 @@ Ray is imported only here and only with ``--ray``: one machine without it needs 
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import sys
@@ -82,6 +83,9 @@ def connect(address: str, probe_timeout: float = PROBE_TIMEOUT_S, timeout: float
     # An address that answers but is not a Ray cluster can keep ray.init waiting: bounded here
     # (the thread is a daemon, so a refused start does not wait for it to give up).
     failure: list[BaseException] = []
+    # In a thread ray.init installs no SIGTERM handler, and says so as a warning: that is wanted
+    # (the study's own handler stops it, cancelling the tasks), so the warning is dropped.
+    logging.getLogger("ray._private.worker").addFilter(lambda r: "SIGTERM handler is not set" not in r.getMessage())
 
     def init() -> None:
         try:
