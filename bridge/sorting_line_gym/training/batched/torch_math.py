@@ -23,6 +23,11 @@ import jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 
 
+def _unfused(product: jax.Array) -> jax.Array:
+    """The product rounded on its own (XLA would fuse it into a multiply-add; see optim.unfused)."""
+    return jax.lax.optimization_barrier(product)
+
+
 def _rounded(f):
     return lambda x: f(x.astype(jnp.float64)).astype(x.dtype)
 
@@ -39,7 +44,7 @@ def _tanh_fwd(x):
 
 def _tanh_bwd(y, g):
     # tanh_backward (aten/src/ATen/native/cpu/BinaryOpsKernel.cpp): grad * (1 - output * output)
-    return (g * (1 - y * y),)
+    return (g * (1 - _unfused(y * y)),)  # y * y rounded, as torch's, not fused into the subtraction
 
 
 tanh.defvjp(_tanh_fwd, _tanh_bwd)
