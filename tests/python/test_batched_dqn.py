@@ -28,6 +28,7 @@ from training_stack import MISSING
 if MISSING:
     pytest.skip(f"needs the training stack (setup.sh --train); missing {', '.join(MISSING)}", allow_module_level=True)
 
+import jax  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3 import DQN, PPO  # noqa: E402
 from stable_baselines3.common.buffers import ReplayBufferSamples  # noqa: E402
@@ -143,7 +144,9 @@ def short_runs(tmp_path_factory):
     """The engine's short training of two seeds and SB3's of each, on the same native lines."""
     seeds = SEEDS[:2]
     engine = BatchedDQN(seeds, **LINE, n_envs=LINES, episode_steps=EPISODE, **SHORT)
-    engine_trace = traced(engine, engine.q_net_target.parameters, len(seeds))
+    engine_trace = traced(
+        engine, lambda: [torch.from_numpy(np.array(a)) for a in jax.tree.leaves(engine.q_net_target)], len(seeds)
+    )
     # Two learn() calls, the second continuing the first (reset_num_timesteps=False), on both sides.
     engine.learn(STEPS - 200).learn(200, reset_num_timesteps=False)
     references = []

@@ -10,15 +10,15 @@ One concept per module:
   pass; ``optim``: torch's Adam, RMSprop and gradient-norm clip as per-seed JAX functions, their
   state moved from and to S torch optimizers; ``torch_math``: tanh, exp, logsumexp and softmax
   as torch rounds them (the base of the JAX learners: jit + vmap over seeds);
-- ``stacked``: the same in eager torch (stacked weights, per-seed clip, the optimizer over the
-  stacked weights), what DQN still runs on;
 - ``lines``: the S x L native lines, seeded, auto-reset and counted per seed as SB3's VecEnv;
 - ``checks``: what the trainer accepts (algorithms, seeds, hyperparameters, memory);
 - ``models``: the SB3 models behind the seeds (built, loaded, written back as SB3's zips);
 - ``actor_critic``, ``rollout``, ``ppo``, ``a2c``: SB3's actor-critic policy, rollout buffer
   (GAE, the truncation bootstrap), PPO/MaskablePPO and A2C updates, for S seeds;
 - ``on_policy``: the driver, ``OnPolicyTrainer`` (PPO, A2C, MaskablePPO);
-- ``dqn`` (``BatchedDQN``) and ``replay``: DQN and its replay buffer, for S seeds.
+- ``dqn`` (``BatchedDQN``), ``q_learning`` and ``replay``: DQN's driver, its arithmetic in JAX
+  (greedy actions, SB3's loss, the gradient steps and the target update) and its replay buffers,
+  for S seeds.
 
 ``training.train_batched`` puts both behind ``sorting-line-train --engine batched --seeds ...``.
 

@@ -67,7 +67,12 @@ def check_seeds(seeds: Sequence[int]) -> list[int]:
 
 
 def algorithm_class(algo: str) -> type:
-    """The SB3 (or sb3-contrib) class of ``algo``."""
+    """The SB3 (or sb3-contrib) class of ``algo``: an on-policy algorithm, or ``"dqn"`` (the batched
+    DQN builds its seeds' models with ``models.new_models`` too)."""
+    if algo == "dqn":
+        from stable_baselines3 import DQN
+
+        return DQN
     if check_algo(algo) == "maskable_ppo":
         from sb3_contrib import MaskablePPO
 

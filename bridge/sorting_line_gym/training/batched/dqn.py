@@ -13,11 +13,18 @@ generator is a ``RandomState(s)`` of its own, drawn by the same calls in the sam
 epsilon-greedy coin of ``DQN.predict``, the replay indices of ``ReplayBuffer.sample``); its action
 space is seeded s as SB3 seeds it; it has its own replay buffer, Adam moments and gradient clip.
 The seeds share only the arithmetic: their networks are stacked over a leading seed axis and
-evaluated and updated by batched matmuls, the loss of the batch being the sum of the seeds' own
-losses (so each seed's gradient is its own). Every piece below names the SB3 code it mirrors.
-The package's shared parts carry the rest: ``stacked`` (the stacked networks, the per-seed clip,
-the optimizer and its state per seed), ``lines`` (the S x L lines as each seed's VecEnv),
-``models`` (the spaces SB3 builds a model on); ``replay`` is DQN's own (per-seed buffers).
+evaluated and updated in JAX (``q_learning``: each loss written once for one seed, vmapped over
+the seeds and jitted, so each seed's gradient, clip and Adam step are its own). Every piece below
+names the SB3 code it mirrors. The package's shared parts carry the rest: ``params`` and ``optim``
+(the stacked weights, torch's Adam and clip, the optimizer state to and from SB3's), ``lines``
+(the S x L lines as each seed's VecEnv), ``models`` (the spaces SB3 builds a model on);
+``replay`` is DQN's own (per-seed buffers).
+
+What costs a call: a rollout step is one jitted forward for all seeds (none when every seed
+explores) and one step of the native lines; a ``train(gradient_steps)`` is one jitted call for
+all its steps (the replay indices of all of them drawn first, by each seed's generator in SB3's
+order); the epsilon coins of a rollout are drawn in one call per seed (``RandomState.rand(n)``
+gives the n numbers n calls of ``rand()`` give).
 
 Each seed is saved as the SB3 ``.zip`` SB3 would write (the per-seed model with the trained
 weights, optimizer state and counters, ``model.save``), and ``BatchedDQN.from_models`` starts
@@ -32,7 +39,6 @@ import inspect
 import random
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,24 +46,17 @@ import numpy as np
 import torch
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.utils import polyak_update, update_learning_rate
 from torch import nn
-from torch.nn import functional as F
 
 from ...envs.env import action_space, observation_space
 from ...line.vocabulary import check_setup, check_variant
+from . import optim
 from .checks import available_memory, check_seeds
 from .lines import BatchedLines
-from .models import check_model_file, spaces_vec_env
+from .models import SeedModel, check_model_file, new_models, spaces_vec_env
+from .params import specs_of, stack, torch_tree, write_back
+from .q_learning import QLearning
 from .replay import BatchedReplayBuffer, ReplaySamples
-from .stacked import (
-    StackedSequential,
-    clip_grad_norm_per_seed,
-    optimizer_state_from_seeds,
-    optimizer_state_to_seeds,
-    parameter_pairs,
-    stacked_optimizer,
-)
 
 #: DQN's constructor arguments and SB3's defaults (DQN.__init__).
 SB3_DEFAULTS = {
@@ -144,49 +143,28 @@ def spaces_env(variant: str, n_envs: int):
     return spaces_vec_env(observation_space(variant), action_space(variant), n_envs)
 
 
-@dataclass
-class SeedModel:
-    """One seed's SB3 model, and the state of numpy's global generator right after SB3 built (or
-    loaded) it: SB3 seeded it there (set_random_seed), and the seed's run draws from it from then on."""
+def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], variant: str, n_envs: int) -> list[SeedModel]:
+    """SB3's ``DQN.load(path, env, seed=s)`` for each path (without ``seed`` where none is given:
+    SB3's load reseeds with the saved seed then), refused with the path named when a file is not a
+    DQN model of this line's spaces; numpy's state right after each load, the process's generators
+    left as they were.
 
-    model: DQN
-    numpy_state: Any
-
-
-def _keeping_global_generators(make: Callable[[], DQN]) -> SeedModel:
-    """``make()``'s model and numpy's state after it; the process's generators are left as they were
-    (SB3 reseeds them on every build, which would otherwise reach the caller and the next seed)."""
+    Not ``models.load_models`` (the on-policy loader): DQN's random actions come from the model's
+    action space, which SB3's load seeds with the seed it is given (set_random_seed), and its
+    epsilon coin from the np.random state that seeding leaves; that loader loads without a seed and
+    starts the generators from fresh ones, and requires a seed per model."""
+    loaded = []
     saved = random.getstate(), np.random.get_state(), torch.get_rng_state()
     try:
-        model = make()
-        return SeedModel(model, np.random.get_state())
+        for path, seed in zip(paths, seeds, strict=True):
+            check_model_file(path, "dqn", (observation_space(variant), action_space(variant)))
+            extra = {} if seed is None else {"seed": seed}
+            model = DQN.load(path, env=spaces_env(variant, n_envs), device="cpu", **extra)
+            loaded.append(SeedModel(model, torch.get_rng_state(), np.random.get_state()))
     finally:
         random.setstate(saved[0])
         np.random.set_state(saved[1])
         torch.set_rng_state(saved[2])
-
-
-def new_models(seeds: list[int], variant: str, n_envs: int, kwargs: dict[str, Any]) -> list[SeedModel]:
-    """SB3's ``DQN("MlpPolicy", env, seed=s, **kwargs)`` for each seed: its QNetwork's weights are
-    the ones SB3's training of seed s starts from (torch's default init after manual_seed(s))."""
-    return [
-        _keeping_global_generators(
-            lambda s=s: DQN("MlpPolicy", spaces_env(variant, n_envs), seed=s, device="cpu", **kwargs)
-        )
-        for s in seeds
-    ]
-
-
-def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], variant: str, n_envs: int):
-    """SB3's ``DQN.load(path, env)`` for each path (with ``seed=s`` where one is given: SB3's load
-    reseeds with the saved seed otherwise), refused with the path named when a file is not a DQN
-    model of this line's spaces."""
-    loaded = []
-    for path, seed in zip(paths, seeds, strict=True):
-        check_model_file(path, "dqn", (observation_space(variant), action_space(variant)))
-        extra = {} if seed is None else {"seed": seed}
-        env = spaces_env(variant, n_envs)
-        loaded.append(_keeping_global_generators(lambda p=path, e=env, x=extra: DQN.load(p, env=e, device="cpu", **x)))
     return loaded
 
 
@@ -207,8 +185,9 @@ class BatchedDQN:
     ):
         seeds = check_seeds(seeds)
         self._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(hyperparameters))
-        sb3_kwargs = {k: v for k, v in hyperparameters.items() if k != "device"}
-        self._adopt(seeds, new_models(seeds, variant, n_envs, sb3_kwargs))
+        sb3_kwargs = {k: v for k, v in hyperparameters.items() if k != "device"} | {"device": "cpu"}
+        spaces = (observation_space(variant), action_space(variant))
+        self._adopt(seeds, new_models("dqn", seeds, sb3_kwargs, spaces, n_envs))
 
     @classmethod
     def from_models(
@@ -272,16 +251,23 @@ class BatchedDQN:
         # set_random_seed seeded the model's action space with s: warm-up and random actions come from it.
         self.action_spaces = [copy.deepcopy(m.action_space) for m in self.models]
         policies = [m.policy for m in self.models]
-        self.q_net = StackedSequential([p.q_net.q_net for p in policies])
-        self.q_net_target = StackedSequential([p.q_net_target.q_net for p in policies])
-        for p in self.q_net_target.parameters():
-            p.requires_grad_(False)
-        self._pairs = parameter_pairs(self.q_net, [p.q_net.q_net for p in policies])
-        self.optimizer = stacked_optimizer(policies[0].optimizer, self.q_net.parameters())
-        # Adam's foreach path: the arithmetic of the per-tensor loop SB3's CPU Adam runs, bit for bit,
-        # in one call per operation over all of the network's tensors (about 10% of a gradient step).
-        self.optimizer.param_groups[0]["foreach"] = True
-        optimizer_state_from_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
+        # The seeds' QNetworks (q_net.q_net, q_net_target.q_net: SB3's create_mlp) as stacked JAX
+        # trees; the torch trees are where the weights go back to when the models are written.
+        self._q_trees = [torch_tree({"q_net": p.q_net.q_net}) for p in policies]
+        self._target_trees = [torch_tree({"q_net": p.q_net_target.q_net}) for p in policies]
+        spec = specs_of(
+            [{"q_net": p.q_net.q_net} for p in policies] + [{"q_net": p.q_net_target.q_net} for p in policies]
+        )
+        self.q_net, self.q_net_target = stack(self._q_trees), stack(self._target_trees)
+        # DQNPolicy's optimizer (Adam over q_net.parameters()), its state and step count per seed.
+        settings = [optim.settings_of(p.optimizer) for p in policies]
+        if any(st != settings[0] for st in settings):
+            raise ValueError(f"the models' optimizers differ ({settings[0]} vs others): allowed one setting")
+        self.optimizer_settings, self._learning_rate = settings[0], settings[0].lr
+        self.optimizer_state, self._optimizer_steps = optim.state_from_torch(
+            settings[0], [p.optimizer for p in policies], self._q_trees
+        )
+        self.q_learning = QLearning(spec["q_net"], settings[0], self.gamma, self.max_grad_norm)
         first = self.models[0]
         counters = ("num_timesteps", "_total_timesteps", "_n_calls", "_n_updates")
         if any(getattr(m, c) != getattr(first, c) for m in self.models for c in counters):
@@ -365,8 +351,19 @@ class BatchedDQN:
     def _collect_rollout(self) -> None:
         """OffPolicyAlgorithm.collect_rollouts with TrainFreq(train_freq, STEP)."""
         assert self.lines is not None and self.replay is not None and self._last_obs is not None
-        for _ in range(self.train_freq):
-            actions = self._sample_actions()
+        # DQN.predict's coin is one np.random.rand() per seed and step past the warm-up; a rollout's
+        # coins come first in each seed's generator (its replay indices after them), so one call
+        # per seed draws them all (rand(n) gives the numbers of n calls of rand()).
+        starts = self.num_timesteps + self.n_envs * np.arange(self.train_freq)
+        n_coins = int((starts >= self.learning_starts).sum())
+        coins = np.stack([rng.rand(n_coins) for rng in self.np_rngs]) if n_coins else None
+        for k in range(self.train_freq):
+            if self.num_timesteps < self.learning_starts:
+                # OffPolicyAlgorithm._sample_action, warm-up: action_space.sample() per line.
+                actions = np.array([[space.sample() for _ in range(self.n_envs)] for space in self.action_spaces])
+            else:
+                assert coins is not None
+                actions = self._sample_actions(coins[:, k - (self.train_freq - n_coins)])
             step = self.lines.step(actions)
             self.num_timesteps += self.n_envs
             # _store_transition: next_obs is the terminal observation where an episode ended
@@ -378,19 +375,17 @@ class BatchedDQN:
             self._on_step()
             self._episode_num += step.dones.sum(axis=1)
 
-    def _sample_actions(self) -> np.ndarray:
-        """(S, L) actions: OffPolicyAlgorithm._sample_action, then DQN.predict(deterministic=False)."""
+    def _sample_actions(self, coins: np.ndarray) -> np.ndarray:
+        """(S, L) actions past the warm-up: DQN.predict(deterministic=False), ``coins`` (S,) the
+        seeds' draws of its ``np.random.rand()``."""
         assert self._last_obs is not None
-        if self.num_timesteps < self.learning_starts:
-            # Warm-up: action_space.sample() per line.
-            return np.array([[space.sample() for _ in range(self.n_envs)] for space in self.action_spaces])
         # DQN.predict draws ONE number per call (per seed here, from that seed's np.random) and
         # takes random actions for all L lines of the call, or greedy ones for all of them.
-        explore = [rng.rand() < self.exploration_rate for rng in self.np_rngs]
-        if all(explore):
+        explore = coins < self.exploration_rate
+        if explore.all():
             actions = np.empty((self.n_seeds, self.n_envs), dtype=np.int64)
         else:
-            actions = self.predict(self._last_obs)
+            actions = self.predict(self._last_obs).astype(np.int64)
         for s in np.flatnonzero(explore):
             actions[s] = [self.action_spaces[s].sample() for _ in range(self.n_envs)]
         return actions
@@ -400,7 +395,7 @@ class BatchedDQN:
         steps (polyak_update, tau), and the exploration rate from its LinearSchedule."""
         self._n_calls += 1
         if self._n_calls % max(self.target_update_interval // self.n_envs, 1) == 0:
-            polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
+            self.q_net_target = self.q_learning.polyak(self.q_net, self.q_net_target, self.tau)
             # (SB3 also copies batch-norm running stats here; the MLP has none.)
         self.exploration_rate = self.exploration_schedule(self._current_progress_remaining)
 
@@ -410,41 +405,39 @@ class BatchedDQN:
         """DQN.train: the learning rate from its schedule, then ``gradient_steps`` steps, each on a
         fresh batch of each seed's own buffer. Returns the seeds' mean losses (S,)."""
         assert self.replay is not None
-        # BaseAlgorithm._update_learning_rate
-        update_learning_rate(self.optimizer, self.lr_schedule(self._current_progress_remaining))
-        losses = []
-        for _ in range(gradient_steps):
-            losses.append(self.gradient_step(self.replay.sample(batch_size, self.np_rngs)))
+        # BaseAlgorithm._update_learning_rate: the optimizer's lr for all the steps of this call.
+        self._learning_rate = self.lr_schedule(self._current_progress_remaining)
+        # replay_buffer.sample once per gradient step, in that order: all drawn before the steps
+        # (nothing else draws from the seeds' generators, nor writes the buffers, in between).
+        losses = self._gradient_steps(self.replay.sample(gradient_steps, batch_size, self.np_rngs))
         self._n_updates += gradient_steps
-        return np.mean(losses, axis=0)
+        return losses.mean(axis=1)
 
     def gradient_step(self, batch: ReplaySamples) -> np.ndarray:
-        """One DQN gradient step of every seed on its batch (tensors with a leading seed axis, as
-        ReplaySamples): DQN.train's loop body. Returns each seed's Huber loss (S,)."""
-        with torch.no_grad():
-            # 1-step TD target from the target network's greedy value.
-            next_q_values = self.q_net_target(batch.next_observations).max(dim=2).values.unsqueeze(2)
-            target_q_values = batch.rewards + (1 - batch.dones) * self.gamma * next_q_values
-        current_q_values = torch.gather(self.q_net(batch.observations), dim=2, index=batch.actions.long())
-        # F.smooth_l1_loss (Huber), its mean over each seed's own batch; the sum of the seeds'
-        # losses gives each seed its own gradient.
-        loss = F.smooth_l1_loss(current_q_values, target_q_values, reduction="none").mean(dim=(1, 2))
-        self.optimizer.zero_grad()
-        loss.sum().backward()
-        # clip_grad_norm_(policy.parameters(), max_grad_norm): over each seed's parameters alone
-        # (the target network's have no gradient, as in SB3).
-        clip_grad_norm_per_seed(self.q_net.parameters(), self.max_grad_norm)
-        self.optimizer.step()
-        return loss.detach().numpy()
+        """One DQN gradient step of every seed on its batch (arrays or tensors with a leading seed
+        axis, as SB3's ReplayBufferSamples: actions, dones, rewards (S, B, 1) or (S, B)), at the
+        optimizer's current learning rate: DQN.train's loop body. Returns each seed's loss (S,)."""
+        arrays = [np.asarray(a) for a in batch]
+        arrays = [a[..., 0] if a.ndim == 3 and k not in (0, 2) else a for k, a in enumerate(arrays)]
+        return self._gradient_steps(ReplaySamples(*(a[:, None] for a in arrays)))[:, 0]
 
-    @torch.no_grad()
+    def _gradient_steps(self, batches: ReplaySamples) -> np.ndarray:
+        """The steps of ``batches`` (S, G, B, ...) at ``self._learning_rate``; the losses (S, G)."""
+        n = batches.actions.shape[1]
+        coefs = optim.coefficients(self.optimizer_settings, self._learning_rate, self._optimizer_steps, n, self.n_seeds)
+        self.q_net, self.optimizer_state, losses = self.q_learning.train(
+            self.q_net, self.optimizer_state, self.q_net_target, batches, coefs
+        )
+        self._optimizer_steps += n
+        return np.asarray(losses)
+
     def predict(self, observations: np.ndarray) -> np.ndarray:
         """Greedy actions (S, N) for observations (S, N, obs_dim): each seed's
         ``predict(obs, deterministic=True)`` (QNetwork._predict: argmax of the Q-values)."""
-        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32))
-        if obs.dim() != 3 or obs.shape[0] != self.n_seeds:
-            raise ValueError(f"observations of shape {tuple(obs.shape)}: allowed (seeds={self.n_seeds}, N, obs_dim)")
-        return self.q_net(obs).argmax(dim=2).numpy()
+        obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 3 or obs.shape[0] != self.n_seeds:
+            raise ValueError(f"observations of shape {obs.shape}: allowed (seeds={self.n_seeds}, N, obs_dim)")
+        return self.q_learning.act(self.q_net, obs)
 
     # ---- saving: each seed as the SB3 model SB3 would have written ----
 
@@ -452,10 +445,16 @@ class BatchedDQN:
         """The seeds' SB3 models with the engine's state written into them: weights of q_net and
         q_net_target, Adam's state, and what SB3's learn leaves on a model (counters, schedules'
         progress, last observations, episode statistics), so that ``save`` writes SB3's zip."""
-        policies = [m.policy for m in self.models]
-        self.q_net.write_to([p.q_net.q_net for p in policies])
-        self.q_net_target.write_to([p.q_net_target.q_net for p in policies])
-        optimizer_state_to_seeds(self.optimizer, self._pairs, [p.optimizer for p in policies])
+        write_back(self.q_net, self._q_trees)
+        write_back(self.q_net_target, self._target_trees)
+        optim.state_to_torch(
+            self.optimizer_settings,
+            self.optimizer_state,
+            self._optimizer_steps,
+            self._learning_rate,
+            [m.policy.optimizer for m in self.models],
+            self._q_trees,
+        )
         for s, model in enumerate(self.models):
             model.num_timesteps, model._total_timesteps = self.num_timesteps, self._total_timesteps
             model._num_timesteps_at_start = self._num_timesteps_at_start

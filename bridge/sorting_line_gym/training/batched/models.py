@@ -42,10 +42,16 @@ class SpacesEnv(gym.Env):
 
 
 def spaces_vec_env(observation_space: gym.Space, action_space: gym.spaces.Discrete, n_lines: int):
-    """A DummyVecEnv of ``n_lines`` :class:`SpacesEnv` (the model's n_envs is the seed's lines)."""
+    """A DummyVecEnv of ``n_lines`` :class:`SpacesEnv` (the model's n_envs is the seed's lines),
+    each with spaces of its own: SB3 seeds a model's action space with its seed, and DQN draws its
+    random actions from it, so two seeds' models must not share one space object."""
+    import copy
+
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    return DummyVecEnv([lambda: SpacesEnv(observation_space, action_space) for _ in range(n_lines)])
+    return DummyVecEnv(
+        [lambda: SpacesEnv(copy.deepcopy(observation_space), copy.deepcopy(action_space)) for _ in range(n_lines)]
+    )
 
 
 @dataclass

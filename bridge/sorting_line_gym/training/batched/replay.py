@@ -6,27 +6,28 @@ all seeds (they step together), with the timeouts of ``handle_timeout_terminatio
 its indices from seed s's own generator, by SB3's calls in SB3's order (``BaseBuffer.sample`` then
 ``ReplayBuffer._get_samples``), so each seed's batch is the one SB3 would have drawn from that
 generator and no seed reads another's rows. ``optimize_memory_usage`` is not mirrored (the engine
-refuses it).
+refuses it). The arrays are numpy's: the gradient steps (q_learning, JAX) take the batches of all
+of one ``train`` call at once.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-import torch
 
 
 class ReplaySamples(NamedTuple):
-    """One batch for every seed, as SB3's ``ReplayBufferSamples`` with a leading seed axis:
-    observations and next_observations (S, B, obs_dim), actions (S, B, 1) int64, dones and rewards
-    (S, B, 1) float32 (dones already cleared where the episode was cut by a time limit)."""
+    """Replay batches, SB3's ``ReplayBufferSamples`` of one seed under the gradient step's vmap
+    (observations and next_observations (B, obs_dim), actions (B,) integers, dones and rewards (B,)
+    float32, dones already cleared where the episode was cut by a time limit); a sample of all
+    seeds has two axes in front, the seed and the gradient step: (S, G, B, ...)."""
 
-    observations: torch.Tensor
-    actions: torch.Tensor
-    next_observations: torch.Tensor
-    dones: torch.Tensor
-    rewards: torch.Tensor
+    observations: Any
+    actions: Any
+    next_observations: Any
+    dones: Any
+    rewards: Any
 
 
 class BatchedReplayBuffer:
@@ -71,24 +72,23 @@ class BatchedReplayBuffer:
         if self.pos == self.buffer_size:
             self.full, self.pos = True, 0
 
-    def sample(self, batch_size: int, rngs: list[np.random.RandomState]) -> ReplaySamples:
-        """``batch_size`` transitions of each seed s, drawn with ``rngs[s]`` (the generator that
-        is np.random's global one in SB3's run of that seed)."""
+    def sample(self, n_batches: int, batch_size: int, rngs: list[np.random.RandomState]) -> ReplaySamples:
+        """``n_batches`` batches of ``batch_size`` transitions of each seed s, drawn with ``rngs[s]``
+        (the generator that is np.random's global one in SB3's run of that seed) in the order of
+        ``n_batches`` calls of SB3's ``sample``: arrays (S, n_batches, batch_size, ...)."""
         # BaseBuffer.sample: rows uniform below pos (or all of them once full) ...
         upper_bound = self.buffer_size if self.full else self.pos
-        rows = np.empty((self.seeds, batch_size), dtype=np.int64)
-        lines = np.empty((self.seeds, batch_size), dtype=np.int64)
+        rows = np.empty((self.seeds, n_batches, batch_size), dtype=np.int64)
+        lines = np.empty((self.seeds, n_batches, batch_size), dtype=np.int64)
         for s, rng in enumerate(rngs):
-            rows[s] = rng.randint(0, upper_bound, size=batch_size)
-            # ... then ReplayBuffer._get_samples: a line per sample, from the same generator.
-            lines[s] = rng.randint(0, high=self.n_envs, size=(batch_size,))
-        at = (self._seed_index, rows, lines)
+            for g in range(n_batches):
+                rows[s, g] = rng.randint(0, upper_bound, size=batch_size)
+                # ... then ReplayBuffer._get_samples: a line per sample, from the same generator
+                # (randint(0, 1) draws nothing: all zeros, and the generator left as it was).
+                lines[s, g] = rng.randint(0, high=self.n_envs, size=(batch_size,)) if self.n_envs > 1 else 0
+        at = (self._seed_index[:, :, None], rows, lines)
         # _get_samples: dones only where the episode was not cut by a time limit.
         dones = self.dones[at] * (1 - self.timeouts[at])
         return ReplaySamples(
-            torch.from_numpy(self.observations[at]),
-            torch.from_numpy(self.actions[at][..., None]),
-            torch.from_numpy(self.next_observations[at]),
-            torch.from_numpy(dones[..., None]),
-            torch.from_numpy(self.rewards[at][..., None]),
+            self.observations[at], self.actions[at], self.next_observations[at], dones, self.rewards[at]
         )
