@@ -11,6 +11,8 @@
 - :func:`strip_figure`: strip plots, each row one cell's runs (a dot per run) beside its interval,
   so a reader sees how the runs spread, not only the summary; :func:`runs_figure` draws the
   benchmark's (per line and agent, and the --n-envs check), the transfer study draws its own.
+- :func:`curve_figure`: learning curves, the mean over runs with a band, several series one over
+  the other per panel (the engine check's SB3 and batched curves).
 
 Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths. Figures are drawn on their
 own ``Figure`` and Agg canvas (as ``render`` does), never through pyplot: importing this module
@@ -357,3 +359,47 @@ def runs_figure(
         stem,
         "held-out episode reward: a dot per run (its mean over the seeds), tick: IQM, bar: its 95% CI over runs",
     )
+
+
+@dataclass(frozen=True)
+class CurveSeries:
+    """One learning curve: the mean over runs per step and its band (low, high), in one color."""
+
+    label: str
+    steps: Sequence[int]
+    mean: Sequence[float]
+    low: Sequence[float]
+    high: Sequence[float]
+    color: str = "#444444"
+
+
+@dataclass(frozen=True)
+class CurvePanel:
+    """A panel of learning curves drawn one over the other."""
+
+    title: str
+    series: Sequence[CurveSeries]
+
+
+def curve_figure(panels: Sequence[CurvePanel], stem: Path, xlabel: str, ylabel: str, columns: int = 3) -> list[Path]:
+    """One panel per entry of ``panels``, up to ``columns`` a row: each series' mean as a line with
+    its band shaded, the series one over the other; nothing when no panel has a series."""
+    panels = [p for p in panels if p.series]
+    if not panels:
+        return []
+    columns = min(columns, len(panels))
+    rows = (len(panels) + columns - 1) // columns
+    fig = _figure(figsize=(4.2 * columns, 3.0 * rows + 0.4))
+    axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
+    for ax, panel in zip(axes, panels, strict=False):
+        for s in panel.series:
+            ax.fill_between(s.steps, s.low, s.high, color=s.color, alpha=0.25, linewidth=0)
+            ax.plot(s.steps, s.mean, color=s.color, linewidth=1.4, marker=".", markersize=3, label=s.label)
+        ax.set_title(panel.title, fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    fig.supxlabel(xlabel, fontsize=9)
+    fig.supylabel(ylabel, fontsize=9)
+    return _save(fig, stem)
