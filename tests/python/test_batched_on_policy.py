@@ -167,14 +167,17 @@ def test_masks_act_as_maskable_ppos():
         tr.close()
 
 
+@pytest.mark.parametrize("episode_steps", [20, 15], ids=["rollouts-end-episodes", "rollouts-end-mid-episode"])
 @pytest.mark.parametrize("algo, params", [("ppo", PPO), ("a2c", A2C)], ids=["ppo", "a2c"])
-def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
-    """Two rollouts on native lines with 20-step episodes (truncated: SB3 bootstraps them from the
+def test_a_short_training_equals_sb3s_learn(algo, params, episode_steps, tmp_path):
+    """Two rollouts on native lines with short episodes (truncated: SB3 bootstraps them from the
     terminal observation) and their updates: each seed equals SB3 trained with that seed on one
     line of the same backend, episode for episode; saved, it loads in SB3 and predicts the
-    trainer's actions, and it loads back into the trainer."""
+    trainer's actions, and it loads back into the trainer. With 15-step episodes a PPO rollout of
+    40 steps holds two truncations and ends inside an episode, so its last values (the bootstrap
+    of GAE) count: 20-step episodes end with the rollout, where they do not."""
     total = 2 * params.get("n_steps", 5) * (4 if algo == "a2c" else 1)
-    tr = trainer(algo, params, lines=1, episode_steps=20)
+    tr = trainer(algo, params, lines=1, episode_steps=episode_steps)
     try:
         tr.learn(total)
         paths = tr.save([tmp_path / f"{algo}_seed{s}" for s in SEEDS])
@@ -185,7 +188,7 @@ def test_a_short_training_equals_sb3s_learn(algo, params, tmp_path):
         tr.close()
     cls = type(tr.template)
     for s, seed in enumerate(SEEDS):
-        env = make_training_env("B", "advanced", 1, 20, backend="native")
+        env = make_training_env("B", "advanced", 1, episode_steps, backend="native")
         try:
             reference = cls("MlpPolicy", env, seed=seed, device="cpu", **params).learn(total)
         finally:

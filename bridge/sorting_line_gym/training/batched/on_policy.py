@@ -190,7 +190,9 @@ class OnPolicyTrainer:
         values = values.reshape(len(self.seeds), len(blocks), -1)
         for i, (pos, truncated, _) in enumerate(truncations):
             bootstrap_truncated(buffer.rewards[pos], truncated, values[:, i], gamma)
-        buffer.compute_returns_and_advantage(values[:, -1], self._last_episode_starts, gamma, self.template.gae_lambda)
+        # The last observation's block comes right after the truncations' (the padding follows it).
+        last_values = values[:, len(truncations)]
+        buffer.compute_returns_and_advantage(last_values, self._last_episode_starts, gamma, self.template.gae_lambda)
 
     def train(self) -> None:
         """PPO.train, MaskablePPO.train or A2C.train on the filled buffer, for every seed."""
