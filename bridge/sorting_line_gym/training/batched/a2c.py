@@ -75,14 +75,7 @@ def a2c_update(
     settings: A2CSettings,
 ) -> tuple[Any, dict[str, Any]]:
     """One A2C.train for every seed; ``coef``: the optimizer's scalars of this one step (S, 1)."""
-    fields = {
-        "observations": data.observations,
-        "actions": data.actions.astype(np.int32),
-        "advantages": data.advantages,
-        "returns": data.returns,
-    }
-    if data.action_masks is not None:
-        fields["action_masks"] = data.action_masks
+    fields = data.arrays("observations", "actions", "advantages", "returns")
     hp = {
         "ent_coef": np.float32(settings.ent_coef),
         "vf_coef": np.float32(settings.vf_coef),

@@ -161,16 +161,7 @@ def ppo_update(
     # PPO.train: `if self.normalize_advantage and len(advantages) > 1` (MaskablePPO: without the size test)
     normalize = (settings.normalize_advantage and (b > 1 or settings.maskable),
                  settings.normalize_advantage and (r > 1 or settings.maskable))  # fmt: skip
-    fields = {
-        "observations": data.observations,
-        "actions": data.actions.astype(np.int32),
-        "values": data.values,
-        "log_probs": data.log_probs,
-        "advantages": data.advantages,
-        "returns": data.returns,
-    }
-    if data.action_masks is not None:
-        fields["action_masks"] = data.action_masks
+    fields = data.arrays("observations", "actions", "values", "log_probs", "advantages", "returns")
     steps = {key: c.reshape(n_seeds, n_epochs, per_epoch) for key, c in coef.items()}
     full = orders[:, :, : k * b].reshape(n_seeds, n_epochs, k, b).astype(np.int32)
     rest = orders[:, :, k * b :].astype(np.int32)

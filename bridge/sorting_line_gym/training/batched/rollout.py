@@ -32,6 +32,16 @@ class FlatRollout:
     def size(self) -> int:
         return int(self.actions.shape[1])
 
+    def arrays(self, *names: str) -> dict[str, np.ndarray]:
+        """The fields ``names`` (and the action masks, when there are any) as a loss reads them:
+        the actions as int32, the index type of JAX's gathers."""
+        fields = {name: getattr(self, name) for name in names}
+        if "actions" in fields:
+            fields["actions"] = self.actions.astype(np.int32)
+        if self.action_masks is not None:
+            fields["action_masks"] = self.action_masks
+        return fields
+
 
 class RolloutBuffer:
     """SB3's RolloutBuffer (reset, add, compute_returns_and_advantage, get) for S seeds x L lines."""
