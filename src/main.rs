@@ -418,6 +418,8 @@ fn run_vocabulary() -> Result<(), String> {
     let modes = numbered(SORT_MODES.iter().map(|&m| (m, m.index())));
     let categories = numbered(CATEGORIES.iter().map(|&c| (c, c.index())));
     let defaults = LineConfig::default();
+    // `mut` only for the node's endpoints below, which a build without the ros feature leaves out.
+    #[cfg_attr(not(feature = "ros"), allow(unused_mut))]
     let mut vocabulary = serde_json::json!({
         "variants": VARIANTS,
         "inputs": INPUT_KINDS,
