@@ -177,8 +177,13 @@ def forward(spec: Spec, layers: Sequence[Mapping[str, jax.Array]], x: jax.Array)
     k = 0
     for op in spec:
         if op[0] == "linear":
-            # F.linear(x, W, b) = x @ W.T + b (torch/nn/modules/linear.py)
-            x = x @ layers[k]["w"].T + layers[k]["b"]
+            # F.linear(x, W, b) = x @ W.T + b (torch/nn/modules/linear.py). The barrier keeps W.T a
+            # transposed copy: folded into the dot (XLA's default), XLA's CPU kernel for an output
+            # width that is no multiple of its vector width (DQN's 30 actions) sums in another order
+            # than torch's (sequential over the inputs, fused multiply-adds), and Adam makes those
+            # last bits grow over a training; on a contiguous W.T both sum alike, and a seed's result
+            # no longer depends on which seeds share its batch (measured with JAX 0.10.2).
+            x = x @ jax.lax.optimization_barrier(layers[k]["w"].T) + layers[k]["b"]
             k += 1
         else:
             x = activate(op, x)
