@@ -36,7 +36,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .. import _native
+import sorting_line_gym._native as _native
+
 from ..line.vocabulary import (
     ACTION_COUNTS,
     CATEGORIES,

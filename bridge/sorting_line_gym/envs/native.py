@@ -20,7 +20,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from .. import _native  # always built with the package (line.vocabulary says how, if not)
+import sorting_line_gym._native as _native  # always built with the package (line.vocabulary says how, if not)
+
 from ..line.errors import BridgeError
 from ..line.options import LineOptions
 from .env import SEED_BOUND, action_space, observation_space

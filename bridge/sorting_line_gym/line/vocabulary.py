@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 try:
-    from .. import _native
+    import sorting_line_gym._native as _native
 except ImportError as e:  # every install builds it (setup.sh, `pip install ./bridge`, the wheel)
     raise ImportError(
         "sorting_line_gym needs its extension sorting_line_gym._native (the line's facts and model come from "
