@@ -52,10 +52,27 @@ class Endpoint:
     note: str = ""  # a remark for the docs' table
 
 
+@dataclass(frozen=True)
+class Qos:
+    """A QoS profile as plain values, for each ROS library to build its own object from
+    (``ros.links.QOS`` for rclpy, ``bag.storage.schema.NODE_QOS`` for a bag's metadata)."""
+
+    reliability: str  # "reliable" or "best_effort"
+    durability: str  # "volatile" or "transient_local"
+    depth: int  # of a keep-last history
+
+    def words(self) -> str:
+        """The profile as ``sorting_line vocabulary`` prints it: ``reliable, volatile, keep-last 10``."""
+        return f"{self.reliability.replace('_', '-')}, {self.durability.replace('_', '-')}, keep-last {self.depth}"
+
+
+#: The node's QoS for its commands, sensors and state (src/ros/qos.rs, ``default_profile``).
+NODE_QOS = Qos(reliability="reliable", durability="volatile", depth=10)
+
 #: The QoS profiles, in words (src/ros/qos.rs has them; ros2-client creates /rosout's and
 #: /parameter_events' as rcl does).
 QOS_PROFILES = {
-    "default": "reliable, volatile, keep-last 10",
+    "default": NODE_QOS.words(),
     "action": "rcl_action's: status reliable, transient-local, keep-last 1; the rest default",
     "rosout": "reliable, transient-local, keep-last 1, lifespan 10 s",
     "parameter_events": "reliable, transient-local, keep-last 1",

@@ -22,15 +22,25 @@ from sorting_line_interfaces.msg import LineCommands, LineState, LineStates, Sor
 from sorting_line_interfaces.srv import ResetLine, ResetLines
 
 from ..line.errors import BridgeError
-from ..line.topics import BATCH_CMD, BATCH_RESET, BATCH_STATE, DIAGNOSTICS, RESET, SORT_MODE_CMD, SPEED_CMD, STATE
+from ..line.topics import (
+    BATCH_CMD,
+    BATCH_RESET,
+    BATCH_STATE,
+    DIAGNOSTICS,
+    NODE_QOS,
+    RESET,
+    SORT_MODE_CMD,
+    SPEED_CMD,
+    STATE,
+)
 from ..line.vocabulary import SPEEDS  # a speed index i commands SPEEDS[i]
 from .batch_codec import BatchCodec, from_message, row_bytes
 
-#: The node's QoS for commands and state.
+#: The node's QoS for commands and state (``line.topics.NODE_QOS``), as rclpy's profile.
 QOS = QoSProfile(
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
+    depth=NODE_QOS.depth,
+    reliability=ReliabilityPolicy[NODE_QOS.reliability.upper()],
+    durability=DurabilityPolicy[NODE_QOS.durability.upper()],
     history=HistoryPolicy.KEEP_LAST,
 )
 

@@ -21,14 +21,15 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from ...line import topics
 from ..format.topics import INTERFACES
 
-#: The node's QoS (docs/ros-node.md), as a rosbag2 offered QoS profile.
+#: The node's QoS (``line.topics.NODE_QOS``), as a rosbag2 offered QoS profile.
 NODE_QOS = Qos(
     history=QosHistory.KEEP_LAST,
-    depth=10,
-    reliability=QosReliability.RELIABLE,
-    durability=QosDurability.VOLATILE,
+    depth=topics.NODE_QOS.depth,
+    reliability=QosReliability[topics.NODE_QOS.reliability.upper()],
+    durability=QosDurability[topics.NODE_QOS.durability.upper()],
     deadline=QosTime(0, 0),
     lifespan=QosTime(0, 0),
     liveliness=QosLiveliness.AUTOMATIC,
