@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 
-import ros_harness as h  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 REEXEC_MARK = "SORTING_LINE_BENCH_IN_NETNS"
 TARGET_RATIO = 2.0

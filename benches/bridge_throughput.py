@@ -50,7 +50,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
-import ros_harness as h  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 TARGET_ONE_LINE = 3000.0
 TARGET_SCALING = 10.0

@@ -29,7 +29,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
-import ros_harness as h  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 CLIENT = r"""
 import json, os, sys, time

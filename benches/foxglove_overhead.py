@@ -30,8 +30,8 @@ sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 
 import node_lockstep as bench  # noqa: E402
-import ros_harness as h  # noqa: E402
-from foxglove_viewer import Viewer, live_view_url  # noqa: E402
+from support import ros_harness as h  # noqa: E402
+from support.foxglove_viewer import Viewer, live_view_url  # noqa: E402
 
 CONFIGS = ["off", "on, no viewer", "on, one viewer"]
 

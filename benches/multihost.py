@@ -2,7 +2,7 @@
 """Lines on several hosts, one vector env driving them all: what a round trip costs as
 hosts are added, and a soak across hosts.
 
-The hosts are network namespaces made here (tests/python/netns_hosts.py: veth pairs into a Linux
+The hosts are network namespaces made here (tests/python/support/netns_hosts.py: veth pairs into a Linux
 bridge, addresses 192.168.77.x that exist only inside them; nothing is sent anywhere else). Each
 host runs one `sorting_line node --lines 16` (/h<i>/plant) under ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET;
 a "trainer" host runs a ``SortingLineVectorEnv`` over all of them (``namespace=[...]``,
@@ -149,8 +149,8 @@ def ros_env(**values: str) -> dict[str, str]:
 
 def on_hosts(count: int, role: str, cfg: dict, log_dir: Path) -> dict:
     """Builds ``count`` node hosts and a trainer host, runs ``role`` in the trainer, tears down."""
-    import netns_hosts
-    import ros_harness as h
+    from support import netns_hosts
+    from support import ros_harness as h
 
     names = [f"h{i + 1}" for i in range(count)]
     env = ros_env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", SORTING_LINE_BIN=str(h.node_binary()))
@@ -258,7 +258,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _runner(args):
     """run(count, role, cfg): a role's process over ``count`` nodes, --attach's or network namespaces'."""
-    import netns_hosts
+    from support import netns_hosts
 
     if args.attach:
         most = max(args.hosts + ([args.soak_hosts] if args.soak_ticks > 0 else []))

@@ -36,7 +36,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 
-import ros_harness as h  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 REEXEC_MARK = "SORTING_LINE_BENCH_IN_NETNS"
 POLICY = ROOT / "tests" / "data" / "policies" / "ppo_B_advanced_seed42.onnx"
@@ -61,7 +61,7 @@ def decisions(path: Path) -> list[dict]:
 def run_lines(flags: dict[str, list[str]], node_flags: list[str], ticks: int, workdir: Path) -> dict[str, list[dict]]:
     """One node per controller (namespace = its name), each reset once and driven for ``ticks``
     ticks by its controller; the decision logs."""
-    from line_client import LineClient
+    from support.line_client import LineClient
 
     session = h.RosSession()
     nodes, controllers, clients, logs = [], [], [], {}

@@ -34,8 +34,8 @@ sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "bridge"))
 sys.path.insert(0, str(ROOT / "benches"))
 
-import ros_harness as h  # noqa: E402
 from node_lockstep import cpu_seconds  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 LINE_TOPICS = ("input", "belt/occupancy", "state", "events/reset")
 NAMESPACE = "/recbench"

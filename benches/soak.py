@@ -39,8 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
 
-import ros_harness as h  # noqa: E402
 from sorting_line_gym.line.vocabulary import EPISODE_STEPS, SETUPS, VARIANTS  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 
 def progress(msg: str) -> None:

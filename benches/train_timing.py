@@ -33,8 +33,8 @@ from unittest.mock import MagicMock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
-import ros_harness as h  # noqa: E402
 from sorting_line_gym.line.vocabulary import SETUPS, THRESHOLD, VARIANTS  # noqa: E402
+from support import ros_harness as h  # noqa: E402
 
 #: The reference env's name of each input generator.
 REFERENCE_INPUTS = {"random": "r", "seasonal": "s9"}

@@ -14,7 +14,7 @@ interfaces of .venv (sorting_line_interfaces, simulation_interfaces) through an 
 exactly the files of their install manifests, so the rest of .venv (torch, a second rclpy) stays out.
 
 A stamp keyed on the manifest, the requirements, the recipe and the interpreter makes a rerun instant; a lock
-serialises concurrent runs. tests/python/ros2_cli.py imports this module: one implementation for both.
+serialises concurrent runs. tests/python/support/ros2_cli.py imports this module: one implementation for both.
 Python rather than bash because of that, and for readable checks and error messages without a traceback.
 """
 

@@ -23,7 +23,7 @@ step() { printf '\n== %s\n' "$*"; }
 
 # The subset of the suite that runs on the other Python version: the README's snippets, the env,
 # the vector env, bags, bag check, the controllers and the pytest plugin (tests needing the training
-# stack skip there: tests/python/training_stack.py), less the two longest, which test nothing of the
+# stack skip there: tests/python/support/training_stack.py), less the two longest, which test nothing of the
 # Python version (a throughput benchmark; the plugin's examples in a pytest of their own), which took 113
 # of 388 s at load 9-13. What it costs: docs/installing.md, "Python 3.11 and 3.12".
 OTHER_PYTHON_TESTS=(test_readme.py test_bridge.py test_bridge_vector.py test_bags.py test_bag_check.py
@@ -74,11 +74,11 @@ if [[ $RUST_ONLY == 0 ]]; then
     OTHER_VENV=""
     other_missing
   fi
-  job_start ros2cli .venv/bin/python tests/python/ros2_cli.py --build
+  job_start ros2cli .venv/bin/python tests/python/support/ros2_cli.py --build
   job_start rllib bash launch_scripts/setup.sh --rllib --no-cargo
   SORTING_LINE_COLCON_WS="$(mktemp -d /tmp/sorting_line_colcon_ws.XXXXXX)"
   export SORTING_LINE_COLCON_WS
-  job_start colcon .venv/bin/python tests/python/colcon_ws.py --build
+  job_start colcon .venv/bin/python tests/python/support/colcon_ws.py --build
 fi
 
 step "Rust formatting (rustfmt.toml)"
@@ -177,7 +177,7 @@ step "ros2 CLI for the CLI tests"
 job_join ros2cli "test.sh: building the ros2 CLI venv (launch_scripts/ros2cli.sh)"
 
 step "colcon workspace for the ROS 2 package test"
-job_join colcon "test.sh: tests/python/colcon_ws.py --build"
+job_join colcon "test.sh: tests/python/support/colcon_ws.py --build"
 
 step "core venv of Python $OTHER_PYTHON for the subset"
 # Joined before the suite: its editable install builds the native extension into bridge/.

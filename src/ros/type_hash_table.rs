@@ -1,5 +1,5 @@
 //! The RIHS01 hash of every interface the node's endpoints use, as rosidl computed them.
-//! Generated: `.venv/bin/python tests/python/type_hashes.py --write`. Do not edit;
+//! Generated: `.venv/bin/python tests/python/support/type_hashes.py --write`. Do not edit;
 //! tests/python/test_graph_citizen.py::test_type_hash_table_is_rosidls fails when this differs from rosidl's.
 
 /// (ROS type name, RIHS01 hash), sorted by name; one row a line, as generated (and as

@@ -20,9 +20,9 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import ros2_cli  # noqa: E402
-import ros_harness as h  # noqa: E402
-from line_client import LineClient  # noqa: E402
+from support import ros2_cli  # noqa: E402
+from support import ros_harness as h  # noqa: E402
+from support.line_client import LineClient  # noqa: E402
 
 h.ros_environment()  # before anything imports rclpy
 
@@ -52,7 +52,7 @@ def ros():
 
 @pytest.fixture(scope="session")
 def ros2(tmp_path_factory):
-    """The real `ros2` command line (tests/python/ros2_cli.py); skips with the reason when there is none.
+    """The real `ros2` command line (tests/python/support/ros2_cli.py); skips with the reason when there is none.
 
     A graph command (`ros2 topic echo`, `list`, ...) starts a ros2 daemon of its domain when none
     runs, and that daemon outlives pytest; the session stops the one of its domain at the end (a

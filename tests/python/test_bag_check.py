@@ -26,15 +26,15 @@ from pathlib import Path
 
 import pytest
 
-import ros_harness as h
-from bag_golden import DATA, GOLDEN, BagProcess
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.check.checker import check_controller
 from sorting_line_gym.bag.format.description import META_KEY
 from sorting_line_gym.bag.storage.schema import typestore
 from sorting_line_gym.bag.storage.writer import BagWriter
+from support import ros_harness as h
+from support.bag_golden import DATA, GOLDEN, BagProcess
 
-SCRIPT = Path(__file__).with_name("scripted_controller.py")
+SCRIPT = Path(__file__).parent / "support" / "scripted_controller.py"
 
 
 @pytest.fixture(autouse=True)

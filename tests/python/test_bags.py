@@ -31,13 +31,13 @@ from types import SimpleNamespace
 
 import pytest
 
-import ros_harness as h
-from bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, wait_for_command_writers
-from ros_harness import NS_PER_S
 from sorting_line_gym.bag import open_bag, rewrite_bag
 from sorting_line_gym.bag.storage.schema import stamp_ns as plain_stamp
 from sorting_line_gym.bag.storage.schema import typestore
 from sorting_line_gym.bag.transport.replay import replay
+from support import ros_harness as h
+from support.bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, wait_for_command_writers
+from support.ros_harness import NS_PER_S
 
 
 @pytest.fixture(autouse=True)

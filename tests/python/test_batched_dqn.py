@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from training_stack import MISSING
+from support.training_stack import MISSING
 
 if MISSING:
     pytest.skip(f"needs the training stack (setup.sh --train); missing {', '.join(MISSING)}", allow_module_level=True)

@@ -34,11 +34,11 @@ import gymnasium
 import numpy as np
 import pytest
 
-import ros_harness as h
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, BridgeTimeout
 from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
-from training_stack import needs_training
+from support import ros_harness as h
+from support.training_stack import needs_training
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -61,7 +61,7 @@ INFO_KEYS = set(
 
 
 def node_binary() -> Path:
-    from ros_harness import node_binary as harness_node_binary
+    from support.ros_harness import node_binary as harness_node_binary
 
     return harness_node_binary()
 

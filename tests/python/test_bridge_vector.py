@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from sorting_line_gym import SortingLineVectorEnv
+from support.training_stack import needs_training
 from test_bridge import (
     ADVANCED,
     BASIC,
@@ -24,7 +25,6 @@ from test_bridge import (
     strip_node_counters,
     trace,
 )
-from training_stack import needs_training
 
 
 def _run_vector(env: SortingLineVectorEnv, seed: int, actions: np.ndarray) -> dict:

@@ -1,6 +1,6 @@
 """The node as a ROS 2 package (docs/ros-package.md), as a ROS user builds and runs it: a colcon workspace
 with this repository under src/, built by a plain `colcon build` from PyPI's colcon with .venv as the
-underlay (tests/python/colcon_ws.py; launch_scripts/test.sh builds it before the tests), then, after
+underlay (tests/python/support/colcon_ws.py; launch_scripts/test.sh builds it before the tests), then, after
 `source install/setup.bash`, the real `ros2` CLI: `ros2 pkg`, `ros2 interface`, `ros2 run` of the
 node and of the bridge's entries, and `ros2 launch sorting_line sorting_line.launch.py`.
 
@@ -20,10 +20,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-import colcon_ws
-import ros2_cli
-import ros_harness as h
-from ros_harness import LINE_TYPES
+from support import colcon_ws, ros2_cli
+from support import ros_harness as h
+from support.ros_harness import LINE_TYPES
 from test_ros2cli import poll, yaml_docs
 
 # The workspace installs Python modules for the project venv's version (this interpreter's).
@@ -37,7 +36,7 @@ def workspace() -> Path:
     ws = colcon_ws.workspace_dir()
     result = colcon_ws.load_result(ws)
     if result is None:
-        why = f"no colcon workspace in {ws}: build it with `python tests/python/colcon_ws.py --build` (test.sh does)"
+        why = f"no colcon workspace in {ws}: build it with `python tests/python/support/colcon_ws.py --build` (test.sh does)"
         if os.environ.get("SORTING_LINE_COLCON_WS"):  # test.sh built it: then a missing result is a failure
             pytest.fail(why, pytrace=False)
         pytest.skip(why)

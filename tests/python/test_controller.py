@@ -31,8 +31,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ros_harness as h
-from ros_harness import NS_PER_S, show_ns, stamp_ns
 from sorting_line_gym import SortingLineEnv
 from sorting_line_gym.agents import (
     START_SPEED_INDEX,
@@ -44,6 +42,8 @@ from sorting_line_gym.agents import (
 )
 from sorting_line_gym.line.vocabulary import SPEEDS
 from sorting_line_gym.training.trained_agent import make_agent
+from support import ros_harness as h
+from support.ros_harness import NS_PER_S, show_ns, stamp_ns
 
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),

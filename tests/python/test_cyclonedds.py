@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import pytest
 
-import ros_harness as h
-from ros_harness import NS_PER_S
+from support import ros_harness as h
+from support.ros_harness import NS_PER_S
 
 cyclonedds = pytest.importorskip("cyclonedds", reason="cyclonedds (launch_scripts/requirements-bridge.txt) missing")
 

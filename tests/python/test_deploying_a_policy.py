@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-import ros_harness as h
+from support import ros_harness as h
 
 DOC = h.ROOT / "docs" / "deploying-a-policy.md"
 #: The training budget of the doc (4096 steps) cut for CI: one PPO rollout of 256 steps.

@@ -4,7 +4,7 @@ the deprecated ROS_LOCALHOST_ONLY=1). Under LOCALHOST, a ros2 daemon and the nod
 whatever participant ids they hold.
 
 The two hosts are network namespaces this test makes, joined by one veth pair whose two addresses
-exist only inside them (tests/python/netns_hosts.py). An rclpy node next to ours, under the default
+exist only inside them (tests/python/support/netns_hosts.py). An rclpy node next to ours, under the default
 range, is the control: the probes must see it, so a node they do not see is the node's doing.
 """
 
@@ -19,9 +19,8 @@ import sys
 
 import pytest
 
-import netns_hosts
-import participant_ids
-import ros_harness as h
+from support import netns_hosts, participant_ids
+from support import ros_harness as h
 from test_ros2cli import poll
 
 # Polls the graph of its own participant until it has seen every name of `want` and at least
@@ -147,7 +146,7 @@ def test_discovery_range_and_static_peers_across_a_veth_pair(tmp_path):
 
 def test_a_node_and_a_daemon_beyond_the_first_participant_ids_find_each_other(ros2, start_node, namespace):
     """Under LOCALHOST discovery each participant announces itself by unicast to the discovery port
-    of each participant id (tests/python/participant_ids.py). Fast DDS reaches ids up to 31; RustDDS
+    of each participant id (tests/python/support/participant_ids.py). Fast DDS reaches ids up to 31; RustDDS
     reached 0..11 only, so a ros2 daemon that took id 12 or more (started while a dozen participants
     ran) never heard of a node beyond 31, and `ros2 node list` lacked it for good (one of two nodes in a
     CI run). Now the node announces itself to every id. Here sockets hold ids 0..39 of a domain of

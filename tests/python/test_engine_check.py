@@ -19,7 +19,7 @@ import json
 
 import pytest
 
-from training_stack import needs_training
+from support.training_stack import needs_training
 
 pytestmark = [needs_training, pytest.mark.usefixtures("one_torch_thread")]
 

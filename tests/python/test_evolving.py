@@ -16,8 +16,8 @@ from __future__ import annotations
 import json
 import subprocess
 
-import ros_harness as h
-from ros_harness import NS_PER_S, stamp_ns
+from support import ros_harness as h
+from support.ros_harness import NS_PER_S, stamp_ns
 
 # Both schedules run the advanced line (as built, episode 0) with basic hardware: no sort modes, no
 # ratio sensor, until their upgrades.
@@ -571,9 +571,9 @@ def check_a_tampered_event_is_named(out, tmp_path) -> None:
 
 
 def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_factory, probe, namespace, ros):
-    from bag_golden import BagProcess, wait_for_command_writers
     from sorting_line_gym.bag import open_bag
     from sorting_line_gym.bag.transport.replay import replay
+    from support.bag_golden import BagProcess, wait_for_command_writers
 
     schedule, ns, node, c = evolving_line(tmp_path, start_node, client_factory, namespace("bag"))
     c.wait_connected()

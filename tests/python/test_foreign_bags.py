@@ -1,5 +1,5 @@
 """Bags recorded by others: `sorting-line-bag info`, `replay` and `check` on bags written the way
-`ros2 bag record -a` writes them in a ROS 2 graph (tests/python/ros2_bags.py: rosbags' writer,
+`ros2 bag record -a` writes them in a ROS 2 graph (tests/python/support/ros2_bags.py: rosbags' writer,
 rosbag2 version 9 metadata, MCAP and sqlite3 storage, no custom_data of ours, extra topics, one
 of a type this project does not know, the line in another namespace), from the golden bags' data.
 
@@ -21,12 +21,12 @@ from pathlib import Path
 
 import pytest
 
-import ros_harness as h
-from bag_golden import DATA, GOLDEN
-from ros2_bags import CELL_STATUS, write_ros2_bag
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.cli import main
 from sorting_line_gym.bag.transport.replay import replay
+from support import ros_harness as h
+from support.bag_golden import DATA, GOLDEN
+from support.ros2_bags import CELL_STATUS, write_ros2_bag
 
 #: The node serving /plant/line_2 hosted three lines with seed 7: line 2 has seed 9, advanced_b's.
 PLANT_PARAMETERS = {
@@ -121,7 +121,7 @@ def test_a_bag_with_the_nodes_parameters_replays_with_no_flags(ros2_bags):
 def test_a_bag_of_other_types_only_is_refused(tmp_path, capsys):
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from ros2_bags import user_typestore
+    from support.ros2_bags import user_typestore
 
     store = user_typestore()
     writer = Writer(tmp_path / "other", version=9, storage_plugin=StoragePlugin.MCAP)

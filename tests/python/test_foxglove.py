@@ -1,5 +1,5 @@
 """The node's Foxglove live view (`--foxglove`, docs/foxglove.md) read by Foxglove's own client
-libraries, headless (tests/python/foxglove_viewer.py runs them under Node.js), and the
+libraries, headless (tests/python/support/foxglove_viewer.py runs them under Node.js), and the
 recorder's bags read by Foxglove's MCAP reader:
 
 - every channel decodes by the schema the server advertised, to the values an rclpy subscriber
@@ -22,12 +22,12 @@ import time
 import pytest
 import yaml
 
-import ros_harness
-from foxglove_viewer import Viewer, live_view_url, message_bytes, read_bags
-from ros_harness import TopicRecorder, diagnostic_values, join_ns, run_node_expecting_failure, stamp_ns
 from sorting_line_gym.bag.format.options import WriteOptions
 from sorting_line_gym.bag.storage import schema
 from sorting_line_gym.bag.storage.rewrite import rewrite_bag
+from support import ros_harness
+from support.foxglove_viewer import Viewer, live_view_url, message_bytes, read_bags
+from support.ros_harness import TopicRecorder, diagnostic_values, join_ns, run_node_expecting_failure, stamp_ns
 
 #: The topics a line publishes (the harness's, less the commands it subscribes to).
 LINE_TYPES = {rel: ros_type for rel, ros_type in ros_harness.LINE_TYPES.items() if not rel.startswith("cmd/")}
@@ -410,7 +410,7 @@ def test_bad_foxglove_values_fail_at_start_naming_them():
 @pytest.fixture(scope="module")
 def bags(tmp_path_factory):
     """The golden bags (plain), and copies written zstd-compressed and split, as the recorder writes them."""
-    from bag_golden import DATA
+    from support.bag_golden import DATA
 
     out = tmp_path_factory.mktemp("foxglove_bags")
     plain = [DATA / name for name in ("basic_d", "advanced_b", "ppo_advanced_b")]
@@ -435,7 +435,7 @@ def test_bags_are_read_by_foxglove_readers(bags):
 def test_the_layout_shows_what_the_node_serves():
     """launch_scripts/sorting_line.foxglove.json: every panel of the tree is configured, and every
     message path names a topic the node serves (default namespace) and a field of its type."""
-    from ros_harness import ROOT
+    from support.ros_harness import ROOT
 
     layout = json.loads((ROOT / "launch_scripts" / "sorting_line.foxglove.json").read_text())
 

@@ -9,7 +9,7 @@ import importlib.util
 import subprocess
 import sys
 
-import ros_harness as h
+from support import ros_harness as h
 
 
 def _load(path):

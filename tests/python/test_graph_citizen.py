@@ -14,13 +14,13 @@ import time
 
 import pytest
 
-import ros_harness as h
-import type_hashes
+from support import ros_harness as h
+from support import type_hashes
 
 
 def test_type_hash_table_is_rosidls():
     """Fails when a .msg/.srv (or a dependency) changed and the table was not regenerated with
-    `.venv/bin/python tests/python/type_hashes.py --write`."""
+    `.venv/bin/python tests/python/support/type_hashes.py --write`."""
     assert type_hashes.checked_in() == type_hashes.expected()
 
 

@@ -1,5 +1,5 @@
 """The launch_testing example (tests/launch/test_line_with_controller.launch.py) under `launch_test`,
-the runner of ROS's own integration-test framework, from the ros2 CLI venv (tests/python/ros2_cli.py;
+the runner of ROS's own integration-test framework, from the ros2 CLI venv (tests/python/support/ros2_cli.py;
 `launch_test` beside its `ros2`, as after sourcing launch_scripts/ros2cli.sh's env.sh), so that test.sh
 runs it: the node and `sorting-line-controller` started by a launch description, WaitForTopics on their topics, and the
 post-shutdown exit-code check, all passing, as the JUnit file launch_test writes says.
@@ -12,7 +12,7 @@ import shutil
 import subprocess
 import xml.etree.ElementTree as ET
 
-import ros_harness as h
+from support import ros_harness as h
 
 EXAMPLE = h.ROOT / "tests" / "launch" / "test_line_with_controller.launch.py"
 #: What the example checks: three tests while it runs, one after shutdown.

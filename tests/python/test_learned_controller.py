@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ros_harness as h
+from support import ros_harness as h
+from support.training_stack import needs_training
 from test_controller import ControllerProcess, line_recorders, ns_args, reset_until_answered, watch
-from training_stack import needs_training
 
 POLICIES = h.ROOT / "tests" / "data" / "policies"
 PPO_ZIP = POLICIES / "ppo_B_advanced_seed42.zip"

@@ -1,7 +1,7 @@
 """Lines on several hosts of one DDS domain, driven by one vector env on another host.
 
 The hosts are network namespaces this test makes, each plugged by a veth pair into a Linux bridge,
-with addresses that exist only inside them (tests/python/netns_hosts.py): h1, h2, h3 each run a
+with addresses that exist only inside them (tests/python/support/netns_hosts.py): h1, h2, h3 each run a
 `sorting_line node --lines 16` in a namespace of their own (/h1/plant, ...), and "trainer" runs a
 `SortingLineVectorEnv` over all three (``namespace=[...]``, ``node="attach"``). Discovery is set as
 users set it: h1, h2 and the trainer under ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (multicast through
@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import netns_hosts
-import ros_harness as h
+from support import netns_hosts
+from support import ros_harness as h
 from test_bridge import assert_obs, assert_step, fixed_actions, trace
 
 LINES = 16  # per node: a batch/reset reply of 16 lines (2.5 KB) is larger than one datagram of a 1500-byte MTU

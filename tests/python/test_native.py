@@ -23,11 +23,11 @@ import gymnasium
 import numpy as np
 import pytest
 
-import ros_harness as h
 import sorting_line_gym  # noqa: F401 - registers the ids
 from sorting_line_gym import BridgeError, SortingLineSB3VecEnv, SortingLineVectorEnv
 from sorting_line_gym.envs.evolving import READY_SCHEDULES, schedule_file
 from sorting_line_gym.line.vocabulary import ENV_IDS, SETUPS, SPEEDS, VARIANTS
+from support import ros_harness as h
 from test_bridge import same as same_value
 
 IDS = {variant: f"sorting_line_gym:{env_id}" for variant, env_id in ENV_IDS.items()}

@@ -12,10 +12,10 @@ import time
 
 import pytest
 
-import ros_harness as h
-from line_client import LineClient
-from ros_harness import LINE_TYPES, show_ns, stamp_ns
 from sorting_line_gym.line.vocabulary import START_CONTENTS
+from support import ros_harness as h
+from support.line_client import LineClient
+from support.ros_harness import LINE_TYPES, show_ns, stamp_ns
 
 REASONS = [
     "invalid_speed",

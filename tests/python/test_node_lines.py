@@ -12,8 +12,8 @@ import signal
 
 import pytest
 
-import ros_harness as h
-from ros_harness import LINE_TYPES, NS_PER_S, show_ns, stamp_ns
+from support import ros_harness as h
+from support.ros_harness import LINE_TYPES, NS_PER_S, show_ns, stamp_ns
 from test_node import (
     clock_recorder,
     compare_with_trace,

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-import ros_harness as h
-from ros_harness import NS_PER_S, stamp_ns
+from support import ros_harness as h
+from support.ros_harness import NS_PER_S, stamp_ns
 from test_node import (
     diagnostics_recorder,
     ns_args,

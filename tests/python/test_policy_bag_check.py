@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-import ros_harness as h
+from support import ros_harness as h
 
 BAG = h.ROOT / "tests" / "data" / "bags" / "ppo_advanced_b"
 POLICIES = h.ROOT / "tests" / "data" / "policies"

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ros_harness as h
+from support import ros_harness as h
 
 POLICIES = h.ROOT / "tests" / "data" / "policies"
 PPO_ZIP = POLICIES / "ppo_B_advanced_seed42.zip"

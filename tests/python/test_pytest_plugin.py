@@ -26,8 +26,8 @@ from pathlib import Path
 
 import pytest
 
-import ros_harness as h
-from bag_golden import DATA
+from support import ros_harness as h
+from support.bag_golden import DATA
 
 EXAMPLES = h.ROOT / "docs" / "examples"
 DOC = h.ROOT / "docs" / "testing-controllers.md"

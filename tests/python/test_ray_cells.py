@@ -1,6 +1,6 @@
 """The studies' cells on a Ray cluster (``--ray ADDRESS``, studies/ray_cells.py): a small benchmark
 (two baselines and a short A2C cell, native lines) run on a cluster of two hosts in network
-namespaces (tests/python/netns_hosts.py, the cluster as test_rllib.py starts its own), cut by
+namespaces (tests/python/support/netns_hosts.py, the cluster as test_rllib.py starts its own), cut by
 SIGTERM after its first cell and run again, against the same command on one machine without Ray.
 
 It checks that the cells ran on both hosts (each record's ``ran_on``), that the cut run kept its
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import pytest
 
-import netns_hosts
+from support import netns_hosts
 from test_rllib import RayCluster, ray_env
 
 INSTALLED = importlib.util.find_spec("ray") is not None

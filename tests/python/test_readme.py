@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-import ros2_cli
-from training_stack import needs_training
+from support import ros2_cli
+from support.training_stack import needs_training
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"

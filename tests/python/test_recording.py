@@ -25,12 +25,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-import ros_harness as h
-from bag_golden import DATA, BagProcess
 from sorting_line_gym.bag import open_bag, rewrite_bag
 from sorting_line_gym.bag.format.options import WriteOptions
 from sorting_line_gym.bag.format.topics import PUBLISHED, relative_to
 from sorting_line_gym.bag.storage.losses import header_stamp
+from support import ros_harness as h
+from support.bag_golden import DATA, BagProcess
 
 #: The killed recorder must hold everything the node published up to this long before the kill
 #: (it fsyncs every 0.5 s; the rest is slack for a busy 2-core machine).

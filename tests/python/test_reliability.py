@@ -32,12 +32,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ros_harness as h
-from bag_golden import BagProcess, wait_for_command_writers
 from sorting_line_gym import BridgeError, BridgeTimeout, SortingLineEnv, SortingLineVectorEnv
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.storage.schema import stamp_ns
 from sorting_line_gym.bag.transport.replay import replay
+from support import ros_harness as h
+from support.bag_golden import BagProcess, wait_for_command_writers
 from test_controller import ControllerProcess
 from test_node import diagnostics_recorder, ns_args, wait_diagnostics
 

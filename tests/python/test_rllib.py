@@ -31,9 +31,9 @@ from pathlib import Path
 
 import pytest
 
-import netns_hosts
-import ros_harness as h
 from sorting_line_gym.training.rllib import RAY_ENVIRONMENT
+from support import netns_hosts
+from support import ros_harness as h
 
 REQUIRED = os.environ.get("SORTING_LINE_RLLIB") == "1"
 INSTALLED = importlib.util.find_spec("ray") is not None

@@ -1,5 +1,5 @@
 """The node as a ROS 2 Jazzy user meets it: the real `ros2` command line and `ros2 launch`
-(tests/python/ros2_cli.py says where they come from), not our own clients.
+(tests/python/support/ros2_cli.py says where they come from), not our own clients.
 
 Every command runs with a timeout. Graph queries (`node list`, `topic list`, `topic info`) go
 through the ros2 daemon (the `ros2_daemon` fixture runs it in this test network namespace for this
@@ -18,9 +18,9 @@ import time
 import pytest
 import yaml
 
-import participant_ids
-import ros_harness as h
-from ros_harness import LINE_TYPES
+from support import participant_ids
+from support import ros_harness as h
+from support.ros_harness import LINE_TYPES
 
 pytestmark = pytest.mark.usefixtures("ros2_daemon")
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-import ros2_cli
+from support import ros2_cli
 
 recipe = ros2_cli.recipe
 SCRIPT = ros2_cli.ROOT / "launch_scripts" / "ros2cli.sh"

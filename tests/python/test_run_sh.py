@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from training_stack import needs_training
+from support.training_stack import needs_training
 
 ROOT = Path(__file__).resolve().parents[2]
 RUN = ROOT / "launch_scripts" / "run.sh"

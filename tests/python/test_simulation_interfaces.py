@@ -22,10 +22,10 @@ import time
 
 import pytest
 
-import ros_harness as h
-from ros_harness import show_ns, stamp_ns
 from sorting_line_gym.line.process import with_parent_death_signal
 from sorting_line_gym.line.vocabulary import START_SPEED_INDEX  # held each episode until commanded
+from support import ros_harness as h
+from support.ros_harness import show_ns, stamp_ns
 
 SETUP, VARIANT, SEED, RATE = "B", "basic", 13, 40.0
 FEATURES = [20, 21, 22, 24, 25, 26, 31, 32, 33]  # reset (time, state), state get/set/pause, step single/multiple/action

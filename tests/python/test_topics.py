@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-import ros_harness as h
 from sorting_line_gym.bag.format import topics as bag_topics
 from sorting_line_gym.line import topics
+from support import ros_harness as h
 
 PACKAGE = h.ROOT / "bridge" / "sorting_line_gym"
 VOCABULARY = PACKAGE / "line" / "topics.py"

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ros_harness as h
+from support import ros_harness as h
 
 TIMEOUT = 300
 

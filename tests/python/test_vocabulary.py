@@ -14,8 +14,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import ros_harness as h
 from sorting_line_gym.line import vocabulary as v
+from support import ros_harness as h
 
 
 @pytest.fixture(scope="module")

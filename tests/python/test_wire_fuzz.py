@@ -25,9 +25,9 @@ from types import SimpleNamespace
 
 import pytest
 
-import ros_harness as h
-import rtps_wire as w
-from line_client import LineClient
+from support import ros_harness as h
+from support import rtps_wire as w
+from support.line_client import LineClient
 from test_node import ns_args
 
 DATAGRAMS = int(os.environ.get("SORTING_LINE_WIRE_FUZZ_DATAGRAMS", "50000"))

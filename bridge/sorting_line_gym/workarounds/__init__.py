@@ -69,7 +69,7 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     that happened,
     ``repeated_while_unanswered`` repeats it only while the caller's evidence says nothing
     happened: ``bag.check.closed_loop`` (a reset whose first tick got no answer; a fresh node first when
-    the reset had no seed) and the tests' harness (tests/python/line_client.py: a reset that
+    the reset had no seed) and the tests' harness (tests/python/support/line_client.py: a reset that
     /diagnostics shows did not happen; bag_golden.py: a golden recording's reset nobody answered).
     Delete when: the first state of a reset is proven to arrive (a reader-side handshake of the
     node's own, or a durable step-0 state), and no test sees a lost first reply or state.

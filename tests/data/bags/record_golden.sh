@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Re-records the golden bags of this directory with `sorting-line-bag record` (see
-# tests/python/bag_golden.py for what is recorded and how): in a loopback-only network namespace
+# tests/python/support/bag_golden.py for what is recorded and how): in a loopback-only network namespace
 # (needs root), on a domain id of its own. Check the result with
 #   bash launch_scripts/test.sh -k bag
 set -euo pipefail
@@ -13,5 +13,5 @@ unshare -n bash -c '
   ip link set lo up
   source launch_scripts/env.sh
   cd tests/python
-  python bag_golden.py "$@"
+  python -m support.bag_golden "$@"
 ' bash "$@"   # no names: every bag of bag_golden.GOLDEN

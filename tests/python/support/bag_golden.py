@@ -20,9 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-import ros_harness as h
-from line_client import LineClient
 from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
+from support import ros_harness as h
+from support.line_client import LineClient
 
 DATA = h.ROOT / "tests" / "data" / "bags"
 MAX_STEPS = 50

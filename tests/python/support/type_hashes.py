@@ -5,7 +5,7 @@ the RIHS01 hash of each interface, our own `sorting_line_interfaces` (built from
 setup.sh) included. The node cannot compute hashes at run time (no ROS install), so it carries
 them in src/ros/type_hash_table.rs, written by this module:
 
-    .venv/bin/python tests/python/type_hashes.py --write
+    .venv/bin/python tests/python/support/type_hashes.py --write
 
 test_type_hash.py fails when the table differs from rosidl's (a .msg/.srv changed and the
 table was not regenerated) and checks that the running node announces them.
@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TABLE = ROOT / "src" / "ros" / "type_hash_table.rs"
 
 # Interfaces of other packages that the node's endpoints use: its own topics (/clock,
@@ -103,7 +103,7 @@ def render(table: dict[str, str]) -> str:
     rows = "".join(f'    ("{t}", "{h}"),\n' for t, h in table.items())
     return (
         "//! The RIHS01 hash of every interface the node's endpoints use, as rosidl computed them.\n"
-        "//! Generated: `.venv/bin/python tests/python/type_hashes.py --write`. Do not edit;\n"
+        "//! Generated: `.venv/bin/python tests/python/support/type_hashes.py --write`. Do not edit;\n"
         "//! tests/python/test_graph_citizen.py::test_type_hash_table_is_rosidls "
         "fails when this differs from rosidl's.\n\n"
         "/// (ROS type name, RIHS01 hash), sorted by name; one row a line, as generated (and as\n"

@@ -15,7 +15,7 @@ tests/python/test_colcon_package.py checks, done the way docs/ros-package.md tel
   must find all three packages itself), with .venv's python and cmake first on PATH and .venv as
   AMENT_PREFIX_PATH and CMAKE_PREFIX_PATH.
 
-launch_scripts/test.sh runs `python tests/python/colcon_ws.py --build` in the background beside the
+launch_scripts/test.sh runs `python tests/python/support/colcon_ws.py --build` in the background beside the
 Rust tests, outside the tests' network namespace (PyPI); the test reads `result.json` in the
 workspace. A failed build does not stop test.sh: it is recorded there, and the test fails with the log.
 """
@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PROJECT_VENV = ROOT / ".venv"
 REQUIREMENTS = ROOT / "launch_scripts" / "requirements-colcon.txt"
 # The exact command the test stands for; --release and --locked as setup.sh's build, whose target/ it reuses.

@@ -10,7 +10,8 @@ import time
 from collections import defaultdict
 from typing import Any
 
-from ros_harness import (
+from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
+from support.ros_harness import (
     NS_PER_S,
     NodeProcess,
     RosSession,
@@ -21,7 +22,6 @@ from ros_harness import (
     show_ns,
     stamp_ns,
 )
-from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 
 
 class LineClient:

@@ -14,7 +14,7 @@ Where it comes from, in order:
 4. else nothing: the CLI tests are skipped with the reason.
 
 Building needs PyPI, and the tests run in a network namespace without it, so launch_scripts/test.sh
-builds the venv before it enters the namespace (`python tests/python/ros2_cli.py --build`); inside
+builds the venv before it enters the namespace (`python tests/python/support/ros2_cli.py --build`); inside
 the namespace the tests only look the venv up.
 
 The project's interfaces (sorting_line_interfaces and simulation_interfaces, compiled into .venv by setup.sh) are
@@ -33,7 +33,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _load_recipe():

@@ -50,7 +50,7 @@ from sorting_line_gym.line.process import with_parent_death_signal
 from sorting_line_gym.line.topics import line_types
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_TEST_DOMAIN = "87"
 NS_PER_S = 1_000_000_000
 # How long a wait goes on spinning once its peer is gone, to take what the peer sent before it went.

@@ -19,7 +19,7 @@ from typing import Any
 
 from sorting_line_gym.line.process import with_parent_death_signal
 
-FOXGLOVE = Path(__file__).resolve().parents[1] / "foxglove"
+FOXGLOVE = Path(__file__).resolve().parents[2] / "foxglove"
 
 #: The node's log line naming where its live view listens.
 LISTENING = re.compile(r"foxglove live view on (ws://\S+)")
