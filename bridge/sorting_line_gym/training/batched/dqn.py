@@ -1,5 +1,6 @@
 """Batched DQN: S independent seeds of Stable-Baselines3's DQN trained at once in one process, on
-S x L native lines stepped in one call (``envs.native.NativeLines``), each seed held to SB3 step for
+S x L lines stepped in one call (``lines.BatchedLines``: native lines by default, or with
+``backend="ros"`` the lines of one node, a round trip a step), each seed held to SB3 step for
 step.
 
     engine = BatchedDQN([42, 43, 44], setup="B", variant="advanced", gamma=0.95)  # the paper's DQN
@@ -52,7 +53,7 @@ from ...envs.env import action_space, observation_space
 from ...line.vocabulary import check_setup, check_variant
 from . import optim
 from .checks import available_memory, check_seeds
-from .lines import BatchedLines
+from .lines import BatchedLines, check_backend
 from .models import SeedModel, check_model_file, new_models, spaces_vec_env
 from .params import specs_of, stack, torch_tree, write_back
 from .q_learning import QLearning
@@ -169,9 +170,10 @@ def load_models(paths: Sequence[str | Path], seeds: Sequence[int | None], varian
 
 
 class BatchedDQN:
-    """S seeds of SB3's DQN on ``n_envs`` native lines each (see the module docstring).
-    ``hyperparameters`` are DQN's constructor arguments (SB3's defaults for the rest); the seeds
-    share them. The counters are SB3's names, one value for all seeds: they step together."""
+    """S seeds of SB3's DQN on ``n_envs`` lines each (see the module docstring; ``backend`` and
+    ``namespace`` as ``lines.BatchedLines`` takes them). ``hyperparameters`` are DQN's constructor
+    arguments (SB3's defaults for the rest); the seeds share them. The counters are SB3's names,
+    one value for all seeds: they step together."""
 
     def __init__(
         self,
@@ -181,10 +183,13 @@ class BatchedDQN:
         variant: str = "basic",
         n_envs: int = 1,
         episode_steps: int = 250,
+        backend: str = "native",
+        namespace: str | Sequence[str] | None = None,
         **hyperparameters: Any,
     ):
         seeds = check_seeds(seeds)
         self._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(hyperparameters))
+        self._where(backend, namespace, len(seeds))
         sb3_kwargs = {k: v for k, v in hyperparameters.items() if k != "device"} | {"device": "cpu"}
         spaces = (observation_space(variant), action_space(variant))
         self._adopt(seeds, new_models("dqn", seeds, sb3_kwargs, spaces, n_envs))
@@ -199,6 +204,8 @@ class BatchedDQN:
         variant: str = "basic",
         n_envs: int = 1,
         episode_steps: int = 250,
+        backend: str = "native",
+        namespace: str | Sequence[str] | None = None,
     ) -> BatchedDQN:
         """Continues SB3 DQN models (``.zip``, one per seed) as SB3's ``DQN.load(path, env,
         seed=s).learn(...)`` would: their weights, Adam state, ``_n_calls``/``_n_updates`` and
@@ -220,6 +227,7 @@ class BatchedDQN:
         train_freq = params[0]["train_freq"]  # a TrainFreq once SB3 has built the model
         loaded_params = {**params[0], "train_freq": (train_freq.frequency, train_freq.unit.value)}
         engine._configure(setup, variant, n_envs, episode_steps, check_hyperparameters(loaded_params))
+        engine._where(backend, namespace, len(seeds))
         engine._adopt(seeds, loaded)
         return engine
 
@@ -236,6 +244,11 @@ class BatchedDQN:
         self.tau, self.gamma, self.max_grad_norm = params["tau"], params["gamma"], params["max_grad_norm"]
         self.train_freq, self.gradient_steps = params["train_freq"], params["gradient_steps"]
         self.target_update_interval = params["target_update_interval"]
+
+    def _where(self, backend: str, namespace: str | Sequence[str] | None, n_seeds: int) -> None:
+        """Where the lines will run, checked now: ``learn`` builds them, after the models."""
+        check_backend(backend, namespace, n_seeds, self.n_envs, None)
+        self.backend, self.namespace = backend, namespace
 
     def _adopt(self, seeds: list[int], built: list[SeedModel]) -> None:
         """Takes over the SB3 models: their weights stacked, their optimizers' state, generators and
@@ -338,6 +351,8 @@ class BatchedDQN:
                 variant=self.variant,
                 episode_steps=self.episode_steps,
                 stats_window=self.params["stats_window_size"],
+                backend=self.backend,
+                namespace=self.namespace,
             )
         if self._last_obs is None:
             self._last_obs = self.lines.reset()

@@ -1,6 +1,14 @@
-"""The S x L native lines of a batched training, stepped in one call, seen by each seed as SB3
-sees its own VecEnv: the same seeding, auto-reset and episode statistics, so that seed s of the
-engine trains on the lines SB3 with ``seed=s`` and ``n_envs=L`` would train on.
+"""The S x L lines of a batched training, stepped in one call, seen by each seed as SB3 sees its
+own VecEnv: the same seeding, auto-reset and episode statistics, so that seed s of the engine
+trains on the lines SB3 with ``seed=s`` and ``n_envs=L`` would train on.
+
+- Backends (``envs.vector.make_lines``, the vector envs' lines): ``"native"`` (default), the S x L
+  lines in this process, one call a step; ``"ros"``, S x L lines of one `sorting_line node`
+  (``--lines S*L``, batch topics), one round trip a step, which then sets the pace. Without
+  ``namespace`` the node is started for the run and stopped with it (``node="spawn"``, as
+  ``sorting-line-train --engine sb3 --backend ros`` starts its node); with it, the node(s) serving
+  that namespace (or list of namespaces, the lines spread evenly) are used. Both backends give the
+  same observations and rewards for the same seeds, so a training is the same on either.
 
 - Seeding (envs/seeding.py, the rule of both backends and of ``VecEnv.seed``): line j of seed s
   starts from line seed ``s + j`` with the generator ``default_rng(s + j)``, whose draws seed its
@@ -10,7 +18,7 @@ engine trains on the lines SB3 with ``seed=s`` and ``n_envs=L`` would train on.
   at once; its last observation is kept as the terminal observation, for SB3's bootstrap.
 - Episode statistics (VecMonitor): per seed, the last ``stats_window`` episodes' return and length.
 
-Used by the on-policy driver and meant for any batched learner (DQN's too).
+Used by the on-policy trainer and the batched DQN, which pass their ``backend`` and ``namespace`` on.
 """
 
 from __future__ import annotations
@@ -23,8 +31,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...envs.env import action_space, observation_space
-from ...envs.native import NativeLines
+from ...envs.native import BACKENDS
+from ...envs.vector import make_lines, node_namespaces
+from ...line.errors import BridgeError
 from ...line.options import LineOptions
+from ...line.vocabulary import check
+
+#: The most lines one node serves (``sorting_line node --lines``; ``ros.bank.LineBank`` checks it too).
+NODE_LINES = 64
 
 
 @dataclass
@@ -40,8 +54,38 @@ class Step:
     terminal_obs: np.ndarray
 
 
+def check_backend(
+    backend: str, namespace: str | Sequence[str] | None, n_seeds: int, lines_per_seed: int, evolution: str | None
+) -> list[str] | None:
+    """The node namespaces of ``backend``'s lines (None: native lines, or a node started for the
+    run), or a ValueError naming what cannot be: what the engines call before they build anything."""
+    check("backend", backend, BACKENDS)
+    namespaces = node_namespaces(namespace)
+    if backend == "native":
+        if namespaces is not None:
+            raise ValueError(
+                f"namespace = {namespace!r} with backend = 'native': native lines run in this process; "
+                "a node's namespace is for backend = 'ros'"
+            )
+        return None
+    if evolution is not None:
+        # vector.Lines reports every action valid (the ROS vector faces do not run the evolving line).
+        raise ValueError(
+            f"evolution = {evolution!r} with backend = 'ros': the ROS lines of a vector env give no action masks "
+            "of the evolving line; allowed backend = 'native' for the evolving line"
+        )
+    total, nodes = n_seeds * lines_per_seed, len(namespaces or [None])
+    if total % nodes or total // nodes > NODE_LINES:
+        raise ValueError(
+            f"{n_seeds} seeds x {lines_per_seed} lines = {total} lines on {nodes} node(s): a node serves "
+            f"1 ..= {NODE_LINES} lines, the same number on each; allowed seeds x lines <= {NODE_LINES * nodes}"
+            f"{f' and a multiple of {nodes}' if nodes > 1 else ''} (fewer seeds or lines per seed)"
+        )
+    return namespaces
+
+
 class BatchedLines:
-    """S seeds x L lines of one native batch (see the module docstring)."""
+    """S seeds x L lines of one native batch or of one node (see the module docstring)."""
 
     def __init__(
         self,
@@ -53,13 +97,21 @@ class BatchedLines:
         episode_steps: int,
         evolution: str | None = None,
         stats_window: int = 100,
+        backend: str = "native",
+        namespace: str | Sequence[str] | None = None,
     ) -> None:
         self.seeds = list(seeds)
         self.n_seeds, self.n_lines = len(self.seeds), lines_per_seed
+        namespaces = check_backend(backend, namespace, self.n_seeds, lines_per_seed, evolution)
+        self.backend, self.namespaces = backend, namespaces
         variant = "advanced" if evolution else variant
-        options = LineOptions(setup=setup, variant=variant, max_episode_steps=episode_steps, evolution=evolution)
+        # With namespaces the node is the user's (attach); without, a ROS run starts its own (spawn).
+        node = "attach" if namespaces else "spawn"
+        options = LineOptions(setup=setup, variant=variant, max_episode_steps=episode_steps, evolution=evolution,
+                              node=node, namespace=namespaces[0] if namespaces else None)  # fmt: skip
         self.observation_space, self.action_space = observation_space(variant), action_space(variant)
-        self._lines = NativeLines(self.n_seeds * lines_per_seed, options)
+        self._lines = make_lines(backend, self.n_seeds * lines_per_seed, options, namespaces)
+        self._started = False
         self.episodes: list[deque[dict[str, float]]] = [deque(maxlen=stats_window) for _ in self.seeds]
         self.episode_counts = np.zeros(self.n_seeds, dtype=np.int64)
         self._returns = np.zeros((self.n_seeds, lines_per_seed), dtype=np.float32)
@@ -82,10 +134,27 @@ class BatchedLines:
                 k = i * self.n_lines + j
                 self._lines.rngs[k] = np.random.default_rng(seed + j)
                 first[k] = seed + j
-        obs = self._lines.reset(first)
+        obs = self._first_reset(first) if not self._started else self._lines.reset(first)
         self._returns[:] = 0
         self._lengths[:] = 0
         return np.stack([obs[k] for k in range(len(first))]).reshape(self.n_seeds, self.n_lines, -1)
+
+    def _first_reset(self, seeds: dict[int, int]) -> dict[int, np.ndarray]:
+        """The first reset; on a node's lines it is where a node of another number of lines shows
+        (its refusal, or its reply of another size), so the error says what the run needs."""
+        try:
+            obs = self._lines.reset(seeds)
+        except BridgeError as e:
+            if self.namespaces is None:
+                raise
+            total = self.n_seeds * self.n_lines
+            raise BridgeError(
+                f"the batched engine's {self.n_seeds} seeds x {self.n_lines} lines need {total} lines on the node(s) "
+                f"{', '.join(self.namespaces)} (sorting_line node --lines {total // len(self.namespaces)} each); "
+                f"its first reset failed: {e}"
+            ) from e
+        self._started = True
+        return obs
 
     def action_masks(self) -> np.ndarray:
         """(S, L, n_actions) bool: which actions are valid now (``get_action_masks`` of sb3-contrib)."""

@@ -1,6 +1,7 @@
 """The batched on-policy trainer: S seeds of PPO, A2C or MaskablePPO trained at once on S x L
-native lines, each seed as SB3's ``OnPolicyAlgorithm.learn`` (stable_baselines3/common/
-on_policy_algorithm.py) would train it with ``seed=s`` and ``n_envs=L``.
+lines (native by default, or a node's with ``backend="ros"``: ``lines.BatchedLines``), each seed
+as SB3's ``OnPolicyAlgorithm.learn`` (stable_baselines3/common/on_policy_algorithm.py) would
+train it with ``seed=s`` and ``n_envs=L``.
 
     trainer = OnPolicyTrainer("ppo", [42, 43, 44], setup="B", variant="advanced",
                               params={"gamma": 0.85, "learning_rate": 7e-4, "ent_coef": 0.03})
@@ -47,7 +48,8 @@ Progress = Callable[["OnPolicyTrainer"], None]
 
 class OnPolicyTrainer:
     """S seeds of one on-policy algorithm (see the module docstring). ``models``: SB3 zips, one per
-    seed, to continue training from instead of new models."""
+    seed, to continue training from instead of new models. ``backend`` and ``namespace``: where the
+    lines run (``lines.BatchedLines``: native by default; ``"ros"``, a node of S x L lines)."""
 
     def __init__(
         self,
@@ -61,6 +63,8 @@ class OnPolicyTrainer:
         episode_steps: int = 250,
         evolution: str | None = None,
         models: Sequence[str | Path] | None = None,
+        backend: str = "native",
+        namespace: str | Sequence[str] | None = None,
     ) -> None:
         self.algo = checks.check_algo(algo)
         self.seeds = checks.check_seeds(seeds)
@@ -80,7 +84,7 @@ class OnPolicyTrainer:
         checks.check_memory(len(self.seeds), lines_per_seed, n_steps, obs_dim, n_actions)
         self.lines = BatchedLines(
             self.seeds, lines_per_seed, setup=setup, variant=variant, episode_steps=episode_steps, evolution=evolution,
-            stats_window=int(params.get("stats_window_size", 100)),
+            stats_window=int(params.get("stats_window_size", 100)), backend=backend, namespace=namespace,
         )  # fmt: skip
         try:
             spaces = (self.lines.observation_space, self.lines.action_space)
