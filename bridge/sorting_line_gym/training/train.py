@@ -15,8 +15,9 @@ Writes ``<out>/<algo>_<setup>_<variant>_seed<seed>.zip`` (the SB3 model) and a `
 under ``<out>/tensorboard/`` with the line KPIs (``line/purity``, ``line/mean_speed``, ... see
 ``callbacks``). A progress bar shows the steps unless ``--no-progress``.
 
-``--engine batched`` trains all ``--seeds`` at once in this process on native lines (``train_batched``,
-``training/batched``), each seed's model and record written as above.
+``--engine batched`` trains all ``--seeds`` at once in this process (``train_batched``,
+``training/batched``), each seed's model and record written as above: on native lines by default,
+or with ``--backend ros`` on the S x L lines of one node started for the run.
 """
 
 from __future__ import annotations
@@ -160,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--backend",
         choices=BACKENDS,
         help="ros: lines of a sorting_line node over ROS 2; native: the line in-process (same model) "
-        "(default ros; with --engine batched native, its only backend)",
+        "(default ros; with --engine batched native, and ros means one node of seeds x n_envs lines)",
     )
     p.add_argument(
         "--engine",

@@ -1,7 +1,12 @@
 """`sorting-line-train --engine batched --seeds 42 43 ...`: the batched trainer (training/batched)
-behind the training command: all the seeds of one algorithm trained at once on native lines, each
-written as ``--engine sb3`` writes one (``<algo>_<setup>_<variant>_seed<S>.zip``, an SB3 model
-file, and its ``.json`` training record).
+behind the training command: all the seeds of one algorithm trained at once, each written as
+``--engine sb3`` writes one (``<algo>_<setup>_<variant>_seed<S>.zip``, an SB3 model file, and its
+``.json`` training record).
+
+The lines are native by default; ``--backend ros`` trains on S x L lines of one `sorting_line
+node` started for the run (``--lines S*L``, stopped with it), as ``--engine sb3 --backend ros``
+starts its node: each step is then one round trip to the node, which sets the pace. A node serves
+at most 64 lines, so S x L beyond that fails before anything starts.
 
 The hyperparameters are the same (``hyperparams.load``: the paper's, ``--hp``, ``n_envs`` lines
 per seed); what the batched trainer does not implement fails before anything starts (its checks).
@@ -25,14 +30,25 @@ from . import hyperparams
 from .run_record import TrainingRun, model_stem, versions
 
 
-def trainer(algo: str, setup: str, variant: str, seeds: Sequence[int], own: dict[str, Any], kwargs: dict[str, Any]):
-    """The batched trainer of ``algo`` (DQN's or the on-policy one) for ``seeds``."""
+def trainer(
+    algo: str,
+    setup: str,
+    variant: str,
+    seeds: Sequence[int],
+    own: dict[str, Any],
+    kwargs: dict[str, Any],
+    lines: dict[str, Any] | None = None,
+):
+    """The batched trainer of ``algo`` (DQN's or the on-policy one) for ``seeds``; ``lines``: where
+    its lines run (``backend``, ``namespace``: ``batched.lines.BatchedLines``; default native)."""
+    lines = lines or {}
     if algo == "dqn":
         from .batched.dqn import BatchedDQN
 
         return BatchedDQN(
-            seeds, setup=setup, variant=variant, n_envs=own["n_envs"], episode_steps=own["episode_steps"], **kwargs
-        )
+            seeds, setup=setup, variant=variant, n_envs=own["n_envs"], episode_steps=own["episode_steps"],
+            **lines, **kwargs,
+        )  # fmt: skip
     from .batched.on_policy import OnPolicyTrainer
 
     return OnPolicyTrainer(
@@ -43,6 +59,7 @@ def trainer(algo: str, setup: str, variant: str, seeds: Sequence[int], own: dict
         params=kwargs,
         lines_per_seed=own["n_envs"],
         episode_steps=own["episode_steps"],
+        **lines,
     )
 
 
@@ -84,9 +101,12 @@ def train_batched(
     progress: bool = True,
     torch_threads: int = 1,
     on_update: Callable[[Any], None] | None = None,
+    backend: str = "native",
+    namespace: str | Sequence[str] | None = None,
 ) -> list[TrainingRun]:
-    """Trains ``algo`` for all ``seeds`` at once on native lines, saves each seed's model and record, returns
-    the records (``wall_s``: the batch's); ``on_update(engine)`` before the first step and after each update."""
+    """Trains ``algo`` for all ``seeds`` at once, saves each seed's model and record, returns the records
+    (``wall_s``: the batch's); ``on_update(engine)`` before the first step and after each update. The lines
+    are native, or with ``backend="ros"`` a node's: one started for the run, or the one(s) at ``namespace``."""
     import torch
 
     check_setup(setup)
@@ -94,7 +114,7 @@ def train_batched(
     own, kwargs = hyperparams.split(params)
     torch.set_num_threads(torch_threads)
     (out := Path(out)).mkdir(parents=True, exist_ok=True)
-    engine = trainer(algo, setup, variant, seeds, own, kwargs)
+    engine = trainer(algo, setup, variant, seeds, own, kwargs, {"backend": backend, "namespace": namespace})
     try:
         bar, update = progress_bar(own["n_timesteps"], len(engine.seeds)) if progress else (None, None)
         start = time.perf_counter()
@@ -137,8 +157,6 @@ def train_batched(
 
 def refused_flags(args: argparse.Namespace) -> str | None:
     """Why the flags cannot go to the batched trainer, or None: what it lacks is refused, not ignored."""
-    if args.backend not in (None, "native"):
-        return f"--backend {args.backend}: the batched engine trains on native lines (--backend native)"
     if args.tensorboard not in (None, "none"):
         return f"--tensorboard {args.tensorboard}: the batched engine writes no TensorBoard logs (--engine sb3 does)"
     if args.verbose:
@@ -152,8 +170,10 @@ def main_batched(args: argparse.Namespace, params: dict[str, Any]) -> int:
     if refused:
         print(f"sorting-line-train: {refused}", file=sys.stderr)
         return 2
+    args.backend = args.backend or "native"  # the batched engine's default (--engine sb3's is ros)
     print(
-        f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seeds {args.seeds} at once: {params}",
+        f"training {args.algo.upper()} on setup {args.setup} {args.variant}, seeds {args.seeds} at once "
+        f"on {args.backend} lines: {params}",
         file=sys.stderr,
     )
     try:
