@@ -4,7 +4,7 @@
 //! [`info_of`]; the ROS backend's `vocabulary.state_info` builds its own from [`INFO`], exported as
 //! `INFO_FIELDS` (a message is Python attributes there, one line's scalars or a batch's arrays).
 
-use sorting_line::sim::Line;
+use sorting_line::sim::Report;
 
 /// How a value of the info is typed in Python.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,28 +63,25 @@ pub enum Value {
     Seed(u64),
 }
 
-/// The info of `line` after a step whose batch was sorted at `accuracy` with the belt at
-/// `occupancy` (the step's outcome), in the order of [`INFO`]. The values are the ROS env's:
-/// `LineState::of` in the node fills the same fields from the same `Line`.
-pub fn info_of(line: &Line, accuracy: f64, occupancy: f64) -> [Value; INFO.len()] {
-    let c = line.containers();
-    let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+/// The info of a line after a step, from its [`Report`], in the order of [`INFO`]. The node's
+/// `state` message is built from the same report (`Report::of` in the library).
+pub fn info_of(r: &Report) -> [Value; INFO.len()] {
     [
-        Value::Float(accuracy),
-        Value::Float(c.purity()),
-        Value::Float(c.recall_a()),
-        Value::Float(c.recall_b()),
-        Value::Float(line.speed()),
-        Value::Int(line.speed_index() as i64),
-        Value::Int(line.mode() as i64),
-        Value::Float(occupancy),
-        Value::Containers([count(c.a), count(c.a_false), count(c.b), count(c.b_false)]),
-        Value::Int(i64::from(line.speed_changes())),
-        Value::Float(line.cumulative_reward()),
-        Value::Int(i64::from(line.step_count())),
+        Value::Float(r.accuracy),
+        Value::Float(r.purity),
+        Value::Float(r.recall_a),
+        Value::Float(r.recall_b),
+        Value::Float(r.speed),
+        Value::Int(r.speed_index as i64),
+        Value::Int(r.mode as i64),
+        Value::Float(r.occupancy),
+        Value::Containers(r.containers),
+        Value::Int(i64::from(r.speed_changes)),
+        Value::Float(r.cumulative_reward),
+        Value::Int(i64::from(r.step)),
         // The node stamps tick k at k * tick_period (1 s): the seconds since the reset are the steps.
-        Value::Float(f64::from(line.step_count())),
-        Value::Seed(line.seed()),
+        Value::Float(f64::from(r.step)),
+        Value::Seed(r.seed),
     ]
 }
 

@@ -1,7 +1,7 @@
 //! One line for a Gymnasium `Env`: `reset` and `step` return what the env returns, the
 //! observation, the info dict and (evolving line) its announcements built here, so a step costs
-//! one call from Python. The values are the ROS env's: `LineState::of` in the node fills the same
-//! fields from the same `Line`.
+//! one call from Python. The values are the ROS env's: the node's `state` message and this info
+//! are both built from the library's `sim::Report` of the same `Line`.
 
 use numpy::PyArray1;
 use pyo3::intern;
@@ -10,7 +10,7 @@ use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use sorting_line::sim::evolution::CATEGORY_UNKNOWN_OBSERVATION;
 use sorting_line::sim::evolution::{category_code, event_changes, At, Settings, CATEGORY_UNKNOWN_CODE};
 use sorting_line::sim::line::action_mask;
-use sorting_line::sim::{Action, Line, Variant};
+use sorting_line::sim::{Action, Line, Report, Variant};
 
 use crate::info::{info_of, Value, INFO};
 use crate::{bridge_error, LineSettings, Spec};
@@ -112,7 +112,7 @@ impl NativeLine {
         }
         let action = Action::from_discrete(self.encoding, index as usize).expect("checked above");
         let outcome = self.line.step(action);
-        let info = self.info(py, &outcome)?;
+        let info = self.info(py)?;
         if self.evolving {
             self.add_evolution(py, &info, PyList::empty(py))?;
         }
@@ -154,9 +154,9 @@ impl NativeLine {
     }
 
     /// The info of the step just taken ([`crate::info`]), as the single-line env reports it.
-    fn info<'py>(&self, py: Python<'py>, outcome: &sorting_line::sim::StepOutcome) -> PyResult<Bound<'py, PyDict>> {
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let info = PyDict::new(py);
-        for ((key, _, _), value) in INFO.iter().zip(info_of(&self.line, outcome.accuracy, outcome.occupancy)) {
+        for ((key, _, _), value) in INFO.iter().zip(info_of(&Report::of(&self.line))) {
             let key = PyString::intern(py, key);
             match value {
                 Value::Float(v) => info.set_item(key, v)?,

@@ -12,7 +12,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use sorting_line::sim::line::action_mask;
-use sorting_line::sim::{Action, Line, Variant};
+use sorting_line::sim::{Action, Line, Report, Variant};
 
 use crate::info::{info_of, keys_of, Kind, Value, INFO};
 use crate::line::{not_steppable, write_observation};
@@ -246,10 +246,10 @@ fn write_line(line: &Line, k: usize, line_kind: (Variant, bool), out: &mut Out<'
     if reset {
         return;
     }
-    let last = line.last_step().expect("a line that stepped has a last step");
-    out.floats[k] = last.reward; // the reward row
+    let report = Report::of(line);
+    out.floats[k] = report.reward; // the reward row
     let (mut float_row, mut int_row) = (1, 0);
-    for value in info_of(line, last.accuracy, last.occupancy) {
+    for value in info_of(&report) {
         match value {
             Value::Float(v) => {
                 out.floats[float_row * n + k] = v;

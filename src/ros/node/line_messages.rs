@@ -8,7 +8,7 @@ use crate::ros::messages::{
 };
 use crate::ros::protocol::HostedLine;
 use crate::sim::evolution::{event_changes, fault_name, Settings};
-use crate::sim::Observation;
+use crate::sim::{Observation, Report};
 
 /// The header of a line's current tick.
 pub(super) fn header(host: &HostedLine) -> Header {
@@ -106,37 +106,32 @@ pub(super) fn evolution_event(
 /// reports the start state with reward 0.
 pub(super) fn line_state(host: &HostedLine) -> LineState {
     let line = host.line();
-    let containers = line.containers();
-    let count = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-    let observation = line.observation();
-    let (occupancy, accuracy, reward) = match line.last_step() {
-        Some(o) => (o.occupancy, o.accuracy, o.reward),
-        None => (line.belt().occupancy(), line.belt_accuracy(), 0.0),
-    };
+    let r = Report::of(line);
+    let [container_a, container_a_false, container_b, container_b_false] = r.containers;
     LineState {
         header: header(host),
-        episode: line.episode(),
-        step: line.step_count(),
-        seed: line.seed(),
-        speed: line.speed(),
-        speed_index: line.speed_index() as u8,
-        mode: line.mode() as u8,
-        occupancy,
-        accuracy,
-        reward,
-        cumulative_reward: line.cumulative_reward(),
-        purity: containers.purity(),
-        recall_a: containers.recall_a(),
-        recall_b: containers.recall_b(),
-        container_a: count(containers.a),
-        container_a_false: count(containers.a_false),
-        container_b: count(containers.b),
-        container_b_false: count(containers.b_false),
-        speed_changes: line.speed_changes(),
-        observation_quantity: observation.quantity,
+        episode: r.episode,
+        step: r.step,
+        seed: r.seed,
+        speed: r.speed,
+        speed_index: r.speed_index as u8,
+        mode: r.mode as u8,
+        occupancy: r.occupancy,
+        accuracy: r.accuracy,
+        reward: r.reward,
+        cumulative_reward: r.cumulative_reward,
+        purity: r.purity,
+        recall_a: r.recall_a,
+        recall_b: r.recall_b,
+        container_a,
+        container_a_false,
+        container_b,
+        container_b_false,
+        speed_changes: r.speed_changes,
+        observation_quantity: line.observation().quantity,
         observation_category: host.category_reading(),
         terminated: false,
-        truncated: line.truncated(),
+        truncated: r.truncated,
     }
 }
 
