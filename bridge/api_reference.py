@@ -5,7 +5,7 @@ first paragraph of its docstring, then each public class and function (no leadin
 `__all__` where a module has one) with its signature and the first line of its docstring, and each
 public method of a public class likewise. Read with `ast`, nothing imported: it needs neither rclpy
 nor torch, and the page does not depend on what is installed. A test
-(tests/python/test_python_api_reference.py) fails when the page is stale.
+(tests/python/unit/test_generated_docs.py) fails when the page is stale.
 
     python3 launch_scripts/docs.py    # rewrite it (and the other generated pages); --check
 """

@@ -1,6 +1,6 @@
 """The node's topic table in README.md and docs/ros-node.md, written from the package's topic
 vocabulary (sorting_line_gym/line/topics.py, itself checked against the node's table by
-tests/python/test_topics.py) between two markers in each page, so the pages cannot drift apart
+tests/python/unit/test_topics.py) between two markers in each page, so the pages cannot drift apart
 or from the node. launch_scripts/docs.py calls ``rewrite`` for each of ``PAGES``.
 
 Standard library only: the vocabulary is loaded from its file, without importing the package.

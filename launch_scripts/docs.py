@@ -7,7 +7,7 @@ The pages and their renderers (standard library only, so this runs before any se
 docs/interfaces.md from msg/'s definitions (msg/reference.py), docs/python-api.md from the source
 of sorting_line_gym (bridge/api_reference.py); and a section of pages: the node's topic table in
 README.md and docs/ros-node.md, between markers, from the topic vocabulary
-(bridge/topics_reference.py). tests/python/test_generated_docs.py checks the same.
+(bridge/topics_reference.py). tests/python/unit/test_generated_docs.py checks the same.
 """
 
 from __future__ import annotations

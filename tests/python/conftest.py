@@ -1,12 +1,23 @@
-"""pytest set-up of the Python/ROS integration tests.
+"""pytest set-up of the Python tests: the unit tier (tests/python/unit/) and the ROS tier (the rest).
 
-Refuses to run outside an isolated (loopback-only) network namespace, fixes the ROS environment
-(ROS_DOMAIN_ID from the environment, default 87; Fast DDS with the project's profile) before rclpy
-loads, initialises rclpy once per session with one executor, and starts/stops real node processes.
+A session is in the ROS tier unless every path it was given lies inside tests/python/unit/ (decided from
+the command line in pytest_configure, before any test module is imported). Only the ROS tier fixes the
+ROS environment (ROS_DOMAIN_ID from the environment, default 87; Fast DDS with the project's profile)
+before rclpy loads, refuses to run outside an isolated (loopback-only) network namespace and checks the
+node binary, at session start, as before the tiers existed: so `pytest tests/python`, `pytest
+tests/python/test_node.py` or `pytest tests/python/unit tests/python/test_node.py` refuse outside a
+namespace exactly as they did, while `pytest tests/python/unit` needs no root, no ROS environment and no
+node. Why from the paths and not from the collected items: the guard then still comes before any ROS test
+module is imported; and a unit-tier session that collected a test outside unit/ anyway (a path spelled
+some way this did not foresee) stops after collection (pytest_collection_modifyitems).
+
+The fixtures below initialise rclpy once per session with one executor and start/stop real node
+processes; the unit tests use only the generic ones (make_env with backend="native", one_torch_thread).
 
 Run like CI:
+    .venv/bin/python -m pytest tests/python/unit -q
     unshare -n bash -c 'ip link set lo up; source launch_scripts/env.sh; export ROS_DOMAIN_ID=87;
-                        python -m pytest tests/python -q'
+                        python -m pytest tests/python --ignore=tests/python/unit -q'
 """
 
 from __future__ import annotations
@@ -20,21 +31,34 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from support import ros2_cli  # noqa: E402
+from support import ros2_cli, tiers, torch_threads  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 from support.line_client import LineClient  # noqa: E402
 
-h.ros_environment()  # before anything imports rclpy
+
+def pytest_configure(config):
+    if tiers.decide(config):
+        h.ros_environment()  # before anything imports rclpy
 
 
 def pytest_sessionstart(session):
+    if not tiers.is_ros_tier(session.config):
+        return
     problem = h.isolation_problem()
     if problem:
         pytest.exit(f"refusing to run the ROS tests: {problem}", returncode=3)
     h.node_binary()  # fails early and clearly when the binary is missing
 
 
+def pytest_collection_modifyitems(config, items):
+    outside = [item.nodeid for item in items if not tiers.in_unit(item.path)]
+    if outside and not tiers.is_ros_tier(config):
+        pytest.exit(f"a unit-tier session collected tests outside {tiers.UNIT}: {outside[:3]}", returncode=3)
+
+
 def pytest_report_header(config):
+    if not tiers.is_ros_tier(config):
+        return ["sorting_line unit tests (tests/python/unit): no ROS environment, no network namespace, no node"]
     env = h.ros_environment()
     return [
         f"sorting_line ROS tests: node {h.node_binary()}, " + ", ".join(f"{k}={v}" for k, v in env.items()),
@@ -189,11 +213,6 @@ def make_vec(request):
 
 @pytest.fixture(scope="module")
 def one_torch_thread():
-    """One torch thread for a module, as sorting-line-train runs: on a busy machine a second one only waits.
-    A module asks for it with ``pytestmark = pytest.mark.usefixtures("one_torch_thread")``."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    """One torch thread for a module (support/torch_threads.py)."""
+    with torch_threads.one_torch_thread():
+        yield

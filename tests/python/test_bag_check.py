@@ -91,7 +91,7 @@ def test_our_controller_passes_open_loop_on_the_command_line(namespace, tmp_path
 def test_our_controller_already_running_passes_open_and_closed_loop_on_the_advanced_line(namespace, tmp_path):
     """Without --controller: one controller, started as a user would, checked open loop and then
     closed loop in its namespace (it starts over when the closed loop's fresh node begins)."""
-    from test_controller import ControllerProcess
+    from support.controller_process import ControllerProcess
 
     spec, ns = GOLDEN["advanced_b"], namespace("adv")
     controller = ControllerProcess(
@@ -118,7 +118,7 @@ def test_our_controller_already_running_passes_open_and_closed_loop_on_the_advan
 
 def test_rba_instead_of_rba_hold_fails_naming_tick_and_field_open_and_closed_loop(namespace, tmp_path):
     """One controller running rba where the bag was recorded with rba-hold, checked both ways."""
-    from test_controller import ControllerProcess
+    from support.controller_process import ControllerProcess
 
     spec, ns = GOLDEN["advanced_b"], namespace("rba")
     controller = ControllerProcess(

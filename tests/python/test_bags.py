@@ -304,7 +304,7 @@ def test_a_command_writer_counts_once_its_node_says_it_matched_every_reader(name
 
 
 def test_controller_answers_played_sensor_data_as_recorded(ros, probe, namespace, tmp_path):
-    from test_controller import ControllerProcess, line_recorders
+    from support.controller_process import ControllerProcess, line_recorders
 
     spec, bag = GOLDEN["advanced_b"], open_bag(DATA / "advanced_b")
     ns = namespace("play")

@@ -22,7 +22,6 @@ What is checked:
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -36,117 +35,26 @@ import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, BridgeTimeout
-from sorting_line_gym.line.vocabulary import MAX_EPISODE_STEPS
-from support import ros_harness as h
+from support.env_trace import (
+    ADVANCED,
+    BASIC,
+    INFO_KEYS,
+    assert_episode_follows_trace,
+    assert_obs,
+    assert_step,
+    fixed_actions,
+    strip_node_counters,
+    trace,
+)
+from support.same_values import first_difference, same
 from support.training_stack import needs_training
 
 ROOT = Path(__file__).resolve().parents[2]
-BASIC = "sorting_line_gym:SortingLine-v0"
-ADVANCED = "sorting_line_gym:SortingLineAdvanced-v0"
 IDS = {"basic": BASIC, "advanced": ADVANCED}
-CATEGORY = {"basic": 0, "positive": 1, "negative": 2}
-UNLIMITED = MAX_EPISODE_STEPS  # the env's node episode length when gymnasium's TimeLimit truncates
-
-# The KPIs every step's info carries (env.py's docstring). Its "episode" (the node's episode number)
-# and "sim_time" are not required here: see test_step_info_does_not_depend_on_earlier_episodes and
-# the episode-statistics tests for why they cannot stay as they are.
-INFO_KEYS = set(
-    "accuracy purity recall_a recall_b speed speed_index mode occupancy containers speed_changes cumulative_reward "
-    "step seed".split()
-)
 
 
 # --------------------------------------------------------------------------------------------
 # Helpers
-
-
-def node_binary() -> Path:
-    from support.ros_harness import node_binary as harness_node_binary
-
-    return harness_node_binary()
-
-
-def trace(setup: str, variant: str, seed: int, actions, max_steps: int = UNLIMITED) -> list[dict]:
-    """`sorting_line trace`: one dict per line; "reset" entries for (re)sets, step entries otherwise.
-    `actions` are Gymnasium actions, or "r<seed>" to reset with a seed."""
-    flags = f"--setup {setup} --variant {variant} --seed {seed} --max-steps {max_steps}"
-    argv = [str(node_binary()), "trace", *flags.split(), "--actions", ",".join(str(a) for a in actions)]
-    r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
-    assert r.returncode == 0, f"`{' '.join(argv)}` failed ({r.returncode}): {r.stderr}"
-    return [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
-
-
-def expected_obs(variant: str, observation: dict) -> np.ndarray:
-    """A trace observation as the env must return it (float32)."""
-    q = np.float32(observation["quantity"])
-    if variant == "advanced":
-        return np.array([q, np.float32(CATEGORY[observation["category"]])], dtype=np.float32)
-    return np.array([q], dtype=np.float32)
-
-
-def assert_obs(obs, variant: str, observation: dict, where: str) -> None:
-    want = expected_obs(variant, observation)
-    assert isinstance(obs, np.ndarray) and obs.dtype == np.float32, f"{where}: obs {obs!r} is not float32"
-    assert obs.shape == want.shape and np.array_equal(obs, want), f"{where}: obs {obs!r} != library {want!r}"
-
-
-def assert_step(variant: str, obs, reward, info: dict, entry: dict, where: str) -> None:
-    """One env step (obs, reward, info KPIs) against one trace step entry, exactly."""
-    assert "step" in entry, f"{where}: the library has a reset here: {entry}"
-    library = h.trace_step_view(entry)
-    assert_obs(obs, variant, entry["step"]["observation"], where)
-    assert reward == library["reward"], f"{where}: reward {reward!r} != library {library['reward']!r}"
-    got = {k: info[k] for k in ("accuracy", "purity", "occupancy", "cumulative_reward")}
-    got |= {k: int(info[k]) for k in ("speed_changes", "speed_index", "mode", "step")}
-    want = {k: library[k] for k in got}
-    got["containers"] = tuple(int(x) for x in info["containers"])
-    want["containers"] = tuple(library[f"container_{k}"] for k in h.CONTAINERS)
-    diff = {k: (got[k], want[k]) for k in want if got[k] != want[k]}
-    assert not diff, f"{where}: info differs from the library (env, library): {diff}"
-
-
-def assert_episode_follows_trace(env, setup: str, variant: str, seed: int, actions, what: str) -> None:
-    """reset(seed) then ``actions`` on ``env`` == `sorting_line trace` of the same, step by step."""
-    want = trace(setup, variant, seed, actions)
-    obs, _ = env.reset(seed=seed)
-    assert_obs(obs, variant, want[0]["reset"]["observation"], f"{what} reset")
-    for t, a in enumerate(actions, start=1):
-        obs, reward, _, _, info = env.step(a)
-        assert_step(variant, obs, reward, info, want[t], f"{what} step {t}")
-
-
-def fixed_actions(n_actions: int, count: int, seed: int) -> list[int]:
-    return [int(a) for a in np.random.default_rng(seed).integers(0, n_actions, size=count)]
-
-
-def strip_node_counters(info: dict) -> dict:
-    """info without the node's process-wide counters (its episode number and simulated clock run
-    on across resets): for comparing runs made one after the other in the same node."""
-    return {k: v for k, v in info.items() if k not in ("episode", "sim_time")}
-
-
-def same(a, b) -> bool:
-    """Exact structural equality of trajectories (arrays by value, dtype included)."""
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (
-            isinstance(a, np.ndarray)
-            and isinstance(b, np.ndarray)
-            and a.dtype == b.dtype
-            and a.shape == b.shape
-            and bool(np.all(a == b))
-        )
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple)):
-        return type(a) is type(b) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=False))
-    return type(a) is type(b) and a == b
-
-
-def first_difference(a: list, b: list) -> str:
-    for i, (x, y) in enumerate(zip(a, b, strict=False)):
-        if not same(x, y):
-            return f"entry {i}: {x!r}\n    vs {y!r}"
-    return f"lengths {len(a)} vs {len(b)}"
 
 
 # --------------------------------------------------------------------------------------------

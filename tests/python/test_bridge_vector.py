@@ -1,5 +1,5 @@
 """The vector faces of the Gymnasium bridge against the REAL node, continued from test_bridge.py
-(whose helpers and fixtures they use): SortingLineVectorEnv and the SB3 VecEnv equal the simulation
+(the trace checks they share: support/env_trace.py): SortingLineVectorEnv and the SB3 VecEnv equal the simulation
 library's trajectories (line k = seed S + k) across SAME_STEP autoresets, one seed reproduces a
 run, gymnasium.make_vec uses the vector entry point, and the ecosystem's episode statistics
 (Gymnasium's RecordEpisodeStatistics, SB3's Monitor convention) work on every face. Runs in the
@@ -12,19 +12,18 @@ import numpy as np
 import pytest
 
 from sorting_line_gym import SortingLineVectorEnv
-from support.training_stack import needs_training
-from test_bridge import (
+from support.env_trace import (
     ADVANCED,
     BASIC,
     INFO_KEYS,
     assert_obs,
     assert_step,
-    first_difference,
     fixed_actions,
-    same,
     strip_node_counters,
     trace,
 )
+from support.same_values import first_difference, same
+from support.training_stack import needs_training
 
 
 def _run_vector(env: SortingLineVectorEnv, seed: int, actions: np.ndarray) -> dict:

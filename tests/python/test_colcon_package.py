@@ -22,8 +22,8 @@ import yaml
 
 from support import colcon_ws, ros2_cli
 from support import ros_harness as h
+from support.ros2_output import poll, yaml_docs
 from support.ros_harness import LINE_TYPES
-from test_ros2cli import poll, yaml_docs
 
 # The workspace installs Python modules for the project venv's version (this interpreter's).
 PYTHON_DIR = f"python{sys.version_info.major}.{sys.version_info.minor}"
@@ -36,7 +36,8 @@ def workspace() -> Path:
     ws = colcon_ws.workspace_dir()
     result = colcon_ws.load_result(ws)
     if result is None:
-        why = f"no colcon workspace in {ws}: build it with `python tests/python/support/colcon_ws.py --build` (test.sh does)"
+        build = "python tests/python/support/colcon_ws.py --build"
+        why = f"no colcon workspace in {ws}: build it with `{build}` (test.sh does)"
         if os.environ.get("SORTING_LINE_COLCON_WS"):  # test.sh built it: then a missing result is a failure
             pytest.fail(why, pytrace=False)
         pytest.skip(why)

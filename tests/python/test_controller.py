@@ -25,8 +25,6 @@ import json
 import math
 import os
 import subprocess
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,7 +41,8 @@ from sorting_line_gym.agents import (
 from sorting_line_gym.line.vocabulary import SPEEDS
 from sorting_line_gym.training.trained_agent import make_agent
 from support import ros_harness as h
-from support.ros_harness import NS_PER_S, show_ns, stamp_ns
+from support.controller_process import ControllerProcess, line_recorders, reset_until_answered, watch
+from support.ros_harness import NS_PER_S, ns_args, show_ns, stamp_ns
 
 # 20 Hz: 50 ms for a tick's readings to reach the controller and its answer the node. At 50 Hz
 # the controller keeps up on a quiet machine (0-3 late ticks of 60, also next to two busy loops),
@@ -51,10 +50,6 @@ from support.ros_harness import NS_PER_S, show_ns, stamp_ns
 # (stalls of 50-140 ms). SORTING_LINE_TEST_RATE_HZ overrides it.
 RATE_HZ = float(os.environ.get("SORTING_LINE_TEST_RATE_HZ", "20"))
 MEASURED_TICKS = 60
-
-
-def ns_args(ns: str) -> list[str]:
-    return ["--ros-args", "-r", f"__ns:={ns}"]
 
 
 def speed_index(speed: float) -> int:
@@ -71,30 +66,6 @@ def same_binary_for_the_agents(monkeypatch):
 
 # --------------------------------------------------------------------------------------------
 # The controller process
-
-
-class ControllerProcess(h.ScriptProcess):
-    """`sorting-line-controller ARGS` (the installed console script) with its log and decision log;
-    stop() sends SIGINT and wants it to exit in time, having logged its summary."""
-
-    def __init__(self, tmp_path: Path, tag: str, args: list[str]):
-        self.decision_path = tmp_path / f"decisions_{tag}.jsonl"
-        super().__init__(
-            "sorting-line-controller",
-            [*args, "--decision-log", self.decision_path],
-            tmp_path / f"controller_{tag}.log",
-            label="controller",
-        )
-
-    def decision_rows(self) -> list[dict]:
-        """The decision log, a row per decision, in order (a restarted node's ticks repeat stamps)."""
-        if not self.decision_path.exists():
-            return []
-        return [json.loads(line) for line in self.decision_path.read_text().splitlines() if line.strip()]
-
-    def decisions(self) -> dict[int, dict]:
-        """The decision log, by tick stamp (ns): for one node's run, where stamps do not repeat."""
-        return {r["stamp_ns"]: r for r in self.decision_rows()}
 
 
 @pytest.fixture
@@ -116,59 +87,6 @@ def start_controller(tmp_path):
     problems = h.stop_problems(procs, stop)
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
-
-
-class TimedRecorder:
-    """Every message of one topic with the monotonic time it was received (this process).
-
-    Reliable, volatile like every endpoint of the line, but keeping the last 500 samples instead of
-    10: the recorder shares one executor with everything else in this process, and a keep-last-10
-    reader that falls behind by more than 10 messages (a busy machine) overwrites them unseen."""
-
-    def __init__(self, node, topic: str, msg_type):
-        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-        qos = QoSProfile(
-            depth=500,
-            history=HistoryPolicy.KEEP_LAST,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE,
-        )
-        self.topic = topic
-        self.items: list[tuple[float, object]] = []
-        self.sub = node.create_subscription(msg_type, topic, lambda m: self.items.append((time.monotonic(), m)), qos)
-
-    def by_stamp(self) -> dict[int, tuple[float, object]]:
-        """First message per stamp (ns) -> (receive time, message)."""
-        out = {}
-        for t, m in self.items:
-            out.setdefault(stamp_ns(m.header.stamp), (t, m))
-        return out
-
-
-def line_recorders(probe, ns: str) -> dict[str, TimedRecorder]:
-    from sorting_line_interfaces.msg import LineState, SortModeCommand, SpeedCommand
-
-    return {
-        "state": TimedRecorder(probe, h.join_ns(ns, "state"), LineState),
-        "cmd/speed": TimedRecorder(probe, h.join_ns(ns, "cmd/speed"), SpeedCommand),
-        "cmd/sort_mode": TimedRecorder(probe, h.join_ns(ns, "cmd/sort_mode"), SortModeCommand),
-    }
-
-
-def watch(client, controller):
-    """(context, abort) for waits on a line driven by a controller process: what to show when a
-    wait fails, and why to stop waiting early (the node or the controller is gone)."""
-
-    def context():
-        return f"{client.context()}\n{controller.describe()}"
-
-    def abort():
-        return client.node_gone() or (
-            None if controller.running() else f"the controller exited with {controller.proc.returncode}"
-        )
-
-    return context, abort
 
 
 def controller_args(ns: str, agent: str, setup: str = "B", variant: str = "advanced") -> list[str]:
@@ -417,24 +335,6 @@ def test_late_detection_accepts_held_and_late_commands_only():
 
 # --------------------------------------------------------------------------------------------
 # Lock-step
-
-
-def reset_until_answered(ros, c, rec, seed: int, context, abort) -> int:
-    """Resets the line with ``seed`` until the controller answers the reset's tick (up to 3 times);
-    the episode. Its first tick can be lost while the node is still matching the controller's
-    endpoints: then nothing moves, and a new seeded reset (the same episode again) is the remedy."""
-    for attempt in range(1, 4):
-        episode = c.reset(seed).episode
-
-        def steps_seen(episode=episode):
-            return max((s.step for _, s in rec["state"].items if s.episode == episode), default=0)
-
-        try:
-            ros.spin_until(lambda: steps_seen() >= 1, 3.0, f"{c.ns}: the controller's first step", context, abort=abort)
-            return episode
-        except h.WaitTimeout:
-            print(f"attempt {attempt}: the controller did not answer the reset's tick; resetting again")
-    pytest.fail(f"the controller never answered a reset's tick\n{context()}")
 
 
 def check_decisions_and_commands(states: list, agent, ctl, rec) -> list[int]:

@@ -21,7 +21,7 @@ import pytest
 
 from support import netns_hosts, participant_ids
 from support import ros_harness as h
-from test_ros2cli import poll
+from support.ros2_output import poll
 
 # Polls the graph of its own participant until it has seen every name of `want` and at least
 # MIN s have passed (a name that is not supposed to appear gets that long), or MAX s; prints

@@ -1,14 +1,15 @@
-"""What a user hits first with the envs' arguments: the line's settings as keyword arguments, and a closed env.
+"""What the envs' line keywords do on a real node, and a closed env:
 
-- ``input``, ``obs_noise``, ``action_penalty`` and ``threshold`` are accepted by ``gymnasium.make`` (as the
-  node's options of the same name, on top of the setup); an out-of-range value fails at once naming the value
-  and the range, before any node starts; an unknown keyword names itself in the error.
-- A ROS_DOMAIN_ID that DDS cannot use fails at the first reset naming it (rmw_fastrtps would end the process
-  without a word).
+- ``obs_noise`` and ``threshold`` given to ``gymnasium.make`` (on top of the setup) give the trajectory of
+  the node's options of the same name (setup A + obs_noise 0.3 is setup C; the reward cut moves).
+- Every keyword reaches the line options of each face (making an env starts no node, but loads rclpy).
+- A ROS_DOMAIN_ID that DDS cannot use fails at the first reset naming it (rmw_fastrtps would end the
+  process without a word).
 - Stepping or resetting a closed env raises our ``BridgeError`` saying the env is closed, not rclpy's
   ``InvalidHandle`` of a destroyed node.
 
-Real node, real rclpy: about 10 s.
+Real node, real rclpy: about 10 s. The keywords' checks that need no ROS at all:
+unit/test_env_keywords.py.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError, SortingLineSB3VecEnv, SortingLineVectorEnv
-from test_bridge import BASIC, assert_episode_follows_trace, fixed_actions
+from support.env_trace import BASIC, assert_episode_follows_trace, fixed_actions
 
 
 def test_setup_a_with_obs_noise_is_setup_c(make_env):
@@ -44,43 +45,14 @@ def test_threshold_moves_the_reward_cut(make_env):
     assert below and above, f"the episode never tested the cut: {below} steps in 0.7..0.8, {above} above 0.8"
 
 
-@pytest.mark.parametrize(
-    ("kwargs", "message"),
-    [
-        ({"obs_noise": 1.5}, "obs_noise = 1.5 is out of range: allowed 0.0 ..= 1.0"),
-        ({"threshold": 1.0}, "threshold = 1.0 is out of range: allowed 0.0 ..< 1.0"),
-        ({"action_penalty": -0.5}, "action_penalty = -0.5 is out of range: allowed 0.0 ..= 10.0"),
-        ({"input": "bursty"}, "input = 'bursty' is not valid: allowed random, seasonal, seasonal3"),
-    ],
-)
-def test_bad_settings_fail_at_make_naming_value_and_range(kwargs, message):
-    for make in (
-        lambda: gymnasium.make(BASIC, **kwargs),
-        lambda: SortingLineVectorEnv(2, **kwargs),
-        lambda: SortingLineSB3VecEnv(2, **kwargs),
-    ):
-        with pytest.raises(ValueError, match=message.replace(".", r"\.").replace("(", r"\(")):
-            make()
-
-
-@pytest.mark.parametrize(
-    "make",
-    [
-        lambda **kw: gymnasium.make(BASIC, **kw),
-        lambda **kw: gymnasium.make(BASIC, backend="native", **kw),
-        lambda **kw: gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", **kw),
-        lambda **kw: gymnasium.make("sorting_line_gym:SortingLineEvolving-v0", backend="native", **kw),
-        lambda **kw: gymnasium.make_vec(BASIC, num_envs=2, vectorization_mode="vector_entry_point", **kw),
-        lambda **kw: SortingLineSB3VecEnv(2, **kw),
-    ],
-    ids=["make", "make-native", "evolving", "evolving-native", "make_vec", "sb3"],
-)
-def test_unknown_keyword_is_named_with_the_allowed_ones(make):
-    """A misspelt keyword fails at once on every face, naming itself, the keyword meant and the allowed ones."""
-    with pytest.raises(TypeError, match=r"unexpected keyword argument 'setpu' \(did you mean 'setup'\?\): allowed .*"):
-        make(setpu="B")
-    with pytest.raises(TypeError, match="'noise'.*allowed .*step_timeout"):
-        make(noise=0.3)
+def test_closed_env_raises_our_error(make_env):
+    env = make_env(BASIC, setup="B")
+    env.reset(seed=1)
+    env.step(3)
+    env.close()
+    for use in (lambda: env.step(3), lambda: env.reset(seed=1)):
+        with pytest.raises(BridgeError, match="the environment is closed"):
+            use()
 
 
 #: A value other than the default for every line option (with node="attach", the namespace it needs).
@@ -116,32 +88,6 @@ def test_every_keyword_reaches_the_line_options():
         options = bank(face(**given)).options
         assert {k: getattr(options, k) for k in given} == given, face.__name__
         assert len(given) >= 6, f"{face.__name__} takes only {sorted(given)}"
-
-
-def test_help_shows_each_keyword_with_its_default_and_meaning():
-    """``help()`` of each env class lists every keyword it takes, with its default, in the signature
-    and in the docstring (written there from ``line/options.py`` and ``envs/keywords.py``)."""
-    import pydoc
-
-    from sorting_line_gym import SortingLineEnv
-    from sorting_line_gym.envs.evolving import SortingLineEvolvingEnv
-
-    for face in (SortingLineEnv, SortingLineEvolvingEnv, SortingLineVectorEnv, SortingLineSB3VecEnv):
-        text = pydoc.render_doc(face, renderer=pydoc.plaintext)
-        for name, parameter in inspect.signature(face).parameters.items():
-            assert f"{name}: " in text.split("__init__", 1)[1], f"help({face.__name__}) shows no {name} in __init__"
-            assert f"- `{name}={parameter.default!r}`: " in text, f"help({face.__name__}) lists no {name} default"
-    assert "action_penalty: float | None = None" in pydoc.render_doc(SortingLineEnv, renderer=pydoc.plaintext)
-
-
-def test_closed_env_raises_our_error(make_env):
-    env = make_env(BASIC, setup="B")
-    env.reset(seed=1)
-    env.step(3)
-    env.close()
-    for use in (lambda: env.step(3), lambda: env.reset(seed=1)):
-        with pytest.raises(BridgeError, match="the environment is closed"):
-            use()
 
 
 @pytest.mark.parametrize("domain", ["233", "1000", "-1", "abc"])

@@ -26,8 +26,9 @@ import numpy as np
 import pytest
 
 from support import ros_harness as h
+from support.controller_process import ControllerProcess, line_recorders, reset_until_answered, watch
+from support.ros_harness import ns_args
 from support.training_stack import needs_training
-from test_controller import ControllerProcess, line_recorders, ns_args, reset_until_answered, watch
 
 POLICIES = h.ROOT / "tests" / "data" / "policies"
 PPO_ZIP = POLICIES / "ppo_B_advanced_seed42.zip"

@@ -20,7 +20,7 @@ import pytest
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import BridgeError
 from sorting_line_gym.line import line_supervisor
-from test_bridge import BASIC, assert_episode_follows_trace, fixed_actions
+from support.env_trace import BASIC, assert_episode_follows_trace, fixed_actions
 
 OUTLIVE_LIMIT = 10.0  # s: the longest a line server may outlive its last env (the project's rule for the default)
 

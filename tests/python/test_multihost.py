@@ -33,7 +33,7 @@ import pytest
 
 from support import netns_hosts
 from support import ros_harness as h
-from test_bridge import assert_obs, assert_step, fixed_actions, trace
+from support.env_trace import assert_obs, assert_step, fixed_actions, trace
 
 LINES = 16  # per node: a batch/reset reply of 16 lines (2.5 KB) is larger than one datagram of a 1500-byte MTU
 SETUP, VARIANT = "B", "basic"

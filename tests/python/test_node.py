@@ -15,7 +15,9 @@ import pytest
 from sorting_line_gym.line.vocabulary import START_CONTENTS
 from support import ros_harness as h
 from support.line_client import LineClient
-from support.ros_harness import LINE_TYPES, show_ns, stamp_ns
+from support.lockstep_trace import compare_with_trace
+from support.node_graph import clock_recorder, diagnostics_recorder, topic_types, wait_diagnostics
+from support.ros_harness import LINE_TYPES, ns_args, show_ns, stamp_ns
 
 REASONS = [
     "invalid_speed",
@@ -30,46 +32,6 @@ REASONS = [
 
 # The fixed line contents after a reset (src/sim/line.rs, as the library exports them).
 START_BELT = START_CONTENTS["belt"]
-
-
-def ns_args(ns: str) -> list[str]:
-    return ["--ros-args", "-r", f"__ns:={ns}"]
-
-
-def clock_recorder(ros, probe):
-    from rosgraph_msgs.msg import Clock
-
-    return h.TopicRecorder(ros, probe, "/clock", Clock)
-
-
-def diagnostics_recorder(ros, probe):
-    from diagnostic_msgs.msg import DiagnosticArray
-
-    return h.TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
-
-
-def wait_diagnostics(
-    diag: h.TopicRecorder, hardware_id: str, want: dict[str, str], timeout: float = 5.0, context=lambda: ""
-) -> dict[str, str]:
-    """Waits (the node publishes at 1 Hz) for a status of `hardware_id` whose values include `want`."""
-
-    def matches(array):
-        values = h.diagnostic_values(array, hardware_id)
-        return values is not None and all(values.get(k) == v for k, v in want.items())
-
-    def last_seen():
-        for array in reversed(diag.msgs):
-            values = h.diagnostic_values(array, hardware_id)
-            if values is not None:
-                return f"want {want}\nlast status of {hardware_id}: {values}\n{context()}"
-        return f"no status of {hardware_id} at all ({len(diag.msgs)} arrays received)\n{context()}"
-
-    array = diag.wait_for(matches, timeout, f"a status of {hardware_id} with {want}", last_seen)
-    return h.diagnostic_values(array, hardware_id)
-
-
-def topic_types(node) -> dict[str, list[str]]:
-    return dict(node.get_topic_names_and_types())
 
 
 PUBLISHED = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
@@ -128,30 +90,6 @@ def check_tick_consistency(c: LineClient, stamps: list[int], reset_stamps: set[i
             )
             assert state.observation_category == ratio.category, where
         previous_input = inp
-
-
-def compare_with_trace(states_by_token: list, trace: list[dict], where: str) -> None:
-    """`states_by_token[i]` is the node's state after trace line i + 1 (trace line 0 = initial reset)."""
-    assert len(states_by_token) == len(trace) - 1
-    for i, (state, entry) in enumerate(zip(states_by_token, trace[1:], strict=False)):
-        if "reset" in entry:
-            assert h.state_reset_view(state) == h.trace_reset_view(entry), f"{where}: reset #{i}"
-            assert state.step == 0 and not state.truncated, f"{where}: reset #{i}"
-        else:
-            assert h.state_step_view(state) == h.trace_step_view(entry), f"{where}: token #{i}"
-
-
-def run_tokens(c: LineClient, tokens: list) -> list:
-    """Plays trace tokens on the node: ints are actions, 'r' / 'rN' resets. Returns the state after each."""
-    out = []
-    for t in tokens:
-        if isinstance(t, str) and t.startswith("r"):
-            seed = int(t[1:]) if len(t) > 1 else None
-            c.reset(seed)
-            out.append(c.by_stamp["state"][c.stamp][0])
-        else:
-            out.append(c.act(t))
-    return out
 
 
 # ------------------------------------------------------------------------------------------

@@ -1,5 +1,5 @@
-"""Integration tests of the `sorting_line` node, continued from test_node.py (whose helpers they
-use): determinism across node processes and lines, the batch service and topics of several lines,
+"""Integration tests of the `sorting_line` node, continued from test_node.py (the helpers they
+share are in support/): determinism across node processes and lines, the batch service and topics of several lines,
 truncation, and exit on signals. The real binary, real rclpy over DDS, in a loopback-only network
 namespace."""
 
@@ -13,16 +13,9 @@ import signal
 import pytest
 
 from support import ros_harness as h
-from support.ros_harness import LINE_TYPES, NS_PER_S, show_ns, stamp_ns
-from test_node import (
-    clock_recorder,
-    compare_with_trace,
-    diagnostics_recorder,
-    ns_args,
-    run_tokens,
-    topic_types,
-    wait_diagnostics,
-)
+from support.lockstep_trace import compare_with_trace, run_tokens
+from support.node_graph import clock_recorder, diagnostics_recorder, topic_types, wait_diagnostics
+from support.ros_harness import LINE_TYPES, NS_PER_S, ns_args, show_ns, stamp_ns
 
 # ------------------------------------------------------------------------------------------
 # Determinism

@@ -1,5 +1,5 @@
-"""Integration tests of the `sorting_line` node in realtime mode, continued from test_node.py (whose
-helpers they use): the held speed, NaN refused, episodes restarting, and topics without a reader.
+"""Integration tests of the `sorting_line` node in realtime mode, continued from test_node.py (the
+helpers they share are in support/): the held speed, NaN refused, episodes restarting, and topics without a reader.
 The real binary, real rclpy over DDS, in a loopback-only network namespace."""
 
 from __future__ import annotations
@@ -9,12 +9,8 @@ import math
 import numpy as np
 
 from support import ros_harness as h
-from support.ros_harness import NS_PER_S, stamp_ns
-from test_node import (
-    diagnostics_recorder,
-    ns_args,
-    wait_diagnostics,
-)
+from support.node_graph import diagnostics_recorder, wait_diagnostics
+from support.ros_harness import NS_PER_S, ns_args, stamp_ns
 
 # ------------------------------------------------------------------------------------------
 # Realtime

@@ -34,7 +34,7 @@ from pathlib import Path
 import pytest
 
 from support import netns_hosts
-from test_rllib import RayCluster, ray_env
+from support.ray_cluster import RayCluster, ray_env
 
 INSTALLED = importlib.util.find_spec("ray") is not None
 needs_ray = pytest.mark.skipif(

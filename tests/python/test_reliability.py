@@ -38,8 +38,9 @@ from sorting_line_gym.bag.storage.schema import stamp_ns
 from sorting_line_gym.bag.transport.replay import replay
 from support import ros_harness as h
 from support.bag_golden import BagProcess, wait_for_command_writers
-from test_controller import ControllerProcess
-from test_node import diagnostics_recorder, ns_args, wait_diagnostics
+from support.controller_process import ControllerProcess
+from support.node_graph import diagnostics_recorder, wait_diagnostics
+from support.ros_harness import ns_args
 
 sys.path.insert(0, str(h.ROOT / "benches"))
 import soak  # noqa: E402

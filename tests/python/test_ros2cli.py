@@ -20,6 +20,7 @@ import yaml
 
 from support import participant_ids
 from support import ros_harness as h
+from support.ros2_output import poll, yaml_docs
 from support.ros_harness import LINE_TYPES
 
 pytestmark = pytest.mark.usefixtures("ros2_daemon")
@@ -86,28 +87,6 @@ def rt_line(tmp_path_factory):
     alive = node.running()
     code = node.stop(signal.SIGINT, timeout=5.0)
     assert alive and code == 0, f"the realtime node exited with {code} (alive at the end: {alive})\n{node.describe()}"
-
-
-def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: float = 15.0, context=None) -> str:
-    """Repeats `ros2 ARGS` until `until(stdout)` holds; returns that stdout (fails with the last one,
-    and with what `context()` says then)."""
-    deadline = time.monotonic() + timeout
-    last = None
-    while True:
-        r = ros2.run(*args, timeout=each, check=False)
-        if r.returncode == 0 and until(r.stdout):
-            return r.stdout
-        last = r
-        if time.monotonic() > deadline:
-            raise AssertionError(
-                f"`ros2 {' '.join(args)}` did not show {what} within {timeout} s; last answer "
-                f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}" + (f"\n{context()}" if context else "")
-            )
-        time.sleep(0.5)
-
-
-def yaml_docs(text: str) -> list:
-    return [d for d in yaml.safe_load_all(text) if d is not None]
 
 
 # ------------------------------------------------------------------------------------------

@@ -8,7 +8,9 @@ What must hold:
 - one cell per seed (the benchmark's named ``..._batched_seed<S>``), its record naming the engine;
 - a rerun with a cell missing trains that seed alone (a batch of one) and leaves the others;
 - a transfer cell's evaluations equal SB3's cell of the same seed (its curve to float32);
-- bad input fails at start: an unknown engine, or the batched engine on the ROS backend.
+- on one node's lines (``--backend ros``) a batch records the scores native lines give;
+- bad input fails at start: an unknown engine, a batch too large for one node, the batched
+  transfer on the ROS backend (the evolving line's masks are native only).
 """
 
 from __future__ import annotations
@@ -60,10 +62,29 @@ def test_bad_engine_input_fails_at_start(tmp_path, capsys):
         benchmark.main(["--engine", "jax", "--out", str(tmp_path)])
     assert stopped.value.code == 2
     assert "'jax'" in (err := capsys.readouterr().err) and "'sb3', 'batched'" in err
-    assert benchmark.main([*ARGV, "--backend", "ros", "--out", str(tmp_path)]) == 2
+    # On ROS lines a batch trains on one node of seeds x n-envs lines: at most 64.
+    assert benchmark.main([*ARGV, "--backend", "ros", "--n-envs", "64", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert "--engine batched --backend ros is not valid" in err and "allowed --backend native" in err
+    assert "2 --train-seeds x --n-envs 64 = 128 lines is not valid" in err and "seeds x n-envs <= 64" in err
     assert not (tmp_path / "cells").exists() or not any((tmp_path / "cells").iterdir())
+
+
+def test_a_batched_benchmark_on_ros_lines_records_what_native_lines_do(tmp_path, capsys):
+    """The same batch on one node's lines (trained and evaluated over ROS 2): the same scores."""
+    from sorting_line_gym.studies import benchmark
+
+    records = {}
+    for backend in ("native", "ros"):
+        out = tmp_path / backend
+        assert benchmark.main([*ARGV, "--backend", backend, "--out", str(out)]) == 0
+        records[backend] = {
+            s: json.loads((out / "cells" / f"D_basic_a2c_batched_seed{s}.json").read_text()) for s in (42, 43)
+        }
+    capsys.readouterr()
+    for seed in (42, 43):
+        native, ros = records["native"][seed], records["ros"][seed]
+        for part in ("heldout", "evaluation"):
+            assert ros[part]["per_episode"] == native[part]["per_episode"], (seed, part)
 
 
 TRANSFER = ["--engine", "batched", "--scenarios", "upgrade", "--algos", "a2c", "--seeds", "1", "2",

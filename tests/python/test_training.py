@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from support import ros_harness as h
+from support.images import assert_real_image
 
 TIMEOUT = 300
 
@@ -51,16 +52,6 @@ def library_eval(agent: str, setup: str, variant: str, episodes: int, seed: int 
     argv = [str(h.node_binary()), "eval", *eval_flags(agent, setup, variant, episodes), "--seed", str(seed)]
     argv += ["--gap"] if gap else []
     return json.loads(subprocess.run(argv, capture_output=True, text=True, check=True, timeout=60).stdout)
-
-
-def assert_real_image(path: Path, min_bytes: int = 10_000) -> None:
-    """A PNG that is more than a blank canvas."""
-    import matplotlib.image
-
-    assert path.is_file() and path.stat().st_size >= min_bytes, f"{path} missing or tiny"
-    pixels = matplotlib.image.imread(path)
-    assert pixels.ndim == 3 and pixels.shape[0] > 200 and pixels.shape[1] > 200
-    assert len(np.unique(pixels.reshape(-1, pixels.shape[2]), axis=0)) > 50, f"{path} is nearly uniform"
 
 
 @pytest.mark.parametrize("agent,setup,variant", [("rba", "D", "basic"), ("rba-hold", "B", "advanced")])

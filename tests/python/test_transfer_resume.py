@@ -24,7 +24,7 @@ import json
 
 import pytest
 
-from test_training import assert_real_image
+from support.images import assert_real_image
 
 SMOKE = ["--smoke", "--scenarios", "upgrade", "--algos", "ppo", "--seeds", "1", "2"]
 FIRST = ["upgrade_baselines", "upgrade_ppo_transfer_seed1"]

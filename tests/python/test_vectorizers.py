@@ -33,7 +33,8 @@ import pytest
 
 import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import SortingLineSB3VecEnv, SortingLineVectorEnv
-from test_bridge import assert_obs, assert_step, fixed_actions, node_binary, trace
+from support.env_trace import assert_obs, assert_step, fixed_actions, trace
+from support.ros_harness import node_binary
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"

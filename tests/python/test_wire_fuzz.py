@@ -28,7 +28,7 @@ import pytest
 from support import ros_harness as h
 from support import rtps_wire as w
 from support.line_client import LineClient
-from test_node import ns_args
+from support.ros_harness import ns_args
 
 DATAGRAMS = int(os.environ.get("SORTING_LINE_WIRE_FUZZ_DATAGRAMS", "50000"))
 SECONDS = float(os.environ.get("SORTING_LINE_WIRE_FUZZ_SECONDS", "15"))

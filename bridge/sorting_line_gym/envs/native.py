@@ -2,8 +2,8 @@
 through the extension ``sorting_line_gym._native`` (the crate in native/), with no node, no ROS and
 no DDS. A step is a function call instead of a round trip, and everything a user sees is the ROS
 backend's: the same spaces, info keys and types, ``action_masks()``, seeding rules, autoreset and
-trajectory (``Line::step`` is what the node runs; tests/python/test_native.py holds the two, and
-``sorting_line trace``, equal step for step).
+trajectory (``Line::step`` is what the node runs; tests/python/test_native.py holds the two equal step
+for step, tests/python/unit/test_native_backend.py the native one and ``sorting_line trace``).
 
 - :class:`NativeLineEnv`: one line (``SortingLine-v0``, ``SortingLineAdvanced-v0`` and, with an
   evolution schedule, ``SortingLineEvolving-v0``); its step is one call into Rust, which builds the

@@ -1,7 +1,7 @@
 """The node's topics, services and action as the Python package names them: one constant per name,
 and the table of every endpoint (its type, what the node does with it, where its name lives, its
 QoS and on which lines it exists). ``ros/``, ``agents/``, ``bag/`` and the tests take their topic
-names from here; no other module of the package writes one (tests/python/test_topics.py checks
+names from here; no other module of the package writes one (tests/python/unit/test_topics.py checks
 both that and this table against the node's own, which ``sorting_line vocabulary`` prints from
 src/ros/topics.rs). The README's and docs/ros-node.md's topic table is written from this table
 (launch_scripts/docs.py), so the docs cannot drift from it either.

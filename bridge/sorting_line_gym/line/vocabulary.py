@@ -7,8 +7,8 @@ talk to a node (plots, argument parsers, the agents' tables) can use them too. T
 (src/sim) is the source of truth and this module states none of its facts again: the constants,
 ranges, action counts, info keys, start contents and the observation and mask builders are the
 extension's (``sorting_line_gym._native``, native/src/vocabulary.rs), re-exported here.
-tests/python/test_vocabulary.py holds them to ``sorting_line vocabulary`` (the CLI's own print
-of them), tests/python/test_line_facts.py what Python still states about the line to the library.
+tests/python/unit/test_vocabulary.py holds them to ``sorting_line vocabulary`` (the CLI's own print
+of them), tests/python/unit/test_line_facts.py what Python still states about the line to the library.
 
 The codec works on one line (a ``LineState`` message: Python scalars) and on N lines at once (a
 decoded ``LineStates`` batch: numpy arrays, entry k = line k) with the same functions.

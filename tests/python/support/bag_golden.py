@@ -125,7 +125,7 @@ def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda:
 
 def record_golden(name: str, out: Path, session: h.RosSession, workdir: Path, namespace: str) -> str:
     """Records golden bag `name` into `out` (which must not exist); returns the recorder's summary."""
-    from test_controller import ControllerProcess  # the controller as the controller tests run it
+    from support.controller_process import ControllerProcess  # the controller as the controller tests run it
 
     spec = GOLDEN[name]
     node = h.NodeProcess(

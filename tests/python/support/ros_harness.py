@@ -167,6 +167,11 @@ def ros_environment(default_domain: str = DEFAULT_TEST_DOMAIN) -> dict[str, str]
     return {k: os.environ[k] for k in keys}
 
 
+def ns_args(ns: str) -> list[str]:
+    """The ROS arguments that put a node (ours or a script's) into namespace ``ns``."""
+    return ["--ros-args", "-r", f"__ns:={ns}"]
+
+
 def node_binary() -> Path:
     """The node binary the bridge uses too (``sorting_line_gym.line.process.find_node_binary``:
     $SORTING_LINE_BIN, else this checkout's release build, else PATH)."""

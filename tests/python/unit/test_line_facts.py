@@ -4,7 +4,7 @@ places that say a line fact in Python's own words (a docstring, a range in a hel
 decoding a policy card writes, the fields the ROS backend reads an info from) say what the
 library says. No ROS, no node: well under a second.
 
-tests/python/test_vocabulary.py holds the same exports to the CLI's ``sorting_line vocabulary``.
+tests/python/unit/test_vocabulary.py holds the same exports to the CLI's ``sorting_line vocabulary``.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from sorting_line_gym.line import vocabulary as v
 from sorting_line_gym.line.options import LineOptions
 from sorting_line_gym.line.policy_card import action_decoding
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 #: Each re-export of the vocabulary, by the name the extension gives it.
 REEXPORTED = (

@@ -1,8 +1,7 @@
 """The dashboard renderer (bridge/sorting_line_gym/envs/render.py): headless, deterministic, no ROS.
 
-Runs in the normal test session (launch_scripts/test.sh). On its own, outside the isolated network
-namespace that conftest.py insists on for the ROS tests:
-    .venv/bin/python -m pytest tests/python/test_render.py --noconftest -q
+Part of the unit tier (no ROS, no network namespace, any user):
+    .venv/bin/python -m pytest tests/python/unit/test_render.py -q
 """
 
 from __future__ import annotations
@@ -18,51 +17,13 @@ import numpy as np
 import pytest
 
 from sorting_line_gym.envs import render
-from sorting_line_gym.line.vocabulary import SPEEDS, START_ACCURACY
+from support.dashboard_frames import make_frame
 
 DashboardFrame = render.DashboardFrame
 LiveDashboard = render.LiveDashboard
 count_speed_changes = render.count_speed_changes
 render_dashboard = render.render_dashboard
 save_dashboard = render.save_dashboard
-
-
-def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> DashboardFrame:
-    """A plausible tick after `steps` steps (steps = 0: right after reset, empty histories)."""
-    rng = np.random.default_rng(seed)
-    speed = [float(rng.choice(SPEEDS)) for _ in range(steps)]
-    accuracy = [float(a) for a in rng.uniform(0.4, 0.98, steps)]
-    occupancy = [float(o) for o in rng.uniform(0.05, 0.95, steps)]
-    reward = [
-        -0.1 if a < 0.7 else round(0.5 * (a - 0.7) / 0.3 + 0.5 * (s - 0.1) / 0.9, 2)
-        for a, s in zip(accuracy, speed, strict=False)
-    ]
-    advanced = variant == "advanced"
-    modes = [int(m) for m in rng.integers(0, 3, steps)] if advanced else None
-    containers = (40 * steps, 5 * steps, 35 * steps, 6 * steps) if steps else (0, 0, 0, 0)
-    sorted_units = sum(containers)
-    fields = dict(
-        variant=variant,
-        title=f"SortingLine-v0 setup B ({variant}), seed 42, episode 3",
-        input_ab=(30, 45),
-        belt_ab=(70, 12),
-        machine_ab=(5, 60),
-        containers=containers,
-        belt_accuracy=accuracy[-1] if steps else START_ACCURACY,
-        sorter_accuracy=START_ACCURACY,
-        occupancy=0.82,
-        speed=speed[-1] if steps else 0.6,
-        mode=(modes[-1] if steps else 0) if advanced else None,
-        purity=(containers[0] + containers[2]) / sorted_units if sorted_units else 0.0,
-        history_reward=reward,
-        history_speed=speed,
-        history_accuracy=accuracy,
-        history_occupancy=occupancy,
-        history_mode=modes,
-        max_steps=50,
-    )
-    fields.update(overrides)
-    return DashboardFrame(**fields)
 
 
 FRAMES = {
@@ -178,8 +139,9 @@ def test_headless_without_pyplot_and_live_dashboard_degrades():
     script = textwrap.dedent(
         f"""
         import sys, warnings
-        sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
-        from test_render import LiveDashboard, make_frame, render_dashboard
+        sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+        from sorting_line_gym.envs.render import LiveDashboard, render_dashboard
+        from support.dashboard_frames import make_frame
         frame = make_frame("advanced", 5)
         render_dashboard(frame)
         assert "matplotlib.pyplot" not in sys.modules, "render_dashboard imported pyplot"
@@ -206,8 +168,9 @@ def test_live_dashboard_updates_one_window():
         f"""
         import sys, warnings
         import numpy as np
-        sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
-        from test_render import LiveDashboard, make_frame, render_dashboard
+        sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+        from sorting_line_gym.envs.render import LiveDashboard, render_dashboard
+        from support.dashboard_frames import make_frame
         import matplotlib.pyplot as plt
         LiveDashboard._pyplot = lambda self: plt  # pretend the backend is interactive
         warnings.simplefilter("ignore")  # Agg says it cannot show a window

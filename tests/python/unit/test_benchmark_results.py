@@ -234,7 +234,7 @@ def test_the_documented_snippet_writes_a_file_compare_takes(tmp_path):
 
     from sorting_line_gym.line.process import find_node_binary
 
-    page = (Path(__file__).resolve().parents[2] / "docs" / "benchmark.md").read_text()
+    page = (Path(__file__).resolve().parents[3] / "docs" / "benchmark.md").read_text()
     (code,) = re.findall(r"<!-- test: my-results -->\n```python\n(.*?)\n```", page, re.S)
     assert "range(10000, 10100)" in code
     script = tmp_path / "my_results.py"

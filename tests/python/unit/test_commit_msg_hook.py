@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 HOOKS = ROOT / ".githooks"
 HOOK = HOOKS / "commit-msg"
 SCISSORS = "# ------------------------ >8 ------------------------"

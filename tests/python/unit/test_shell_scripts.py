@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 #: Scripts that are sourced, never run: they inherit the options of the shell that sources them.
 SOURCED = {"launch_scripts/env.sh", "launch_scripts/jobs.sh"}
 STRICT = "set -euo pipefail"

@@ -98,7 +98,7 @@ def test_no_layer_needs_sb3_but_those_that_train(subpackage):
 
 # --- The order of the layers (docs/layout.md, "## Layers"), checked on the source ----------------------------------
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 LAYOUT = ROOT / "docs" / "layout.md"
 #: The package's source tree (read, not imported).
 SOURCE = ROOT / "bridge" / "sorting_line_gym"

@@ -13,7 +13,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TREES = ("bridge", "benches", "tests/python")
 MAX_FUNCTION_LINES = 60
 MAX_FILE_LINES = 700

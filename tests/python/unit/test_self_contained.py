@@ -1,9 +1,9 @@
 """The repository explains itself: no tracked file sends the reader to the `shared/` folder beside the clone.
 
 That folder (the reference material and the tools of the machines this project was built on) is not part of the
-repository. Only the code that finds a tool's inputs in it may name it: tests/python/support/ros2_cli.py, which hands the
-folder of the ros2 CLI's source archives to launch_scripts/ros2cli.sh. Everything else says what it needs in its
-own words or links to docs/. No ROS, no network: about 0.1 s.
+repository. Only the code that finds a tool's inputs in it may name it: tests/python/support/ros2_cli.py, which
+hands the folder of the ros2 CLI's source archives to launch_scripts/ros2cli.sh. Everything else says what it
+needs in its own words or links to docs/. No ROS, no network: about 0.1 s.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import re
 import subprocess
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PATTERN = re.compile(r"\.\./shared|(?<![\w.-])shared/(?:reference|platform|tools|hooks)|/work/shared|CONTRACT\.md")
 # Files that find a tool's inputs in shared/ (and this test, which names the pattern).
 ALLOWED = {
     "tests/python/support/ros2_cli.py",
-    "tests/python/test_self_contained.py",
+    "tests/python/unit/test_self_contained.py",
 }
 
 
