@@ -36,9 +36,10 @@ evaluation (``curves``); the cells' format is ``benchmark_cells``'.
 
 ``--engine batched`` trains the RL cells that differ only by training seed (same line, algorithm,
 lines and budget) together, in one run of the batched trainer (``sorting-line-train --engine
-batched``, native lines only), then evaluates and saves each seed's cell as ``--engine sb3`` (the
-default) does; the cells are named ``..._batched_seed<S>`` and their records name the engine, so
-the two engines' cells never mix, and a batch that was cut leaves its evaluated cells saved: a
+batched``: native lines by default, with ``--backend ros`` one node's seeds x n-envs lines), then
+evaluates and saves each seed's cell as ``--engine sb3`` (the default) does; the cells are named
+``..._batched_seed<S>`` and their records name the engine, so the two engines' cells never mix,
+and a batch that was cut leaves its evaluated cells saved: a
 rerun trains the missing seeds, as one smaller batch. When the cells are in, it
 writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Table 1 and the
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
@@ -82,6 +83,7 @@ from ..reports.benchmark_summary import (
     summarize,
 )
 from ..reports.benchmark_tables import statistics_markdown, table_markdown
+from ..training.batched.lines import NODE_LINES
 from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
 from . import benchmark_compare, cell_pool
 from .benchmark_cells import (  # noqa: F401 (re-exported: the benchmark's cells as callers know them)
@@ -202,7 +204,7 @@ def run_batch(
     models = out / f"models{first.lines}_{first.engine}"  # beside, not over, the SB3 cells' models
     curves = BatchedCurves(first.setup, first.variant, len(seeds), timesteps, curve) if curve and curve.on else None
     runs = train_batched(first.agent, first.setup, first.variant, seeds=seeds, out=models, params=params,
-                         progress=progress, on_update=curves)  # fmt: skip
+                         progress=progress, on_update=curves, backend=backend)  # fmt: skip
     share = (time.perf_counter() - start) / len(cells)
     records = []
     for i, (cell, run) in enumerate(zip(cells, runs, strict=True)):
@@ -374,7 +376,8 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
         default="sb3",
         choices=ENGINES,
         help="who trains the RL cells: sb3, cell by cell (default), or batched: the training seeds of a line at "
-        "once (sorting-line-train --engine batched; native lines), each seed still a cell of its own",
+        "once (sorting-line-train --engine batched; on one node's lines with --backend ros), each seed still a "
+        "cell of its own",
     )
     p.add_argument(
         "--ray",
@@ -516,10 +519,12 @@ def _invalid(args) -> str | None:
             f"--curve-episodes = {args.curve_episodes} is not valid: allowed 1 .. --heldout-episodes "
             f"({args.heldout_episodes}): a curve is scored on the first held-out seeds"
         )
-    if args.engine == "batched" and args.backend != "native":
+    if args.engine == "batched" and args.backend == "ros" and len(args.train_seeds) * args.n_envs > NODE_LINES:
+        # A batch trains on one node of seeds x n_envs lines (training/batched/lines.py).
         return (
-            f"--engine batched --backend {args.backend} is not valid: the batched trainer trains on native lines; "
-            "allowed --backend native with --engine batched (or --engine sb3 for ROS)"
+            f"--engine batched --backend ros with {len(args.train_seeds)} --train-seeds x --n-envs {args.n_envs} = "
+            f"{len(args.train_seeds) * args.n_envs} lines is not valid: a batch trains on one node of at most "
+            f"{NODE_LINES} lines; allowed seeds x n-envs <= {NODE_LINES} (or --backend native)"
         )
     if args.ray is not None and args.jobs != 1:
         return (
