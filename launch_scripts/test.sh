@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Every test of sorting_line, from a fresh clone: installs what it needs (launch_scripts/setup.sh),
-# then runs the Rust tests and the Python/ROS integration tests. The ROS tests run inside a
+# then runs the Rust tests, the Python unit tests (tests/python/unit, on the host) and the Python/ROS
+# integration tests (the rest of tests/python). The ROS tests run inside a
 # loopback-only network namespace on a test-specific ROS_DOMAIN_ID, so no DDS traffic leaves
 # this machine and parallel runs cannot cross-talk over the network. (Not over shared memory,
 # which namespaces do not separate: every rclpy participant in LOCALHOST mode opens Fast DDS's
@@ -196,6 +197,30 @@ if [[ -n "$OTHER_VENV" ]]; then
   echo "test.sh: core venv $OTHER_VENV: $size_mb MB, no torch"
 fi
 
+step "Python unit tests (tests/python/unit: no root, no ROS environment, no network namespace, no node)"
+# The tier a contributor runs as any user in a minute or two (CONTRIBUTING.md, "Tests"), here on the host,
+# before the namespace; the ROS tier below leaves unit/ out, so no test runs twice. As user nobody when
+# nobody can run the venv's interpreter, which shows the tier needs no root; else as the current user
+# (here and in CI /root is mode 700, so nobody cannot reach the pyenv interpreter behind .venv/bin/python).
+# PYTEST_ARGS go to the ROS tier only: a path among them would put this session in the ROS tier.
+status=0
+unit_tests=(.venv/bin/python -m pytest tests/python/unit -q -rs -p no:cacheprovider --durations=8)
+nobody=(setpriv --reuid=65534 --regid=65534 --clear-groups)
+if [[ $EUID == 0 ]] && command -v setpriv >/dev/null && "${nobody[@]}" .venv/bin/python -c "" >/dev/null 2>&1; then
+  unit_home="$(mktemp -d /tmp/sorting_line_unit.XXXXXX)"
+  chown 65534:65534 "$unit_home"
+  echo "test.sh: the unit tier runs as user nobody (uid 65534), outside the network namespace"
+  # A HOME of its own (caches, matplotlib); git trusts this root-owned clone (test_commit_msg_hook runs git).
+  "${nobody[@]}" env HOME="$unit_home" PYTHONDONTWRITEBYTECODE=1 GIT_CONFIG_COUNT=1 \
+    GIT_CONFIG_KEY_0=safe.directory GIT_CONFIG_VALUE_0="*" "${unit_tests[@]}" || status=$?
+  rm -rf "$unit_home"
+else
+  why="user nobody cannot run $(readlink -f .venv/bin/python)"
+  [[ $EUID == 0 ]] || why="not root, so no other user to switch to"
+  echo "test.sh: the unit tier runs as user $(id -un) (uid $EUID), outside the network namespace: $why"
+  "${unit_tests[@]}" || status=$?
+fi
+
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
   echo "test.sh: needs unshare (util-linux) and ip (iproute2) to isolate DDS traffic" >&2
@@ -216,13 +241,12 @@ fi
 # after the tests, so runs neither pile them up nor start among a dead run's ports.
 shm_clean() { .venv/bin/fastdds shm clean | tr '\n' ' ' | sed 's/^/Fast DDS /; s/ $/\n/' || true; }
 shm_clean
-status=0
 unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
   # --durations: where the minutes of the suite go, in every CI log (a run must stay well under 20 min).
-  python -m pytest tests/python -q -rs -p no:cacheprovider --durations=12 "$@"
+  python -m pytest tests/python --ignore=tests/python/unit -q -rs -p no:cacheprovider --durations=12 "$@"
 ' test.sh "$@" || status=$?
 shm_clean
 
