@@ -152,8 +152,36 @@ def _parser():
     return p
 
 
+#: hyperparams/ppo.yml's algorithm keys under their RLlib names (``PPOConfig.training``).
+RLLIB_NAMES = {"gamma": "gamma", "learning_rate": "lr", "ent_coef": "entropy_coeff"}
+
+
+def paper_training(env_id: str) -> dict[str, Any]:
+    """The paper's PPO settings of ``env_id``'s line, read from hyperparams/ppo.yml (as
+    ``sorting-line-train`` reads them) in RLlib's names; a key with no RLlib counterpart here fails,
+    naming it, rather than being dropped."""
+    from ..line.vocabulary import ENV_IDS
+    from . import hyperparams
+
+    # The evolving line is the advanced line over time (the transfer study trains it so, too).
+    variants = {env: variant for variant, env in ENV_IDS.items()} | {"SortingLineEvolving-v0": "advanced"}
+    name = env_id.split(":")[-1]
+    if name not in variants:
+        raise ValueError(f"--id {env_id}: the paper's PPO settings exist for {', '.join(sorted(variants))}")
+    _, kwargs = hyperparams.split(hyperparams.load("ppo", variants[name]))
+    unknown = sorted(set(kwargs) - set(RLLIB_NAMES))
+    if unknown:
+        raise ValueError(
+            f"hyperparams/ppo.yml's {', '.join(unknown)}: no RLlib counterpart is mirrored (mirrored: "
+            f"{', '.join(RLLIB_NAMES)})"
+        )
+    return {RLLIB_NAMES[k]: v for k, v in kwargs.items()}
+
+
 def _ppo_config(ppo_config, args):
-    """RLlib's PPO config for ``args``: the paper's PPO settings (hyperparams/ppo.yml)."""
+    """RLlib's PPO config for ``args``: the paper's gamma, learning rate and entropy coefficient
+    (hyperparams/ppo.yml, :func:`paper_training`); the batch layout (``--batch`` per iteration,
+    minibatches of up to 250, 4 epochs) is RLlib's own, not SB3's rollout of 2048 x 10 epochs."""
     env_config: dict[str, Any] = {"id": args.id, "setup": args.setup, "max_episode_steps": args.episode_steps}
     if args.nodes:
         env_config.update(nodes=args.nodes, lines_per_node=args.lines_per_node)
@@ -170,9 +198,7 @@ def _ppo_config(ppo_config, args):
             train_batch_size_per_learner=args.batch,
             minibatch_size=min(250, args.batch),
             num_epochs=4,
-            gamma=0.85,
-            lr=7e-4,
-            entropy_coeff=0.03,
+            **paper_training(args.id),
         )
         .learners(num_learners=0)
         .debugging(seed=args.seed)
