@@ -44,8 +44,10 @@ import yaml
 EPISODE_STEPS = 50
 SCENARIOS = ("upgrade", "drift")
 ALGOS = ("ppo", "a2c")
+#: The cells' kinds: a scenario's rule-based baselines, then per algorithm and seed the agent
+#: trained before and after the change (its continued and frozen strategies) and the one trained
+#: from scratch after it (reports/transfer_report.py's EVALUATIONS reads each strategy's record).
 KINDS = ("baselines", "transfer", "scratch")
-STRATEGIES = ("continued", "frozen", "scratch")
 #: Episodes of the moving mean of the training curves; --before and --after are multiples of it.
 WINDOW = 10
 EVAL_SEED = 10_000
@@ -79,9 +81,7 @@ def plan(scenarios, algos, seeds) -> list[Cell]:
     """Baselines first (seconds), then seed by seed every scenario and algorithm, so that a partial
     study has whole seeds."""
     cells = [Cell(s, "baselines") for s in scenarios]
-    cells += [
-        Cell(s, kind, a, seed) for seed in seeds for s in scenarios for a in algos for kind in ("transfer", "scratch")
-    ]
+    cells += [Cell(s, kind, a, seed) for seed in seeds for s in scenarios for a in algos for kind in KINDS[1:]]
     return cells
 
 
