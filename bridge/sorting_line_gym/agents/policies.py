@@ -17,9 +17,9 @@
 Interface of every agent:
 
 - ``act(quantity, category, current_speed_index) -> (speed_index, mode)``: the decision for the
-  input sensor's reading (0..1), the ratio category (0 mixed, 1 A-rich, 2 B-rich; ignored by the
-  basic line) and the belt's current speed index (only ``rba-hold`` and nothing else uses it);
-  mode is always 0 on the basic line.
+  input sensor's reading (0..1), the ratio category (0 basic (mixed), 1 positive (A-rich),
+  2 negative (B-rich); ignored by the basic line) and the belt's current speed index (only
+  ``rba-hold`` and nothing else uses it); mode is always 0 on the basic line.
 - ``predict(obs, current_speed_index) -> action``: the same on a Gymnasium observation, returning
   the Gymnasium action (basic: speed index; advanced: speed index * 3 + mode).
 - ``reset(seed=None)``: at the start of an episode (reseeds the random agent; no-op otherwise).

@@ -4,13 +4,14 @@
 Material enters a conveyor belt in batches of two materials, A and B; a sorting machine splits
 each batch into two containers. The faster the belt, the more it earns, but the less accurately a
 crowded belt is sorted. The advanced line adds a ratio sensor and a sorting mode that helps when it
-matches the batch (A-rich, B-rich or mixed). This is the SortingEnv benchmark (Maus et al.) with
-the reference implementation's dynamics, simulated by the Rust node and reached over ROS 2 topics.
+matches the batch (positive for an A-rich batch, negative for a B-rich one, basic for a mixed one).
+This is the SortingEnv benchmark (Maus et al.) with the reference implementation's dynamics,
+simulated by the Rust node and reached over ROS 2 topics.
 
 ## Action space
 - `SortingLine-v0`: `Discrete(10)`, the belt speed index i (speed (i + 1) / 10).
-- `SortingLineAdvanced-v0`: `Discrete(30)`, `speed_index * 3 + mode`, mode 0 mixed, 1 A-rich,
-  2 B-rich.
+- `SortingLineAdvanced-v0`: `Discrete(30)`, `speed_index * 3 + mode`, mode 0 basic, 1 positive (A-rich),
+  2 negative (B-rich) (the library's names, `line.vocabulary.MODES`).
 
 ## Observation space
 - basic: `Box(0, 1, (1,), float32)`: the input sensor's reading of the next batch's amount

@@ -9,7 +9,7 @@ schedule applied by the node: the schedule, the seeds and the actions fix the tr
 `sorting_line trace --evolution FILE` for the same seeds and actions.
 
 ## Action space
-`Discrete(30)` throughout, `speed_index * 3 + mode` (mode 0 mixed, 1 A-rich, 2 B-rich), whatever
+`Discrete(30)` throughout, `speed_index * 3 + mode` (mode 0 basic, 1 positive (A-rich), 2 negative (B-rich)), whatever
 the hardware. Before the machine upgrade (`sort_modes` off) only mode 0 is valid:
 `action_masks()` allows the ten actions with mode 0 (sb3-contrib's MaskablePPO reads it). A
 masked action is still sent as it is: the node refuses its mode (counted as
