@@ -1,7 +1,7 @@
 """pytest set-up of the Python tests: the unit tier (tests/python/unit/) and the ROS tier (the rest).
 
 A session is in the ROS tier unless every path it was given lies inside tests/python/unit/ (decided from
-the command line in pytest_configure, before any test module is imported). Only the ROS tier fixes the
+the command line in pytest_configure, before any test module is imported: support/tiers.py). Only the ROS tier fixes the
 ROS environment (ROS_DOMAIN_ID from the environment, default 87; Fast DDS with the project's profile)
 before rclpy loads, refuses to run outside an isolated (loopback-only) network namespace and checks the
 node binary, at session start, as before the tiers existed: so `pytest tests/python`, `pytest
@@ -12,7 +12,8 @@ module is imported; and a unit-tier session that collected a test outside unit/ 
 some way this did not foresee) stops after collection (pytest_collection_modifyitems).
 
 The fixtures below initialise rclpy once per session with one executor and start/stop real node
-processes; the unit tests use only the generic ones (make_env with backend="native", one_torch_thread).
+processes; the unit tests use none of them (unit/conftest.py has the one they need, one_torch_thread,
+and keeps rclpy out of a unit-only session).
 
 Run like CI:
     .venv/bin/python -m pytest tests/python/unit -q
