@@ -131,8 +131,16 @@ def train_batched(
         episodes = [int(n) for n in engine.lines.episode_counts]
     finally:
         engine.close()
+    return write_records(algo, setup, variant, own, kwargs, engine.seeds, paths, episodes, wall, torch_threads)
+
+
+def write_records(
+    algo: str, setup: str, variant: str, own: dict[str, Any], kwargs: dict[str, Any], seeds: Sequence[int],
+    paths: Sequence[Path], episodes: Sequence[int], wall: float, torch_threads: int,
+) -> list[TrainingRun]:  # fmt: skip
+    """Each seed's TrainingRun, written beside its model as ``<model>.json``; ``wall``: the batch's."""
     runs = []
-    for s, (seed, path) in enumerate(zip(engine.seeds, paths, strict=True)):
+    for s, (seed, path) in enumerate(zip(seeds, paths, strict=True)):
         run = TrainingRun(
             algo=algo,
             setup=setup,
@@ -144,11 +152,11 @@ def train_batched(
             policy=own["policy"],
             hyperparams=kwargs,
             wall_s=wall,
-            steps_per_s=own["n_timesteps"] * len(engine.seeds) / wall,
+            steps_per_s=own["n_timesteps"] * len(seeds) / wall,
             episodes=episodes[s],
             model_path=str(path),
             torch_threads=torch_threads,
-            versions={**versions(), "engine": f"batched ({len(engine.seeds)} seeds at once)"},
+            versions={**versions(), "engine": f"batched ({len(seeds)} seeds at once)"},
         )
         path.with_suffix(".json").write_text(json.dumps(asdict(run), indent=2) + "\n")
         runs.append(run)
