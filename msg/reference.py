@@ -4,7 +4,7 @@ Every message, service and action of the two interface packages (sorting_line_in
 simulation_interfaces in msg/simulation_interfaces/), each with its leading comment and a table of
 its fields: type, name, default or constant value, and the field's trailing comment. The .msg,
 .srv and .action files are the one source; this page is their rendering, so a test
-(tests/python/test_interfaces_reference.py) fails when the page is stale.
+(tests/python/unit/test_generated_docs.py, through launch_scripts/docs.py) fails when the page is stale.
 
     python3 launch_scripts/docs.py    # rewrite it (and the other generated pages); --check
 

@@ -1,7 +1,7 @@
 """`sorting-line-benchmark --engine batched` and `sorting-line-transfer --engine batched`, on tiny
-budgets (A2C, two training seeds; native lines, and the benchmark on ROS lines too): the seeds of a line are trained in one batched
-run, each is saved as a cell of its own naming the engine, and a batch that was cut is resumed by
-training only the missing seed. The default engine (sb3) keeps its cells and records:
+budgets (A2C, two training seeds; native lines, and the benchmark on ROS lines too): the seeds of
+a line are trained in one batched run, each is saved as a cell of its own naming the engine, and a
+batch that was cut is resumed by training only the missing seed. The default engine (sb3) keeps its cells and records:
 test_training.py, test_native_tools.py and the transfer tests hold it.
 
 What must hold:
