@@ -8,6 +8,7 @@ native backend:
     .venv/bin/python benches/batched_training.py                           # PPO and A2C, 100k steps
     .venv/bin/python benches/batched_training.py --algos ppo --seeds 1 16 --timesteps 20000
     .venv/bin/python benches/batched_training.py --algos ppo --update-only  # one PPO update per seed
+    .venv/bin/python benches/batched_training.py --algos ppo a2c dqn --reference DIR  # + the reference env
 
 Before the trainings, one PPO update (10 epochs of 32 minibatches of 64 over a 2048-step rollout)
 and one 2048-step rollout are timed per seed, engine at each S against SB3's ``train()`` and
@@ -17,15 +18,20 @@ excluded on both sides; neither side writes logs or shows a progress bar. JAX ru
 every engine time waits for its results (``jax.block_until_ready``). Prints wall and CPU time
 (this process's: the steadier figure on a shared machine), the ratios, the command and the load
 average before and after: the figures move with what else runs, so both sides are measured in
-the same run.
+the same run. With ``--reference DIR`` (a checkout of the reference implementation) each
+algorithm is also trained by SB3 on the reference's own env, as its utils/benchmark.py does; each
+engine run prints the process's peak memory and what each added seed added to it.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 # One XLA thread, set before JAX starts its CPU backend: the figures are per core, as SB3's with one
 # torch thread (on a shared machine a second thread would only wait).
@@ -107,22 +113,41 @@ def update_times(seed_counts: list[int]) -> dict[str, dict[int, tuple[float, flo
     return out
 
 
+def peak_mb() -> float:
+    """This process's peak resident memory so far (MB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def training_times(algo: str, seed_counts: list[int], timesteps: int) -> dict[int, tuple[float, float]]:
-    """Seconds of training per seed: SB3 (key 0, one seed) and the engine with S seeds at once."""
+    """Seconds of training per seed: SB3 (key 0, one seed) and the engine with S seeds at once, S
+    rising. Prints the process's peak memory after each engine and what each seed beyond the last S
+    added to it: the first engine's figure carries JAX's runtime, the later ones the seeds alone."""
     model, env = sb3_model(algo)
     with Clock() as clock:
         model.learn(timesteps)
     env.close()
-    out = {0: clock.per(1)}
+    out, (last_n, last_peak) = {0: clock.per(1)}, (0, peak_mb())
     own, kwargs = paper(algo, timesteps)
-    for n in seed_counts:
+    for n in sorted(seed_counts):
         engine = trainer(algo, LINE["setup"], LINE["variant"], list(range(42, 42 + n)), own, kwargs)
         with Clock() as clock:
             engine.learn(timesteps)
             jax.block_until_ready(engine.params)
         engine.close()
         out[n] = clock.per(n)
+        peak = peak_mb()
+        print(f"{algo.upper()} engine S={n}: peak memory {peak:.0f} MB, {max(peak - last_peak, 0) / (n - last_n):.1f} "
+              f"MB a seed beyond S={last_n}", flush=True)  # fmt: skip
+        last_n, last_peak = n, peak
     return out
+
+
+def reference_time(ref_dir: Path, algo: str, timesteps: int, tmp: Path) -> float:
+    """Wall seconds of SB3's ``learn`` on the reference implementation's own env (as its
+    utils/benchmark.py trains; benches/train_timing.py's ``time_reference``, progress bar and all)."""
+    from train_timing import time_reference  # this folder is on sys.path when a bench runs as a script
+
+    return time_reference(ref_dir, algo, LINE["setup"], LINE["variant"], timesteps, 1, tmp / algo)
 
 
 def report(what: str, times: dict[int, tuple[float, float]], scale: float, unit: str) -> None:
@@ -142,7 +167,10 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 4, 16, 32], help="S, seeds at once (default 1 4 16 32)")
     p.add_argument("--timesteps", type=int, default=100_000, help="steps per seed of a training (default 100000)")
     p.add_argument("--update-only", action="store_true", help="time one PPO rollout and update only")
+    p.add_argument("--reference", type=Path, help="also SB3 on the reference implementation's env (its checkout)")
     args = p.parse_args()
+    if args.reference is not None and not (args.reference / "src" / "env_1_simple.py").is_file():
+        sys.exit(f"batched_training.py: {args.reference} is not the reference checkout (no src/env_1_simple.py)")
     torch.set_num_threads(1)
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
     print(f"XLA_FLAGS={os.environ['XLA_FLAGS']}; JAX {jax.__version__} on {jax.devices()[0].platform}")
@@ -158,8 +186,14 @@ def main() -> None:
                   f"calls: about {times['first'][n][0]:.1f} s wall once per training", flush=True)  # fmt: skip
     if not args.update_only:
         for algo in args.algos:
-            report(f"{algo.upper()} {args.timesteps}-step training", training_times(algo, args.seeds, args.timesteps),
-                   1.0, "s")  # fmt: skip
+            times = training_times(algo, args.seeds, args.timesteps)
+            report(f"{algo.upper()} {args.timesteps}-step training", times, 1.0, "s")
+            if args.reference is not None:
+                with tempfile.TemporaryDirectory() as tmp:
+                    ref = reference_time(args.reference, algo, args.timesteps, Path(tmp))
+                best = min(wall for n, (wall, _) in times.items() if n)
+                print(f"{algo.upper()} on the reference env (SB3, one seed): wall {ref:.3f} s; SB3 native "
+                      f"{ref / times[0][0]:.2f}x it, the engine's best S {ref / best:.1f}x it", flush=True)  # fmt: skip
     print(f"load average after: {os.getloadavg()[0]:.1f}")
 
 
