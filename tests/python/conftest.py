@@ -101,6 +101,14 @@ def ros2_daemon(ros2):
     ros2.run("daemon", "stop", timeout=30)
 
 
+@pytest.fixture
+def same_binary(monkeypatch):
+    """SORTING_LINE_BIN set to the binary this session's nodes run (``h.node_binary()``), so that the
+    bag tools, agents, controllers and envs a test starts run that one too. A module asks for it with
+    ``pytestmark = pytest.mark.usefixtures("same_binary")``."""
+    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+
+
 _NAMESPACES = itertools.count()
 
 

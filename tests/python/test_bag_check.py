@@ -31,16 +31,12 @@ from sorting_line_gym.bag.check.checker import check_controller
 from sorting_line_gym.bag.format.description import META_KEY
 from sorting_line_gym.bag.storage.schema import typestore
 from sorting_line_gym.bag.storage.writer import BagWriter
-from support import ros_harness as h
 from support.bag_golden import DATA, GOLDEN, BagProcess
 
 SCRIPT = Path(__file__).parent / "support" / "scripted_controller.py"
 
 
-@pytest.fixture(autouse=True)
-def same_binary(monkeypatch):
-    """The check starts the node the tests use (SORTING_LINE_BIN / release build)."""
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def our_controller(name: str, agent: str | None = None) -> str:

@@ -39,11 +39,7 @@ from support import ros_harness as h
 from support.bag_golden import DATA, GOLDEN, MAX_STEPS, BagProcess, wait_for_command_writers
 from support.ros_harness import NS_PER_S
 
-
-@pytest.fixture(autouse=True)
-def same_binary(monkeypatch):
-    """The bag tools start the node the tests use (SORTING_LINE_BIN / release build)."""
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def relative(bag, rel: str) -> list:

@@ -58,10 +58,7 @@ def speed_index(speed: float) -> int:
     return i
 
 
-@pytest.fixture(autouse=True)
-def same_binary_for_the_agents(monkeypatch):
-    """The agents load their table from the binary the node tests use (SORTING_LINE_BIN / release build)."""
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 # --------------------------------------------------------------------------------------------

@@ -24,7 +24,6 @@ import pytest
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.cli import main
 from sorting_line_gym.bag.transport.replay import replay
-from support import ros_harness as h
 from support.bag_golden import DATA, GOLDEN
 from support.ros2_bags import CELL_STATUS, write_ros2_bag
 
@@ -69,9 +68,7 @@ def ros2_bags(tmp_path_factory) -> dict[str, Path]:
     }
 
 
-@pytest.fixture(autouse=True)
-def same_binary(monkeypatch):
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def test_info_tells_the_line_and_where_each_option_came_from(ros2_bags, capsys):

@@ -45,9 +45,7 @@ sys.exit(code)
 """
 
 
-@pytest.fixture(autouse=True)
-def same_binary_for_the_agents(monkeypatch):
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def reporting_controller(tmp_path: Path, tag: str, args: list) -> ControllerProcess:

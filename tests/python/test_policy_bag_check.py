@@ -23,9 +23,7 @@ BAG = h.ROOT / "tests" / "data" / "bags" / "ppo_advanced_b"
 POLICIES = h.ROOT / "tests" / "data" / "policies"
 
 
-@pytest.fixture(autouse=True)
-def same_binary_for_the_agents(monkeypatch):
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def check(controller_policy: Path, namespace: str, *flags: str) -> subprocess.CompletedProcess:

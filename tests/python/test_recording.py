@@ -37,9 +37,7 @@ from support.bag_golden import DATA, BagProcess
 KILL_MARGIN = 1.5
 
 
-@pytest.fixture(autouse=True)
-def same_binary(monkeypatch):
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 def _line_messages(bag, namespace: str, t0: int, t1: int) -> dict[str, int]:

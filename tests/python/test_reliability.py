@@ -50,10 +50,7 @@ SOAK_TICKS = 50_000
 FLOOD_TICKS = int(os.environ.get("SORTING_LINE_FLOOD_TICKS", "25"))
 
 
-@pytest.fixture(autouse=True)
-def same_binary_for_the_bridge(monkeypatch):
-    """Envs spawn (and agents read) the binary the node tests use."""
-    monkeypatch.setenv("SORTING_LINE_BIN", str(h.node_binary()))
+pytestmark = pytest.mark.usefixtures("same_binary")  # conftest: the tools start the tests' binary
 
 
 # --------------------------------------------------------------------------------------------
