@@ -172,8 +172,9 @@ def test_a_short_training_equals_sb3_learn(short_runs):
         buffer, ours_buffer = model.replay_buffer, engine.replay
         assert buffer.full and ours_buffer.full and buffer.pos == ours_buffer.pos
         for name in ("observations", "next_observations", "rewards", "dones", "timeouts"):
-            assert np.array_equal(getattr(buffer, name), getattr(ours_buffer, name)[s]), name
-        assert np.array_equal(buffer.actions[..., 0], ours_buffer.actions[s]), "actions (the epsilon-greedy draws)"
+            assert np.array_equal(getattr(buffer, name), ours_buffer.of_seed(name, s)), name
+        actions = ours_buffer.of_seed("actions", s)
+        assert np.array_equal(buffer.actions[..., 0], actions), "actions (the epsilon-greedy draws)"
         assert buffer.timeouts.sum() > 0 and buffer.dones.sum() == buffer.timeouts.sum(), "truncations"
         q_net, q_net_target = engine_nets(engine, s)
         assert relative_error(q_net, model.policy.q_net.state_dict()) < 1e-5

@@ -149,6 +149,20 @@ def compiled(specs: tuple[tuple[str, Spec], ...]) -> dict[str, Any]:
     }
 
 
+class JittedPolicy:
+    """:func:`compiled`'s ``act`` and ``values`` of one set of stacked weights, numpy out: the
+    interface of ``host.HostPolicy``, for the networks that path does not evaluate."""
+
+    def __init__(self, functions: dict[str, Any], stacked: Any):
+        self.functions, self.stacked = functions, stacked
+
+    def act(self, obs: np.ndarray, q: np.ndarray, masks: np.ndarray | None = None):
+        return tuple(np.asarray(a) for a in self.functions["act"](self.stacked, obs, q, masks))
+
+    def values(self, obs: np.ndarray) -> np.ndarray:
+        return np.asarray(self.functions["values"](self.stacked, obs))
+
+
 def exponential_noise(generators: Sequence[torch.Generator], shape: tuple[int, ...]) -> np.ndarray:
     """(S, *shape) Exp(1) draws, seed s's from ``generators[s]`` in torch's order: the draws of
     ``shape[0]`` consecutive samplings of ``shape[1:]`` each (one draw of (k, L, A) is, value for

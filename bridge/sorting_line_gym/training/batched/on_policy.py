@@ -30,9 +30,9 @@ import numpy as np
 import torch
 
 from ...envs.env import action_space, observation_space
-from . import checks, optim, params
+from . import checks, host, optim, params
 from .a2c import A2CSettings, a2c_update
-from .actor_critic import check_policy, compiled, exponential_noise, networks
+from .actor_critic import JittedPolicy, check_policy, compiled, exponential_noise, networks
 from .lines import BatchedLines
 from .models import finish_model, load_models, new_models
 from .ppo import PPOSettings, minibatch_orders, ppo_update
@@ -164,7 +164,7 @@ class OnPolicyTrainer:
         """OnPolicyAlgorithm.collect_rollouts for all seeds: n_steps steps of every line."""
         assert self._last_obs is not None
         buffer, lines, gamma = self.buffer, self.lines, self.template.gamma
-        act, values_of = self.compiled["act"], self.compiled["values"]
+        policy = self._rollout_policy()
         buffer.reset()
         obs = self._last_obs
         truncations: list[tuple[int, np.ndarray, np.ndarray]] = []
@@ -175,7 +175,7 @@ class OnPolicyTrainer:
                 steps = min(NOISE_CHUNK, buffer.n_steps - buffer.pos)
                 noise = exponential_noise(self.generators, (steps, lines.n_lines, lines.n_actions))
             masks = lines.action_masks() if self.masked else None  # sb3-contrib: get_action_masks(env)
-            actions, values, log_probs = (np.asarray(a) for a in act(self.params, obs, noise[:, k], masks))
+            actions, values, log_probs = policy.act(obs, noise[:, k], masks)
             actions = actions.astype(np.int64)
             step = lines.step(actions)
             self.num_timesteps += lines.n_lines  # env.num_envs per seed
@@ -190,13 +190,20 @@ class OnPolicyTrainer:
         # padded to a power of two of blocks, so that few shapes are ever compiled.
         blocks = [t[2] for t in truncations] + [obs]
         blocks += [np.zeros_like(obs)] * ((1 << (len(blocks) - 1).bit_length()) - len(blocks))
-        values = np.asarray(values_of(self.params, np.concatenate(blocks, axis=1)))
+        values = policy.values(np.concatenate(blocks, axis=1))
         values = values.reshape(len(self.seeds), len(blocks), -1)
         for i, (pos, truncated, _) in enumerate(truncations):
             bootstrap_truncated(buffer.rewards[pos], truncated, values[:, i], gamma)
         # The last observation's block comes right after the truncations' (the padding follows it).
         last_values = values[:, len(truncations)]
         buffer.compute_returns_and_advantage(last_values, self._last_episode_starts, gamma, self.template.gae_lambda)
+
+    def _rollout_policy(self) -> host.HostPolicy | JittedPolicy:
+        """The policy of this rollout's steps (its weights do not change during it): on the host
+        where the networks allow it (host.py: one row per seed is cheaper there), else jitted."""
+        if host.supported(*self.specs.values()):
+            return host.HostPolicy(self.specs, self.params)
+        return JittedPolicy(self.compiled, self.params)
 
     def train(self) -> None:
         """PPO.train, MaskablePPO.train or A2C.train on the filled buffer, for every seed."""

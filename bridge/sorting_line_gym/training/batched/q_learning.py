@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import optim
+from . import host, optim
 from .optim import unfused
 from .params import Spec, forward
 from .replay import ReplaySamples
@@ -89,10 +89,10 @@ class QLearning:
             return jax.tree_util.tree_map(lambda p, t: unfused(t * keep) + unfused(tau * p), q_net, q_net_target)
 
         self._act = jax.jit(jax.vmap(greedy))
-        # The rollout's forward (S observations of one step) on the host when numpy computes every
-        # layer exactly as torch does (matmuls, ReLU): a jitted call costs more than the arithmetic.
-        self._on_host = all(op[0] in ("linear", "relu", "identity") for op in spec)
-        self._host: tuple[Any, list[tuple[np.ndarray, np.ndarray]]] | None = None
+        # The rollout's forward (S observations of one step) on the host where it can be: a jitted
+        # call of one row per seed costs more than the arithmetic (host.py).
+        self._on_host = host.supported(spec)
+        self._host: tuple[Any, host.HostQNetwork] | None = None
         self._train = jax.jit(jax.vmap(steps, in_axes=(0, 0, 0, 0, 0)))
         self._polyak = jax.jit(jax.vmap(polyak, in_axes=(0, 0, None, None)))
 
@@ -101,21 +101,8 @@ class QLearning:
         if not self._on_host:
             return np.asarray(self._act(q_net, observations))
         if self._host is None or self._host[0] is not q_net:
-            # The weights of this q_net on the host, once per set of weights (views, no copy).
-            layers = [
-                (np.asarray(layer["w"]).transpose(0, 2, 1), np.asarray(layer["b"])[:, None]) for layer in q_net["q_net"]
-            ]
-            self._host = (q_net, layers)
-        x, k = np.asarray(observations, dtype=np.float32), 0
-        for op in self.spec:
-            if op[0] == "linear":
-                # F.linear(x, W, b) = x @ W.T + b per seed: a stacked matmul
-                w, b = self._host[1][k]
-                x, k = np.matmul(x, w) + b, k + 1
-            elif op[0] == "relu":
-                x = np.maximum(x, np.float32(0))
-        # QNetwork._predict: argmax(dim=1), the first of equal values (numpy's rule too)
-        return np.argmax(x, axis=-1)
+            self._host = (q_net, host.HostQNetwork(self.spec, q_net["q_net"]))  # once per set of weights
+        return self._host[1].greedy(observations)
 
     def train(
         self, q_net: Any, state: Any, q_net_target: Any, batches: ReplaySamples, coefs: Mapping[str, np.ndarray]

@@ -1,6 +1,6 @@
 """The replay buffers of S independent DQN runs, held in one set of arrays with a leading seed axis.
 
-Seed s's slice is SB3's ``ReplayBuffer`` (stable_baselines3/common/buffers.py) of that run, entry for
+Seed s's entries are SB3's ``ReplayBuffer`` (stable_baselines3/common/buffers.py) of that run, entry for
 entry: ``buffer_size // n_envs`` rows of ``n_envs`` transitions, written at one position shared by
 all seeds (they step together), with the timeouts of ``handle_timeout_termination``. A sample draws
 its indices from seed s's own generator, by SB3's calls in SB3's order (``BaseBuffer.sample`` then
@@ -38,9 +38,12 @@ class BatchedReplayBuffer:
         self.buffer_size = max(buffer_size // n_envs, 1)
         self.seeds, self.n_envs = seeds, n_envs
         self.handle_timeout_termination = handle_timeout_termination
-        shape = (seeds, self.buffer_size, n_envs)
-        # np.zeros as SB3: the pages of rows never written are never touched, so a buffer far larger
-        # than a run's steps costs the memory of the steps only.
+        # Row-major over the positions, (buffer_size, S, n_envs, ...): a step of all seeds writes
+        # one contiguous block (a seed-major layout scattered each add over S pages: 7x slower,
+        # and the sample's gather is one flat take either way). np.zeros as SB3: the pages of rows
+        # never written are never touched, so a buffer far larger than a run's steps costs the
+        # memory of the steps only.
+        shape = (self.buffer_size, seeds, n_envs)
         self.observations = np.zeros((*shape, obs_dim), dtype=np.float32)
         self.next_observations = np.zeros((*shape, obs_dim), dtype=np.float32)
         self.actions = np.zeros(shape, dtype=np.int64)
@@ -48,7 +51,7 @@ class BatchedReplayBuffer:
         self.dones = np.zeros(shape, dtype=np.float32)
         self.timeouts = np.zeros(shape, dtype=np.float32)
         self.pos, self.full = 0, False
-        self._seed_index = np.arange(seeds)[:, None]
+        self._seed_index = np.arange(seeds)[:, None, None]
 
     @staticmethod
     def bytes_per_transition(obs_dim: int) -> int:
@@ -61,16 +64,20 @@ class BatchedReplayBuffer:
         terminal observation where an episode ended (OffPolicyAlgorithm._store_transition)."""
         # ReplayBuffer.add: copy into row pos, timeouts only with handle_timeout_termination.
         p = self.pos
-        self.observations[:, p] = obs
-        self.next_observations[:, p] = next_obs
-        self.actions[:, p] = actions
-        self.rewards[:, p] = rewards
-        self.dones[:, p] = dones
+        self.observations[p] = obs
+        self.next_observations[p] = next_obs
+        self.actions[p] = actions
+        self.rewards[p] = rewards
+        self.dones[p] = dones
         if self.handle_timeout_termination:
-            self.timeouts[:, p] = timeouts
+            self.timeouts[p] = timeouts
         self.pos += 1
         if self.pos == self.buffer_size:
             self.full, self.pos = True, 0
+
+    def of_seed(self, name: str, seed: int) -> np.ndarray:
+        """Seed ``seed``'s (by index) array ``name`` as its SB3 ReplayBuffer holds it: (buffer_size, n_envs, ...)."""
+        return getattr(self, name)[:, seed]
 
     def sample(self, n_batches: int, batch_size: int, rngs: list[np.random.RandomState]) -> ReplaySamples:
         """``n_batches`` batches of ``batch_size`` transitions of each seed s, drawn with ``rngs[s]``
@@ -86,9 +93,16 @@ class BatchedReplayBuffer:
                 # ... then ReplayBuffer._get_samples: a line per sample, from the same generator
                 # (randint(0, 1) draws nothing: all zeros, and the generator left as it was).
                 lines[s, g] = rng.randint(0, high=self.n_envs, size=(batch_size,)) if self.n_envs > 1 else 0
-        at = (self._seed_index[:, :, None], rows, lines)
+        # Entry (row, seed, line) of the arrays flattened over their first three axes.
+        at = ((rows * self.seeds + self._seed_index) * self.n_envs + lines).ravel()
+        shape = (self.seeds, n_batches, batch_size)
+
+        def take(a: np.ndarray) -> np.ndarray:
+            flat = a.reshape(-1, *a.shape[3:])
+            return flat.take(at, axis=0).reshape(*shape, *a.shape[3:])
+
         # _get_samples: dones only where the episode was not cut by a time limit.
-        dones = self.dones[at] * (1 - self.timeouts[at])
+        dones = take(self.dones) * (1 - take(self.timeouts))
         return ReplaySamples(
-            self.observations[at], self.actions[at], self.next_observations[at], dones, self.rewards[at]
+            take(self.observations), take(self.actions), take(self.next_observations), dones, take(self.rewards)
         )
