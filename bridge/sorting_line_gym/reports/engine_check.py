@@ -14,8 +14,8 @@ Verdicts, from the difference's interval [low, high] and the margin m:
   engine (no figure when |point| >= m: more seeds would show a difference, not an agreement).
 
 Also each run's held-out mean (the strip plot's dots) and the learning curves (per step, the mean
-over runs and its 95 % interval over runs) of both engines. Pure analysis of the benchmark's cell
-records (``studies.benchmark``); the figures are ``plots``'.
+over runs and its 95 % interval over runs: ``curves.curve_bands``) of both engines. Pure analysis
+of the benchmark's cell records (``studies.benchmark``); the figures are ``plots``'.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from . import stats
+from .curves import curve_bands
 
 #: The issue's margin: about one run-to-run standard deviation of a cell's held-out mean.
 MARGIN = 1.5
@@ -104,24 +105,6 @@ def compare(
         have = {e: arrays[e].shape[0] if e in arrays else 0 for e in ("sb3", "batched")}
         row["verdict"] = f"not yet: runs sb3 {have['sb3']}, batched {have['batched']} (needs {MIN_RUNS} each)"
     return row
-
-
-def curve_bands(records: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
-    """The learning curve over runs: steps every run has, mean over runs and its 95 % interval
-    (whole runs drawn); None when no run has a curve."""
-    curves = [{p["step"]: p["reward_mean"] for p in r["curve"]["points"]} for r in records if r.get("curve")]
-    if not curves:
-        return None
-    steps = sorted(set.intersection(*(set(c) for c in curves)))
-    values = np.array([[c[s] for s in steps] for c in curves], dtype=float)  # runs x steps
-    bands = [stats.mean_interval(values[:, [i]]) for i in range(len(steps))]
-    return {
-        "steps": steps,
-        "runs": len(curves),
-        "mean": [b.point for b in bands],
-        "low": [b.low for b in bands],
-        "high": [b.high for b in bands],
-    }
 
 
 def table_markdown(rows: Sequence[dict[str, Any]], margin: float, timesteps: int, heldout_episodes: int) -> str:

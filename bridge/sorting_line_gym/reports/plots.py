@@ -12,7 +12,8 @@
   so a reader sees how the runs spread, not only the summary; :func:`runs_figure` draws the
   benchmark's (per line and agent, and the --n-envs check), the transfer study draws its own.
 - :func:`curve_figure`: learning curves, the mean over runs with a band, several series one over
-  the other per panel (the engine check's SB3 and batched curves).
+  the other per panel, with reference values as horizontal lines (the engine check's SB3 and
+  batched curves); :func:`learning_curves_figure` draws the benchmark's (``curves.benchmark_curves``).
 
 Each writes ``<stem>.png`` and ``<stem>.svg`` and returns their paths. Figures are drawn on their
 own ``Figure`` and Agg canvas (as ``render`` does), never through pyplot: importing this module
@@ -371,14 +372,17 @@ class CurveSeries:
     low: Sequence[float]
     high: Sequence[float]
     color: str = "#444444"
+    linestyle: str = "-"
 
 
 @dataclass(frozen=True)
 class CurvePanel:
-    """A panel of learning curves drawn one over the other."""
+    """A panel of learning curves drawn one over the other, with reference values (label, value)
+    drawn as horizontal lines."""
 
     title: str
     series: Sequence[CurveSeries]
+    references: Sequence[tuple[str, float]] = ()
 
 
 def curve_figure(panels: Sequence[CurvePanel], stem: Path, xlabel: str, ylabel: str, columns: int = 3) -> list[Path]:
@@ -394,7 +398,10 @@ def curve_figure(panels: Sequence[CurvePanel], stem: Path, xlabel: str, ylabel: 
     for ax, panel in zip(axes, panels, strict=False):
         for s in panel.series:
             ax.fill_between(s.steps, s.low, s.high, color=s.color, alpha=0.25, linewidth=0)
-            ax.plot(s.steps, s.mean, color=s.color, linewidth=1.4, marker=".", markersize=3, label=s.label)
+            ax.plot(s.steps, s.mean, color=s.color, linestyle=s.linestyle, linewidth=1.4, marker=".", markersize=3,
+                    label=s.label)  # fmt: skip
+        for (label, value), style in zip(panel.references, ("--", ":", "-."), strict=False):
+            ax.axhline(value, color="black", linestyle=style, linewidth=0.9, label=f"{label} {value:.2f}")
         ax.set_title(panel.title, fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
@@ -403,3 +410,24 @@ def curve_figure(panels: Sequence[CurvePanel], stem: Path, xlabel: str, ylabel: 
     fig.supxlabel(xlabel, fontsize=9)
     fig.supylabel(ylabel, fontsize=9)
     return _save(fig, stem)
+
+
+def learning_curves_figure(curves: dict[tuple[str, str], dict[str, Any]], stem: Path) -> list[Path]:
+    """The benchmark's learning curves (``curves.benchmark_curves``): a panel per line, a series per
+    RL algorithm (its color) and training configuration (a line style per further one of the same
+    algorithm), rba-hold's and the oracle's mean on the same seeds as lines; nothing without curves."""
+    styles = ("-", "--", "-.", ":")
+    panels = []
+    for (setup, variant), panel in curves.items():
+        series, seen = [], dict[str, int]()
+        for s in panel["series"]:
+            style = styles[seen.setdefault(s["agent"], 0) % len(styles)]
+            seen[s["agent"]] += 1
+            label = f"{s['label']} ({s['runs']} run{'s' if s['runs'] != 1 else ''})"
+            series.append(
+                CurveSeries(label, s["steps"], s["mean"], s["low"], s["high"], AGENT_COLORS[s["agent"]], style)
+            )
+        seeds = panel["seeds"]
+        span = f": seeds {seeds['first']}..{seeds['first'] + seeds['episodes'] - 1}" if seeds else ""
+        panels.append(CurvePanel(_line_label(setup, variant) + span, series, list(panel["references"].items())))
+    return curve_figure(panels, stem, "training steps", "mean reward (band: 95% CI over runs)")

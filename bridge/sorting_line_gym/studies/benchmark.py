@@ -45,12 +45,16 @@ writes ``<out>/table.md`` and ``table.json`` (our figures beside the paper's Tab
 reference implementation's), ``figure7.png``/``.svg`` (mean reward per setup and agent),
 ``figure3.png``/``.svg`` (the reward analysis behind the rule-based agent), ``intervals`` (IQM
 and interval per line and agent), ``runs`` (each cell's runs, a dot per training seed, beside its
-interval; and the --n-envs check's), ``aggregate`` (aggregate IQM and performance profiles) and the
-seed-42 dashboard of every agent in ``<out>/dashboards/``, and ``results.csv``: every run's reward and
-normalized score on every held-out seed (``reports.results_csv``). ``--report-only`` redraws from saved
-cells; ``--compare MY_RESULTS`` puts a user's agent beside the table (``benchmark_compare``).
-Ctrl-C or SIGTERM stops it within seconds, workers and their nodes included (exit 130); the
-cells that finished are kept.
+interval; and the --n-envs check's), ``curves`` (learning curves: per line the mean over runs of
+each RL algorithm and training configuration, with its 95 % interval over runs as a band and
+rba-hold's and the oracle's mean on the same seeds as lines; from every RL cell of this budget
+saved in ``<out>``, another engine's or lines' cells labelled as such; none without curves; the
+numbers in ``table.json``'s ``learning_curves``), ``aggregate`` (aggregate IQM and performance
+profiles) and the seed-42 dashboard of every agent in ``<out>/dashboards/``, and ``results.csv``:
+every run's reward and normalized score on every held-out seed (``reports.results_csv``).
+``--report-only`` redraws from saved cells; ``--compare MY_RESULTS`` puts a user's agent beside
+the table (``benchmark_compare``). Ctrl-C or SIGTERM stops it within seconds, workers and their
+nodes included (exit 130); the cells that finished are kept.
 """
 
 from __future__ import annotations
@@ -83,6 +87,7 @@ from ..reports.benchmark_summary import (
     summarize,
 )
 from ..reports.benchmark_tables import statistics_markdown, table_markdown
+from ..reports.curves import benchmark_curves
 from ..training.batched.lines import NODE_LINES
 from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
 from . import benchmark_compare, cell_pool
@@ -95,6 +100,7 @@ from .benchmark_cells import (  # noqa: F401 (re-exported: the benchmark's cells
     load_cell,
     plan,
     saved_records,
+    with_saved_curves,
 )
 from .cell_store import write_atomic
 from .curves import DEFAULT_EPISODES, DEFAULT_EVERY, CurveSettings
@@ -259,8 +265,9 @@ def write_report(
 ) -> list[Path]:
     """Table 1 (``table.md``, ``table.json``) and the figures from the cells' ``records``, with the
     oracle on the same seeds (held-out: by default the benchmark's); the --n-envs check compares
-    the saved cells of ``engine``."""
-    from ..reports.plots import aggregate_figure, analysis_figure, benchmark_figure, interval_figure, runs_figure
+    the saved cells of ``engine``; the learning curves draw every saved RL cell of this budget
+    (``with_saved_curves``)."""
+    from ..reports import plots  # matplotlib, only for a report
 
     heldout = heldout or Heldout()
 
@@ -273,6 +280,7 @@ def write_report(
     normalized = normalized_runs(records, oracles)
     aggregate = aggregates(normalized)
     checks = agreement([r for r in saved_records(out) if r.get("engine", "sb3") == engine], timesteps)
+    curves = benchmark_curves(with_saved_curves(records, out, timesteps, heldout), oracles)
     table = out / "table.md"
     table.write_text(
         f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}"
@@ -289,18 +297,20 @@ def write_report(
                 "aggregate_normalized_per_seed": aggregates(normalized_per_seed_runs(rows)),
                 "n_envs_agreement": checks,
                 "n_envs_agreement_by_algorithm": agreement_by_algorithm(checks),
+                "learning_curves": [{"setup": s, "variant": v, **panel} for (s, v), panel in curves.items()],
             },
             indent=2,
         )
         + "\n"
     )
     written = [table, out / "table.json", results_csv.write(out / "results.csv", results_csv.rows_of(records, oracles))]
-    written += benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
-    written += interval_figure(rows, out / "intervals")
-    written += runs_figure(rows, checks, out / "runs")
+    written += plots.benchmark_figure({k: r for k, r in rows.items() if k[2] != "oracle"}, out / "figure7")
+    written += plots.interval_figure(rows, out / "intervals")
+    written += plots.runs_figure(rows, checks, out / "runs")
+    written += plots.learning_curves_figure(curves, out / "curves")
     if aggregate:
-        written += aggregate_figure(aggregate, normalized, out / "aggregate")
-    written += analysis_figure(out / "figure3")
+        written += plots.aggregate_figure(aggregate, normalized, out / "aggregate")
+    written += plots.analysis_figure(out / "figure3")
     return written
 
 

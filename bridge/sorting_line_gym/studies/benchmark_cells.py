@@ -1,7 +1,7 @@
 """The benchmark's cells (``sorting-line-benchmark``, ``sorting-line-engine-check``): what a cell
 is (an agent on a line, with its training seed, lines and engine) and its name, the plan of a run's
-cells, how ``--engine batched`` groups them, and the saved records: their format and how a rerun
-finds the cells it can keep.
+cells, how ``--engine batched`` groups them, and the saved records: their format, how a rerun
+finds the cells it can keep, and which saved cells the report's learning curves add.
 
 A record is ``<out>/cells/<name>.json``, written whole or not at all by the benchmark. Format 2
 adds ``format`` and an RL cell's learning ``curve`` (studies/curves.py); a record without
@@ -132,3 +132,21 @@ def saved_records(out: Path) -> list[dict[str, Any]]:
         except json.JSONDecodeError:
             continue
     return records
+
+
+def with_saved_curves(
+    records: list[dict[str, Any]], out: Path, timesteps: int, heldout: Heldout
+) -> list[dict[str, Any]]:
+    """``records`` and every other RL cell with a curve saved in ``out`` that a run of this budget
+    and held-out seeds keeps (``load_cell``): another engine's cells, or the one-line cells of
+    --n-envs's check, which the learning curves set beside the report's own, each as a series."""
+    names = {Cell(**r["cell"]).name for r in records}
+    found = list(records)
+    for r in saved_records(out):
+        if r.get("format") != CELL_FORMAT or not r.get("curve") or r["cell"]["agent"] not in ALGOS:
+            continue  # a format-1 record has no curve; a later format is skipped, not refused: only a figure
+        cell = Cell(**r["cell"])
+        if cell.name not in names and load_cell(cell, out, timesteps, heldout) is not None:
+            names.add(cell.name)
+            found.append(r)
+    return found
