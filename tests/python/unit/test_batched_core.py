@@ -35,7 +35,9 @@ def test_stacked_forward_and_write_back_equal_the_seeds_networks():
     specs = params.specs_of(per_seed)
     trees = [params.torch_tree(n) for n in per_seed]
     stacked = params.stack(trees)
-    assert stacked["body"][0]["w"].shape == (S, 8, 3) and stacked["head"][0]["b"].shape == (S, 5)
+    # the engine's layout: each weight stored transposed, (S, in, out)
+    assert stacked["body"][0]["w"].shape == (S, 3, 8) and stacked["head"][0]["b"].shape == (S, 5)
+    np.testing.assert_array_equal(np.asarray(stacked["body"][0]["w"][1]), per_seed[1]["body"][0].weight.detach().T)
 
     def forward(p, x):
         return params.forward(specs["head"], p["head"], params.forward(specs["body"], p["body"], x))
@@ -49,7 +51,7 @@ def test_stacked_forward_and_write_back_equal_the_seeds_networks():
     params.write_back(moved, trees)
     for s in range(S):
         np.testing.assert_array_equal(
-            per_seed[s]["body"][2].weight.detach().numpy(), np.asarray(moved["body"][1]["w"][s])
+            per_seed[s]["body"][2].weight.detach().numpy(), np.asarray(moved["body"][1]["w"][s]).T
         )
 
 
@@ -105,7 +107,7 @@ def test_clipped_steps_equal_each_seeds_torch_optimizer(kind):
         assert (np.asarray(norms) > 0.5).all()  # the clip acts
     for s in range(S):
         theirs_all = jax.tree_util.tree_leaves(trees[s], is_leaf=torch.is_tensor)
-        for mine, theirs in zip(jax.tree_util.tree_leaves(p), theirs_all, strict=True):
+        for mine, theirs in zip(params.torch_layout(p), theirs_all, strict=True):
             np.testing.assert_allclose(np.asarray(mine[s]), theirs.detach().numpy(), rtol=1e-5, atol=1e-6)
     copies = [nets(10 + s) for s in range(S)]
     copy_trees = [params.torch_tree(n) for n in copies]

@@ -38,9 +38,10 @@ def supported(*specs: Spec) -> bool:
 
 
 def layers_of(stacked: Sequence[Mapping[str, Any]]) -> Layers:
-    """One stacked network's layers as numpy: (W.T (S, in, out), b (S, 1, out)), views of the JAX
-    arrays (on the CPU ``np.asarray`` copies nothing; it waits for the update that made them)."""
-    return [(np.asarray(layer["w"]).transpose(0, 2, 1), np.asarray(layer["b"])[:, None]) for layer in stacked]
+    """One stacked network's layers as numpy: (W.T (S, in, out), as params stores it, b (S, 1, out)),
+    views of the JAX arrays (on the CPU ``np.asarray`` copies nothing; it waits for the update that
+    made them)."""
+    return [(np.asarray(layer["w"]), np.asarray(layer["b"])[:, None]) for layer in stacked]
 
 
 def _rounded(f, x: np.ndarray) -> np.ndarray:

@@ -252,7 +252,7 @@ class OnPolicyTrainer:
     def weights(self) -> list[tuple[np.ndarray, list[torch.Tensor]]]:
         """Each stacked array (S, ...) with the S torch parameters it stands for (slice s: seed s's),
         in the trees' order: what the tests compare with SB3's weights."""
-        arrays = [np.asarray(a) for a in jax.tree_util.tree_leaves(self.params)]
+        arrays = params.torch_layout(self.params)
         per_seed = [jax.tree_util.tree_leaves(tree, is_leaf=torch.is_tensor) for tree in self.trees]
         return [(a, [leaves[i] for leaves in per_seed]) for i, a in enumerate(arrays)]
 

@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 import torch
 
-from .params import stack
+from .params import stack, torch_layout
 
 #: torch's state entries besides ``step``, per optimizer kind (the order torch creates them in).
 STATE_KEYS = {"adam": ("exp_avg", "exp_avg_sq"), "rmsprop": ("square_avg",)}
@@ -237,7 +237,7 @@ def state_to_torch(
     (its state as torch's own steps would have left it; none before the first step)."""
     rates = np.broadcast_to(np.asarray(lr, dtype=np.float64), (len(optimizers),))
     keys = STATE_KEYS[settings.kind]
-    moments = {k: [np.asarray(a) for a in jax.tree_util.tree_leaves(state[k])] for k in keys}
+    moments = {k: torch_layout(state[k]) for k in keys}
     for s, (opt, tree) in enumerate(zip(optimizers, trees, strict=True)):
         leaves = _check_parameters(opt, tree, s)
         opt.param_groups[0]["lr"] = float(rates[s])

@@ -7,17 +7,22 @@ Interface (stable; the on-policy learners and DQN both build on it):
 - A **tree** is a dict of named networks, each a list of layers ``{"w": (out, in), "b": (out,)}``,
   one per ``nn.Linear`` in the network's order: :func:`torch_tree` gives it for one seed's torch
   modules (holding the live ``nn.Parameter``s), :func:`stack` turns S such trees into one tree of
-  float32 JAX arrays with a leading seed axis (``w`` (S, out, in), ``b`` (S, out)). Slice ``[s]``
-  is exactly seed s's ``nn.Linear`` weight and bias (torch's own layout: no transpose), so the same
-  functions move optimizer moments (trees of the same structure) in and out; :func:`write_back`
-  copies a stacked tree into the S torch trees in place (the SB3 models then hold the weights).
+  float32 JAX arrays with a leading seed axis, **in the engine's layout**: ``w`` (S, in, out), slice
+  ``[s]`` seed s's weight transposed (W.T, what ``x @ W.T`` reads), ``b`` (S, out). The same
+  functions move optimizer moments (trees of the same structure, elementwise, so the layout does
+  not change their values) in and out; :func:`torch_layout` gives a stacked tree's arrays back in
+  torch's layout and :func:`write_back` copies them into the S torch trees in place (the SB3
+  models then hold the weights). Why W.T: XLA's CPU backend sums ``x @ W.T`` as torch does (see
+  :func:`forward`) only on a contiguous W.T, and a transposed copy of W per use cost as much as
+  the matmul itself (DQN's gradient step: 30 % of its time, measured 2026-12-02).
 - A **spec** is a network's shape of computation, hashable (a static argument of ``jax.jit``): one
   entry per module of the ``nn.Sequential`` (or the single ``nn.Linear`` head), ``("linear",)`` or
   an elementwise activation with its settings, e.g. ``("tanh",)``, ``("leaky_relu", 0.01)``.
   :func:`spec_of` reads it from a torch module and refuses, naming it, a module it cannot mirror;
   :func:`specs_of` does so for a dict of networks and checks that all seeds share it.
 - :func:`forward(spec, layers, x) <forward>`: one seed's network on ``x`` (..., in) -> (..., out),
-  torch's ``F.linear`` (x @ W.T + b) and the activations' own formulas, to be vmapped over seeds.
+  torch's ``F.linear`` (x @ W.T + b, W.T as stored) and the activations' own formulas, to be vmapped
+  over seeds.
 
 Why JAX: the networks are tiny (64 units), so eager torch spends its time in per-op overhead;
 ``jit`` fuses a whole update into one XLA computation and ``vmap`` batches the seeds in it, each
@@ -114,29 +119,44 @@ def _to_numpy(t: Any) -> np.ndarray:
     return t.detach().cpu().numpy() if torch.is_tensor(t) else np.asarray(t)
 
 
+def _is_weight(path: tuple[Any, ...]) -> bool:
+    """Whether a leaf of a tree is a Linear layer's weight (its key ``"w"``)."""
+    return bool(path) and getattr(path[-1], "key", None) == "w"
+
+
 def stack(trees: Sequence[Any]) -> Any:
     """S trees of torch tensors (or arrays) of one structure -> one tree of float32 JAX arrays with
-    a leading seed axis (slice s = trees[s]); shapes are checked to agree."""
+    a leading seed axis, weights in the engine's layout (slice s = trees[s], ``w`` transposed);
+    shapes are checked to agree."""
     if not trees:
         raise ValueError("no trees to stack (one per seed is needed)")
-    leaves = [jax.tree_util.tree_flatten(t, is_leaf=torch.is_tensor) for t in trees]
-    structure = leaves[0][1]
-    for s, (_, theirs) in enumerate(leaves[1:], start=1):
+    leaves = [jax.tree_util.tree_flatten_with_path(t, is_leaf=torch.is_tensor) for t in trees]
+    structure = jax.tree_util.tree_structure(trees[0], is_leaf=torch.is_tensor)
+    for s, t in enumerate(trees[1:], start=1):
+        theirs = jax.tree_util.tree_structure(t, is_leaf=torch.is_tensor)
         if theirs != structure:
             raise ValueError(f"seed {s}'s networks differ in structure from seed 0's: {theirs} vs {structure}")
     stacked = []
-    for k in range(len(leaves[0][0])):
-        arrays = [_to_numpy(ls[0][k]) for ls in leaves]
+    for k, (path, _) in enumerate(leaves[0][0]):
+        arrays = [_to_numpy(ls[0][k][1]) for ls in leaves]
         if any(a.shape != arrays[0].shape for a in arrays):
             raise ValueError(f"the networks to stack differ in shape: {[a.shape for a in arrays]}")
-        stacked.append(jnp.asarray(np.stack(arrays).astype(np.float32)))
+        array = np.stack(arrays).astype(np.float32)
+        stacked.append(jnp.asarray(np.ascontiguousarray(array.transpose(0, 2, 1)) if _is_weight(path) else array))
     return jax.tree_util.tree_unflatten(structure, stacked)
+
+
+def torch_layout(stacked: Any) -> list[np.ndarray]:
+    """The leaves of a stacked tree as numpy arrays in torch's layout (``w`` (S, out, in)), in the
+    tree's leaf order: what :func:`write_back` and the optimizer's state copy into torch."""
+    leaves = jax.tree_util.tree_flatten_with_path(stacked)[0]
+    return [np.asarray(a).transpose(0, 2, 1) if _is_weight(path) else np.asarray(a) for path, a in leaves]
 
 
 @torch.no_grad()
 def write_back(stacked: Any, trees: Sequence[Any]) -> None:
     """Copies slice s of every array of ``stacked`` into ``trees[s]``'s torch tensor, in place."""
-    arrays = [np.asarray(a) for a in jax.tree_util.tree_leaves(stacked)]  # one device copy per array
+    arrays = torch_layout(stacked)  # one device copy per array
     for s, tree in enumerate(trees):
         targets = jax.tree_util.tree_leaves(tree, is_leaf=torch.is_tensor)
         if len(targets) != len(arrays):
@@ -177,13 +197,14 @@ def forward(spec: Spec, layers: Sequence[Mapping[str, jax.Array]], x: jax.Array)
     k = 0
     for op in spec:
         if op[0] == "linear":
-            # F.linear(x, W, b) = x @ W.T + b (torch/nn/modules/linear.py). The barrier keeps W.T a
-            # transposed copy: folded into the dot (XLA's default), XLA's CPU kernel for an output
-            # width that is no multiple of its vector width (DQN's 30 actions) sums in another order
-            # than torch's (sequential over the inputs, fused multiply-adds), and Adam makes those
-            # last bits grow over a training; on a contiguous W.T both sum alike, and a seed's result
-            # no longer depends on which seeds share its batch (measured with JAX 0.10.2).
-            x = x @ jax.lax.optimization_barrier(layers[k]["w"].T) + layers[k]["b"]
+            # F.linear(x, W, b) = x @ W.T + b (torch/nn/modules/linear.py), W.T stored as it is read
+            # (the module docstring). On a contiguous W.T, XLA's CPU kernel sums as torch does for
+            # these shapes (sequential over the inputs, fused multiply-adds); with W.T folded into
+            # the dot, for an output width that is no multiple of its vector width (DQN's 30
+            # actions) it sums in another order, and Adam makes those last bits grow over a
+            # training; a seed's result also no longer depends on which seeds share its batch
+            # (measured with JAX 0.10.2).
+            x = x @ layers[k]["w"] + layers[k]["b"]
             k += 1
         else:
             x = activate(op, x)
