@@ -2,11 +2,9 @@
 observations (S, L, obs_dim), for the learners' action choice (``ActorCriticPolicy.forward`` of PPO,
 A2C and MaskablePPO; ``QNetwork._predict`` of DQN).
 
-Why not JAX here: a rollout step evaluates one row per seed, and XLA's CPU dot of a stacked
-(S, 1, 64) x (S, 64, 64) costs about 20x numpy's (S = 32, one XLA thread, CPU time: 185 us against
-8 us, 2026-12-02 on the 2-core VM beside a study), so the jitted forward took 0.58 ms of CPU a step
-for 32 seeds and more than half of an A2C training; on the host a step takes about a fifth of that.
-The updates stay in JAX (gradients over many rows, where XLA's dots pay for themselves).
+Why not JAX here: a rollout step evaluates one row per seed, where XLA's CPU dot costs many times
+numpy's, so a jitted forward took more than half of an A2C training (the figures are in
+docs/performance.md). The updates stay in JAX (gradients over many rows).
 
 The arithmetic is ``params.forward``'s and ``torch_math``'s, operation for operation: ``x @ W.T + b``
 per seed, tanh, exp and log computed in float64 and rounded once to float32 (what torch's kernels

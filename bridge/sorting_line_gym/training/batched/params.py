@@ -14,7 +14,7 @@ Interface (stable; the on-policy learners and DQN both build on it):
   torch's layout and :func:`write_back` copies them into the S torch trees in place (the SB3
   models then hold the weights). Why W.T: XLA's CPU backend sums ``x @ W.T`` as torch does (see
   :func:`forward`) only on a contiguous W.T, and a transposed copy of W per use cost as much as
-  the matmul itself (DQN's gradient step: 30 % of its time, measured 2026-12-02).
+  the matmul itself (docs/performance.md).
 - A **spec** is a network's shape of computation, hashable (a static argument of ``jax.jit``): one
   entry per module of the ``nn.Sequential`` (or the single ``nn.Linear`` head), ``("linear",)`` or
   an elementwise activation with its settings, e.g. ``("tanh",)``, ``("leaky_relu", 0.01)``.
@@ -202,8 +202,7 @@ def forward(spec: Spec, layers: Sequence[Mapping[str, jax.Array]], x: jax.Array)
             # these shapes (sequential over the inputs, fused multiply-adds); with W.T folded into
             # the dot, for an output width that is no multiple of its vector width (DQN's 30
             # actions) it sums in another order, and Adam makes those last bits grow over a
-            # training; a seed's result also no longer depends on which seeds share its batch
-            # (measured with JAX 0.10.2).
+            # training; a seed's result also no longer depends on which seeds share its batch.
             x = x @ layers[k]["w"] + layers[k]["b"]
             k += 1
         else:
