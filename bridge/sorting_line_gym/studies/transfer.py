@@ -131,6 +131,10 @@ def options(argv: list[str] | None):
         )
     if args.after < tc.WINDOW or args.after % tc.WINDOW:
         parser.error(f"--after = {args.after} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW}")
+    if len(set(args.seeds)) != len(args.seeds) or min(args.seeds) < 0:
+        parser.error(
+            f"--seeds {' '.join(map(str, args.seeds))} is not valid: allowed distinct training seeds, each 0 or more"
+        )
     if args.evaluations < 1:
         parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
     if args.jobs < 1:

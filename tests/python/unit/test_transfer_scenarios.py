@@ -3,7 +3,8 @@ node or a training: each ready schedule loads and passes the library's validatio
 refused), the lines before and after each change are what the library's evolving line runs, the
 oracle is attached to the sides that are paper setups only, the first version's schedules keep
 their digests (so its stores stay valid), a store of that version refuses the newer scenarios
-naming the allowed ones, and an unknown scenario fails at the start naming the allowed ones.
+naming the allowed ones, and an unknown scenario or a bad seed list fails at the start naming the
+allowed ones.
 
 The baselines cell runs the `sorting_line` binary offline (a few hundred milliseconds).
 """
@@ -111,3 +112,12 @@ def test_an_unknown_scenario_fails_at_the_start_naming_the_allowed_ones(tmp_path
     assert not (tmp_path / "t").exists()
     with pytest.raises(ValueError, match="scenario = 'flood' is not known: allowed upgrade, drift, sensor"):
         tc.line_states("flood")
+
+
+@pytest.mark.parametrize("seeds", [["1", "2", "1"], ["-1"]])
+def test_a_bad_seed_list_fails_at_the_start(seeds, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        transfer.main(["--seeds", *seeds, "--out", str(tmp_path / "t")])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and f"--seeds {' '.join(seeds)} is not valid: allowed distinct training seeds" in err
+    assert not (tmp_path / "t").exists()
