@@ -12,31 +12,7 @@ the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
 - steps to recover: training steps after the change (for "from scratch": from its start) until
   the 10-episode moving mean of the training rewards first reaches 90 % of the from-scratch final
   score (its IQM over runs x seeds); a run that never does counts as its whole budget (so the
-  figure is a lower bound when not all runs reached it); IQM over runs with its interval;
-- the continual-RL metrics (``continual``), each per run with the IQM over runs and its interval
-  over whole runs:
-
-  - *jumpstart*: the score right after the change, i.e. the frozen snapshot's evaluation on the
-    changed line (the continued agent is that snapshot at the change), for continued and frozen;
-    from scratch has no evaluation at its start, so none;
-  - *AUC*: the area under the normalised training curve after the change, the mean over the
-    after-change episodes of ``(reward - low) / (high - low)``; ``low`` and ``high`` per scenario:
-    random's and the oracle's means after the change where the baselines cell has both, else 0
-    and rba-hold's mean after the change (``normalisation`` says which, and so do the tables);
-    for continued (its curve after the change) and from scratch (its whole curve);
-  - *steps to rba-hold*: training steps after the change (from scratch: from its start) until the
-    10-episode moving mean of the training rewards first reaches rba-hold's mean after the change;
-    a run that never does counts as its budget, so the figure is then a lower bound (as for the
-    steps to recover);
-  - *forward transfer*: ``(AUC - AUC_scratch) / (1 - AUC_scratch)`` per continued run, against the
-    mean AUC of the from-scratch runs (held fixed: the interval resamples the continued runs);
-    none when that mean is 1 or more (the formula's scale is gone: 0 and rba-hold normalise so);
-  - *crossover*: the training steps after the change at which the from-scratch run's cumulative
-    training reward first exceeds the continued run's of the same training seed; a pair where it
-    never does counts as the budget (a lower bound).
-
-  Forgetting (the score on the line before the change) is not reported: no cell evaluates an
-  agent on that line.
+  figure is a lower bound when not all runs reached it); IQM over runs with its interval.
 
 No ROS and no Stable-Baselines3 here: the report redraws from the cell files alone.
 """
@@ -112,104 +88,13 @@ def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any])
     found: dict[str, Any] = {"target": target, "budget_steps": budget}
     for strategy, runs in curves.items():
         steps = [recovery_steps(c, target, key["episode_steps"], key["window"]) for c in runs]
-        found[strategy] = _counted(steps, budget)
-    return found
-
-
-def _counted(steps: list[int | None], budget: int) -> dict[str, Any]:
-    """Steps per run (None: never within ``budget``) with their IQM over runs, a run that never got
-    there counted as ``budget`` (the figure is then a lower bound)."""
-    counted = np.array([[s if s is not None else budget] for s in steps], dtype=float)
-    return {
-        "per_run": steps,
-        "reached": sum(s is not None for s in steps),
-        "runs": len(steps),
-        "iqm": stats.iqm_interval(counted).as_dict(),
-    }
-
-
-def _over_runs(values: list[float]) -> dict[str, Any]:
-    """One value per run with their IQM and its interval over runs."""
-    return {"per_run": values, "runs": len(values), "iqm": stats.iqm_interval(np.array(values)[:, None]).as_dict()}
-
-
-def normalisation(record: dict[str, Any]) -> dict[str, Any]:
-    """The scale of a scenario's normalised curves from its baselines cell: ``low`` and ``high``
-    after the change (random's and the oracle's means, else 0 and rba-hold's mean) and which."""
-    after = record["after"]
-    if "random" in after and "oracle" in after:
-        return {"low": float(np.mean(after["random"])), "high": float(np.mean(after["oracle"])),
-                "between": "random and oracle"}  # fmt: skip
-    return {"low": 0.0, "high": float(np.mean(after["rba-hold"])), "between": "0 and rba-hold"}
-
-
-def auc(curve, low: float, high: float) -> float:
-    """The area under the normalised curve of episode rewards ``curve``, per episode: the mean of
-    ``(reward - low) / (high - low)`` (1: ``high`` from the first episode on)."""
-    return float(np.mean(stats.normalized(np.asarray(curve, dtype=float), low, high)))
-
-
-def forward_transfer(auc_run: float, auc_scratch: float) -> float | None:
-    """``(AUC - AUC_scratch) / (1 - AUC_scratch)``; None when ``AUC_scratch`` >= 1."""
-    return (auc_run - auc_scratch) / (1 - auc_scratch) if auc_scratch < 1 else None
-
-
-def crossover_steps(scratch_curve, continued_curve, episode_steps: int) -> int | None:
-    """Steps after the change at the end of the first episode where the cumulative reward of
-    ``scratch_curve`` exceeds that of ``continued_curve`` (both from the change on), or None."""
-    n = min(len(scratch_curve), len(continued_curve))
-    ahead = np.cumsum(np.asarray(scratch_curve[:n], dtype=float)) > np.cumsum(
-        np.asarray(continued_curve[:n], dtype=float)
-    )
-    return (int(np.argmax(ahead)) + 1) * episode_steps if ahead.any() else None
-
-
-def continual(
-    records: list[dict],
-    scenario: str,
-    algo: str,
-    key: dict[str, Any],
-    scale: dict[str, Any] | None,
-    rba_hold: float | None,
-) -> dict[str, Any]:
-    """The continual-RL metrics of one scenario and algorithm (module docstring), per strategy, and
-    the crossover between from scratch and continued."""
-    budget = key["after"] * key["episode_steps"]
-    transfer = runs_of(records, scenario, algo, "transfer")
-    scratch = runs_of(records, scenario, algo, "scratch")
-    curves = {
-        "continued": {r["cell"]["seed"]: r["continued_curve"][key["before"] :] for r in transfer},
-        "scratch": {r["cell"]["seed"]: r["scratch_curve"] for r in scratch},
-    }
-    found: dict[str, Any] = {s: {} for s in EVALUATIONS}
-    if transfer:
-        # The continued agent at the change is the frozen snapshot: one score right after it for both.
-        at_change = scores(records, scenario, algo, "frozen")
-        jumpstart = {"per_run": at_change.mean(axis=1).tolist(), "runs": at_change.shape[0],
-                     "iqm": stats.iqm_interval(at_change).as_dict()}  # fmt: skip
-        for strategy in ("continued", "frozen"):
-            found[strategy]["jumpstart"] = jumpstart
-    for strategy, runs in curves.items():
-        if not runs:
-            continue
-        if scale is not None and scale["high"] > scale["low"]:
-            found[strategy]["auc"] = _over_runs([auc(c, scale["low"], scale["high"]) for c in runs.values()])
-        if rba_hold is not None:
-            steps = [recovery_steps(c, rba_hold, key["episode_steps"], key["window"]) for c in runs.values()]
-            found[strategy]["steps_to_rba_hold"] = {**_counted(steps, budget), "target": rba_hold}
-    if "auc" in found["continued"] and "auc" in found["scratch"]:
-        base = float(np.mean(found["scratch"]["auc"]["per_run"]))
-        transfers = [t for a in found["continued"]["auc"]["per_run"] if (t := forward_transfer(a, base)) is not None]
-        if len(transfers) == len(found["continued"]["auc"]["per_run"]):
-            found["continued"]["forward_transfer"] = {**_over_runs(transfers), "auc_scratch": base}
-        else:
-            found["continued"]["forward_transfer_missing"] = (
-                f"the from-scratch runs' mean AUC is {base:.3f}, not below 1"
-            )
-    pairs = sorted(set(curves["continued"]) & set(curves["scratch"]))
-    if pairs:
-        steps = [crossover_steps(curves["scratch"][s], curves["continued"][s], key["episode_steps"]) for s in pairs]
-        found["scratch"]["crossover"] = {**_counted(steps, budget), "seeds": pairs}
+        counted = np.array([[s if s is not None else budget] for s in steps], dtype=float)
+        found[strategy] = {
+            "per_run": steps,
+            "reached": sum(s is not None for s in steps),
+            "runs": len(steps),
+            "iqm": stats.iqm_interval(counted).as_dict(),
+        }
     return found
 
 
@@ -222,11 +107,7 @@ def baseline_summary(record: dict[str, Any]) -> dict[str, Any]:
     return summary
 
 
-def algo_summary(
-    records: list[dict], scenario: str, algo: str, key: dict[str, Any], rba_hold, scale: dict[str, Any] | None = None
-) -> dict[str, Any]:
-    """A scenario's and algorithm's strategies, comparisons, steps to recover and continual-RL
-    metrics; ``rba_hold``: its episodes after the change (1 x seeds), ``scale``: ``normalisation``."""
+def algo_summary(records: list[dict], scenario: str, algo: str, key: dict[str, Any], rba_hold) -> dict[str, Any]:
     strategies, improvements = {}, {}
     for strategy in EVALUATIONS:
         s = scores(records, scenario, algo, strategy)
@@ -245,13 +126,7 @@ def algo_summary(
         sx, sy = scores(records, scenario, algo, x), scores(records, scenario, algo, y)
         if sx.size and sy.size:
             improvements[f"{x} > {y}"] = stats.probability_of_improvement_interval(sx, sy).as_dict()
-    target = float(rba_hold.mean()) if rba_hold is not None else None
-    return {
-        "strategies": strategies,
-        "improvement": improvements,
-        "recovery": recovery(records, scenario, algo, key),
-        "continual": continual(records, scenario, algo, key, scale, target),
-    }
+    return {"strategies": strategies, "improvement": improvements, "recovery": recovery(records, scenario, algo, key)}
 
 
 def summarize(records: list[dict], key: dict[str, Any], scenarios, algos) -> dict[str, Any]:
@@ -260,11 +135,9 @@ def summarize(records: list[dict], key: dict[str, Any], scenarios, algos) -> dic
     for scenario in scenarios:
         base = [r for r in records if r["cell"]["scenario"] == scenario and r["cell"]["kind"] == "baselines"]
         rba_hold = np.array([base[0]["after"]["rba-hold"]]) if base else None
-        scale = normalisation(base[0]) if base else None
         found[scenario] = {
             "baselines": baseline_summary(base[0]) if base else None,
-            "normalisation": scale,
-            "algos": {a: algo_summary(records, scenario, a, key, rba_hold, scale) for a in algos},
+            "algos": {a: algo_summary(records, scenario, a, key, rba_hold) for a in algos},
         }
     return found
 
@@ -344,63 +217,9 @@ def _recovery_table(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
-#: The continual-RL tables' columns: (title, the metric in ``continual``'s strategy, digits).
-CONTINUAL_COLUMNS = (
-    ("jumpstart", "jumpstart", 2),
-    ("AUC after the change", "auc", 3),
-    ("steps to rba-hold", "steps_to_rba_hold", 0),
-    ("forward transfer", "forward_transfer", 3),
-    ("new agent's cumulative reward passes the continued one's at", "crossover", 0),
-)
-
-
-def _normalised_between(scale: dict[str, Any] | None) -> str:
-    if scale is None:
-        return "no baselines cell: no AUC"
-    if not scale["high"] > scale["low"]:
-        return f"{scale['between']} ({scale['low']:.2f}, {scale['high']:.2f}): no scale, no AUC"
-    return f"AUC normalised between {scale['between']} after the change ({scale['low']:.2f} and {scale['high']:.2f})"
-
-
-def _continual_cell(metric: dict[str, Any] | None, digits: int) -> str:
-    if not metric:
-        return "-"
-    if "reached" in metric:
-        return f"{_interval(metric['iqm'], digits)} ({metric['reached']}/{metric['runs']})"
-    return _interval(metric["iqm"], digits)
-
-
-def _continual_tables(summary: dict[str, Any]) -> list[str]:
-    lines = [
-        "## Continual-RL metrics: IQM [95 % CI] over runs",
-        "",
-        "Jumpstart: the score right after the change (the frozen snapshot's, evaluated on the changed line). "
-        "AUC: the mean normalised training reward after the change (1: the upper reference throughout). "
-        "Steps to rba-hold: until the 10-episode moving mean of the training rewards reaches rba-hold's mean "
-        "after the change ((k/n): k of n runs did; the others count as the budget, a lower bound). "
-        "Forward transfer: (AUC - AUC_scratch) / (1 - AUC_scratch), against the mean AUC of the from-scratch runs. "
-        "Crossover: steps after the change at which the from-scratch run's cumulative training reward first "
-        "exceeds the continued run's of the same seed ((k/n) as above). Forgetting is not reported: no cell "
-        "evaluates on the line before the change.",
-    ]
-    header = "| strategy | runs | final score | " + " | ".join(c[0] for c in CONTINUAL_COLUMNS) + " |"
-    for scenario, s in summary.items():
-        for algo, a in s["algos"].items():
-            lines += ["", f"### {scenario}, {algo}: {_normalised_between(s.get('normalisation'))}", "", header,
-                      "|---|---|---|" + "---|" * len(CONTINUAL_COLUMNS)]  # fmt: skip
-            for strategy in EVALUATIONS:
-                st, metrics = a["strategies"].get(strategy), a.get("continual", {}).get(strategy, {})
-                cells = [_continual_cell(metrics.get(name), digits) for _, name, digits in CONTINUAL_COLUMNS]
-                final = _interval(st["iqm"]) if st else "-"
-                lines.append(f"| {strategy} | {st['runs'] if st else 0} | {final} | " + " | ".join(cells) + " |")
-    return lines
-
-
 def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
-    """The tables: final scores, probabilities of improvement, steps to recover, and the
-    continual-RL metrics per scenario and algorithm."""
+    """The three tables: final scores, probabilities of improvement, steps to recover."""
     lines = _score_table(summary, key) + [""] + _improvement_table(summary) + [""] + _recovery_table(summary)
-    lines += [""] + _continual_tables(summary)
     lines += [
         "",
         "Runs: training seeds. A run that does not reach the target within its budget counts as the whole "

@@ -1,12 +1,10 @@
 """The cells of the transfer study (`sorting-line-transfer`): what each one trains and evaluates.
 
 A cell is saved as soon as it finishes (``studies.cell_store``), so a stopped study resumes cell
-by cell. The scenarios (``SCENARIOS``) are the ready schedules of ``evolutions/`` of the same name;
-``line_states`` says what each one's line is before and after its change. The cells of a scenario:
+by cell. The cells of a scenario:
 
-- ``baselines``: `rba` and `rba-hold` on the line before and after the change, `random` after it
-  (the lower reference of the report's normalised curves), and the oracle (`sorting_line oracle`,
-  the clairvoyant optimum per seed) where the line is one of the paper's setups, which it solves;
+- ``baselines``: `rba` and `rba-hold` on the line before and after the change, and the oracle
+  (`sorting_line oracle`, the clairvoyant optimum per seed) where the line is one it can solve;
 - ``transfer`` per algorithm and training seed: one agent trained ``before`` episodes on the
   evolving line and ``after`` more past the change (strategy **continued**), and its snapshot at
   the change (strategy **frozen**), both evaluated on the changed line;
@@ -43,16 +41,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .cell_store import ConfigurationMismatch
-
 EPISODE_STEPS = 50
-#: The scenarios, each a ready schedule (evolutions/<name>.yaml): the paper's machine and sensor
-#: upgrade, its sensor half and its machine half (both ending on advanced B as it does), the drift of
-#: noise and threshold together, each alone, and the change of input and penalty from setup A to B.
-SCENARIOS = ("upgrade", "drift", "sensor", "machine", "noise-drift", "threshold-drift", "setup-a-to-b")
-#: The scenarios of the study's first version: the default of --scenarios, and the only ones a store
-#: written then has in its key (``key_scenarios``).
-FIRST_SCENARIOS = ("upgrade", "drift")
+SCENARIOS = ("upgrade", "drift")
 ALGOS = ("ppo", "a2c")
 #: The cells' kinds: a scenario's rule-based baselines, then per algorithm and seed the agent
 #: trained before and after the change (its continued and frozen strategies) and the one trained
@@ -137,85 +127,12 @@ class Settings:
         }
 
 
-class OlderStore(ConfigurationMismatch):
-    """A results directory written before some of the asked scenarios existed."""
-
-
-def key_scenarios(saved_key: dict[str, Any] | None, asked, where: str = "the store") -> tuple[str, ...]:
-    """The scenarios whose schedules are in the key of a store (``saved_key``: its study.json's key,
-    None for a new one; ``where``: the store, for the message): ``SCENARIOS``, or ``FIRST_SCENARIOS``
-    for a store of the first version, so that its cells stay valid; such a store refuses the other
-    scenarios (``OlderStore``)."""
-    if saved_key is None or set(saved_key.get("schedules", {})) != set(FIRST_SCENARIOS):
-        return SCENARIOS
-    newer = [s for s in asked if s not in FIRST_SCENARIOS]
-    if newer:
-        raise OlderStore(
-            f"{where} was written before the scenarios {', '.join(newer)} existed (its key holds the schedules "
-            f"of {', '.join(FIRST_SCENARIOS)} only): allowed there --scenarios {' '.join(FIRST_SCENARIOS)}; "
-            "run the others into another --out"
-        )
-    return FIRST_SCENARIOS
-
-
-def ready_events(scenario: str) -> list[dict[str, Any]]:
-    """The events of the ready schedule of ``scenario`` (one of ``SCENARIOS``)."""
-    from ..envs.evolving import schedule_file
-
-    if scenario not in SCENARIOS:
-        raise ValueError(f"scenario = {scenario!r} is not known: allowed {', '.join(SCENARIOS)}")
-    return yaml.safe_load(schedule_file(scenario).read_text())["events"]
-
-
-def start_line() -> dict[str, Any]:
-    """The settings every line of the study starts from before its schedule: advanced B (``make_env``
-    and ``library`` run setup B, and the evolving line has the advanced hardware), from the library."""
-    from .. import _native
-
-    return {**_native.SETUPS["B"], "threshold": _native.THRESHOLD, **VARIANT_HARDWARE["advanced"]}
-
-
-#: The hardware of the paper's two variants, as the schedule's fields name it (src/sim/evolution.rs).
-VARIANT_HARDWARE = {
-    "basic": {"sort_modes": False, "ratio_sensor": False},
-    "advanced": {"sort_modes": True, "ratio_sensor": True},
-}
-
-
-def line_states(scenario: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The settings of the line of ``scenario`` before its change (episode 0's events) and after
-    all of it (every event), as the schedule's fields name them."""
-    before, after = start_line(), start_line()
-    for e in ready_events(scenario):
-        fields = {k: v for k, v in e.items() if k != "at"}
-        if e["at"].get("episode") == 0:
-            before.update(fields)
-        after.update(fields)
-    return before, after
-
-
-def paper_line(state: dict[str, Any]) -> tuple[str, str] | None:
-    """(setup, variant) of the paper whose line has the settings ``state``, or None: only those the
-    oracle solves (it takes no schedule)."""
-    from .. import _native
-
-    for setup, settings in _native.SETUPS.items():
-        for variant, hardware in VARIANT_HARDWARE.items():
-            if state == {**settings, "threshold": _native.THRESHOLD, **hardware}:
-                return setup, variant
-    return None
-
-
-def frozen_mode0(scenario: str) -> bool:
-    """Whether the line of ``scenario`` has no sort modes before its change: the frozen snapshot
-    never chose one, and is evaluated on the changed line with the old machine's masks."""
-    return not line_states(scenario)[0]["sort_modes"]
-
-
 def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     """(the evolving schedule with the change after `before` episodes, the changed line's schedule
     from episode 0), written to `out`/schedules/, from the ready schedule of `scenario`."""
-    events = ready_events(scenario)
+    from ..envs.evolving import schedule_file
+
+    events = yaml.safe_load(schedule_file(scenario).read_text())["events"]
     first = min(e["at"]["episode"] for e in events if e["at"].get("episode", 0) > 0)
     evolving, final = [], {}
     for e in events:
@@ -230,10 +147,6 @@ def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     a.parent.mkdir(parents=True, exist_ok=True)
     a.write_text(yaml.safe_dump({"events": evolving}, sort_keys=False))
     b.write_text(yaml.safe_dump({"events": [{"at": {"episode": 0}, **final}]}, sort_keys=False))
-    # The line before the change, for the baselines where it is none of the paper's setups.
-    initial = {k: v for e in events if e["at"].get("episode") == 0 for k, v in e.items() if k != "at"}
-    first_line = {"events": [{"at": {"episode": 0}, **initial}]}
-    before_path(scenario, out).write_text(yaml.safe_dump(first_line, sort_keys=False))
     return a, b
 
 
@@ -312,7 +225,7 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
     frozen_model = algorithm_class(cell.algo).load(snapshot, device="cpu")
     eval_env = make_env(changed, settings.backend)
     try:
-        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
+        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
         continued = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
     finally:
         eval_env.close()
@@ -340,18 +253,16 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
     return {"scratch_curve": curve, "scratch_eval": final, **timing}
 
 
-def library(
-    command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None, setup: str = "B"
-) -> list[float]:
-    """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on ``setup``
-    (the study's B by default), seeds 10000..., offline."""
+def library(command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None) -> list[float]:
+    """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on setup B,
+    seeds 10000..., offline."""
     from ..line.process import find_node_binary
 
     argv = [
         find_node_binary(),
         command,
         "--setup",
-        setup,
+        "B",
         "--variant",
         variant,
         "--episodes",
@@ -368,46 +279,25 @@ def library(
     return [float(e["reward"]) for e in json.loads(r.stdout)["per_episode"]]
 
 
-def run_baselines(cell: Cell, settings: Settings, changed: Path, before: Path) -> dict[str, Any]:
-    """rba and rba-hold before and after the change, random after it; the oracle of each side where
-    the oracle can solve it. It models the paper's fixed lines (``paper_line``), so it is used only
-    on a side whose line is one of them: before the change the baselines then run on that setup
-    itself, after it on the changed schedule, the oracle only if random's episodes on the setup
-    equal the schedule's to the last digit (the oracle depends on the line's dynamics and rewards,
-    which random's actions see, not on what it observes, which rba's read: rba and rba-hold weigh
-    the readings by the noise of the setup they are built for, the setup's, not a schedule's);
-    otherwise the record says why it is missing.
-    ``before``: the schedule of the line before the change, for a line that is no paper setup."""
+def run_baselines(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
+    """rba and rba-hold before and after the change; the oracle of each side where the oracle can
+    solve it. It models the paper's fixed lines, so after the change it is used only when the
+    changed line is advanced B (rba-hold's episodes there equal the schedule's to the last digit);
+    otherwise the record says why it is missing."""
     n = settings.evaluations
-    lines = dict(zip(("before", "after"), (paper_line(s) for s in line_states(cell.scenario)), strict=True))
+    before_variant = "basic" if cell.scenario == "upgrade" else "advanced"
     record: dict[str, Any] = {"before": {}, "after": {}}
-    first = lines["before"]
     for agent in ("rba", "rba-hold"):
-        if first is not None:
-            record["before"][agent] = library("eval", agent, first[1], n, setup=first[0])
-        else:
-            record["before"][agent] = library("eval", agent, "advanced", n, before)
+        record["before"][agent] = library("eval", agent, before_variant, n)
         record["after"][agent] = library("eval", agent, "advanced", n, changed)
-    record["after"]["random"] = library("eval", "random", "advanced", n, changed)
-    if first is not None:
-        record["before"]["oracle"] = library("oracle", None, first[1], n, setup=first[0])
+    record["before"]["oracle"] = library("oracle", None, before_variant, n)
+    if library("eval", "rba-hold", "advanced", n) == record["after"]["rba-hold"]:
+        record["after"]["oracle"] = library("oracle", None, "advanced", n)
     else:
-        record["oracle_before_missing"] = NOT_A_SETUP.format(side="line before the change")
-    last = lines["after"]
-    if last is not None and library("eval", "random", last[1], n, setup=last[0]) == record["after"]["random"]:
-        record["after"]["oracle"] = library("oracle", None, last[1], n, setup=last[0])
-    elif last is not None:
         record["oracle_after_missing"] = (
-            f"random's episodes on setup {last[0]} {last[1]} differ from the changed line's: the oracle of the "
-            "setup is not the changed line's"
+            "the changed line is not one of the paper's setups (the oracle models those: it takes no schedule)"
         )
-    else:
-        record["oracle_after_missing"] = NOT_A_SETUP.format(side="changed line")
     return record
-
-
-#: Why a side of a scenario has no oracle.
-NOT_A_SETUP = "the {side} is not one of the paper's setups (the oracle models those: it takes no schedule)"
 
 
 def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
@@ -418,7 +308,7 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
     started = time.monotonic()
     evolving, changed = schedule_paths(cell.scenario, settings.before, out)
     if cell.kind == "baselines":
-        result = run_baselines(cell, settings, changed, before_path(cell.scenario, out))
+        result = run_baselines(cell, settings, changed)
     elif cell.kind == "transfer":
         models = out / "models"
         models.mkdir(parents=True, exist_ok=True)
@@ -431,11 +321,6 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
 def schedule_paths(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     """Where ``schedules`` wrote the scenario's two schedules (the study writes them at its start)."""
     return out / "schedules" / f"{scenario}-at-{before + 1}.yaml", out / "schedules" / f"{scenario}-after.yaml"
-
-
-def before_path(scenario: str, out: Path) -> Path:
-    """Where ``schedules`` wrote the schedule of the scenario's line before the change."""
-    return out / "schedules" / f"{scenario}-before.yaml"
 
 
 # ------------------------------------------------------------------------------------------
@@ -555,7 +440,7 @@ def run_batch(
         try:
             if cell.kind == "transfer":
                 frozen_model = algorithm_class(cell.algo).load(snapshots[s], device="cpu")
-                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
+                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
                 continued = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
                 result = {"continued_curve": curves.curves[s], "continued_eval": continued, "frozen_eval": frozen}
             else:
