@@ -279,8 +279,9 @@ def write_report(
     poi = improvements(records)
     normalized = normalized_runs(records, oracles)
     aggregate = aggregates(normalized)
-    checks = agreement([r for r in saved_records(out) if r.get("engine", "sb3") == engine], timesteps)
-    curves = benchmark_curves(with_saved_curves(records, out, timesteps, heldout), oracles)
+    saved = saved_records(out)
+    checks = agreement([r for r in saved if r.get("engine", "sb3") == engine], timesteps)
+    curves = benchmark_curves(with_saved_curves(records, saved, timesteps, heldout), oracles)
     table = out / "table.md"
     table.write_text(
         f"# Benchmark: Table 1 through ROS 2\n\n{table_markdown(rows, timesteps, agents, heldout)}"

@@ -113,14 +113,17 @@ def load_cell(cell: Cell, out: Path, timesteps: int, heldout: Heldout) -> dict[s
             f"{path}: a cell of format {version!r}, written by a later version of sorting-line-benchmark (this one "
             f"reads formats 1 .. {CELL_FORMAT}): run it with that version, or use another --out"
         )
+    return record if kept(cell, record, timesteps, heldout) else None
+
+
+def kept(cell: Cell, record: dict[str, Any], timesteps: int, heldout: Heldout) -> bool:
+    """Whether ``record`` of ``cell`` was run with this budget, engine and held-out seeds."""
     if cell.agent in ALGOS and record.get("timesteps") != timesteps:
-        return None
+        return False
     if cell.agent in ALGOS and record.get("engine", "sb3") != cell.engine:  # an SB3 record names none
-        return None
+        return False
     saved = record.get("heldout")
-    if not saved or (saved["seed"], saved["episodes"]) != (heldout.seed, heldout.episodes):
-        return None
-    return record
+    return bool(saved) and (saved["seed"], saved["episodes"]) == (heldout.seed, heldout.episodes)
 
 
 def saved_records(out: Path) -> list[dict[str, Any]]:
@@ -135,18 +138,19 @@ def saved_records(out: Path) -> list[dict[str, Any]]:
 
 
 def with_saved_curves(
-    records: list[dict[str, Any]], out: Path, timesteps: int, heldout: Heldout
+    records: list[dict[str, Any]], saved: list[dict[str, Any]], timesteps: int, heldout: Heldout
 ) -> list[dict[str, Any]]:
-    """``records`` and every other RL cell with a curve saved in ``out`` that a run of this budget
-    and held-out seeds keeps (``load_cell``): another engine's cells, or the one-line cells of
-    --n-envs's check, which the learning curves set beside the report's own, each as a series."""
+    """``records`` and every other RL cell with a curve among ``saved`` (``saved_records``) that a
+    run of this budget and held-out seeds keeps (:func:`kept`): another engine's cells, or the
+    one-line cells of --n-envs's check, which the learning curves set beside the report's own, each
+    as a series."""
     names = {Cell(**r["cell"]).name for r in records}
     found = list(records)
-    for r in saved_records(out):
+    for r in saved:
         if r.get("format") != CELL_FORMAT or not r.get("curve") or r["cell"]["agent"] not in ALGOS:
             continue  # a format-1 record has no curve; a later format is skipped, not refused: only a figure
         cell = Cell(**r["cell"])
-        if cell.name not in names and load_cell(cell, out, timesteps, heldout) is not None:
+        if cell.name not in names and kept(cell, r, timesteps, heldout):
             names.add(cell.name)
             found.append(r)
     return found
