@@ -20,12 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from .actor_critic import HUGE_NEG
 from .params import Spec
 
 #: The layers this module evaluates; a network with another activation takes the jitted path.
 HOST_OPS = ("linear", "tanh", "relu", "identity")
-#: The logit sb3-contrib gives a masked action (actor_critic.HUGE_NEG, sb3-contrib's HUGE_NEG).
-HUGE_NEG = np.float32(-1e8)
 
 Layers = list[tuple[np.ndarray, np.ndarray]]
 

@@ -39,10 +39,10 @@ class BatchedReplayBuffer:
         self.seeds, self.n_envs = seeds, n_envs
         self.handle_timeout_termination = handle_timeout_termination
         # Row-major over the positions, (buffer_size, S, n_envs, ...): a step of all seeds writes
-        # one contiguous block (a seed-major layout scattered each add over S pages: 7x slower,
-        # and the sample's gather is one flat take either way). np.zeros as SB3: the pages of rows
-        # never written are never touched, so a buffer far larger than a run's steps costs the
-        # memory of the steps only.
+        # one contiguous block (a seed-major layout scattered each add over S pages, several
+        # times slower: docs/performance.md), and the sample's gather is one flat take either
+        # way. np.zeros as SB3: the pages of rows never written are never touched, so a buffer
+        # far larger than a run's steps costs the memory of the steps only.
         shape = (self.buffer_size, seeds, n_envs)
         self.observations = np.zeros((*shape, obs_dim), dtype=np.float32)
         self.next_observations = np.zeros((*shape, obs_dim), dtype=np.float32)
