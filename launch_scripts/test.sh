@@ -206,7 +206,11 @@ step "Python unit tests (tests/python/unit: no root, no ROS environment, no netw
 status=0
 unit_tests=(.venv/bin/python -m pytest tests/python/unit -q -rs -p no:cacheprovider --durations=8)
 nobody=(setpriv --reuid=65534 --regid=65534 --clear-groups)
-if [[ $EUID == 0 ]] && command -v setpriv >/dev/null && "${nobody[@]}" .venv/bin/python -c "" >/dev/null 2>&1; then
+# The probe runs the interpreter as the tier does (through env) and checks that it is the venv's: a
+# checkout under a directory nobody cannot enter (mktemp -d's mode 700) once let a bare probe start
+# another Python while the tier's own command was refused.
+probe=(env .venv/bin/python -c "import sys; sys.exit(sys.prefix == sys.base_prefix)")
+if [[ $EUID == 0 ]] && command -v setpriv >/dev/null && "${nobody[@]}" "${probe[@]}" >/dev/null 2>&1; then
   unit_home="$(mktemp -d /tmp/sorting_line_unit.XXXXXX)"
   chown 65534:65534 "$unit_home"
   echo "test.sh: the unit tier runs as user nobody (uid 65534), outside the network namespace"
