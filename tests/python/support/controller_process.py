@@ -95,9 +95,14 @@ def watch(client, controller):
 def reset_until_answered(ros, c, rec, seed: int, context, abort) -> int:
     """Resets the line with ``seed`` until the controller answers the reset's tick (up to 3 times);
     the episode. Its first tick can be lost while the node is still matching the controller's
-    endpoints: then nothing moves, and a new seeded reset (the same episode again) is the remedy."""
+    endpoints: then nothing moves, and a new seeded reset (the same episode again) is the remedy.
+
+    The reset's tick is awaited on the deep recorder ``rec``, not on the client's keep-last-10
+    reader: the controller drives the lock-step line through its 50 ticks as fast as the round
+    trip allows, and on a busy machine that burst overwrites the client's copy of the first tick
+    before it is taken (seen in CI: states 47..51 arrived, tick 1 never did)."""
     for attempt in range(1, 4):
-        episode = c.reset(seed).episode
+        episode = c.reset(seed, wait_tick=False).episode
 
         def steps_seen(episode=episode):
             return max((s.step for _, s in rec["state"].items if s.episode == episode), default=0)
