@@ -27,6 +27,7 @@ import os
 import time
 from collections import defaultdict
 
+import numpy as np
 import torch
 
 from batched_training import Clock  # this folder is on sys.path when a bench runs as a script
@@ -58,10 +59,10 @@ def gradient_step_times(seeds: list[int], rounds: int) -> dict[int, tuple[float,
     for n in seeds:
         engine = BatchedDQN(range(n), **LINE, episode_steps=own["episode_steps"], **kw).learn(2000)
         for _ in range(10):  # compiles the one-step call first
-            engine.train(1, engine.batch_size)
+            np.asarray(engine.train(1, engine.batch_size))
         with Clock() as clock:
             for _ in range(rounds):
-                engine.train(1, engine.batch_size)
+                np.asarray(engine.train(1, engine.batch_size))  # (train() dispatches; this waits)
         out[n] = clock.per(rounds * n)
         engine.close()
     return out

@@ -99,7 +99,7 @@ def dqn_parts(seeds: int, calls: int) -> None:
     engine = trainer("dqn", LINE["setup"], LINE["variant"], list(range(42, 42 + seeds)), own, kwargs)
     engine.learn(3000)
     batch = engine.replay.sample(1, engine.batch_size, engine.np_rngs)
-    t_step = cpu_us(lambda: engine._gradient_steps(batch), calls)
+    t_step = cpu_us(lambda: np.asarray(engine._gradient_steps(batch)), calls)  # (dispatched: wait for it)
     t_sample = cpu_us(lambda: engine.replay.sample(1, engine.batch_size, engine.np_rngs), calls)
     t_rollout = cpu_us(engine._collect_rollout, calls)
     per_seed = (t_step + t_sample + t_rollout) / seeds / 1e3

@@ -20,6 +20,8 @@ Native lines in this process: no node, no DDS. About 25 s on a busy machine.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -35,7 +37,7 @@ from stable_baselines3.common.buffers import ReplayBufferSamples  # noqa: E402
 from stable_baselines3.common.logger import Logger  # noqa: E402
 
 from sorting_line_gym.training.batched.dqn import BatchedDQN, spaces_env  # noqa: E402
-from sorting_line_gym.training.batched.replay import ReplaySamples  # noqa: E402
+from sorting_line_gym.training.batched.replay import BatchedReplayBuffer, ReplaySamples  # noqa: E402
 from sorting_line_gym.training.train import make_training_env  # noqa: E402
 
 SEEDS = [3, 4, 11]
@@ -266,3 +268,19 @@ def test_bad_seeds_and_model_files_fail_naming_them(tmp_path):
     DQN("MlpPolicy", spaces_env("basic", 1), device="cpu", buffer_size=10).save(basic)
     with pytest.raises(ValueError, match="observation space"):
         BatchedDQN.from_models([basic], **LINE)
+
+
+def test_the_bound_drawn_ahead_is_the_bound_after_the_adds():
+    # The trainer draws a cycle's replay indices before its rollout adds train_freq rows
+    # (BatchedDQN._collect_rollout): the bound it draws against must be the one SB3 samples with
+    # after those adds, before, at and past the buffer's wrap.
+    buffer = BatchedReplayBuffer(2, 10, 2, 1, True)
+    zeros = np.zeros((2, 1))
+    for _ in range(25):
+        ahead = {adds: buffer.upper_bound(adds) for adds in range(1, 5)}
+        for adds in range(1, 5):
+            later = copy.deepcopy(buffer)
+            for _ in range(adds):
+                later.add(np.zeros((2, 1, 2)), np.zeros((2, 1, 2)), zeros, zeros, zeros, zeros)
+            assert ahead[adds] == later.upper_bound() == (10 if later.full else later.pos), (buffer.pos, adds)
+        buffer.add(np.zeros((2, 1, 2)), np.zeros((2, 1, 2)), zeros, zeros, zeros, zeros)

@@ -43,6 +43,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 import torch
 from stable_baselines3 import DQN
@@ -324,14 +325,22 @@ class BatchedDQN:
         # OffPolicyAlgorithm.learn: rollouts of train_freq vector steps, then gradient steps once
         # past learning_starts (gradient_steps -1: as many as transitions collected, per seed).
         while self.num_timesteps < total_timesteps:
-            self._collect_rollout()
-            if self.num_timesteps > 0 and self.num_timesteps > self.learning_starts:
-                steps = self.gradient_steps if self.gradient_steps >= 0 else self.train_freq * self.n_envs
-                if steps > 0:
-                    self.train(steps, self.batch_size)
+            steps = self._steps_after_rollout()
+            drawn = self._collect_rollout(steps)
+            if steps > 0:
+                self.train(steps, self.batch_size, drawn)
             if callback is not None and callback(self) is False:
                 break
         return self
+
+    def _steps_after_rollout(self) -> int:
+        """The gradient steps that follow the coming rollout (0: none): collect_rollouts always
+        takes its train_freq vector steps, so whether OffPolicyAlgorithm.learn then trains is
+        known before it starts."""
+        after = self.num_timesteps + self.train_freq * self.n_envs
+        if not after > self.learning_starts:  # (after > 0 always)
+            return 0
+        return self.gradient_steps if self.gradient_steps >= 0 else self.train_freq * self.n_envs
 
     def _setup_learn(self, total_timesteps: int, reset_num_timesteps: bool) -> int:
         """BaseAlgorithm._setup_learn: the counters from 0 (or the total counted on from them), the
@@ -363,8 +372,9 @@ class BatchedDQN:
             )
         return total_timesteps
 
-    def _collect_rollout(self) -> None:
-        """OffPolicyAlgorithm.collect_rollouts with TrainFreq(train_freq, STEP)."""
+    def _collect_rollout(self, gradient_steps: int = 0) -> np.ndarray | None:
+        """OffPolicyAlgorithm.collect_rollouts with TrainFreq(train_freq, STEP). Returns the replay
+        indices of the ``gradient_steps`` that follow it (``BatchedReplayBuffer.draw``), or None."""
         assert self.lines is not None and self.replay is not None and self._last_obs is not None
         # DQN.predict's coin is one np.random.rand() per seed and step past the warm-up; a rollout's
         # coins come first in each seed's generator (its replay indices after them), so one call
@@ -372,6 +382,14 @@ class BatchedDQN:
         starts = self.num_timesteps + self.n_envs * np.arange(self.train_freq)
         n_coins = int((starts >= self.learning_starts).sum())
         coins = np.stack([rng.rand(n_coins) for rng in self.np_rngs]) if n_coins else None
+        # Then the replay indices of the train() after the rollout, drawn now: the draws depend on
+        # nothing the rollout does (the bound is the buffer's after train_freq adds; nothing else
+        # draws from these generators in between), and drawing them here overlaps the previous
+        # gradient step, which JAX still runs while the first predict below waits for its weights.
+        drawn = None
+        if gradient_steps > 0:
+            bound = self.replay.upper_bound(self.train_freq)
+            drawn = self.replay.draw(gradient_steps, self.batch_size, self.np_rngs, bound)
         for k in range(self.train_freq):
             if self.num_timesteps < self.learning_starts:
                 # OffPolicyAlgorithm._sample_action, warm-up: action_space.sample() per line.
@@ -389,6 +407,7 @@ class BatchedDQN:
             self._current_progress_remaining = 1.0 - float(self.num_timesteps) / float(self._total_timesteps)
             self._on_step()
             self._episode_num += step.dones.sum(axis=1)
+        return drawn
 
     def _sample_actions(self, coins: np.ndarray) -> np.ndarray:
         """(S, L) actions past the warm-up: DQN.predict(deterministic=False), ``coins`` (S,) the
@@ -416,17 +435,20 @@ class BatchedDQN:
 
     # ---- the update: DQN.train ----
 
-    def train(self, gradient_steps: int, batch_size: int) -> np.ndarray:
+    def train(self, gradient_steps: int, batch_size: int, drawn: np.ndarray | None = None) -> jax.Array:
         """DQN.train: the learning rate from its schedule, then ``gradient_steps`` steps, each on a
-        fresh batch of each seed's own buffer. Returns the seeds' mean losses (S,)."""
+        fresh batch of each seed's own buffer (at the indices ``drawn`` for them, else drawn now).
+        Returns the seeds' mean losses (S,), computed once the steps are: ``np.asarray`` waits."""
         assert self.replay is not None
         # BaseAlgorithm._update_learning_rate: the optimizer's lr for all the steps of this call.
         self._learning_rate = self.lr_schedule(self._current_progress_remaining)
         # replay_buffer.sample once per gradient step, in that order: all drawn before the steps
         # (nothing else draws from the seeds' generators, nor writes the buffers, in between).
-        losses = self._gradient_steps(self.replay.sample(gradient_steps, batch_size, self.np_rngs))
+        if drawn is None:
+            drawn = self.replay.draw(gradient_steps, batch_size, self.np_rngs, self.replay.upper_bound())
+        losses = self._gradient_steps(self.replay.gather(drawn))
         self._n_updates += gradient_steps
-        return losses.mean(axis=1)
+        return losses.mean(axis=1)  # (a JAX array: learn() does not wait for it)
 
     def gradient_step(self, batch: ReplaySamples) -> np.ndarray:
         """One DQN gradient step of every seed on its batch (arrays or tensors with a leading seed
@@ -434,17 +456,19 @@ class BatchedDQN:
         optimizer's current learning rate: DQN.train's loop body. Returns each seed's loss (S,)."""
         arrays = [np.asarray(a) for a in batch]
         arrays = [a[..., 0] if a.ndim == 3 and k not in (0, 2) else a for k, a in enumerate(arrays)]
-        return self._gradient_steps(ReplaySamples(*(a[:, None] for a in arrays)))[:, 0]
+        return np.asarray(self._gradient_steps(ReplaySamples(*(a[:, None] for a in arrays)))[:, 0])
 
-    def _gradient_steps(self, batches: ReplaySamples) -> np.ndarray:
-        """The steps of ``batches`` (S, G, B, ...) at ``self._learning_rate``; the losses (S, G)."""
+    def _gradient_steps(self, batches: ReplaySamples) -> jax.Array:
+        """The steps of ``batches`` (S, G, B, ...) at ``self._learning_rate``, dispatched (JAX runs
+        them while the caller goes on: the next rollout's first predict waits for the weights);
+        the losses (S, G)."""
         n = batches.actions.shape[1]
         coefs = optim.coefficients(self.optimizer_settings, self._learning_rate, self._optimizer_steps, n, self.n_seeds)
         self.q_net, self.optimizer_state, losses = self.q_learning.train(
             self.q_net, self.optimizer_state, self.q_net_target, batches, coefs
         )
         self._optimizer_steps += n
-        return np.asarray(losses)
+        return losses
 
     def predict(self, observations: np.ndarray) -> np.ndarray:
         """Greedy actions (S, N) for observations (S, N, obs_dim): each seed's
