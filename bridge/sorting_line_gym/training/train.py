@@ -23,11 +23,9 @@ or with ``--backend ros`` on the S x L lines of one node started for the run.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +34,7 @@ from ..envs.native import BACKENDS
 from ..line.flags import call_with_flags
 from ..line.vocabulary import SETUPS, VARIANTS, check_setup
 from . import hyperparams
-from .run_record import TrainingRun, model_stem, versions
+from .run_record import TrainingRun, model_stem, write_record
 
 #: How sorting-line-train trains: SB3 itself, or the batched trainer (training/batched, train_batched).
 ENGINES = ("sb3", "batched")
@@ -113,14 +111,10 @@ def train(
         model.save(model_path)
     finally:
         env.close()
-    run = TrainingRun(
-        algo=algo, setup=setup, variant=variant, seed=seed, n_timesteps=own["n_timesteps"], n_envs=own["n_envs"],
-        episode_steps=own["episode_steps"], policy=own["policy"], hyperparams=kwargs, wall_s=wall,
-        steps_per_s=own["n_timesteps"] / wall, episodes=kpis.episodes, model_path=str(model_path),
-        torch_threads=torch_threads, versions=versions(),
+    return write_record(
+        algo, setup, variant, own, kwargs, seed, model_path, episodes=kpis.episodes, wall=wall,
+        steps_per_s=own["n_timesteps"] / wall, torch_threads=torch_threads,
     )  # fmt: skip
-    (out / f"{stem}.json").write_text(json.dumps(asdict(run), indent=2) + "\n")
-    return run
 
 
 def build_parser() -> argparse.ArgumentParser:

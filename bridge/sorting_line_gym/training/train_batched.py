@@ -16,18 +16,16 @@ The progress bar counts each seed's steps and shows the steps per second of all 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from ..line.flags import call_with_flags
 from ..line.vocabulary import check_setup
 from . import hyperparams
-from .run_record import TrainingRun, model_stem, versions
+from .run_record import TrainingRun, model_stem, write_record
 
 
 def trainer(
@@ -139,28 +137,12 @@ def write_records(
     paths: Sequence[Path], episodes: Sequence[int], wall: float, torch_threads: int,
 ) -> list[TrainingRun]:  # fmt: skip
     """Each seed's TrainingRun, written beside its model as ``<model>.json``; ``wall``: the batch's."""
-    runs = []
-    for s, (seed, path) in enumerate(zip(seeds, paths, strict=True)):
-        run = TrainingRun(
-            algo=algo,
-            setup=setup,
-            variant=variant,
-            seed=seed,
-            n_timesteps=own["n_timesteps"],
-            n_envs=own["n_envs"],
-            episode_steps=own["episode_steps"],
-            policy=own["policy"],
-            hyperparams=kwargs,
-            wall_s=wall,
-            steps_per_s=own["n_timesteps"] * len(seeds) / wall,
-            episodes=episodes[s],
-            model_path=str(path),
-            torch_threads=torch_threads,
-            versions={**versions(), "engine": f"batched ({len(seeds)} seeds at once)"},
-        )
-        path.with_suffix(".json").write_text(json.dumps(asdict(run), indent=2) + "\n")
-        runs.append(run)
-    return runs
+    rate, engine = own["n_timesteps"] * len(seeds) / wall, f"batched ({len(seeds)} seeds at once)"
+    shared = dict(wall=wall, steps_per_s=rate, torch_threads=torch_threads, engine=engine)
+    return [
+        write_record(algo, setup, variant, own, kwargs, seed, path, episodes=episodes[s], **shared)
+        for s, (seed, path) in enumerate(zip(seeds, paths, strict=True))
+    ]
 
 
 def refused_flags(args: argparse.Namespace) -> str | None:
