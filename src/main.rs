@@ -393,10 +393,10 @@ fn run_trace(args: TraceArgs) -> Result<(), String> {
 
 /// `{"variants", "inputs", "setups": {name: {input, obs_noise, action_penalty}}, "speeds",
 /// "start_speed_index", "modes"/"categories": {name: number}, "threshold", "episode_steps",
-/// "max_episode_steps"}`, every value taken from the library's own constants; with the node (the
+/// "max_episode_steps", "node_lines"}`, every value taken from the library's own constants; with the node (the
 /// `ros` feature) also its endpoints, `"topics"` and `"qos_profiles"` (`ros::topics::vocabulary`).
 fn run_vocabulary() -> Result<(), String> {
-    use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, SETUPS, VARIANTS};
+    use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, MAX_NODE_LINES, SETUPS, VARIANTS};
     use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
     use sorting_line::sim::speed::{SPEEDS, START_SPEED_INDEX};
     let setups: serde_json::Map<String, serde_json::Value> = SETUPS
@@ -431,6 +431,7 @@ fn run_vocabulary() -> Result<(), String> {
         "threshold": defaults.threshold,
         "episode_steps": defaults.max_steps,
         "max_episode_steps": MAX_EPISODE_STEPS,
+        "node_lines": MAX_NODE_LINES,
         "category_unknown_code": sorting_line::sim::evolution::CATEGORY_UNKNOWN_CODE,
         "category_unknown_observation": sorting_line::sim::evolution::CATEGORY_UNKNOWN_OBSERVATION,
     });

@@ -3,7 +3,7 @@
 //!
 //! - Constants: `VARIANTS`, `INPUTS`, `SETUPS`, `SPEEDS`, `SPEED_TOLERANCE`, `START_SPEED_INDEX`,
 //!   `MODES`, `MODE_COUNT`, `CATEGORIES`, `CATEGORY_UNKNOWN_CODE`, `CATEGORY_UNKNOWN_OBSERVATION`,
-//!   `THRESHOLD`, `EPISODE_STEPS`, `MAX_EPISODE_STEPS`, `ACTION_COUNTS` (per variant),
+//!   `THRESHOLD`, `EPISODE_STEPS`, `MAX_EPISODE_STEPS`, `NODE_LINES`, `ACTION_COUNTS` (per variant),
 //!   `SETTING_RANGES` (name: (low, high, whether high is allowed)), `INFO_KEYS` and `INFO_FIELDS`
 //!   (key, kind, `LineState` fields), `START_CONTENTS` (input, belt, machine: (A, B)),
 //!   `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
@@ -14,7 +14,7 @@ use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use sorting_line::sim::accuracy::START_ACCURACY;
-use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, SETUPS, VARIANTS};
+use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, MAX_NODE_LINES, SETUPS, VARIANTS};
 use sorting_line::sim::evolution::{CATEGORY_UNKNOWN_CODE, CATEGORY_UNKNOWN_OBSERVATION};
 use sorting_line::sim::line::{action_mask as mask_of, START_BELT, START_INPUT, START_MACHINE};
 use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
@@ -155,6 +155,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("THRESHOLD", defaults.threshold)?;
     m.add("EPISODE_STEPS", defaults.max_steps)?;
     m.add("MAX_EPISODE_STEPS", MAX_EPISODE_STEPS)?;
+    m.add("NODE_LINES", MAX_NODE_LINES)?;
     let counts = PyDict::new(py);
     for variant in VARIANTS {
         counts.set_item(variant.to_string(), Action::count(variant))?;

@@ -15,7 +15,9 @@ use serde_yaml::Value;
 
 use super::names::Names;
 use super::options::{NodeArgs, TickMode};
-use crate::sim::config::{ACTION_PENALTY_ALLOWED, MAX_STEPS_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED};
+use crate::sim::config::{
+    ACTION_PENALTY_ALLOWED, MAX_STEPS_ALLOWED, NODE_LINES_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED,
+};
 use crate::sim::evolution::Schedule;
 use crate::sim::{LineConfig, Setup};
 
@@ -57,8 +59,8 @@ impl Default for NodeParams {
     }
 }
 
-/// Most lines one process hosts (memory and message rate stay bounded).
-pub const MAX_LINES: u32 = 64;
+/// Most lines one process hosts: the library's (src/sim/config.rs), which the Python package reads too.
+pub use crate::sim::config::MAX_NODE_LINES as MAX_LINES;
 
 /// Highest realtime rate, ticks per second (the lower bound, 0, is open).
 pub const MAX_RATE: f64 = 100_000.0;
@@ -80,7 +82,7 @@ pub const PARAMETERS: &[(&str, &str)] = &[
     ("seed", "0 ..= 9223372036854775807 (a ROS integer parameter is 64-bit signed; seed + k for k < lines included)"),
     ("mode", "lockstep or realtime"),
     ("rate", "0.0 <.. 100000.0 (ticks per second)"),
-    ("lines", "1 ..= 64"),
+    ("lines", NODE_LINES_ALLOWED),
     ("tick_period", "0.000001 ..= 3600.0 (seconds)"),
     ("setup", "A, B, C or D, or empty for none (sets input, obs_noise and action_penalty; those given explicitly override it)"),
     ("use_sim_time", "true or false (ignored: this node is the clock)"),

@@ -108,6 +108,11 @@ fn check_range(
 /// Largest accepted episode length: keeps step counters and per-episode series bounded.
 pub const MAX_EPISODE_STEPS: u32 = 1_000_000;
 
+/// Most lines one node process hosts (`sorting_line node --lines`: memory and message rate stay
+/// bounded). Here, below the node, so that the Python package's batched trainer and line bank
+/// take it from the library (`vocabulary.NODE_LINES`) instead of writing 64 again.
+pub const MAX_NODE_LINES: u32 = 64;
+
 /// The bounds `validate` accepts (`threshold`'s upper bound is open), named once so that the
 /// node's parameter descriptors state exactly what is enforced.
 pub const OBS_NOISE_RANGE: (f64, f64) = (0.0, 1.0);
@@ -120,6 +125,7 @@ pub const OBS_NOISE_ALLOWED: &str = "0.0 ..= 1.0";
 pub const ACTION_PENALTY_ALLOWED: &str = "0.0 ..= 10.0";
 pub const THRESHOLD_ALLOWED: &str = "0.0 ..< 1.0";
 pub const MAX_STEPS_ALLOWED: &str = "1 ..= 1000000";
+pub const NODE_LINES_ALLOWED: &str = "1 ..= 64";
 
 impl LineConfig {
     /// The configuration of one of the paper's setups (threshold 0.7, 50-step episodes).
@@ -257,5 +263,6 @@ mod tests {
         assert_eq!(ACTION_PENALTY_ALLOWED, closed(ACTION_PENALTY_RANGE));
         assert_eq!(THRESHOLD_ALLOWED, format!("{:.1} ..< {:.1}", THRESHOLD_RANGE.0, THRESHOLD_RANGE.1));
         assert_eq!(MAX_STEPS_ALLOWED, format!("1 ..= {MAX_EPISODE_STEPS}"));
+        assert_eq!(NODE_LINES_ALLOWED, format!("1 ..= {MAX_NODE_LINES}"));
     }
 }

@@ -82,6 +82,8 @@ THRESHOLD: float = _native.THRESHOLD
 EPISODE_STEPS: int = _native.EPISODE_STEPS
 #: Longest episode the node accepts (src/sim/config.rs MAX_EPISODE_STEPS).
 MAX_EPISODE_STEPS: int = _native.MAX_EPISODE_STEPS
+#: The most lines one node serves (``sorting_line node --lines``; src/sim/config.rs MAX_NODE_LINES).
+NODE_LINES: int = _native.NODE_LINES
 
 #: The line's settings an environment takes beside its setup, as the node's options of the same
 #: name, with their ranges: name -> (low, high, whether high itself is allowed), as

@@ -25,6 +25,7 @@ from ..line.line_server import Lease
 from ..line.options import LineOptions
 from ..line.process import STOP_TIMEOUT, NodeProcess, private_namespace
 from ..line.topics import BELT_OCCUPANCY, INPUT, join
+from ..line.vocabulary import NODE_LINES
 from ..workarounds.fork_unsafe_dds import fork_error
 from ..workarounds.late_matching import (
     FRESH_NODE_ATTEMPTS,
@@ -68,8 +69,8 @@ class LineBank:
     ):
         if options.node == "shared" and (lines != 1 or batch):
             raise ValueError("node='shared' leases one line: it is for single-line environments")
-        if not 1 <= lines <= 64:
-            raise ValueError(f"lines = {lines} is out of range: allowed 1 ..= 64")
+        if not 1 <= lines <= NODE_LINES:
+            raise ValueError(f"lines = {lines} is out of range: allowed 1 ..= {NODE_LINES}")
         self.options = options
         self.variant = options.variant
         self.advanced = options.advanced

@@ -70,7 +70,7 @@ from typing import Any
 
 from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
 from ..envs.native import BACKENDS
-from ..line.vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import NODE_LINES, SETUPS, VARIANTS
 from ..reports import results_csv
 from ..reports.benchmark_summary import (
     AGENTS,
@@ -88,7 +88,6 @@ from ..reports.benchmark_summary import (
 )
 from ..reports.benchmark_tables import statistics_markdown, table_markdown
 from ..reports.curves import benchmark_curves
-from ..training.batched.lines import NODE_LINES
 from ..training.hyperparams import ALGOS, DEFAULT_MAPPING, MAPPINGS
 from . import benchmark_compare, cell_pool
 from .benchmark_cells import (  # noqa: F401 (re-exported: the benchmark's cells as callers know them)

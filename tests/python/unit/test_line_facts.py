@@ -42,6 +42,7 @@ REEXPORTED = (
     "THRESHOLD",
     "EPISODE_STEPS",
     "MAX_EPISODE_STEPS",
+    "NODE_LINES",
     "INFO_KEYS",
     "INFO_FIELDS",
 )

@@ -44,6 +44,7 @@ def test_speeds_modes_and_numbers_equal_the_rust_librarys(rust):
     )
     assert v.EPISODE_STEPS == rust["episode_steps"]
     assert v.MAX_EPISODE_STEPS == rust["max_episode_steps"]
+    assert v.NODE_LINES == rust["node_lines"]
     assert set(v.MODE_LABELS) == set(v.MODES.values())
 
 

@@ -35,10 +35,7 @@ from ...envs.native import BACKENDS
 from ...envs.vector import make_lines, node_namespaces
 from ...line.errors import BridgeError
 from ...line.options import LineOptions
-from ...line.vocabulary import check
-
-#: The most lines one node serves (``sorting_line node --lines``; ``ros.bank.LineBank`` checks it too).
-NODE_LINES = 64
+from ...line.vocabulary import NODE_LINES, check
 
 
 @dataclass
