@@ -24,6 +24,7 @@ import pytest
 
 from support import ros_harness as h
 from support.images import assert_real_image
+from support.waits import wait_until
 
 TIMEOUT = 300
 
@@ -409,7 +410,6 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
     """A stopped benchmark takes its workers and their nodes with it, at once, not after their
     trainings (rclpy's signal handler keeps a worker from dying of SIGTERM by itself)."""
     import signal
-    import time
 
     env = dict(os.environ, **h.ros_environment())
     flags = "--setups A --variants basic --agents ppo --train-seeds 42 43 --timesteps 200000 --jobs 2".split()
@@ -418,27 +418,47 @@ def test_benchmark_stops_on_sigterm_with_its_workers_and_nodes(tmp_path):
     bench = subprocess.Popen(argv, env=env, text=True, **pipes)
     workers: list[int] = []
     try:
-        deadline = time.monotonic() + 90
-        nodes: list[int] = []
-        while time.monotonic() < deadline and len(nodes) < 2:
-            workers = children(bench.pid)
+
+        def training_nodes() -> list[int]:
+            workers[:] = children(bench.pid)
             nodes = [
                 n
                 for w in workers
                 for n in children(w)
                 if "sorting_line" in Path(f"/proc/{n}/cmdline").read_bytes().decode(errors="replace")
             ]
-            time.sleep(0.5)
-        assert len(nodes) == 2, f"no two training nodes under the benchmark within 90 s: workers {children(bench.pid)}"
-        time.sleep(2)  # the trainings are under way
+            return nodes if len(nodes) >= 2 else []
+
+        nodes = wait_until(
+            training_nodes,
+            90,
+            "two training nodes under the benchmark",
+            poll=0.5,
+            context=lambda: f"workers {children(bench.pid)}",
+        )
+        assert len(nodes) == 2, f"not two training nodes under the benchmark: {nodes}, workers {children(bench.pid)}"
+        # The trainings are under way once each has its TensorBoard events file: SB3's learn() makes
+        # it after the env's first reset. (A new wait, for what a 2 s sleep hoped for: a node's env
+        # connects and resets in seconds, more under load; 60 s is the bound of a start that hangs.)
+        wait_until(
+            lambda: len(list((tmp_path / "bench" / "tensorboard").glob("*/events.out.tfevents.*"))) >= 2,
+            60,
+            "both trainings' TensorBoard events files (learn() has begun)",
+            poll=0.2,
+            context=lambda: f"under {tmp_path / 'bench'}: {sorted(str(f) for f in (tmp_path / 'bench').rglob('*'))}",
+            abort=lambda: None if bench.poll() is None else f"the benchmark exited with {bench.returncode}",
+        )
         bench.send_signal(signal.SIGTERM)
         _, err = bench.communicate(timeout=20)
         assert bench.returncode == 130, err[-2000:]
         assert "interrupted; 0 of 2 cells are saved" in err, err[-2000:]
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and any(alive(p) for p in workers + nodes):
-            time.sleep(0.2)
-        assert not any(alive(p) for p in workers + nodes), f"left running: {[p for p in workers + nodes if alive(p)]}"
+        wait_until(
+            lambda: not any(alive(p) for p in workers + nodes),
+            10,
+            "the benchmark's workers and nodes to exit",
+            poll=0.2,
+            context=lambda: f"left running: {[p for p in workers + nodes if alive(p)]}",
+        )
     finally:
         if bench.poll() is None:
             bench.kill()
