@@ -19,13 +19,13 @@ annotations` here: cyclonedds resolves the field annotations at run time.)
 
 import os
 import random
-import time
 from dataclasses import dataclass
 
 import pytest
 
 from support import ros_harness as h
 from support.ros_harness import NS_PER_S
+from support.waits import wait_until
 
 cyclonedds = pytest.importorskip("cyclonedds", reason="cyclonedds (launch_scripts/requirements-bridge.txt) missing")
 
@@ -140,18 +140,15 @@ class CycloneLine:
         }
 
     def wait(self, condition, timeout: float, what: str, context=lambda: ""):
-        deadline = time.monotonic() + timeout
-        while True:
+        def collected():
             self.collect()
-            result = condition()
-            if result:
-                return result
-            if time.monotonic() > deadline:
-                raise AssertionError(
-                    f"cyclone: timed out after {timeout} s waiting for {what}; matched {self.matched()}; "
-                    f"states seen (episode, step): {[(s.episode, s.step) for s in self.states.values()]}\n{context()}"
-                )
-            time.sleep(0.002)
+            return condition()
+
+        def seen() -> str:
+            states = [(s.episode, s.step) for s in self.states.values()]
+            return f"matched {self.matched()}; states seen (episode, step): {states}\n{context()}"
+
+        return wait_until(collected, timeout, f"cyclone: {what}", poll=0.002, context=seen)
 
     def collect(self) -> None:
         for s in self.state.take(N=100):

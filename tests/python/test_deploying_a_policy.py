@@ -13,10 +13,10 @@ import re
 import shlex
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from support import ros_harness as h
+from support.waits import wait_until
 
 DOC = h.ROOT / "docs" / "deploying-a-policy.md"
 #: The training budget of the doc (4096 steps) cut for CI: one PPO rollout of 256 steps.
@@ -56,10 +56,14 @@ def test_the_pages_commands_train_export_and_drive_a_line(tmp_path, namespace):
         node_proc = subprocess.Popen(node_argv, cwd=tmp_path, env=env, stdout=node_log, stderr=subprocess.STDOUT)
         ctl = subprocess.Popen(controller_argv, cwd=tmp_path, env=env, stdout=ctl_log, stderr=subprocess.STDOUT)
     try:
-        deadline = time.monotonic() + 60
-        while "first decision" not in (tmp_path / "controller.log").read_text() and time.monotonic() < deadline:
-            assert ctl.poll() is None, (tmp_path / "controller.log").read_text()
-            time.sleep(0.5)
+        wait_until(
+            lambda: "first decision" in (tmp_path / "controller.log").read_text(),
+            60,
+            "the controller's first decision",
+            poll=0.5,
+            context=lambda: (tmp_path / "controller.log").read_text(),
+            abort=lambda: None if ctl.poll() is None else f"the controller exited with {ctl.returncode}",
+        )
     finally:
         for p in (ctl, node_proc):
             p.send_signal(2)

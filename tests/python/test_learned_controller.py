@@ -19,7 +19,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ from support import ros_harness as h
 from support.controller_process import ControllerProcess, line_recorders, reset_until_answered, watch
 from support.ros_harness import ns_args
 from support.training_stack import needs_training
+from support.waits import wait_until
 
 POLICIES = h.ROOT / "tests" / "data" / "policies"
 PPO_ZIP = POLICIES / "ppo_B_advanced_seed42.zip"
@@ -273,11 +273,18 @@ def test_bad_policy_files_fail_with_a_message_and_exit_code_2(tmp_path, namespac
     # Without metadata, --allow-mismatch runs it where its shapes fit (no line here: it waits for one).
     args = [*quick, "--policy", tmp_path / "bare.onnx", "--allow-mismatch", "--variant", "advanced"]
     running = ControllerProcess(tmp_path, "bare", args)
-    deadline = time.monotonic() + 60
-    while "policy: a policy without sorting_line metadata" not in running.log() and time.monotonic() < deadline:
-        assert running.running(), running.describe()
-        time.sleep(0.2)
-    assert running.stop() == 0, running.describe()
+    try:
+        wait_until(
+            lambda: "policy: a policy without sorting_line metadata" in running.log(),
+            60,
+            "the controller to say it runs a policy without metadata",
+            poll=0.2,
+            context=running.describe,
+            abort=lambda: None if running.running() else "the controller exited",
+        )
+    finally:
+        stopped = running.stop()
+    assert stopped == 0, running.describe()
     assert "policy: a policy without sorting_line metadata" in running.log(), running.describe()
 
 

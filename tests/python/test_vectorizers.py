@@ -35,6 +35,7 @@ import sorting_line_gym  # noqa: F401 - registers the Gymnasium ids
 from sorting_line_gym import SortingLineSB3VecEnv, SortingLineVectorEnv
 from support.env_trace import assert_obs, assert_step, fixed_actions, trace
 from support.ros_harness import node_binary
+from support.waits import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 BASIC = "sorting_line_gym:SortingLine-v0"
@@ -161,6 +162,9 @@ def _stacks_then_kill(p: subprocess.Popen) -> tuple[str, str, str]:
             os.killpg(p.pid, sig)
         except ProcessLookupError:
             pass
+        # Not a synchronisation: a grace on the way out of a test that has already failed (a hang).
+        # The stacks go into the stderr pipe, read only after the SIGKILL, so their end is not
+        # observable from here; 3 s lets faulthandler write them, and nothing here decides a verdict.
         time.sleep(pause)
     stdout, stderr = p.communicate(timeout=30)
     return stdout, stderr, "\n".join(native)
@@ -374,11 +378,13 @@ def test_a_worker_with_a_live_env_dies_with_its_parent(tmp_path, start):
         worker = int(line)
         p.kill()
         p.wait()
-        deadline = time.monotonic() + 30
-        while os.path.exists(f"/proc/{worker}") and _state(worker) != "Z":
-            if time.monotonic() > deadline:
-                pytest.fail(f"the worker (pid {worker}) outlived its killed parent by 30 s")
-            time.sleep(0.1)
+        wait_until(
+            lambda: not os.path.exists(f"/proc/{worker}") or _state(worker) == "Z",
+            30,
+            f"the worker (pid {worker}) to end with its killed parent",
+            poll=0.1,
+            context=lambda: f"the worker is in state {_state(worker)}",
+        )
     finally:
         if p.poll() is None:
             p.kill()
@@ -476,6 +482,8 @@ if len(sys.argv) > 7:  # a barrier: every process holds its leases before any st
     import pathlib, time
     barrier, parties = pathlib.Path(sys.argv[7]), int(sys.argv[8])
     (barrier / f"leased_{seed}").touch()
+    # (This script runs in a fresh interpreter without tests/python on its path: a loop of its own,
+    # not support.waits; its deadline names what it waited for all the same.)
     deadline = time.monotonic() + 180
     while len(list(barrier.glob("leased_*"))) < parties:
         assert time.monotonic() < deadline, "the other processes did not lease their lines within 180 s"

@@ -29,6 +29,7 @@ from support import ros_harness as h
 from support import rtps_wire as w
 from support.line_client import LineClient
 from support.ros_harness import ns_args
+from support.waits import wait_until
 
 DATAGRAMS = int(os.environ.get("SORTING_LINE_WIRE_FUZZ_DATAGRAMS", "50000"))
 SECONDS = float(os.environ.get("SORTING_LINE_WIRE_FUZZ_SECONDS", "15"))
@@ -64,13 +65,20 @@ def bound_ports(node, domain: int, timeout: float = 20.0) -> dict[int, str]:
     """The node's UDP ports once it has bound its discovery and its user port. start_node returns
     as soon as the process runs; the node binds one port after the other as its participant starts
     (a fresh run under load once read the discovery port alone)."""
-    deadline = time.monotonic() + timeout
-    while not {"discovery", "user"} <= set((ports := w.node_udp_ports(node.pid, domain)).values()):
-        problem = node_died(node)
-        assert problem is None, problem
-        assert time.monotonic() < deadline, f"the node bound no discovery and user port in {timeout} s: {ports}"
-        time.sleep(0.05)
-    return ports
+    seen: dict[int, str] = {}
+
+    def both_bound() -> dict[int, str] | None:
+        seen.clear()
+        seen.update(w.node_udp_ports(node.pid, domain))
+        return dict(seen) if {"discovery", "user"} <= set(seen.values()) else None
+
+    return wait_until(
+        both_bound,
+        timeout,
+        "the node to bind its discovery and its user port",
+        context=lambda: f"ports bound: {seen}",
+        abort=lambda: node_died(node),
+    )
 
 
 def connect_and_capture(client, node, domain: int):
