@@ -33,7 +33,7 @@ def test_a_queue_longer_than_the_timeout_is_waited_out_while_it_moves():
         try:
             with joining_graph(timeout):
                 turns.append(k)
-                time.sleep(hold)
+                time.sleep(hold)  # not a wait: holding the lock this long is the queue under test
         except BaseException as e:  # noqa: BLE001 - reported below
             errors.append(e)
 

@@ -75,6 +75,7 @@ CONTROLLER = "sorting-line-controller --setup B --variant basic --agent rba"
 
 def test_a_late_controller_plays_the_schedules_first_episode(sorting_line_node):
     line = sorting_line_node(setup="B", variant="basic", evolution=str(UPGRADE), max_steps=20)
+    # The sleep is the lateness under test, not a wait: the controller joins after the line has started.
     late = f"sleep 4; exec {CONTROLLER} --ros-args -r __ns:={line.namespace}"
     controller = subprocess.Popen(["sh", "-c", late])
     try:

@@ -18,7 +18,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -26,6 +25,7 @@ from sorting_line_gym.line.process import with_parent_death_signal
 from sorting_line_gym.line.vocabulary import START_SPEED_INDEX  # held each episode until commanded
 from support import ros_harness as h
 from support.ros_harness import show_ns, stamp_ns
+from support.waits import wait_until
 
 SETUP, VARIANT, SEED, RATE = "B", "basic", 13, 40.0
 FEATURES = [20, 21, 22, 24, 25, 26, 31, 32, 33]  # reset (time, state), state get/set/pause, step single/multiple/action
@@ -306,7 +306,7 @@ for attempt in range(10):
     if future.done():
         print("answered", future.result().result.result, flush=True)
         break
-time.sleep(600)
+time.sleep(600)  # idles as a reader of the reply, not a wait: the test stops it (SIGSTOP) and kills it
 """
 
 
@@ -421,14 +421,20 @@ def test_ros2_cli_lists_and_calls_the_standard_services(ros2_daemon, start_node,
     node = start_node("--setup", SETUP, "--seed", str(SEED), "--ros-args", "-r", f"__ns:={ns}")
     fqn = h.join_ns(ns, "sorting_line")
     want = {f"{fqn}/{name}": f"[{t}]" for name, t in SERVICES.items()}
-    deadline = time.monotonic() + 20
-    while True:
-        out = ros2.run("service", "list", "-t", timeout=20, check=False).stdout
+    last = {"out": ""}
+
+    def services_listed() -> bool:
+        last["out"] = out = ros2.run("service", "list", "-t", timeout=20, check=False).stdout
         listed = dict(line.split(" ", 1) for line in out.splitlines() if " " in line)
-        if all(listed.get(k) == v for k, v in want.items()) or time.monotonic() > deadline:
-            break
-        time.sleep(0.5)
-    assert {k: listed.get(k) for k in want} == want, out
+        return all(listed.get(k) == v for k, v in want.items())
+
+    wait_until(
+        services_listed,
+        20,
+        "`ros2 service list -t` to show the standard services with their types",
+        poll=0.5,
+        context=lambda: f"want {want}\nlast answer:\n{last['out']}",
+    )
     actions = ros2.run("action", "list", "-t", timeout=20).stdout
     assert f"{fqn}/simulate_steps [simulation_interfaces/action/SimulateSteps]" in actions.splitlines(), actions
 
