@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import shutil
 import sys
-import time
 from pathlib import Path
 
 from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 from support import ros_harness as h
 from support.line_client import LineClient
+from support.waits import wait_until
 
 DATA = h.ROOT / "tests" / "data" / "bags"
 MAX_STEPS = 50
@@ -61,16 +61,18 @@ class BagProcess(h.ScriptProcess):
 
     def wait_for_output(self, text: str, timeout: float, session: h.RosSession | None = None) -> None:
         """Waits until the log shows `text` (spinning `session` meanwhile, if given)."""
-        deadline = time.monotonic() + timeout
-        while text not in self.log():
-            if not self.running():
-                raise AssertionError(f"exited before printing {text!r}\n{self.describe()}")
-            if time.monotonic() > deadline:
-                raise h.WaitTimeout(f"timed out after {timeout} s waiting for {text!r}\n{self.describe()}")
-            if session is not None:
-                session.spin_for(0.05)
-            else:
-                time.sleep(0.05)
+        what = f"{text!r} in the log of {self.label}"
+
+        def printed() -> bool:
+            return text in self.log()
+
+        def exited() -> str | None:
+            return None if self.running() else f"exited before printing {text!r}"
+
+        if session is not None:
+            session.spin_until(printed, timeout, what, self.describe, step=0.05, abort=exited)
+        else:
+            wait_until(printed, timeout, what, context=self.describe, abort=exited)
 
 
 def wait_for_command_writers(

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from sorting_line_gym.line.process import with_parent_death_signal
+from support.waits import wait_until
 
 FOXGLOVE = Path(__file__).resolve().parents[2] / "foxglove"
 
@@ -37,14 +38,14 @@ def node_js() -> str:
 
 def live_view_url(node_proc, timeout: float = 10.0) -> str:
     """The ws:// address the node logged for its live view (port 0: the one the system chose)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = LISTENING.search(node_proc.log())
-        if found:
-            return found.group(1)
-        assert node_proc.running(), f"the node exited before its live view listened\n{node_proc.describe()}"
-        time.sleep(0.05)
-    raise AssertionError(f"the node did not log its live view's address within {timeout} s\n{node_proc.describe()}")
+    found = wait_until(
+        lambda: LISTENING.search(node_proc.log()),
+        timeout,
+        "the node to log its live view's address",
+        context=node_proc.describe,
+        abort=lambda: None if node_proc.running() else "the node exited before its live view listened",
+    )
+    return found.group(1)
 
 
 class Viewer:
