@@ -18,6 +18,7 @@ import subprocess
 
 from support import ros_harness as h
 from support.ros_harness import NS_PER_S, stamp_ns
+from support.waits import wait_until
 
 # Both schedules run the advanced line (as built, episode 0) with basic hardware: no sort modes, no
 # ratio sensor, until their upgrades.
@@ -624,8 +625,6 @@ def test_a_recorded_evolving_run_replays_exactly(tmp_path, start_node, client_fa
 def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, start_node, client_factory, namespace, ros):
     """The real `ros2 topic list`: no sensors/ratio and no cmd/sort_mode until the upgrade (here at
     the first reset), both after it."""
-    import time
-
     schedule = tmp_path / "upgrade-at-1.yaml"
     schedule.write_text(
         "events:\n  - at: {episode: 0}\n    sort_modes: false\n    ratio_sensor: false\n"
@@ -639,16 +638,24 @@ def test_ros2_topic_list_shows_the_upgraded_hardware(ros2_daemon, tmp_path, star
     c.wait_connected()
     hardware = {f"{ns}/sensors/ratio", f"{ns}/cmd/sort_mode"}
 
-    def listed(want, timeout: float = 30.0) -> set[str]:
-        deadline = time.monotonic() + timeout
-        while True:
-            topics = set(ros2_daemon.run("topic", "list", timeout=30).stdout.split())
-            if want(topics) or time.monotonic() > deadline:
-                return topics
-            time.sleep(0.5)
+    def listed(want, what: str, timeout: float = 30.0) -> set[str]:
+        last: set[str] = set()
 
-    before = listed(lambda t: f"{ns}/state" in t and f"{ns}/events/evolution" in t)
+        def topics() -> set[str] | None:
+            last.clear()
+            last.update(ros2_daemon.run("topic", "list", timeout=30).stdout.split())
+            return set(last) if want(last) else None
+
+        return wait_until(
+            topics,
+            timeout,
+            f"`ros2 topic list` to show {what}",
+            poll=0.5,
+            context=lambda: f"listed under {ns}: {sorted(t for t in last if t.startswith(ns))}",
+        )
+
+    before = listed(lambda t: f"{ns}/state" in t and f"{ns}/events/evolution" in t, "the line's state and events")
     assert f"{ns}/state" in before and not hardware & before, sorted(t for t in before if t.startswith(ns))
     c.reset(1)
-    after = listed(lambda t: hardware <= t)
+    after = listed(lambda t: hardware <= t, "the upgraded hardware's topics")
     assert hardware <= after, sorted(t for t in after if t.startswith(ns))

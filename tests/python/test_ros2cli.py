@@ -22,6 +22,7 @@ from support import participant_ids
 from support import ros_harness as h
 from support.ros2_output import poll, yaml_docs
 from support.ros_harness import LINE_TYPES
+from support.waits import wait_until
 
 pytestmark = pytest.mark.usefixtures("ros2_daemon")
 
@@ -254,16 +255,22 @@ def test_topic_hz_in_realtime_mode(ros2, rt_line, tmp_path):
             stdin=subprocess.DEVNULL,
             start_new_session=True,
         )
-    deadline = time.monotonic() + 60
-    while log_path.read_text().count("average rate") < REPORTS and time.monotonic() < deadline:
-        time.sleep(0.1)
-    os.killpg(p.pid, signal.SIGINT)
     try:
-        p.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        os.killpg(p.pid, signal.SIGKILL)
-        p.wait()
-        raise AssertionError(f"`ros2 topic hz` did not stop on SIGINT\n{log_path.read_text()}") from None
+        wait_until(
+            lambda: log_path.read_text().count("average rate") >= REPORTS,
+            60,
+            f"{REPORTS} rates reported by `ros2 topic hz`",
+            poll=0.1,
+            context=log_path.read_text,
+        )
+    finally:
+        os.killpg(p.pid, signal.SIGINT)
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+            raise AssertionError(f"`ros2 topic hz` did not stop on SIGINT\n{log_path.read_text()}") from None
     out = log_path.read_text()
     rates = [float(x) for x in re.findall(r"average rate: ([0-9.]+)", out)]
     assert len(rates) >= REPORTS, f"{len(rates)} of {REPORTS} rates reported in 60 s:\n{out}"
@@ -655,12 +662,13 @@ def test_ros2_launch_policy_starts_a_learned_controller_beside_the_node(ros2, tm
         ros2, log_path, f"namespace:={ns}", "setup:=B", "variant:=advanced", "mode:=realtime", f"policy:={policy}"
     )
     try:
-        deadline = time.monotonic() + 90
-        while "first decision" not in log_path.read_text(errors="replace") and time.monotonic() < deadline:
-            assert launch.poll() is None, log_path.read_text(errors="replace")
-            time.sleep(0.5)
-        assert "first decision" in log_path.read_text(errors="replace"), (
-            f"no 'first decision' from the controller within 90 s:\n{log_path.read_text(errors='replace')}"
+        wait_until(
+            lambda: "first decision" in log_path.read_text(errors="replace"),
+            90,
+            "'first decision' from the controller",
+            poll=0.5,
+            context=lambda: log_path.read_text(errors="replace"),
+            abort=lambda: None if launch.poll() is None else f"ros2 launch exited with {launch.returncode}",
         )
         # One `ros2 node list` can answer before the CLI's participant has discovered the controller's
         # (CI saw only the node's): discovery is eventually consistent, so ask until it shows.

@@ -3,27 +3,29 @@ what is wanted, and its YAML output (`ros2 topic echo`, `param dump`, ...) as do
 
 from __future__ import annotations
 
-import time
+import subprocess
 
 import yaml
+
+from support.waits import wait_until
 
 
 def poll(ros2, args: list[str], until, what: str, timeout: float = 15.0, each: float = 15.0, context=None) -> str:
     """Repeats `ros2 ARGS` until `until(stdout)` holds; returns that stdout (fails with the last one,
     and with what `context()` says then)."""
-    deadline = time.monotonic() + timeout
-    last = None
-    while True:
+    last: list[subprocess.CompletedProcess] = []
+
+    def answered() -> tuple[str] | None:  # a tuple: an empty answer may be the one wanted
         r = ros2.run(*args, timeout=each, check=False)
-        if r.returncode == 0 and until(r.stdout):
-            return r.stdout
-        last = r
-        if time.monotonic() > deadline:
-            raise AssertionError(
-                f"`ros2 {' '.join(args)}` did not show {what} within {timeout} s; last answer "
-                f"(exit {last.returncode}):\n{last.stdout}\n{last.stderr}" + (f"\n{context()}" if context else "")
-            )
-        time.sleep(0.5)
+        last[:] = [r]
+        return (r.stdout,) if r.returncode == 0 and until(r.stdout) else None
+
+    def last_answer() -> str:
+        r = last[0]
+        return f"last answer (exit {r.returncode}):\n{r.stdout}\n{r.stderr}" + (f"\n{context()}" if context else "")
+
+    (stdout,) = wait_until(answered, timeout, f"`ros2 {' '.join(args)}` to show {what}", poll=0.5, context=last_answer)
+    return stdout
 
 
 def yaml_docs(text: str) -> list:
