@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -24,6 +23,7 @@ from support import colcon_ws, ros2_cli
 from support import ros_harness as h
 from support.ros2_output import poll, yaml_docs
 from support.ros_harness import LINE_TYPES
+from support.waits import wait_until
 
 # The workspace installs Python modules for the project venv's version (this interpreter's).
 PYTHON_DIR = f"python{sys.version_info.major}.{sys.version_info.minor}"
@@ -263,10 +263,13 @@ def test_ros2_run_the_bridge_entries(ros2, namespace, tmp_path):
         tmp_path / "controller.log",
     )
     try:
-        deadline = time.monotonic() + 60
-        while not (decisions.is_file() and len(decisions.read_text().splitlines()) >= 5):
-            assert time.monotonic() < deadline, f"no 5 decisions in 60 s:\n{controller.log.read_text(errors='replace')}"
-            time.sleep(0.5)
+        wait_until(
+            lambda: decisions.is_file() and len(decisions.read_text().splitlines()) >= 5,
+            60,
+            "5 decisions in the controller's decision log",
+            poll=0.5,
+            context=lambda: controller.log.read_text(errors="replace"),
+        )
     finally:
         controller.stop()
         node.stop()
