@@ -49,6 +49,7 @@ from sorting_line_gym.line import vocabulary
 from sorting_line_gym.line.process import with_parent_death_signal
 from sorting_line_gym.line.topics import line_types
 from sorting_line_gym.line.vocabulary import CATEGORIES, EPISODE_STEPS, MODES, SETUPS, SPEEDS
+from support.waits import WaitTimeout, wait_until
 
 ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_TEST_DOMAIN = "87"
@@ -455,10 +456,6 @@ def msg_to_dict(msg) -> Any:
 # rclpy
 
 
-class WaitTimeout(AssertionError):
-    pass
-
-
 class RosSession:
     """rclpy initialised once, with ONE SingleThreadedExecutor shared by every test node."""
 
@@ -495,24 +492,16 @@ class RosSession:
         """Spins until `condition()` is truthy (and returns it); raises WaitTimeout naming `what`
         after `timeout` s, or soon after `abort()` says why waiting is pointless (a peer that is
         gone: what it sent before it went is taken first, DRAIN_AFTER_ABORT s at most)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            result = condition()
-            if result:
-                return result
-            reason = abort()
-            if reason:
-                try:  # what the peer sent before it went may be here, not yet taken
-                    return self.spin_until(condition, DRAIN_AFTER_ABORT, what, step=step)
-                except WaitTimeout:
-                    raise WaitTimeout(f"gave up waiting for {what}: {reason}\n{context()}") from None
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                extra = context()
-                raise WaitTimeout(
-                    f"timed out after {timeout:.1f} s waiting for {what}" + (f"\n{extra}" if extra else "")
-                )
-            self.executor.spin_once(timeout_sec=min(step, remaining))
+        return wait_until(
+            condition,
+            timeout,
+            what,
+            poll=step,
+            context=context,
+            abort=abort,
+            pause=lambda seconds: self.executor.spin_once(timeout_sec=seconds),
+            drain=DRAIN_AFTER_ABORT,
+        )
 
     def spin_for(self, seconds: float) -> None:
         """Spins for `seconds`, handling whatever arrives."""

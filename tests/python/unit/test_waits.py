@@ -9,6 +9,7 @@ import time
 import pytest
 
 from support import ros_harness as h
+from support import waits
 from support.waits import wait_until
 
 
@@ -34,3 +35,25 @@ def test_an_abort_ends_the_wait_at_once_after_one_more_look():
     # What the writer wrote just before it exited counts: the condition is looked at once more.
     looks = itertools.count(1)
     assert wait_until(lambda: next(looks) == 2, 60.0, "the log line", abort=lambda: "the writer exited") is True
+
+
+def test_a_drain_keeps_looking_after_an_abort_pausing_as_it_is_told():
+    # RosSession.spin_until's use: after the peer is gone, what it sent may still be on its way, so
+    # the condition is looked at for `drain` s more, with rclpy's spinning as the pause.
+    pauses: list[float] = []
+    arrives = time.monotonic() + 0.1
+    found = wait_until(
+        lambda: time.monotonic() >= arrives and "late message",
+        60.0,
+        "the message",
+        poll=0.01,
+        abort=lambda: "the peer exited",
+        pause=lambda seconds: (pauses.append(seconds), time.sleep(seconds)),
+        drain=2.0,
+    )
+    assert found == "late message" and pauses and max(pauses) <= 0.01
+    start = time.monotonic()
+    with pytest.raises(h.WaitTimeout, match="^gave up waiting for the message: the peer exited$"):
+        wait_until(lambda: None, 60.0, "the message", poll=0.01, abort=lambda: "the peer exited", drain=0.2)
+    assert 0.2 <= time.monotonic() - start < 5.0, "the drain did not last its time, or did not end"
+    assert h.WaitTimeout is waits.WaitTimeout, "one error for both waits"
