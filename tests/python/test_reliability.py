@@ -299,7 +299,10 @@ def test_node_restarted_under_a_running_realtime_controller(ros, start_node, pro
         # Rows, not stamps: the new node's clock starts again at 0, so its ticks repeat the old one's
         # stamps (all of them, when the controller answers it only from the old node's first stamp on).
         decisions_before = len(controller.decision_rows())
-        time.sleep(0.5)
+        # Take what the killed node sent before it died: a status left unread in the reader would
+        # land after `since` and pass the wait below for the new node (a sleep spun nothing). The
+        # writer is gone, so nothing more can come than what is in flight over loopback.
+        ros.spin_for(0.5)
         since = len(diag.msgs)  # every status from here on is the new node's
         start_node(*args)
         values = wait_diagnostics_where(
