@@ -5,8 +5,8 @@
 
 use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
 
-use super::params::{MAX_LINES, MAX_RATE, MAX_SEED, PARAMETERS, TICK_PERIOD_RANGE};
-use crate::sim::config::{ACTION_PENALTY_RANGE, MAX_EPISODE_STEPS, OBS_NOISE_RANGE, THRESHOLD_RANGE};
+use super::params::{MAX_RATE, MAX_SEED, PARAMETERS, TICK_PERIOD_RANGE};
+use crate::sim::config::{ACTION_PENALTY_RANGE, MAX_EPISODE_STEPS, MAX_NODE_LINES, OBS_NOISE_RANGE, THRESHOLD_RANGE};
 
 /// What each parameter is for, in the order of [`PARAMETERS`].
 const DESCRIPTIONS: &[(&str, &str)] = &[
@@ -44,7 +44,7 @@ fn range(name: &str) -> NumericRange {
         "seed" => int(0, MAX_SEED as i64),
         // Lower bound open: stated in additional_constraints ("0.0 <.. 100000.0").
         "rate" => float((0.0, MAX_RATE)),
-        "lines" => int(1, i64::from(MAX_LINES)),
+        "lines" => int(1, i64::from(MAX_NODE_LINES)),
         "tick_period" => float(TICK_PERIOD_RANGE),
         _ => NumericRange::NotSpecified,
     }

@@ -16,7 +16,7 @@ use serde_yaml::Value;
 use super::names::Names;
 use super::options::{NodeArgs, TickMode};
 use crate::sim::config::{
-    ACTION_PENALTY_ALLOWED, MAX_STEPS_ALLOWED, NODE_LINES_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED,
+    ACTION_PENALTY_ALLOWED, MAX_NODE_LINES, MAX_STEPS_ALLOWED, NODE_LINES_ALLOWED, OBS_NOISE_ALLOWED, THRESHOLD_ALLOWED,
 };
 use crate::sim::evolution::Schedule;
 use crate::sim::{LineConfig, Setup};
@@ -58,9 +58,6 @@ impl Default for NodeParams {
         }
     }
 }
-
-/// Most lines one process hosts: the library's (src/sim/config.rs), which the Python package reads too.
-pub use crate::sim::config::MAX_NODE_LINES as MAX_LINES;
 
 /// Highest realtime rate, ticks per second (the lower bound, 0, is open).
 pub const MAX_RATE: f64 = 100_000.0;
@@ -216,7 +213,7 @@ impl NodeParams {
         if !(self.rate > 0.0 && self.rate <= MAX_RATE) {
             return out_of_range("rate", self.rate.to_string());
         }
-        if !(1..=MAX_LINES).contains(&self.lines) {
+        if !(1..=MAX_NODE_LINES).contains(&self.lines) {
             return out_of_range("lines", self.lines.to_string());
         }
         if !(self.tick_period >= TICK_PERIOD_RANGE.0 && self.tick_period <= TICK_PERIOD_RANGE.1) {

@@ -445,8 +445,10 @@ class BatchedDQN:
         # replay_buffer.sample once per gradient step, in that order: all drawn before the steps
         # (nothing else draws from the seeds' generators, nor writes the buffers, in between).
         if drawn is None:
-            drawn = self.replay.draw(gradient_steps, batch_size, self.np_rngs, self.replay.upper_bound())
-        losses = self._gradient_steps(self.replay.gather(drawn))
+            batches = self.replay.sample(gradient_steps, batch_size, self.np_rngs)
+        else:
+            batches = self.replay.gather(drawn)
+        losses = self._gradient_steps(batches)
         self._n_updates += gradient_steps
         return losses.mean(axis=1)  # (a JAX array: learn() does not wait for it)
 

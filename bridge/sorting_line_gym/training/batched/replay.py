@@ -50,7 +50,7 @@ class BatchedReplayBuffer:
     def __init__(self, seeds: int, buffer_size: int, obs_dim: int, n_envs: int, handle_timeout_termination: bool):
         # ReplayBuffer.__init__: the rows are buffer_size // n_envs, at least one.
         self.buffer_size = max(buffer_size // n_envs, 1)
-        self.seeds, self.n_envs, self.obs_dim = seeds, n_envs, obs_dim
+        self.seeds, self.n_envs = seeds, n_envs
         self.handle_timeout_termination = handle_timeout_termination
         # One float32 array, row-major over the positions, (buffer_size, S, n_envs, columns): a
         # step of all seeds writes one contiguous block (a seed-major layout scattered each add
@@ -128,7 +128,7 @@ class BatchedReplayBuffer:
         cut = self._slices
 
         def column(name: str) -> np.ndarray:
-            return np.ascontiguousarray(taken[..., cut[name]][..., 0])
+            return taken[..., cut[name]][..., 0]  # a view; the arithmetic and astype below copy it
 
         # _get_samples: dones only where the episode was not cut by a time limit.
         dones = column("dones") * (1 - column("timeouts"))
@@ -137,7 +137,7 @@ class BatchedReplayBuffer:
             column("actions").astype(np.int64),
             np.ascontiguousarray(taken[..., cut["next_observations"]]),
             dones,
-            column("rewards"),
+            np.ascontiguousarray(column("rewards")),
         )
 
     def sample(self, n_batches: int, batch_size: int, rngs: list[np.random.RandomState]) -> ReplaySamples:
