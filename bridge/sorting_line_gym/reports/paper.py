@@ -4,7 +4,7 @@
   setup, variant and algorithm, the mean speed and mean purity (both in %) and the mean reward,
   as printed. The paper has no random-agent rows and no ``rba-hold`` (ours).
 - :data:`REFERENCE`: what the reference implementation gives on the paper's evaluation protocol
-  (seeds 42..51, 50 steps), measured on its code (docs/reference-comparison.md):
+  (seeds 42..51, 50 steps), measured on its code (docs/results/reference-comparison.md):
   its RBA and its (unseeded) random agent on all eight setups, and PPO on B advanced. Each value
   is (mean, population std) of the episode reward.
 """
