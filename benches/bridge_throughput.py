@@ -28,7 +28,7 @@ launch_scripts/env.sh sets and a ROS_DOMAIN_ID of its own (--domain, default 89)
 
     .venv/bin/python benches/bridge_throughput.py                 # 5 rounds, N = 4000 single, 2000 vector
     .venv/bin/python benches/bridge_throughput.py --rounds 3 --single 2000 --vector 500 \
-        --plot docs/benchmark/bridge_throughput.png
+        --plot docs/results/bridge-throughput/bridge_throughput.png
 Progress goes to stderr, the table to stdout; load average and CPU steal are printed with it.
 """
 
