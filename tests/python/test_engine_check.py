@@ -9,7 +9,7 @@ with 4 seeds the interval is about sqrt(10 / 4) = 1.6 times as wide, and a few t
 runs spread further (PPO after its first update: 9.5 .. 13.3), hence 3.0: measured (2026-12-02), the
 widest bound was 2.16 (PPO -0.04 [-2.16, +1.95]; A2C and DQN +-0.83), so a correct engine has room, while
 an engine that does not learn (learning rate 0) is outside it: PPO +3.49 [-1.82, +7.21], A2C -1.21
-[-6.51, +2.11] (docs/engine-check.md says how it was shown). Bad input fails before any training. Cost:
+[-6.51, +2.11] (docs/results/engine-check.md says how it was shown). Bad input fails before any training. Cost:
 3.7 CPU-minutes (12 min of wall time on 2 cores loaded by other work; about 2 minutes on 2 quiet ones).
 """
 
