@@ -18,7 +18,7 @@ a "trainer" host runs a ``SortingLineVectorEnv`` over all of them (``namespace=[
 
     .venv/bin/python benches/multihost.py                    # both (about 3 min on 2 shared cores)
     .venv/bin/python benches/multihost.py --soak-ticks 0     # scaling only
-    .venv/bin/python benches/multihost.py --json r.json --plot docs/scaling.png
+    .venv/bin/python benches/multihost.py --json r.json --plot docs/results/scaling/scaling.png
 
 Needs root (network namespaces), except with --attach. Exit code 1 when the soak lost, misaligned or
 mismatched anything.

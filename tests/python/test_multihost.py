@@ -411,7 +411,7 @@ def assert_bench_output(out: str, node_cpu: str) -> None:
 
 @pytest.mark.skipif(netns_hosts.problem() is not None, reason=f"hosts: {netns_hosts.problem()}")
 def test_the_multihost_benchmark_on_hosts_it_makes(tmp_path):
-    """benches/multihost.py, which gives docs/scaling.md its figures, at a small size over the
+    """benches/multihost.py, which gives docs/results/scaling.md its figures, at a small size over the
     network-namespace hosts it makes itself."""
     r = subprocess.run(
         [sys.executable, str(BENCH), *SMALL_BENCH, "--logs", str(tmp_path)], capture_output=True, text=True, timeout=300
