@@ -14,7 +14,7 @@
 # Usage: launch_scripts/run.sh [--quick-steps N] [--full|--smoke [--jobs J] [--train-seeds S...] [--timesteps N]
 #                               [--n-envs N] [--lines-mapping M] [--heldout-episodes N]] [--backend ros|native] [--out DIR]
 #   --quick-steps N   PPO budget of step 2 (default 20000)
-#   --full            instead: the whole study of docs/benchmark.md (Table 1: 8 lines x random, rba,
+#   --full            instead: the whole study of docs/results/benchmark.md (Table 1: 8 lines x random, rba,
 #                     rba-hold, and DQN, PPO, A2C at 100k steps for each of 5 training seeds on 8 lines
 #                     of one node; every agent on seeds 42..51 and 100 held-out seeds, the oracle, IQM
 #                     with CIs; DQN, PPO and A2C on B advanced and D basic also on one line, for the
@@ -146,7 +146,7 @@ if [[ $FULL == 1 || $SMOKE == 1 ]]; then
     selection=(--setups B --variants advanced --agents random rba-hold ppo)
   fi
   start=$SECONDS
-  step "$name" "the study of docs/benchmark.md ($name) -> $dir" \
+  step "$name" "the study of docs/results/benchmark.md ($name) -> $dir" \
     sorting-line-benchmark --out "$dir" --jobs "$JOBS" --train-seeds "${SEEDS[@]}" --timesteps "$TIMESTEPS" \
     --n-envs "$N_ENVS" --lines-mapping "$MAPPING" --check-n-envs --heldout-episodes "$HELDOUT" --backend "$BACKEND" \
     "${selection[@]}"
