@@ -394,7 +394,7 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="run each cell (with --engine batched: each batch) as a task of the Ray cluster at ADDRESS "
         "(HOST:PORT, ray://HOST[:PORT] or auto, as ray.init takes it), one CPU each, as many at once as it has; "
-        "the cells, models and resume stay here in --out; not with --jobs (docs/results/benchmark.md)",
+        "the cells, models and resume stay here in --out; not with --jobs (docs/benchmark.md)",
     )
 
 

@@ -47,8 +47,8 @@ def add_option(p: argparse.ArgumentParser) -> None:
         metavar="MY_RESULTS",
         type=_results_file,
         default=None,
-        help="a CSV of your agent's held-out rewards in results.csv's columns (docs/results/benchmark.md): put "
-        "beside the table with the same statistics, in <out>/compare/; works with --report-only",
+        help="a CSV of your agent's held-out rewards in results.csv's columns (docs/benchmark.md): put beside the "
+        "table with the same statistics, in <out>/compare/; works with --report-only",
     )
 
 

@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="run each cell (with --engine batched: each batch) as a task of the Ray cluster at ADDRESS "
         "(HOST:PORT, ray://HOST[:PORT] or auto), one CPU each; the cells, models and resume stay here in --out; "
-        "not with --jobs (docs/results/benchmark.md)",
+        "not with --jobs (docs/benchmark.md)",
     )
     p.add_argument("--max-cells", type=int, help="stop after running this many cells (the rest on the next run)")
     p.add_argument("--report-only", action="store_true", help="train nothing: the report of the cells saved in --out")

@@ -226,7 +226,7 @@ def test_the_benchmark_writes_results_csv_and_compares_a_users_file(tmp_path, ca
 
 
 def test_the_documented_snippet_writes_a_file_compare_takes(tmp_path):
-    """docs/results/benchmark.md's `my_results.py` (on 3 held-out seeds instead of 100) writes rows that
+    """docs/benchmark.md's `my_results.py` (on 3 held-out seeds instead of 100) writes rows that
     --compare accepts, its rewards those of `sorting_line eval` for the same constant action."""
     import re
     import subprocess
@@ -234,7 +234,7 @@ def test_the_documented_snippet_writes_a_file_compare_takes(tmp_path):
 
     from sorting_line_gym.line.process import find_node_binary
 
-    page = (Path(__file__).resolve().parents[3] / "docs" / "results" / "benchmark.md").read_text()
+    page = (Path(__file__).resolve().parents[3] / "docs" / "benchmark.md").read_text()
     (code,) = re.findall(r"<!-- test: my-results -->\n```python\n(.*?)\n```", page, re.S)
     assert "range(10000, 10100)" in code
     script = tmp_path / "my_results.py"
