@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from ..line.errors import BridgeError
-from ..line.vocabulary import ENV_IDS, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
+from ..line.vocabulary import ENV_IDS, MODE_COUNT, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
 
 
 def parse_agent(text: str, variant: str):
@@ -34,8 +34,8 @@ def parse_agent(text: str, variant: str):
             raise ValueError
     except ValueError:
         raise SystemExit(
-            f"sorting-line-bridge: agent {text!r} is not valid: allowed random, constant:K (K = 0..9) "
-            "or, on the advanced line, constant:K:M (M = 0..2)"
+            f"sorting-line-bridge: agent {text!r} is not valid: allowed random, constant:K (K = 0..{SPEED_COUNT - 1}) "
+            f"or, on the advanced line, constant:K:M (M = 0..{MODE_COUNT - 1})"
         ) from None
     return encode_actions(variant, speed, mode)
 

@@ -19,7 +19,7 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 
 from ..line.policy_card import PolicyCard
-from ..line.vocabulary import SETUPS
+from ..line.vocabulary import SETUPS, VARIANTS
 
 #: The node parameters that describe a line.
 NAMES = ("variant", "setup", "input", "obs_noise", "action_penalty", "evolution_file")
@@ -89,7 +89,7 @@ def read_line(node: Node, executor, namespace: str, timeout: float) -> LineDescr
             if response is None or len(response.values) != len(NAMES):
                 continue
             values = {n: _value(v) for n, v in zip(NAMES, response.values, strict=True)}
-            if values["variant"] in ("basic", "advanced"):
+            if values["variant"] in VARIANTS:
                 evolution = Path(values["evolution_file"]).stem if values["evolution_file"] else ""
                 source = service.rsplit("/", 1)[0]
                 # An evolving line's policy has the advanced spaces throughout (SortingLineEvolving-v0),

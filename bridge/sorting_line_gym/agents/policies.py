@@ -130,7 +130,9 @@ class RuleBasedAgent(Agent):
         if not self.hold:
             current_speed_index = 0  # rba decides without it
         elif not (isinstance(current_speed_index, (int, np.integer)) and 0 <= current_speed_index < SPEED_COUNT):
-            raise ValueError(f"current_speed_index = {current_speed_index!r} is not valid: allowed 0..9")
+            raise ValueError(
+                f"current_speed_index = {current_speed_index!r} is not valid: allowed 0..{SPEED_COUNT - 1}"
+            )
         # The table's rows clamp a reading to 0..1 (NaN: row 0); the agent takes only what a sensor
         # reads, so the same clamp first: any float decides as before.
         q = float(quantity)
@@ -146,9 +148,9 @@ class ConstantAgent(Agent):
     def __init__(self, variant: str, speed_index: int, mode: int | str = 0):
         self.variant = check_variant(variant)
         if not 0 <= speed_index < SPEED_COUNT:
-            raise ValueError(f"speed_index = {speed_index!r} is not valid: allowed 0..9")
+            raise ValueError(f"speed_index = {speed_index!r} is not valid: allowed 0..{SPEED_COUNT - 1}")
         if mode != "cat" and mode not in MODES.values():
-            raise ValueError(f"mode = {mode!r} is not valid: allowed 0, 1, 2 or 'cat'")
+            raise ValueError(f"mode = {mode!r} is not valid: allowed {', '.join(map(str, MODES.values()))} or 'cat'")
         if variant == "basic" and mode != 0:
             raise ValueError("a sort mode needs the advanced line")
         self.speed_index, self.mode = int(speed_index), mode

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..agents.policies import Agent, ConstantAgent, RandomAgent, RuleBasedAgent
-from ..line.vocabulary import check_variant, decode_action
+from ..line.vocabulary import MODE_COUNT, SPEED_COUNT, check_variant, decode_action
 from .hyperparams import ALGOS, algorithm_class
 
 
@@ -71,5 +71,6 @@ def make_agent(spec: str, setup: str, variant: str, seed: int | None = None) -> 
         detail = f" ({e})" if str(e) else ""
         raise ValueError(
             f"agent {spec!r} is not valid{detail}: allowed rba, rba-hold, random, constant:K, constant:K:M, "
-            "constant:K:cat (K = 0..9, M = 0..2; modes on the advanced line only), ppo:PATH, dqn:PATH, a2c:PATH"
+            f"constant:K:cat (K = 0..{SPEED_COUNT - 1}, M = 0..{MODE_COUNT - 1}; modes on the advanced line only), "
+            "ppo:PATH, dqn:PATH, a2c:PATH"
         ) from None

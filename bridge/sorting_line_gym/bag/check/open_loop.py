@@ -21,7 +21,7 @@ from collections import defaultdict
 
 from ...line.errors import BridgeTimeout
 from ...line.topics import BATCH_CMD, SORT_MODE_CMD, SPEED_CMD
-from ...line.vocabulary import speed_index_of
+from ...line.vocabulary import MODES, speed_index_of
 from ..format.topics import LINE_TYPES, join
 from ..storage.reader import Bag
 from ..storage.schema import decode, stamp_ns
@@ -264,6 +264,6 @@ def _compare(topic: str, recorded, answered) -> tuple[str, str | None]:
         if index is None:
             return "differing", node_reason("invalid_speed")
         return ("matching" if index == speed_index_of(recorded) else "differing"), None
-    if not 0 <= int(answered) <= 2:
+    if int(answered) not in MODES.values():
         return "differing", node_reason("unknown_mode")
     return ("matching" if int(answered) == int(recorded) else "differing"), None
