@@ -41,7 +41,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-EPISODE_STEPS = 50
+from ..line.vocabulary import EPISODE_STEPS
+
 SCENARIOS = ("upgrade", "drift")
 ALGOS = ("ppo", "a2c")
 #: The cells' kinds: a scenario's rule-based baselines, then per algorithm and seed the agent

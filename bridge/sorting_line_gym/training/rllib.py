@@ -35,6 +35,8 @@ from typing import Any
 
 import gymnasium
 
+from ..line.vocabulary import EPISODE_STEPS, SETUPS
+
 #: The name the envs are registered under with Ray Tune.
 ENV_NAME = "sorting_line"
 DEFAULT_ID = "sorting_line_gym:SortingLine-v0"
@@ -125,12 +127,12 @@ def _parser():
 
     p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
     p.add_argument("--id", default=DEFAULT_ID, help="Gymnasium id (default %(default)s)")
-    p.add_argument("--setup", default="B", choices=list("ABCD"), help="the paper's setup A..D (default %(default)s)")
+    p.add_argument("--setup", default="B", choices=list(SETUPS), help="the paper's setup A..D (default %(default)s)")
     p.add_argument("--env-runners", type=int, default=2, help="EnvRunner processes (default %(default)s)")
     p.add_argument("--envs-per-runner", type=int, default=4, help="envs in each EnvRunner (default %(default)s)")
     p.add_argument("--timesteps", type=int, default=4000, help="env steps to train for (whole iterations)")
     p.add_argument("--batch", type=int, default=1000, help="train batch size per iteration")
-    p.add_argument("--episode-steps", type=int, default=50, help="steps per episode (default %(default)s)")
+    p.add_argument("--episode-steps", type=int, default=EPISODE_STEPS, help="steps per episode (default %(default)s)")
     p.add_argument(
         "--nodes",
         nargs="*",
