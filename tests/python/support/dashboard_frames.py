@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from sorting_line_gym.envs.render import DashboardFrame
-from sorting_line_gym.line.vocabulary import SPEEDS, START_ACCURACY
+from sorting_line_gym.line.vocabulary import EPISODE_STEPS, SPEEDS, START_ACCURACY, START_SPEED
 
 
 def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> DashboardFrame:
@@ -33,7 +33,7 @@ def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> Dashboar
         belt_accuracy=accuracy[-1] if steps else START_ACCURACY,
         sorter_accuracy=START_ACCURACY,
         occupancy=0.82,
-        speed=speed[-1] if steps else 0.6,
+        speed=speed[-1] if steps else START_SPEED,
         mode=(modes[-1] if steps else 0) if advanced else None,
         purity=(containers[0] + containers[2]) / sorted_units if sorted_units else 0.0,
         history_reward=reward,
@@ -41,7 +41,7 @@ def make_frame(variant: str, steps: int, seed: int = 0, **overrides) -> Dashboar
         history_accuracy=accuracy,
         history_occupancy=occupancy,
         history_mode=modes,
-        max_steps=50,
+        max_steps=EPISODE_STEPS,
     )
     fields.update(overrides)
     return DashboardFrame(**fields)
