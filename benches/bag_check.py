@@ -55,6 +55,7 @@ def record_bag(out: Path, ticks: int) -> None:
     from sorting_line_gym.bag.storage.schema import decode
     from sorting_line_gym.bag.transport.rosnode import ToolNode
     from sorting_line_gym.line.process import NodeProcess
+    from sorting_line_gym.line.topics import INPUT, RESET, SPEED_CMD, STATE
     from sorting_line_gym.ros.links import LineLink
 
     ns = f"/bench_bag_{os.getpid()}"
@@ -66,21 +67,21 @@ def record_bag(out: Path, ticks: int) -> None:
         link = LineLink(tool.node, ns, advanced=False)
         steps: list[int] = [-1]
         tool.raw_subscription(
-            join(ns, "state"),
-            LINE_TYPES["state"],
-            lambda data, _t: steps.append(decode(data, LINE_TYPES["state"])["step"]),
+            join(ns, STATE),
+            LINE_TYPES[STATE],
+            lambda data, _t: steps.append(decode(data, LINE_TYPES[STATE])["step"]),
         )
         tool.until(
-            lambda: link.endpoints_matched(tool.node) and tool.node.count_subscribers(join(ns, "input")) > 0,
+            lambda: link.endpoints_matched(tool.node) and tool.node.count_subscribers(join(ns, INPUT)) > 0,
             60,
             f"the node and the controller in {ns}",
         )
-        speed = join(ns, "cmd/speed")
+        speed = join(ns, SPEED_CMD)
         recorder = CheckRecorder(ns, out, 30, {speed: tool.node.count_publishers(speed)})
         tool.spin_for(1.0)
         for _attempt in range(3):
             link.send_reset(7)
-            tool.until(link.reset_done, 10, f"{ns}/reset")
+            tool.until(link.reset_done, 10, f"{ns}/{RESET}")
             link.finish_reset()
             try:
                 tool.until(lambda: steps[-1] >= 1, 3, "the controller's first answer")
@@ -111,16 +112,17 @@ def lean_controller(bag: str) -> int:
 
     from sorting_line_gym.bag import open_bag
     from sorting_line_gym.bag.storage.schema import stamp_ns
+    from sorting_line_gym.line.topics import INPUT, SPEED_CMD
     from sorting_line_gym.ros.links import QOS
     from sorting_line_gym.ros.waits import Waiter
 
-    speeds = {stamp_ns(m.plain): m.plain["speed"] for m in open_bag(bag).by_relative_topic()["cmd/speed"]}
+    speeds = {stamp_ns(m.plain): m.plain["speed"] for m in open_bag(bag).by_relative_topic()[SPEED_CMD]}
     rclpy.init(args=sys.argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     stop: list[int] = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     node = rclpy.create_node("lean_controller", start_parameter_services=False, enable_rosout=False)
-    pub = node.create_publisher(SpeedCommand, "cmd/speed", QOS)
-    sub = node.create_subscription(MaterialInput, "input", lambda _m: None, QOS)
+    pub = node.create_publisher(SpeedCommand, SPEED_CMD, QOS)
+    sub = node.create_subscription(MaterialInput, INPUT, lambda _m: None, QOS)
     waiter = Waiter(SingleThreadedExecutor(), None)
 
     def answer() -> bool:

@@ -50,6 +50,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 sys.path.insert(0, str(ROOT / "benches"))
+from sorting_line_gym.line.topics import RESET, SPEED_CMD, STATE  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 
 TARGET_ONE_LINE = 3000.0
@@ -105,9 +106,9 @@ class RawLine:
             durability=DurabilityPolicy.VOLATILE,
             history=HistoryPolicy.KEEP_LAST,
         )
-        self.pub = self.node.create_publisher(SpeedCommand, f"{self.ns}/cmd/speed", qos)
-        self.sub = self.node.create_subscription(LineState, f"{self.ns}/state", self._on_state, qos)
-        self.reset_client = self.node.create_client(ResetLine, f"{self.ns}/reset")
+        self.pub = self.node.create_publisher(SpeedCommand, f"{self.ns}/{SPEED_CMD}", qos)
+        self.sub = self.node.create_subscription(LineState, f"{self.ns}/{STATE}", self._on_state, qos)
+        self.reset_client = self.node.create_client(ResetLine, f"{self.ns}/{RESET}")
         self.cmd = SpeedCommand(speed=0.5)
         self.stamp = None  # (sec, nanosec) of the tick we answer
         self.arrived = False
@@ -142,7 +143,7 @@ class RawLine:
         for attempt in range(3):
             future = self.reset_client.call_async(self._ResetLine.Request(has_seed=True, seed=100))
             try:
-                self._spin_until(future.done, 3.0, f"{self.ns}/reset")
+                self._spin_until(future.done, 3.0, f"{self.ns}/{RESET}")
                 break
             except TimeoutError:
                 self.reset_client.remove_pending_request(future)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
+from sorting_line_gym.line.topics import RESET, SPEED_CMD, STATE  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 
 CLIENT = r"""
@@ -40,11 +41,11 @@ rclpy.init()
 node = rclpy.create_node(f"probe_client_{os.getpid()}")
 spaces = sys.argv[2].split(",")
 # What a bridge needs of its node: the state writer, a reader of its commands, the reset service.
-pubs = {ns: node.create_publisher(SpeedCommand, f"{ns}/cmd/speed", 10) for ns in spaces}
-resets = {ns: node.create_client(ResetLine, f"{ns}/reset") for ns in spaces}
+pubs = {ns: node.create_publisher(SpeedCommand, f"{ns}/@SPEED_CMD@", 10) for ns in spaces}
+resets = {ns: node.create_client(ResetLine, f"{ns}/@RESET@") for ns in spaces}
 def seen(ns):
     return [
-        node.count_publishers(f"{ns}/state") > 0,
+        node.count_publishers(f"{ns}/@STATE@") > 0,
         pubs[ns].get_subscription_count() > 0,
         resets[ns].service_is_ready(),
     ]
@@ -59,6 +60,9 @@ print(json.dumps({ns: {"seen": seen(ns), "after": first.get(ns)} for ns in space
 node.destroy_node()
 rclpy.shutdown()
 """
+# The line's endpoints by the package's names (sorting_line_gym.line.topics).
+for _marker, _name in (("@SPEED_CMD@", SPEED_CMD), ("@RESET@", RESET), ("@STATE@", STATE)):
+    CLIENT = CLIENT.replace(_marker, _name)
 
 
 def participant_ids(domain: int) -> dict[int, list[int]]:

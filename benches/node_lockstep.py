@@ -44,6 +44,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
 
+from sorting_line_gym.line.topics import RESET, SPEED_CMD, STATE  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 
 REEXEC_MARK = "SORTING_LINE_BENCH_IN_NETNS"
@@ -142,16 +143,16 @@ class LockstepClient:
         pub_events = PublisherEventCallbacks(use_default_callbacks=False) if lean else None
         sub_events = SubscriptionEventCallbacks(use_default_callbacks=False) if lean else None
         self.pubs = [
-            self.node.create_publisher(SpeedCommand, h.join_ns(ns, "cmd/speed"), 10, event_callbacks=pub_events)
+            self.node.create_publisher(SpeedCommand, h.join_ns(ns, SPEED_CMD), 10, event_callbacks=pub_events)
             for ns in namespaces
         ]
         self.subs = [
             self.node.create_subscription(
-                LineState, h.join_ns(ns, "state"), self._callback(k), 10, event_callbacks=sub_events
+                LineState, h.join_ns(ns, STATE), self._callback(k), 10, event_callbacks=sub_events
             )
             for k, ns in enumerate(namespaces)
         ]
-        self.resets = [self.node.create_client(ResetLine, h.join_ns(ns, "reset")) for ns in namespaces]
+        self.resets = [self.node.create_client(ResetLine, h.join_ns(ns, RESET)) for ns in namespaces]
         self.cmds = [SpeedCommand(speed=0.5) for _ in namespaces]
         self._ResetLine = ResetLine
         self.watchdog = Watchdog(self.executor)
@@ -181,7 +182,7 @@ class LockstepClient:
         self.session.spin_until(matched, timeout, "the client's publishers and subscriptions to match the node")
         for k, client in enumerate(self.resets):
             reply = self.session.call_service(
-                client, self._ResetLine.Request(has_seed=True, seed=100 + k), f"{self.namespaces[k]}/reset"
+                client, self._ResetLine.Request(has_seed=True, seed=100 + k), f"{self.namespaces[k]}/{RESET}"
             )
             assert reply.success and reply.stamp.nanosec == 0, reply
             self.expected_sec[k] = reply.stamp.sec  # the tick the line waits at

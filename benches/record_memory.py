@@ -35,9 +35,10 @@ sys.path.insert(0, str(ROOT / "bridge"))
 sys.path.insert(0, str(ROOT / "benches"))
 
 from node_lockstep import cpu_seconds  # noqa: E402
+from sorting_line_gym.line.topics import BELT_OCCUPANCY, CLOCK, DIAGNOSTICS, INPUT, RESET_EVENT, STATE  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 
-LINE_TOPICS = ("input", "belt/occupancy", "state", "events/reset")
+LINE_TOPICS = (INPUT, BELT_OCCUPANCY, STATE, RESET_EVENT)
 NAMESPACE = "/recbench"
 #: The node's default simulated seconds per tick (its stamps), whatever the realtime rate.
 TICK_PERIOD = 1.0
@@ -56,7 +57,7 @@ def _args() -> argparse.Namespace:
 
 
 def _recorder(args, out: Path, log: Path) -> subprocess.Popen:
-    topics = [f"{NAMESPACE}/line_{k}/{t}" for k in range(args.lines) for t in LINE_TOPICS] + ["/clock"]
+    topics = [f"{NAMESPACE}/line_{k}/{t}" for k in range(args.lines) for t in LINE_TOPICS] + [CLOCK]
     argv = [
         sys.executable,
         "-m",
@@ -129,7 +130,7 @@ def _diagnostics(session, statuses: dict[str, list[dict]]):
             statuses.setdefault(s.hardware_id, []).append({kv.key: kv.value for kv in s.values})
 
     node = session.make_node("record_memory_probe")
-    node.create_subscription(DiagnosticArray, "/diagnostics", on, 100)
+    node.create_subscription(DiagnosticArray, DIAGNOSTICS, on, 100)
     return node
 
 

@@ -19,6 +19,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from sorting_line_gym.line.topics import SORT_MODE_CMD, SPEED_CMD, STATE
 from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 from support import ros_harness as h
 from support.line_client import LineClient
@@ -82,7 +83,7 @@ def wait_for_command_writers(
     (by default two: the LineClient's and the controller's). Discovery between two rclpy
     processes can take seconds, and a command sent before it is not in the bag."""
     recorder.wait_for_output("recording", 20.0, session)
-    for rel in ["cmd/speed"] + (["cmd/sort_mode"] if variant == "advanced" else []):
+    for rel in [SPEED_CMD] + ([SORT_MODE_CMD] if variant == "advanced" else []):
         session.spin_until(
             lambda: f"matched {namespace}/{rel}: {writers} publisher(s)" in recorder.log(),
             20.0,
@@ -101,7 +102,7 @@ def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda:
             episode = client.reset(seed).episode
             try:
                 session.spin_until(
-                    lambda: any(s.episode == episode and s.step >= 1 for s in client.msgs["state"]),
+                    lambda: any(s.episode == episode and s.step >= 1 for s in client.msgs[STATE]),
                     3.0,
                     f"{client.ns}: the controller's first step",
                     context,
@@ -117,7 +118,7 @@ def drive(session: h.RosSession, client: LineClient, plan: list, context=lambda:
         if not answered:
             raise AssertionError(f"the controller never answered a reset's tick\n{context()}")
         session.spin_until(
-            lambda: any(s.episode == episode and s.truncated for s in client.msgs["state"]),
+            lambda: any(s.episode == episode and s.truncated for s in client.msgs[STATE]),
             30.0,
             f"{client.ns}: episode {episode} driven to its end",
             context,

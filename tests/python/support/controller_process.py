@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from sorting_line_gym.line.topics import SORT_MODE_CMD, SPEED_CMD, STATE
 from support import ros_harness as h
 from support.ros_harness import stamp_ns
 
@@ -71,9 +72,9 @@ def line_recorders(probe, ns: str) -> dict[str, TimedRecorder]:
     from sorting_line_interfaces.msg import LineState, SortModeCommand, SpeedCommand
 
     return {
-        "state": TimedRecorder(probe, h.join_ns(ns, "state"), LineState),
-        "cmd/speed": TimedRecorder(probe, h.join_ns(ns, "cmd/speed"), SpeedCommand),
-        "cmd/sort_mode": TimedRecorder(probe, h.join_ns(ns, "cmd/sort_mode"), SortModeCommand),
+        STATE: TimedRecorder(probe, h.join_ns(ns, STATE), LineState),
+        SPEED_CMD: TimedRecorder(probe, h.join_ns(ns, SPEED_CMD), SpeedCommand),
+        SORT_MODE_CMD: TimedRecorder(probe, h.join_ns(ns, SORT_MODE_CMD), SortModeCommand),
     }
 
 

@@ -10,6 +10,17 @@ import time
 from collections import defaultdict
 from typing import Any
 
+from sorting_line_gym.line.topics import (
+    BELT_OCCUPANCY,
+    DIAGNOSTICS,
+    INPUT,
+    RESET,
+    RESET_EVENT,
+    SENSORS_RATIO,
+    SORT_MODE_CMD,
+    SPEED_CMD,
+    STATE,
+)
 from sorting_line_gym.workarounds.late_matching import repeated_while_unanswered
 from support.ros_harness import (
     NS_PER_S,
@@ -31,7 +42,7 @@ class LineClient:
     `by_stamp[topic][stamp_ns]` the messages per tick stamp.
     """
 
-    TOPICS = ["input", "belt/occupancy", "sensors/ratio", "state", "events/reset"]
+    TOPICS = [INPUT, BELT_OCCUPANCY, SENSORS_RATIO, STATE, RESET_EVENT]
 
     def __init__(
         self,
@@ -70,28 +81,28 @@ class LineClient:
         # /diagnostics first: a status of our line arriving on it proves that the node sends to
         # this participant's readers (see wait_connected); (receive time, values) per status.
         self.diagnostics: list[tuple[float, dict[str, str]]] = []
-        self.diag_sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.diag_sub = self.node.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, 10)
         types = {
-            "input": MaterialInput,
-            "belt/occupancy": BeltOccupancy,
-            "sensors/ratio": MaterialRatio,
-            "state": LineState,
-            "events/reset": ResetEvent,
+            INPUT: MaterialInput,
+            BELT_OCCUPANCY: BeltOccupancy,
+            SENSORS_RATIO: MaterialRatio,
+            STATE: LineState,
+            RESET_EVENT: ResetEvent,
         }
         wanted = topics if topics is not None else self.TOPICS
         if variant != "advanced":
-            wanted = [t for t in wanted if t != "sensors/ratio"]
+            wanted = [t for t in wanted if t != SENSORS_RATIO]
         # depth: the node's QoS is keep-last 10; a deeper reader queue lets a stalled client (a busy
         # machine) catch up on a realtime stream without losing samples.
         self.subs = {t: self.node.create_subscription(types[t], self.name(t), self._recorder(t), depth) for t in wanted}
-        self.speed_pub = self.node.create_publisher(SpeedCommand, self.name("cmd/speed"), 10)
+        self.speed_pub = self.node.create_publisher(SpeedCommand, self.name(SPEED_CMD), 10)
         # The basic line has no cmd/sort_mode: publish it there only on request (mode_topic=True).
         self.mode_pub = (
-            self.node.create_publisher(SortModeCommand, self.name("cmd/sort_mode"), 10)
+            self.node.create_publisher(SortModeCommand, self.name(SORT_MODE_CMD), 10)
             if variant == "advanced" or mode_topic
             else None
         )
-        self.reset_client = self.node.create_client(ResetLine, self.name("reset"))
+        self.reset_client = self.node.create_client(ResetLine, self.name(RESET))
         self._SpeedCommand, self._SortModeCommand, self._ResetLine = SpeedCommand, SortModeCommand, ResetLine
 
     def name(self, rel: str) -> str:
@@ -125,11 +136,11 @@ class LineClient:
     # ---- diagnostics for error messages
 
     def context(self) -> str:
-        states = [show_ns(stamp_ns(s.header.stamp)) for s in self.msgs["state"][-5:]]
+        states = [show_ns(stamp_ns(s.header.stamp)) for s in self.msgs[STATE][-5:]]
         matched = {t: s.get_publisher_count() for t, s in self.subs.items()}
-        matched["cmd/speed (subscribers)"] = self.speed_pub.get_subscription_count()
+        matched[f"{SPEED_CMD} (subscribers)"] = self.speed_pub.get_subscription_count()
         if self.mode_pub is not None:
-            matched["cmd/sort_mode (subscribers)"] = self.mode_pub.get_subscription_count()
+            matched[f"{SORT_MODE_CMD} (subscribers)"] = self.mode_pub.get_subscription_count()
         lines = [
             f"line {self.ns}: waiting at stamp {show_ns(self.stamp) if self.stamp is not None else '?'}; "
             f"last states seen: {states or 'none'}; matched endpoints: {matched}; "
@@ -156,7 +167,7 @@ class LineClient:
         reader is lost for good (volatile). The first reset() reply is the proof the node serves."""
 
         def matched():
-            ok = self.speed_pub.get_subscription_count() >= 1 and self.subs["state"].get_publisher_count() >= 1
+            ok = self.speed_pub.get_subscription_count() >= 1 and self.subs[STATE].get_publisher_count() >= 1
             if self.variant == "advanced":
                 ok = ok and self.mode_pub.get_subscription_count() >= 1
             return ok and all(s.get_publisher_count() >= 1 for s in self.subs.values())
@@ -171,7 +182,7 @@ class LineClient:
         self.session.spin_until(
             lambda: self.diagnostics,
             timeout,
-            f"/diagnostics: a status of {self.ns}",
+            f"{DIAGNOSTICS}: a status of {self.ns}",
             self.context,
             abort=self.node_gone,
         )
@@ -188,7 +199,7 @@ class LineClient:
         )
 
     def wait_state(self, stamp: int, timeout: float = 5.0):
-        return self.wait_message("state", stamp, timeout)
+        return self.wait_message(STATE, stamp, timeout)
 
     # ---- the service
 
@@ -200,7 +211,7 @@ class LineClient:
         """Whether a reset called at ``called`` (monotonic) without a reply happened: "event" (its
         events/reset arrived), "diag-reset" or "diag-same" (a /diagnostics status received well
         after the call counts another or the same number of episodes), None (no evidence yet)."""
-        if len(self.msgs["events/reset"]) > events_before:
+        if len(self.msgs[RESET_EVENT]) > events_before:
             return "event"
         late = [v for t, v in self.diagnostics if t > called + 1.5]
         if late:
@@ -217,14 +228,14 @@ class LineClient:
             stamp=event.header.stamp,
             quantity=state.observation_quantity,
             category=state.observation_category,
-            message=f"(reply lost: rebuilt from events/reset and state) seed {event.seed}",
+            message=f"(reply lost: rebuilt from {RESET_EVENT} and {STATE}) seed {event.seed}",
         )
 
     def _call_reset(self, request, what: str, attempt: int) -> tuple[str, Any]:
         """One call of the reset service: ("reply", the response), or, without a reply within 3 s,
         what the evidence says happened ("event", the index of its events/reset; "diag-reset" or
         "diag-same", the number of events/reset before the call)."""
-        events_before = len(self.msgs["events/reset"])
+        events_before = len(self.msgs[RESET_EVENT])
         episodes_before = self.diagnostics[-1][1].get("episodes") if self.diagnostics else None
         called = time.monotonic()
         future = self.reset_client.call_async(request)
@@ -236,7 +247,7 @@ class LineClient:
             pass
         # No reply. Did the reset happen? Look for evidence before calling again.
         evidence = functools.partial(self._reset_evidence, events_before, episodes_before, called)
-        found = self._until(evidence, 5.0, f"{what}: a reply, events/reset or /diagnostics")
+        found = self._until(evidence, 5.0, f"{what}: a reply, {RESET_EVENT} or {DIAGNOSTICS}")
         if future.done():
             return "reply", future.result()
         self.reset_client.remove_pending_request(future)
@@ -251,7 +262,7 @@ class LineClient:
         status received well after the call still counts the same episodes), so a reset is never
         executed twice. If the reset did happen but its reply was lost, the response is rebuilt from
         events/reset and the state of the new tick (`response.message` says so)."""
-        what = f"{self.name('reset')} (seed {seed})"
+        what = f"{self.name(RESET)} (seed {seed})"
         request = self._ResetLine.Request(has_seed=seed is not None, seed=seed or 0)
         self._until(self.reset_client.service_is_ready, timeout, f"service {what} to be available")
         outcome, value = repeated_while_unanswered(
@@ -260,15 +271,15 @@ class LineClient:
         if outcome == "reply":
             response = value
         elif outcome == "event":
-            response = self._rebuilt_reset_response(self.msgs["events/reset"][value])
+            response = self._rebuilt_reset_response(self.msgs[RESET_EVENT][value])
         elif outcome == "diag-reset":
             raise WaitTimeout(
-                f"{what}: the line was reset (/diagnostics counts it) but neither the reply nor "
-                f"events/reset nor the state arrived\n{self.context()}"
+                f"{what}: the line was reset ({DIAGNOSTICS} counts it) but neither the reply nor "
+                f"{RESET_EVENT} nor the state arrived\n{self.context()}"
             )
         else:  # "diag-same" three times: the request never reached the node
             raise WaitTimeout(f"no reply from {what} after 3 attempts\n{self.context()}")
-        assert response.success, f"{self.name('reset')} failed: {response.message}"
+        assert response.success, f"{self.name(RESET)} failed: {response.message}"
         self.stamp = stamp_ns(response.stamp)
         if self.first_reset is None:
             self.first_reset = self.stamp

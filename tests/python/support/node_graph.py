@@ -3,19 +3,20 @@
 
 from __future__ import annotations
 
+from sorting_line_gym.line.topics import CLOCK, DIAGNOSTICS
 from support import ros_harness as h
 
 
 def clock_recorder(ros, probe):
     from rosgraph_msgs.msg import Clock
 
-    return h.TopicRecorder(ros, probe, "/clock", Clock)
+    return h.TopicRecorder(ros, probe, CLOCK, Clock)
 
 
 def diagnostics_recorder(ros, probe):
     from diagnostic_msgs.msg import DiagnosticArray
 
-    return h.TopicRecorder(ros, probe, "/diagnostics", DiagnosticArray)
+    return h.TopicRecorder(ros, probe, DIAGNOSTICS, DiagnosticArray)
 
 
 def wait_diagnostics(

@@ -22,6 +22,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.storage.schema import NODE_QOS, typestore
+from sorting_line_gym.line.topics import DIAGNOSTICS, PARAMETER_EVENTS, ROSOUT
 
 CELL_STATUS = "factory_msgs/msg/CellStatus"
 CELL_STATUS_MSG = "string cell\nfloat64 temperature\n"
@@ -104,9 +105,9 @@ def _extras(store, namespace: str, t0: int, options: dict, node_parameters: dict
     cell = store.types[CELL_STATUS](cell="cell_3", temperature=41.5)
     volatile, local = _qos(1000, QosDurability.VOLATILE), _qos(1000, QosDurability.TRANSIENT_LOCAL)
     extras = [
-        ("/rosout", "rcl_interfaces/msg/Log", t0 - 3_000_000, log, local),
+        (ROSOUT, "rcl_interfaces/msg/Log", t0 - 3_000_000, log, local),
         (
-            "/parameter_events",
+            PARAMETER_EVENTS,
             "rcl_interfaces/msg/ParameterEvent",
             t0 - 2_000_000,
             parameter_event(
@@ -116,7 +117,7 @@ def _extras(store, namespace: str, t0: int, options: dict, node_parameters: dict
         ),
         ("/factory/cell_status", CELL_STATUS, t0 - 1_000_000, cell, NODE_QOS),
         (
-            "/diagnostics",
+            DIAGNOSTICS,
             "diagnostic_msgs/msg/DiagnosticArray",
             t0 - 500_000,
             diagnostics(store, namespace, 0, options),
@@ -127,7 +128,7 @@ def _extras(store, namespace: str, t0: int, options: dict, node_parameters: dict
         node = f"{namespace.rsplit('/', 1)[0] or ''}/sorting_line"
         extras.append(
             (
-                "/parameter_events",
+                PARAMETER_EVENTS,
                 "rcl_interfaces/msg/ParameterEvent",
                 t0 - 4_000_000,
                 parameter_event(store, node, t0, node_parameters),

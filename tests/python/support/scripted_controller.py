@@ -25,6 +25,7 @@ from std_msgs.msg import Header
 
 from sorting_line_gym.bag import open_bag
 from sorting_line_gym.bag.storage.schema import stamp_ns
+from sorting_line_gym.line.topics import BATCH_CMD, INPUT, SORT_MODE_CMD, SPEED_CMD
 
 QOS = QoSProfile(
     depth=10,
@@ -48,7 +49,7 @@ def _arguments() -> argparse.Namespace:
     p.add_argument("--skip-all", action="store_true")
     p.add_argument("--skip-once", action="append", type=int, default=[])
     p.add_argument("--exit-at", action="append", default=[])
-    p.add_argument("--batch", action="store_true", help="answer on batch/cmd (entry 0) instead")
+    p.add_argument("--batch", action="store_true", help=f"answer on {BATCH_CMD} (entry 0) instead")
     return p.parse_args(remove_ros_args(sys.argv)[1:])
 
 
@@ -56,7 +57,7 @@ def _recorded_commands(bag: str) -> dict[int, dict[str, dict]]:
     """stamp -> topic -> the bag's first command of that kind for the tick."""
     commands: dict[int, dict[str, dict]] = {}
     for rel, msgs in open_bag(bag).by_relative_topic().items():
-        if rel in ("cmd/speed", "cmd/sort_mode"):
+        if rel in (SPEED_CMD, SORT_MODE_CMD):
             for m in msgs:
                 commands.setdefault(stamp_ns(m.plain), {}).setdefault(rel, m.plain)
     return commands
@@ -70,9 +71,9 @@ def main() -> int:
 
     rclpy.init(args=sys.argv)
     node = rclpy.create_node("scripted_controller")
-    speed_pub = node.create_publisher(SpeedCommand, "cmd/speed", QOS)
-    mode_pub = node.create_publisher(SortModeCommand, "cmd/sort_mode", QOS)
-    batch_pub = node.create_publisher(LineCommands, "batch/cmd", QOS) if args.batch else None
+    speed_pub = node.create_publisher(SpeedCommand, SPEED_CMD, QOS)
+    mode_pub = node.create_publisher(SortModeCommand, SORT_MODE_CMD, QOS)
+    batch_pub = node.create_publisher(LineCommands, BATCH_CMD, QOS) if args.batch else None
     exit_code: list[int] = []
 
     def on_input(msg: MaterialInput) -> None:
@@ -89,13 +90,13 @@ def main() -> int:
         if tick in args.skip_once:
             args.skip_once.remove(tick)
             return
-        if args.skip_all or tick in args.skip or "cmd/speed" not in recorded:
+        if args.skip_all or tick in args.skip or SPEED_CMD not in recorded:
             return
         if tick in shifts:
             moved = key + round(shifts[tick] * 1e9)
             stamp.sec, stamp.nanosec = moved // 1_000_000_000, moved % 1_000_000_000
-        mode = recorded["cmd/sort_mode"]["mode"] if "cmd/sort_mode" in recorded else None
-        speed = float(speeds.get(tick, recorded["cmd/speed"]["speed"]))
+        mode = recorded[SORT_MODE_CMD]["mode"] if SORT_MODE_CMD in recorded else None
+        speed = float(speeds.get(tick, recorded[SPEED_CMD]["speed"]))
         if batch_pub is not None:
             batch_pub.publish(
                 LineCommands(
@@ -110,7 +111,7 @@ def main() -> int:
             mode_pub.publish(SortModeCommand(header=Header(stamp=stamp), mode=mode))
         speed_pub.publish(SpeedCommand(header=Header(stamp=stamp), speed=speed))
 
-    node.create_subscription(MaterialInput, "input", on_input, QOS)
+    node.create_subscription(MaterialInput, INPUT, on_input, QOS)
     try:
         while rclpy.ok() and not exit_code:
             rclpy.spin_once(node, timeout_sec=0.1)
