@@ -1,9 +1,9 @@
 """One topic vocabulary per language: the Python package's (sorting_line_gym.line.topics) against
 the node's table (src/ros/topics.rs, printed by ``sorting_line vocabulary``), and no module of the
-package but that one writing a topic name.
+package but that one writing a topic name, nor any helper of the tests or benchmark.
 
-No ROS: the node's side speaks through ``sorting_line vocabulary``; the second check reads the
-package's source (string constants, not docstrings or comments).
+No ROS: the node's side speaks through ``sorting_line vocabulary``; the other checks read the
+source (string constants, not docstrings or comments).
 """
 
 from __future__ import annotations
@@ -65,6 +65,7 @@ _JOINED = re.compile(r"(?<![\w/])/(" + "|".join(_WORDS) + r")(?![\w/])")
 #: a key of a table of topics, a comparison with a topic.
 _TOPIC_CALLS = {
     "join",
+    "join_ns",
     "name",
     "create_publisher",
     "create_subscription",
@@ -156,6 +157,18 @@ def test_no_module_but_the_vocabulary_writes_a_topic_name():
             continue
         for line, text in topic_strings(path.read_text()):
             offenders.append(f"{path.relative_to(h.ROOT)}:{line}: {text!r}")
+    assert not offenders, "topic names outside sorting_line_gym.line.topics:\n" + "\n".join(offenders)
+
+
+def test_no_helper_or_benchmark_writes_a_topic_name():
+    """The test harness (tests/python/support) and the benchmarks use the line's topics without
+    checking them: they take the names from the vocabulary too. (The test files themselves state
+    the node's public names on their own, as a user writes them: that is what they check.)"""
+    offenders = []
+    for folder in (h.ROOT / "tests" / "python" / "support", h.ROOT / "benches"):
+        for path in sorted(folder.rglob("*.py")):
+            for line, text in topic_strings(path.read_text()):
+                offenders.append(f"{path.relative_to(h.ROOT)}:{line}: {text!r}")
     assert not offenders, "topic names outside sorting_line_gym.line.topics:\n" + "\n".join(offenders)
 
 
