@@ -51,7 +51,7 @@ PARAMETERS = [
     ("rate", "realtime ticks per second"),
     ("lines", "number of lines hosted by the node"),
     ("tick_period", "simulated seconds per tick"),
-    ("evolution_file", "an evolution schedule (YAML) the lines follow; see docs/results/evolving.md"),
+    ("evolution_file", "an evolution schedule (YAML) the lines follow; see docs/evolving.md"),
     ("foxglove", "[ADDR:]PORT of the Foxglove live view (off when empty); see docs/foxglove.md"),
 ]
 

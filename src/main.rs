@@ -67,7 +67,7 @@ struct TraceArgs {
     /// always advanced ones (speed index * 3 + mode), as SortingLineEvolving-v0 takes them.
     #[arg(long, value_delimiter = ',')]
     actions: Vec<String>,
-    /// An evolution schedule (YAML, see docs/results/evolving.md): each JSON line then also carries `tick`,
+    /// An evolution schedule (YAML, see docs/evolving.md): each JSON line then also carries `tick`,
     /// the `evolution` events applied there, the line's `settings` and its `category_reading`
     /// (3 = unknown: no ratio sensor).
     #[arg(long, value_name = "FILE")]
@@ -95,7 +95,7 @@ struct EpisodeArgs {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     json: bool,
-    /// An evolution schedule (YAML, see docs/results/evolving.md): the line evolves across the episodes
+    /// An evolution schedule (YAML, see docs/evolving.md): the line evolves across the episodes
     /// (episode k of the evaluation is the line's episode k).
     #[arg(long, value_name = "FILE")]
     evolution: Option<PathBuf>,

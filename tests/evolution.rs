@@ -653,7 +653,7 @@ fn any_event() -> impl Strategy<Value = Event> {
         })
 }
 
-/// The ranges restated from docs/results/evolving.md, independently of the library's checks.
+/// The ranges restated from docs/evolving.md, independently of the library's checks.
 fn valid(e: &Event) -> bool {
     let within = |v: Option<f64>, lo: f64, hi: f64, hi_open: bool| {
         v.is_none_or(|v| v >= lo && if hi_open { v < hi } else { v <= hi })

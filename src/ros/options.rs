@@ -60,7 +60,7 @@ pub struct NodeArgs {
     /// Simulated seconds per tick (the stamp step and the /clock step).
     #[arg(long)]
     pub tick_period: Option<f64>,
-    /// An evolution schedule (YAML; format in src/sim/evolution.rs and docs/results/evolving.md): every
+    /// An evolution schedule (YAML; format in src/sim/evolution.rs and docs/evolving.md): every
     /// hosted line evolves by it. Parameter `evolution_file`.
     #[arg(long, value_name = "FILE")]
     pub evolution: Option<PathBuf>,
