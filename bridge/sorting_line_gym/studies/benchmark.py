@@ -70,7 +70,7 @@ from typing import Any
 
 from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
 from ..envs.native import BACKENDS
-from ..line.vocabulary import NODE_LINES, SETUPS, VARIANTS
+from ..line.vocabulary import EPISODE_STEPS, NODE_LINES, SETUPS, THRESHOLD, VARIANTS
 from ..reports import results_csv
 from ..reports.benchmark_summary import (
     AGENTS,
@@ -233,20 +233,15 @@ def run_unit(
 
 def oracle(setup: str, variant: str, seed: int, episodes: int, cache: Path) -> dict[str, Any]:
     """``sorting_line oracle --json`` for these seeds (the clairvoyant optimum per seed), kept in
-    ``cache`` (it is deterministic)."""
-    import subprocess
-
-    from ..line.process import find_node_binary
+    ``cache`` (it is deterministic). Solved by the library in this process (``_native.oracle_eval``,
+    the same JSON)."""
+    import sorting_line_gym._native as _native
 
     path = cache / f"{setup}_{variant}_seed{seed}_x{episodes}.json"
     if path.is_file():
         return json.loads(path.read_text())
-    flags = f"--setup {setup} --variant {variant} --seed {seed} --episodes {episodes} --json"
-    argv = [find_node_binary(), "oracle", *flags.split()]
-    result = subprocess.run(argv, capture_output=True, text=True, timeout=600)
-    if result.returncode != 0:
-        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
-    record = json.loads(result.stdout)
+    settings = dict(SETUPS[setup], variant=variant, threshold=THRESHOLD, max_steps=EPISODE_STEPS)
+    record = _native.oracle_eval(settings, episodes, seed)
     for e in record["per_episode"]:
         e.pop("actions", None)  # the report needs the rewards; `sorting_line oracle --actions` gives them again
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -31,8 +31,6 @@ cells of one scenario, kind and algorithm that differ only by seed at once with 
 from __future__ import annotations
 
 import hashlib
-import json
-import subprocess
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -256,28 +254,22 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
 
 def library(command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None) -> list[float]:
     """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on setup B,
-    seeds 10000..., offline."""
-    from ..line.process import find_node_binary
+    seeds 10000..., offline: the library's own evaluation, in this process (``_native.evaluate``
+    and ``_native.oracle_eval`` give the JSON of the two commands)."""
+    import sorting_line_gym._native as _native
 
-    argv = [
-        find_node_binary(),
-        command,
-        "--setup",
-        "B",
-        "--variant",
-        variant,
-        "--episodes",
-        str(episodes),
-        "--seed",
-        str(EVAL_SEED),
-        "--json",
-    ]
-    argv += ["--agent", agent] if agent else []
-    argv += ["--evolution", str(schedule)] if schedule else []
-    r = subprocess.run(argv, capture_output=True, text=True, timeout=600)
-    if r.returncode != 0:
-        raise RuntimeError(f"`{' '.join(argv)}` failed with {r.returncode}: {r.stderr.strip()}")
-    return [float(e["reward"]) for e in json.loads(r.stdout)["per_episode"]]
+    from ..line.vocabulary import SETUPS, THRESHOLD
+
+    settings = dict(SETUPS["B"], variant=variant, threshold=THRESHOLD, max_steps=EPISODE_STEPS)
+    if command == "oracle":
+        if schedule is not None:
+            raise ValueError("the oracle models a fixed line; it cannot solve an evolving one")
+        summary = _native.oracle_eval(settings, episodes, EVAL_SEED)
+    else:
+        if schedule is not None:
+            settings["evolution"] = str(schedule)
+        summary = _native.evaluate(agent, settings, episodes, EVAL_SEED)
+    return [float(e["reward"]) for e in summary["per_episode"]]
 
 
 def run_baselines(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
