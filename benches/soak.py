@@ -18,7 +18,7 @@ per-window series as JSON (``--json``) and a plot of throughput and RSS over the
 
     .venv/bin/python benches/soak.py                     # the full soak: 1,000,000 line-ticks
     .venv/bin/python benches/soak.py --ticks 50000       # what tests/python/test_reliability.py runs
-    .venv/bin/python benches/soak.py --plot docs/reliability_soak.png --json /tmp/soak.json
+    .venv/bin/python benches/soak.py --plot docs/results/reliability/reliability_soak.png --json /tmp/soak.json
 
 Like the other benchmarks it refuses to run outside a loopback-only network namespace and, as root,
 re-executes itself under ``unshare -n`` (ros_harness.run_isolated); ROS_DOMAIN_ID is its own

@@ -16,7 +16,8 @@
 - determinism across paths: the same seeds and actions through the library, the node (1 and 16
   lines), the single-line env and the vector env give identical trajectories.
 
-The full-size figures (1,000,000 ticks, more fuzz cases) come from the commands in docs/reliability.md.
+The full-size runs (1,000,000 ticks, more fuzz cases) are the commands of docs/reliability.md; their figures are
+in docs/results/reliability.md.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ which the test reports, instead of exhausting the machine.
 
 Size: SORTING_LINE_WIRE_FUZZ_DATAGRAMS datagrams (CI: 50,000) within SORTING_LINE_WIRE_FUZZ_SECONDS
 (CI: 15); SORTING_LINE_WIRE_FUZZ_SEED picks the datagrams (a failure names its seed). The full run
-is launch_scripts/reliability.sh (docs/reliability.md has its figures).
+is launch_scripts/reliability.sh (docs/reliability.md); its figures are in docs/security.md, "The wire fuzz".
 """
 
 from __future__ import annotations
