@@ -72,7 +72,7 @@ def variant_of_shapes(obs_dim: int, n_actions: int) -> str:
             return variant
     raise PolicyFileError(
         f"its observation has {obs_dim} value(s) and its action space {n_actions} actions: no line has those "
-        "(basic: 1 and 10; advanced and evolving: 2 and 30)"
+        f"(basic: 1 and {ACTION_COUNTS['basic']}; advanced and evolving: 2 and {ACTION_COUNTS['advanced']})"
     )
 
 
