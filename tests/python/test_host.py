@@ -80,9 +80,8 @@ def test_a_holder_that_keeps_the_lock_past_its_turn_makes_the_waiter_fail_naming
 
 
 def test_a_holder_within_a_turn_longer_than_the_waiters_own_is_waited_out():
-    # The fresh-clone failure of 2026-11-29: a transfer-study worker's start took over 20 s under
-    # two CPU hogs, within its own bound (start plus handshake), and the other worker, whose own
-    # start bound was 20 s, gave up on it as if it hung.
+    # A slow start on a busy machine is a long turn, not a hang: a waiter whose own bound is shorter
+    # than the holder's declared turn must wait it out (a fresh-clone failure: docs/results/many-envs.md).
     t, release = _holding(turn=HANDOVER + 4.0, keep=HANDOVER + 2.0)
     try:
         t0 = time.monotonic()
@@ -95,10 +94,10 @@ def test_a_holder_within_a_turn_longer_than_the_waiters_own_is_waited_out():
 
 
 def test_a_declaration_left_from_an_earlier_turn_is_not_the_holders():
-    # The fresh-clone failure of 2026-11-29 (run 26): a SubprocVecEnv-16 worker read the lock file
-    # of a holder killed six hours before (the same network namespace inode and domain, reused) in
-    # the moment between the new holder taking the lock and writing its own declaration, and gave up
-    # at once, "21335 s past the end of the turn it declared".
+    # Between a holder taking the lock and writing its declaration, the file may still hold the
+    # declaration of a holder killed long before (the same network namespace inode and domain,
+    # reused): a waiter must not take it for the new holder's (a fresh-clone failure:
+    # docs/results/many-envs.md).
     path = join_lock_path()
     now = time.clock_gettime(time.CLOCK_MONOTONIC)
     path.write_text(f"999999 {now - 3600:.3f} {now - 3500:.3f}")  # a dead holder's, over long ago

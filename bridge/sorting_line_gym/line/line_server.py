@@ -3,7 +3,7 @@ host that asks (``node="shared"``), instead of one node process per environment.
 
 Why: every node process is one more DDS participant, and each one a client has to discover
 (SPDP, then SEDP for its 30-odd endpoints). Past about a dozen on one host and domain, some
-clients never complete endpoint discovery of some nodes (docs/many-envs.md has the
+clients never complete endpoint discovery of some nodes (docs/results/many-envs.md has the
 measurements), and 64 node processes cost start-up time and memory. With line servers, N envs in
 P processes on one host are P client participants and ceil(N / line_supervisor.LINES) node participants.
 

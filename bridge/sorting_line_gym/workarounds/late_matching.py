@@ -5,8 +5,9 @@ our state reader: the first reset's reply, or its step-0 state, is then lost for
 samples sent before matching are; found by the node tests' harness). The node now waits for the
 client's reply reader before it replies (at most 2 s); the step-0 state has no such guard. A reset with an explicit
 seed repeated gives the same episode, so the handshake (the first reset, whose reply and step-0
-state must both arrive) is retried. Short first attempts (0.2, 0.4, 0.8, ... s instead of 2 s)
-brought 64 shared envs' start-up from about 25 s to 11.5 s (load 12).
+state must both arrive) is retried, with short first attempts (0.2, 0.4, 0.8, ... s instead of
+2 s): a lost exchange costs little at start-up (what it saved for 64 shared envs:
+docs/results/many-envs.md).
 
 A timeout alone cannot tell a lost exchange from a slow one: under load a reply slower than 0.2 s
 means the repeated reset is the node's second. That is harmless only where resets do not count.

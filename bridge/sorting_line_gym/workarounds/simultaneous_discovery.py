@@ -1,13 +1,12 @@
 """Workaround: DDS participants starting together lose endpoint announcements, so banks join one at a time.
 
-Measured (benches/discovery.py, docs/many-envs.md): when several client and node
-participants start at the same moment (16 SubprocVecEnv workers, each starting a node), Fast DDS
-2.14 (rclpy's) and RustDDS (the node's) lose some endpoint announcements between them for good (a
-node's reset service never becomes ready for its client, even after 60 s): 4 AsyncVectorEnv workers
-each starting rclpy and a node at the same moment failed 5 runs in 6; with this lock held from
-participant start to the handshake, 3 of 3, and 16 workers ran 200 steps. One participant pair
-joining at a time discovers completely, whatever the number of participants; it costs about 0.7 s
-per env at start-up.
+When several client and node participants start at the same moment (16 SubprocVecEnv workers,
+each starting a node), Fast DDS 2.14 (rclpy's) and RustDDS (the node's) lose some endpoint
+announcements between them for good: a node's reset service never becomes ready for its client,
+even after 60 s. One participant pair joining at a time discovers completely, whatever the number
+of participants, so a bank holds this lock from its participant's start to its handshake. The runs
+that show it (benches/discovery.py and the bridge, with and without the lock) and what the lock
+costs at start-up: docs/results/many-envs.md.
 """
 
 from __future__ import annotations
@@ -55,9 +54,9 @@ def joining_graph(turn: float):
 
     A holder clears its declaration before it lets go. A declaration already over when a waiter
     first reads it is a leftover, not the holder's: one killed in its turn leaves its own in the
-    file, and the next holder has the lock a moment before it writes its own (a fresh-clone run's
-    SubprocVecEnv-16 worker read a six-hour-old declaration there and gave up at once). The
-    waiter then gives the holder its own ``turn``, the one bound it knows."""
+    file, and the next holder has the lock a moment before it writes its own, so a waiter can read
+    a dead holder's declaration, hours old (docs/results/many-envs.md). The waiter then gives the
+    holder its own ``turn``, the one bound it knows."""
     path = join_lock_path()
     with open(path, "a+") as f:
         seen, since, end = None, 0.0, 0.0  # set at the first look: the file never reads None
