@@ -25,29 +25,27 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     discovery thread waits for the participant's mutex (eProsima/Fast-DDS issue 6513, open, in
     every release). Symptom: ``env.close()`` spinning at 78 % CPU with the GIL held when other
     participants come or go at the same moment; deleting a node's entities hangs the same way.
-    Measured: gdb stacks of a SubprocVecEnv-16 worker stuck 4 min; CI's AsyncVectorEnv (fork) hung
-    240 s in close(); a Ray EnvRunner 400 s; a SubprocVecEnv-16 worker (fork) and an AsyncVectorEnv
-    (forkserver) worker in ``destroy_node`` (fresh-clone suite runs, 2026-11-26); SCHED_IDLE did not
-    help (1 hang in 5). Seen in: Fast DDS 2.14.5. Workaround: a worker (forked, a multiprocessing
-    worker of any start method, or a process ended by being killed: Ray's EnvRunners,
-    ``keep_participant_until_killed``) keeps a never-destroyed node, so its participant is never
-    deleted, keeps the nodes its closed envs leave (``retire_node``), and ends without DDS teardown
-    (fork and forkserver workers by ``os._exit`` already; a spawn worker's final ``sys.exit`` is
-    made an ``os._exit`` with the same code). Other processes delete their participant at their
-    last close, before stopping the node they started; the studies' cell pool, whose workers run
-    cell after cell, declares ``outlives_its_envs``. benches/close_stress.py counts hangs under CPU
-    hogs. Delete when: a Fast DDS wheel that fixes issue 6513 is what rclpy uses, and
-    benches/close_stress.py prints 0 hangs under two CPU hogs with every node destroyed.
+    Measured: the hangs seen (vectorizers' workers, a Ray EnvRunner) and what did not help are in
+    docs/results/reliability.md, "Closing under CPU hogs". Seen in: Fast DDS 2.14.5. Workaround: a
+    worker (forked, a multiprocessing worker of any start method, or a process ended by being
+    killed: Ray's EnvRunners, ``keep_participant_until_killed``) keeps a never-destroyed node, so
+    its participant is never deleted, keeps the nodes its closed envs leave (``retire_node``), and
+    ends without DDS teardown (fork and forkserver workers by ``os._exit`` already; a spawn worker's
+    final ``sys.exit`` is made an ``os._exit`` with the same code). Other processes delete their
+    participant at their last close, before stopping the node they started; the studies' cell pool,
+    whose workers run cell after cell, declares ``outlives_its_envs``. benches/close_stress.py
+    counts hangs under CPU hogs. Delete when: a Fast DDS wheel that fixes issue 6513 is what rclpy
+    uses, and benches/close_stress.py prints 0 hangs under two CPU hogs with every node destroyed.
 
 ``simultaneous_discovery`` -- participants that start together lose endpoint announcements.
     Defect: between Fast DDS 2.14 (rclpy) and RustDDS (the node), SEDP announcements exchanged while
     several participants start at once are lost for good. Symptom: a node's reset service never
-    becomes ready for its client, even after 60 s. Measured: 4 AsyncVectorEnv workers each starting
-    rclpy and a node at once failed 5 runs in 6, 3 of 3 passed with the lock (benches/discovery.py
-    counts which clients complete discovery of which nodes). Workaround: ``joining_graph``, a host
-    lock per network namespace and domain held from a bank's participant start to its handshake
-    (about 0.7 s per env at start-up). Delete when: benches/discovery.py with every participant
-    started at once reports complete discovery, and the SubprocVecEnv-16 test passes without it.
+    becomes ready for its client, even after 60 s. Measured: benches/discovery.py counts which
+    clients complete discovery of which nodes; its runs, with and without the lock, and the lock's
+    cost at start-up are in docs/results/many-envs.md. Workaround: ``joining_graph``, a host lock
+    per network namespace and domain held from a bank's participant start to its handshake. Delete
+    when: benches/discovery.py with every participant started at once reports complete discovery,
+    and the SubprocVecEnv-16 test passes without it.
 
 ``late_matching`` -- the first exchange after discovery can be lost.
     Defect: right after discovery the node may match our request writer before our reply reader,
@@ -56,9 +54,9 @@ rmw_fastrtps 8.4.3, Fast DDS 2.14.5; the node's RustDDS is vendor/rustdds.
     the client's reply reader before it replies, as the rmw layers do: vendor/README.md,
     ros2-client patch 4. A step-0 state has no such guard: a topic's writer cannot know who is
     about to subscribe. So the handshake stays, for the state and for nodes built before.)
-    Measured: found by the node tests' harness; retrying after 0.2, 0.4, 0.8, ... s instead of
-    2 s brought 64 shared envs' start-up from about 25 s to 11.5 s (load 12). Seen in: rclpy 7.1
-    / Fast DDS 2.14 against RustDDS, Cyclone DDS 11 against RustDDS.
+    Measured: found by the node tests' harness; short first attempts and what they saved at
+    start-up: docs/results/many-envs.md. Seen in: rclpy 7.1 / Fast DDS 2.14 against RustDDS,
+    Cyclone DDS 11 against RustDDS.
     Workaround: ``retried_handshake`` repeats the first (seeded, so identical) reset: the bank's on
     a fixed line, the recorder's parameter query and the pytest plugin's first answer of a
     controller (a controller that is still discovering the node misses its first tick the same

@@ -7,14 +7,10 @@ do on ``close()``: rmw_fastrtps first calls ``DomainParticipant::set_listener(nu
 default timeout is infinite and which waits for the discovery callbacks in flight, busy, where
 libstdc++'s condition variable does not wait on ``steady_clock`` (as in the manylinux_2_28 wheels
 of Fast DDS 2.14.5 that rclpy's Jazzy wheels bring): eProsima/Fast-DDS issue 6513, open, no
-release fixes it. Evidence here: gdb stacks of a SubprocVecEnv-16 worker stuck 4 min in
-``env.close()`` (78 % CPU, the GIL held, its discovery thread in ``onReaderDiscovery`` waiting for
-the participant's mutex); in CI an AsyncVectorEnv (fork) hung 240 s in its ``close()``, a remote
-Ray EnvRunner spun there for a test's whole 400 s, a SubprocVecEnv-16 worker (fork) with its
-participant kept hung 240 s in ``destroy_node`` (``rcl_node_fini``), and an AsyncVectorEnv
-(forkserver) worker in ``destroy_node`` at its ``close()`` (fresh-clone suite runs, 2026-11-26).
-Running the deletion at ``SCHED_IDLE`` priority did not help (one hang in 5 runs under load); a
-bounded deletion in a helper thread cannot help either (the GIL stays held while it spins).
+release fixes it. The hangs seen (in ``env.close()`` and, with the participant kept, in
+``destroy_node``), and what did not help, are in docs/results/reliability.md, "Closing under CPU
+hogs". Running the deletion at a lower scheduling priority did not help, and a bounded deletion in
+a helper thread cannot: the deletion spins with the GIL held.
 
 So the rule is: **a worker never deletes its participant nor its nodes, and ends without DDS
 teardown**. A worker is a process that ends when its work returns or when its host kills it: a
