@@ -245,8 +245,8 @@ class LineNode:
         )
         # Seen here is not yet matched by the node, which sends a tick's input only to the readers
         # it has matched: a reset whose input the controller missed is never answered, and here it
-        # is not repeated. So wait for the node's word (a fresh-clone run, and a 1 s settle under
-        # load 7, failed without it).
+        # is not repeated. So wait for the node's word: a fixed settle time is not enough under load
+        # (1 s was not, at load 7).
         matches = self._input_matches or InputMatches(self._tool.node)
         self._input_matches = matches
         self._tool.until(

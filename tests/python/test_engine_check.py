@@ -6,11 +6,10 @@ thread, native lines), so it passes or fails the same way every time.
 What must hold: for each algorithm the 95 % interval (bootstrap of whole runs) of the difference of the
 engines' means lies within +-REDUCED_MARGIN. The full check's margin is 1.5 at 10 seeds and 100k steps;
 with 4 seeds the interval is about sqrt(10 / 4) = 1.6 times as wide, and a few thousand steps leave the
-runs spread further (PPO after its first update: 9.5 .. 13.3), hence 3.0: measured (2026-12-02), the
-widest bound was 2.16 (PPO -0.04 [-2.16, +1.95]; A2C and DQN +-0.83), so a correct engine has room, while
-an engine that does not learn (learning rate 0) is outside it: PPO +3.49 [-1.82, +7.21], A2C -1.21
-[-6.51, +2.11] (docs/results/engine-check.md says how it was shown). Bad input fails before any training. Cost:
-3.7 CPU-minutes (12 min of wall time on 2 cores loaded by other work; about 2 minutes on 2 quiet ones).
+runs spread further, hence 3.0: wide enough that a correct engine's intervals lie well inside it, narrow
+enough that an engine that does not learn (learning rate 0) falls outside it (the runs that showed both,
+and what the test costs: docs/results/engine-check.md, "Reduced check in CI"). Bad input fails before any
+training.
 """
 
 from __future__ import annotations

@@ -249,8 +249,8 @@ def test_evolving_node_follows_its_schedule_like_trace(tmp_path, start_node, cli
     states.append(reset())
     # Episode 2 fits the ratio sensor: its publisher appears. The node announces it before the
     # reset's state goes out, but the probe is another participant than the client that got the
-    # state, and its discovery thread may run later (it lagged in about 1 run of 10, with the
-    # binaries before and after 2026-11-23's rustdds patches alike): so wait a moment for it.
+    # state, and its discovery thread may run later (it lagged in about 1 run of 10, whatever the
+    # node's rustdds patches): so wait a moment for it.
     ros.spin_until(lambda: hardware()[0] == 1, 5, f"the probe to see {ns}/sensors/ratio's publisher")
     ros.spin_until(lambda: ratio_sub.get_publisher_count() >= 1, 10, f"{ns}/sensors/ratio to match", c.context)
     for tick, action in enumerate(EPISODE_2, start=len(EPISODE_1)):

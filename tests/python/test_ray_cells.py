@@ -10,10 +10,9 @@ written under ``--out`` as there. Bad input: an address that does not answer, ``
 ``--ray``, a malformed address, and Ray missing.
 
 Like test_rllib.py it runs in CI (test.sh installs Ray, SORTING_LINE_RLLIB=1 makes a missing Ray a
-failure) and otherwise skips, saying how to install Ray. Measured only under heavy load: 527 s at load
-15-17 on the 2 shared cores (2026-12-02, beside a long training run and other tests); most of it is
-Ray's daemons starting (each `ray status` poll imports Ray) and three benchmark runs importing torch
-and drawing their reports, each a few seconds on a quiet machine.
+failure) and otherwise skips, saying how to install Ray. Most of its time is Ray's daemons starting (each
+`ray status` poll imports Ray) and three benchmark runs importing torch and drawing their reports; its
+time under load: docs/results/scaling.md, "Ray RLlib".
 """
 
 from __future__ import annotations
