@@ -5,7 +5,7 @@ and `ros2 topic echo`), `ros-controller` (a user's rclpy controller, run against
 episode) and `ppo` (SB3 PPO, its budget cut to four rollouts of 64 steps). Everything runs in a ROS domain of its
 own, derived from the test's, because the quickstart uses the root namespace. About 25 s in all on a quiet machine
 (at load 14 on 2 cores: 60 s), mostly importing torch and SB3. Also: every relative link of README.md, CONTRIBUTING.md,
-docs/ and vendor/'s pages resolves.
+docs/ (docs/results/ included) and vendor/'s pages resolves, and the docs' indexes list every page.
 """
 
 from __future__ import annotations
@@ -215,11 +215,11 @@ def test_every_readme_command_is_run_by_a_test():
 
 
 def test_links_in_readme_and_docs_resolve():
-    """Every relative link of README.md, CONTRIBUTING.md, docs/*.md and vendor/'s pages (the patches and their
-    upstream reports) names a file that exists (and a heading that exists)."""
+    """Every relative link of README.md, CONTRIBUTING.md, docs/'s pages (docs/results/'s too) and vendor/'s pages (the
+    patches and their upstream reports) names a file that exists (and a heading that exists)."""
     broken = []
     vendor = [ROOT / "vendor" / "README.md", *sorted((ROOT / "vendor" / "upstream-reports").glob("*.md"))]
-    for page in [README, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").glob("*.md")), *vendor]:
+    for page in [README, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").rglob("*.md")), *vendor]:
         text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
         for target in re.findall(r"\]\(([^)\s]+)\)", text):
             if target.startswith(("http://", "https://", "mailto:")):
@@ -235,12 +235,24 @@ def test_links_in_readme_and_docs_resolve():
     assert not broken, "broken links:\n" + "\n".join(broken)
 
 
+def _linked_pages(index: Path) -> set[Path]:
+    """The pages (.md) an index page links, resolved."""
+    targets = re.findall(r"\]\(([^)#\s]+\.md)(?:#[^)]*)?\)", index.read_text())
+    return {(index.parent / target).resolve() for target in targets}
+
+
 def test_the_docs_index_lists_every_doc():
-    """docs/README.md (the index: where each user starts, every file by subject) links every page of docs/."""
-    index = (ROOT / "docs" / "README.md").read_text()
-    linked = set(re.findall(r"\]\(([^)#\s]+\.md)(?:#[^)]*)?\)", index))
-    pages = {p.name for p in (ROOT / "docs").glob("*.md")} - {"README.md"}
-    assert not pages - linked, f"docs/README.md does not list: {sorted(pages - linked)}"
+    """docs/README.md (the index: where each user starts, every file by subject) links every page of docs/ and the
+    results' index; docs/results/README.md (what each results page measured, the command that reproduces it) links
+    every page of docs/results/."""
+    results_index = ROOT / "docs" / "results" / "README.md"
+    for index in (ROOT / "docs" / "README.md", results_index):
+        pages = {p.resolve() for p in index.parent.glob("*.md")} - {index.resolve()}
+        missing = sorted(str(p.relative_to(ROOT)) for p in pages - _linked_pages(index))
+        assert not missing, f"{index.relative_to(ROOT)} does not list: {missing}"
+    assert results_index.resolve() in _linked_pages(ROOT / "docs" / "README.md"), (
+        "docs/README.md does not link the results' index, results/README.md"
+    )
 
 
 def _keyword_table() -> dict[str, str]:
