@@ -144,7 +144,7 @@ def traced(algorithm, target_parameters, n_seeds: int = 1) -> list[tuple[int, fl
 @pytest.fixture(scope="module")
 def short_runs(tmp_path_factory):
     """The engine's short training of two seeds and SB3's of each, on the same native lines."""
-    seeds = SEEDS[:2]
+    seeds = SEEDS[:2]  # one compiled chunk of seeds: the code every seed runs in any batch (seed_axis.py)
     engine = BatchedDQN(seeds, **LINE, n_envs=LINES, episode_steps=EPISODE, **SHORT)
     engine_trace = traced(
         engine, lambda: [torch.from_numpy(np.array(a)) for a in jax.tree.leaves(engine.q_net_target)], len(seeds)

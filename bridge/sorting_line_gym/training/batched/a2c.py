@@ -24,6 +24,7 @@ from . import optim
 from .actor_critic import evaluate_actions
 from .params import Spec
 from .rollout import FlatRollout
+from .seed_axis import over_seeds
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ def compiled_update(specs: tuple[tuple[str, Spec], ...], opt: optim.Settings, no
         grads, _ = optim.clip_grad_norm(grads, hp["max_grad_norm"])
         return optim.step(opt, p, grads, state, coef)
 
-    return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, 0, None)))
+    return over_seeds(one_seed, (0, 0, 0, 0, None))
 
 
 def a2c_update(

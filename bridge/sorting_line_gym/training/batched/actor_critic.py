@@ -31,6 +31,7 @@ from torch import nn
 
 from . import torch_math
 from .params import Spec, forward
+from .seed_axis import over_seeds
 
 #: The logit sb3-contrib gives a masked action (sb3_contrib/common/maskable/distributions.py, HUGE_NEG).
 HUGE_NEG = np.float32(-1e8)
@@ -143,9 +144,9 @@ def compiled(specs: tuple[tuple[str, Spec], ...]) -> dict[str, Any]:
     for all S x B. Cached by architecture, so that trainers of one architecture share the compiled code."""
     spec = dict(specs)
     return {
-        "act": jax.jit(jax.vmap(lambda p, obs, q, masks: act(spec, p, obs, q, masks))),
-        "values": jax.jit(jax.vmap(lambda p, obs: predict_values(spec, p, obs))),
-        "predict": jax.jit(jax.vmap(lambda p, obs, masks: predict(spec, p, obs, masks))),
+        "act": over_seeds(lambda p, obs, q, masks: act(spec, p, obs, q, masks), (0, 0, 0, 0)),
+        "values": over_seeds(lambda p, obs: predict_values(spec, p, obs), (0, 0)),
+        "predict": over_seeds(lambda p, obs, masks: predict(spec, p, obs, masks), (0, 0, 0)),
     }
 
 

@@ -4,7 +4,7 @@ A2C and MaskablePPO; ``QNetwork._predict`` of DQN).
 
 Why not JAX here: a rollout step evaluates one row per seed, where XLA's CPU dot costs many times
 numpy's, so a jitted forward took more than half of an A2C training (the figures are in
-docs/performance.md). The updates stay in JAX (gradients over many rows).
+docs/results/performance.md). The updates stay in JAX (gradients over many rows).
 
 The arithmetic is ``params.forward``'s and ``torch_math``'s, operation for operation: ``x @ W.T + b``
 per seed, tanh, exp and log computed in float64 and rounded once to float32 (what torch's kernels

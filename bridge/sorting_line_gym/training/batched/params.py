@@ -14,7 +14,7 @@ Interface (stable; the on-policy learners and DQN both build on it):
   torch's layout and :func:`write_back` copies them into the S torch trees in place (the SB3
   models then hold the weights). Why W.T: XLA's CPU backend sums ``x @ W.T`` as torch does (see
   :func:`forward`) only on a contiguous W.T, and a transposed copy of W per use cost as much as
-  the matmul itself (docs/performance.md).
+  the matmul itself (docs/results/performance.md).
 - A **spec** is a network's shape of computation, hashable (a static argument of ``jax.jit``): one
   entry per module of the ``nn.Sequential`` (or the single ``nn.Linear`` head), ``("linear",)`` or
   an elementwise activation with its settings, e.g. ``("tanh",)``, ``("leaky_relu", 0.01)``.

@@ -25,6 +25,7 @@ from . import optim, torch_math
 from .actor_critic import evaluate_actions
 from .params import Spec
 from .rollout import FlatRollout
+from .seed_axis import over_seeds
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ def compiled_update(
         (p, state), _ = jax.lax.scan(epoch, (p, state), (full, rest, coef_full, coef_rest))
         return p, state
 
-    return jax.jit(jax.vmap(one_seed, in_axes=(0, 0, 0, 0, 0, 0, 0, None)))
+    return over_seeds(one_seed, (0, 0, 0, 0, 0, 0, 0, None))
 
 
 def ppo_update(

@@ -28,6 +28,7 @@ from . import host, optim
 from .optim import unfused
 from .params import Spec, forward
 from .replay import ReplaySamples
+from .seed_axis import over_seeds
 
 
 def smooth_l1(x: jax.Array, y: jax.Array) -> jax.Array:
@@ -88,13 +89,13 @@ class QLearning:
             # th.add_(target, param, alpha=tau) (1 - tau computed in Python floats, as there)
             return jax.tree_util.tree_map(lambda p, t: unfused(t * keep) + unfused(tau * p), q_net, q_net_target)
 
-        self._act = jax.jit(jax.vmap(greedy))
+        self._act = over_seeds(greedy, (0, 0))
         # The rollout's forward (S observations of one step) on the host where it can be: a jitted
         # call of one row per seed costs more than the arithmetic (host.py).
         self._on_host = host.supported(spec)
         self._host: tuple[Any, host.HostQNetwork] | None = None
-        self._train = jax.jit(jax.vmap(steps, in_axes=(0, 0, 0, 0, 0)))
-        self._polyak = jax.jit(jax.vmap(polyak, in_axes=(0, 0, None, None)))
+        self._train = over_seeds(steps, (0, 0, 0, 0, 0))
+        self._polyak = over_seeds(polyak, (0, 0, None, None))
 
     def act(self, q_net: Any, observations: np.ndarray) -> np.ndarray:
         """Greedy actions (S, N) of observations (S, N, obs_dim)."""

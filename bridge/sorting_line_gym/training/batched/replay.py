@@ -54,7 +54,7 @@ class BatchedReplayBuffer:
         self.handle_timeout_termination = handle_timeout_termination
         # One float32 array, row-major over the positions, (buffer_size, S, n_envs, columns): a
         # step of all seeds writes one contiguous block (a seed-major layout scattered each add
-        # over S pages, several times slower: docs/performance.md), and a sample is one flat take
+        # over S pages, several times slower: docs/results/performance.md), and a sample is one flat take
         # of whole transitions (six arrays took six). The action is stored as a float32, exact for
         # any integer below 2**24 (a Discrete space of the line has 30 at most). np.zeros as SB3:
         # the pages of rows never written are never touched, so a buffer far larger than a run's
