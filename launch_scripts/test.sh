@@ -20,7 +20,9 @@ source launch_scripts/jobs.sh
 RUST_ONLY=0
 if [[ "${1:-}" == "--rust-only" ]]; then RUST_ONLY=1; shift; fi
 
-step() { printf '\n== %s\n' "$*"; }
+# Each step says when it starts, in seconds since test.sh began: a CI log then shows where the minutes go
+# (docs/installing.md, "How long test.sh takes"), besides pytest's --durations for the slowest tests.
+step() { printf '\n== %s  [test.sh +%d s]\n' "$*" "$SECONDS"; }
 
 # The subset of the suite that runs on the other Python version: the README's snippets, the env,
 # the vector env, bags, bag check, the controllers and the pytest plugin (tests needing the training
@@ -249,8 +251,9 @@ unshare -n bash -c '
   set -euo pipefail
   ip link set lo up
   source launch_scripts/env.sh
-  # --durations: where the minutes of the suite go, in every CI log (a run must stay well under 20 min).
-  python -m pytest tests/python --ignore=tests/python/unit -q -rs -p no:cacheprovider --durations=12 "$@"
+  # --durations: where the minutes of the suite go, in every CI log (the 20 slowest; a run must stay well
+  # under 20 min).
+  python -m pytest tests/python --ignore=tests/python/unit -q -rs -p no:cacheprovider --durations=20 "$@"
 ' test.sh "$@" || status=$?
 shm_clean
 
@@ -269,4 +272,5 @@ else
   other_missing
 fi
 rm -rf "$SORTING_LINE_COLCON_WS"
+step "done (exit $status)"
 exit "$status"
