@@ -9,6 +9,7 @@
 #   job_start cargo cargo build --release     # starts it; its output goes to a temporary log
 #   ...                                        # other steps
 #   job_join cargo "cargo build --release"    # waits, shows the log; exits 1 if the job failed
+#   job_collect cargo "cargo build --release" # the same, but returns the job's status instead
 
 _JOBS=()
 
@@ -28,19 +29,25 @@ job_start() {
   _JOBS+=("$name")
 }
 
-# job_join NAME WHAT: waits for job NAME and prints its log. If it failed, the log goes to stderr
-# followed by "WHAT failed", and the script exits 1.
-job_join() {
+# job_collect NAME WHAT: waits for job NAME, prints its log and returns its exit status. If it
+# failed, the log goes to stderr followed by "WHAT failed", and the script goes on.
+job_collect() {
   local pid_var="_JOB_PID_$1" log_var="_JOB_LOG_$1" status=0
   wait "${!pid_var}" || status=$?
   printf -v "$pid_var" %s ""
   if [[ $status != 0 ]]; then
     cat "${!log_var}" >&2
     echo "$2 failed (exit $status; its output is above)" >&2
-    exit 1
+  else
+    cat "${!log_var}"
   fi
-  cat "${!log_var}"
   rm -f "${!log_var}"
+  return "$status"
+}
+
+# job_join NAME WHAT: job_collect, and if the job failed the script exits 1.
+job_join() {
+  job_collect "$@" || exit 1
 }
 
 _jobs_stop() {

@@ -115,62 +115,19 @@ step "Python types (mypy: the bridge modules without rclpy, [tool.mypy] in bridg
 step "Python dependencies declared (deptry: bridge/pyproject.toml against the imports of sorting_line_gym)"
 (cd bridge && ../.venv/bin/deptry .) || { echo "test.sh: declare what deptry reports above in bridge/pyproject.toml (dependencies or an extra), or drop what is not imported" >&2; exit 1; }
 
-step "Rust lints (clippy, warnings are errors; with and without the ros feature)"
-# About 2 CPU-minutes: a metadata-only check of every dependency (clippy cannot reuse the release
-# build), then seconds for the crate without the ros feature.
-if cargo clippy --version >/dev/null 2>&1; then
-  cargo clippy --locked --all-targets -- -D warnings
-  cargo clippy --locked --all-targets --no-default-features -- -D warnings
-  # The Python extension (native/, PyO3): seconds beyond the lines above; PyO3 asks the venv's
-  # Python for its configuration.
-  PYO3_PYTHON="$PWD/.venv/bin/python" cargo clippy --locked -p sorting_line_native --all-targets -- -D warnings
-else
-  echo "test.sh: clippy is not installed (rustup component add clippy): lints not checked"
-fi
-
-step "Rust docs (rustdoc, warnings are errors: a broken intra-doc link fails)"
-# Seconds after clippy: the dependencies are checked already, only the crate's own docs are built.
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked
-
 step "Rust tests (unit, golden trajectories, properties)"
 cargo test --release --locked
 
-step "The simulation library alone (no ros feature: no DDS dependency)"
-# About 1 CPU-minute: the release build shares the target dir, so only this crate and the few
-# dependencies whose features the DDS stack widens (rand, rand_chacha, serde_json) compile again.
-cargo build --release --locked --no-default-features
-cargo test --release --locked --no-default-features --lib --tests
-# Both put the binary without the `node` command at target/release/sorting_line: this relinks the
-# full one from the cache (seconds), which the ROS tests below run.
-cargo build --release --locked
-
-step "Vendored crates' own unit tests (vendor/rustdds, vendor/ros2-client, with our patches)"
-# Both copies' library unit tests, those that show our patches among them (vendor/upstream-reports/);
-# their tests/ and examples/ are not vendored, and their doc tests are left out (each compiles a
-# program of its own). vendor/Cargo.toml makes the two a workspace of their own (ros2-client on our
-# rustdds), locked by vendor/Cargo.lock. A debug build in target/vendor: about 7 CPU-minutes cold
-# (6.7 measured, the crates' dev-dependencies too), then about 15 s of tests. Built here (crates from the
-# registry), run in a network namespace of their own: they open participants and UDP sockets on
-# fixed ports, and two need multicast, which that namespace's loopback is given, so nothing leaves
-# the machine and the host's network does not matter. Every test passes with our patches; one that
-# fails upstream too would be skipped here by name (`--skip PATH`, exact), its reason beside it.
-vendor_test_skips=()
-if ! unshare -n true 2>/dev/null; then
-  echo "test.sh: cannot create a network namespace for the vendored crates' tests (unshare -n needs root)" >&2
-  exit 1
+step "Rust checks (launch_scripts/rust_checks.sh: clippy, rustdoc, the library alone, the vendored crates' tests)"
+# About 10 CPU-minutes that nothing after them needs; before the Python tiers, which mostly wait, they
+# took 9 of a fresh clone's 22 minutes before the first Python test (2026-12-03). So they run in the
+# background, niced (the tests' processes come first on the CPU), and their output and verdict come
+# after the ROS tier; a failure there still fails test.sh. With --rust-only, here and now.
+if [[ $RUST_ONLY == 1 ]]; then
+  bash launch_scripts/rust_checks.sh
+  exit 0
 fi
-vendor_tests=(--locked --manifest-path vendor/Cargo.toml --target-dir target/vendor --workspace --lib)
-cargo test "${vendor_tests[@]}" --no-run
-unshare -n bash -c '
-  set -euo pipefail
-  ip link set lo up
-  ip link set lo multicast on
-  ip route add 224.0.0.0/4 dev lo
-  cargo test --offline "$@"
-' test.sh "${vendor_tests[@]}" -- --exact "${vendor_test_skips[@]}" ||
-  { echo "test.sh: the vendored crates' unit tests failed (above): a patch of vendor/ broke one, see CONTRIBUTING.md" >&2; exit 1; }
-
-[[ $RUST_ONLY == 1 ]] && exit 0
+job_start rust_checks nice -n 19 bash launch_scripts/rust_checks.sh
 
 step "Ray RLlib for the RLlib tests"
 job_join rllib "test.sh: installing Ray RLlib (setup.sh --rllib, launch_scripts/requirements-rllib.txt)"
@@ -199,33 +156,47 @@ if [[ -n "$OTHER_VENV" ]]; then
   echo "test.sh: core venv $OTHER_VENV: $size_mb MB, no torch"
 fi
 
-step "Python unit tests (tests/python/unit: no root, no ROS environment, no network namespace, no node)"
-# The tier a contributor runs as any user in a minute or two (CONTRIBUTING.md, "Tests"), here on the host,
-# before the namespace; the ROS tier below leaves unit/ out, so no test runs twice. As user nobody when
+# The Python unit tier (tests/python/unit: no root, no ROS environment, no network namespace, no node):
+# the tier a contributor runs as any user in a minute or two (CONTRIBUTING.md, "Tests"), here on the
+# host, outside the namespace; the ROS tier leaves unit/ out, so no test runs twice. As user nobody when
 # nobody can run the venv's interpreter, which shows the tier needs no root; else as the current user
 # (here and in CI /root is mode 700, so nobody cannot reach the pyenv interpreter behind .venv/bin/python).
-# PYTEST_ARGS go to the ROS tier only: a path among them would put this session in the ROS tier.
-status=0
-unit_tests=(.venv/bin/python -m pytest tests/python/unit -q -rs -p no:cacheprovider --durations=8)
-nobody=(setpriv --reuid=65534 --regid=65534 --clear-groups)
-# The probe runs the interpreter as the tier does (through env) and checks that it is the venv's: a
-# checkout under a directory nobody cannot enter (mktemp -d's mode 700) once let a bare probe start
-# another Python while the tier's own command was refused.
-probe=(env .venv/bin/python -c "import sys; sys.exit(sys.prefix == sys.base_prefix)")
-if [[ $EUID == 0 ]] && command -v setpriv >/dev/null && "${nobody[@]}" "${probe[@]}" >/dev/null 2>&1; then
+# It runs beside the ROS tier, niced, like the Rust checks (its output comes after the ROS tier's), in
+# a pytest temporary folder of its own. PYTEST_ARGS go to the ROS tier only: a path among them would
+# put this session in the ROS tier.
+# shellcheck disable=SC2317 # its lines run, through `bash -c unit_tier` (export -f) below
+unit_tier() {
+  set -euo pipefail
+  local unit_home
   unit_home="$(mktemp -d /tmp/sorting_line_unit.XXXXXX)"
-  chown 65534:65534 "$unit_home"
-  echo "test.sh: the unit tier runs as user nobody (uid 65534), outside the network namespace"
-  # A HOME of its own (caches, matplotlib); git trusts this root-owned clone (test_commit_msg_hook runs git).
-  "${nobody[@]}" env HOME="$unit_home" PYTHONDONTWRITEBYTECODE=1 GIT_CONFIG_COUNT=1 \
-    GIT_CONFIG_KEY_0=safe.directory GIT_CONFIG_VALUE_0="*" "${unit_tests[@]}" || status=$?
+  local unit_tests=(.venv/bin/python -m pytest tests/python/unit -q -rs -p no:cacheprovider --durations=8
+    --basetemp "$unit_home/pytest")
+  local nobody=(setpriv --reuid=65534 --regid=65534 --clear-groups)
+  # The probe runs the interpreter as the tier does (through env) and checks that it is the venv's: a
+  # checkout under a directory nobody cannot enter (mktemp -d's mode 700) once let a bare probe start
+  # another Python while the tier's own command was refused.
+  local probe=(env .venv/bin/python -c "import sys; sys.exit(sys.prefix == sys.base_prefix)")
+  local status=0
+  if [[ $EUID == 0 ]] && command -v setpriv >/dev/null && "${nobody[@]}" "${probe[@]}" >/dev/null 2>&1; then
+    chown 65534:65534 "$unit_home"
+    echo "test.sh: the unit tier runs as user nobody (uid 65534), outside the network namespace"
+    # A HOME of its own (caches, matplotlib); git trusts this root-owned clone (test_commit_msg_hook runs git).
+    "${nobody[@]}" env HOME="$unit_home" PYTHONDONTWRITEBYTECODE=1 GIT_CONFIG_COUNT=1 \
+      GIT_CONFIG_KEY_0=safe.directory GIT_CONFIG_VALUE_0="*" "${unit_tests[@]}" || status=$?
+  else
+    local why
+    why="user nobody cannot run $(readlink -f .venv/bin/python)"
+    [[ $EUID == 0 ]] || why="not root, so no other user to switch to"
+    echo "test.sh: the unit tier runs as user $(id -un) (uid $EUID), outside the network namespace: $why"
+    "${unit_tests[@]}" || status=$?
+  fi
   rm -rf "$unit_home"
-else
-  why="user nobody cannot run $(readlink -f .venv/bin/python)"
-  [[ $EUID == 0 ]] || why="not root, so no other user to switch to"
-  echo "test.sh: the unit tier runs as user $(id -un) (uid $EUID), outside the network namespace: $why"
-  "${unit_tests[@]}" || status=$?
-fi
+  return "$status"
+}
+export -f unit_tier
+status=0
+step "Python unit tests (tests/python/unit), in the background beside the ROS tier, niced: output after it"
+job_start unit nice -n 19 bash -c unit_tier
 
 step "Python/ROS integration tests (loopback-only network namespace)"
 if ! command -v unshare >/dev/null || ! command -v ip >/dev/null; then
@@ -257,6 +228,9 @@ unshare -n bash -c '
 ' test.sh "$@" || status=$?
 shm_clean
 
+step "Python unit tests (tests/python/unit), run beside the ROS tier"
+job_collect unit "test.sh: the unit tier (tests/python/unit)" || status=1
+
 step "Python $OTHER_PYTHON, core venv: the README's snippets and a subset of the suite"
 if [[ -n "$OTHER_VENV" ]]; then
   start=$SECONDS
@@ -272,5 +246,8 @@ else
   other_missing
 fi
 rm -rf "$SORTING_LINE_COLCON_WS"
+
+step "Rust checks (launch_scripts/rust_checks.sh), run beside the Python tiers"
+job_collect rust_checks "test.sh: launch_scripts/rust_checks.sh" || status=1
 step "done (exit $status)"
 exit "$status"
