@@ -12,7 +12,7 @@
 # fails ends run.sh at once with exit 1, naming the step and its log. Bad arguments: exit 2.
 #
 # Usage: launch_scripts/run.sh [--quick-steps N] [--full|--smoke [--jobs J] [--train-seeds S...] [--timesteps N]
-#                               [--n-envs N] [--lines-mapping M] [--heldout-episodes N]] [--backend ros|native] [--out DIR]
+#                               [--n-envs N] [--lines-mapping M]] [--heldout-episodes N] [--backend ros|native] [--out DIR]
 #   --quick-steps N   PPO budget of step 2 (default 20000)
 #   --full            instead: the whole study of docs/results/benchmark.md (Table 1: 8 lines x random, rba,
 #                     rba-hold, and DQN, PPO, A2C at 100k steps for each of 5 training seeds on 8 lines
@@ -28,7 +28,7 @@
 #   --n-envs N        lines of one node per training, a power of two (default 8; --smoke 2)
 #   --lines-mapping M how the one-line hyperparameters go to N lines: same-rollout (default) or
 #                     same-line-rollout (see bridge/sorting_line_gym/training/hyperparams.py)
-#   --heldout-episodes N  held-out evaluation seeds from 10000 (default 100; --smoke 5)
+#   --heldout-episodes N  held-out evaluation seeds from 10000, in every step (default 100; --smoke 5)
 #   --backend B       ros (default: every agent drives a node over DDS) or native (the line in-process,
 #                     docs/native.md: the same cells, without the round trips)
 #   --out DIR         results directory (default results), relative to the directory run.sh is called from
@@ -157,10 +157,11 @@ if [[ $FULL == 1 || $SMOKE == 1 ]]; then
 fi
 
 step baselines "1/2: random, rba, rba-hold on the 8 setups, backend $BACKEND" \
-  sorting-line-benchmark --agents random rba rba-hold --out "$OUT/baselines" --backend "$BACKEND"
+  sorting-line-benchmark --agents random rba rba-hold --heldout-episodes "$HELDOUT" --out "$OUT/baselines" \
+  --backend "$BACKEND"
 step quick_ppo "2/2: PPO on setup B advanced, $QUICK_STEPS steps, beside the rule-based agents, backend $BACKEND" \
   sorting-line-benchmark --setups B --variants advanced --agents rba rba-hold ppo --timesteps "$QUICK_STEPS" \
-  --out "$OUT/quick_ppo" --backend "$BACKEND"
+  --heldout-episodes "$HELDOUT" --out "$OUT/quick_ppo" --backend "$BACKEND"
 # The summary is made only of what the steps wrote.
 figures=()
 for table in "$OUT/baselines/table.md" "$OUT/quick_ppo/table.md"; do
