@@ -14,7 +14,7 @@ use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
 use sorting_line::sim::evolution::{category_code, At, Schedule};
-use sorting_line::sim::rba::analysis;
+use sorting_line::sim::rba::{analysis_table, ANALYSIS_COLUMNS};
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
 #[derive(Parser)]
@@ -284,29 +284,12 @@ fn print_summary(out: &mut impl Write, setup: Setup, s: &EvalSummary) -> io::Res
 }
 
 fn run_table(args: TableArgs) -> Result<(), String> {
-    let config = LineConfig { variant: args.variant, threshold: args.threshold, ..LineConfig::default() };
-    config.validate().map_err(|e| e.to_string())?;
+    let rows = analysis_table(args.variant, args.threshold).map_err(|e| e.to_string())?;
     let mut out = io::stdout().lock();
     let write = |out: &mut io::StdoutLock| -> io::Result<()> {
-        writeln!(
-            out,
-            "variant,occupancy,category,speed,mode,noiseless_accuracy,expected_accuracy,p_above_threshold,expected_reward,best"
-        )?;
-        for r in analysis(&config) {
-            writeln!(
-                out,
-                "{},{:.2},{},{:.1},{},{:.6},{:.6},{:.6},{:.6},{}",
-                r.variant,
-                r.occupancy,
-                r.category as u8,
-                r.speed,
-                r.mode as u8,
-                r.noiseless_accuracy,
-                r.expected_accuracy,
-                r.p_above_threshold,
-                r.expected_reward,
-                u8::from(r.best)
-            )?;
+        writeln!(out, "{}", ANALYSIS_COLUMNS.join(","))?;
+        for r in &rows {
+            writeln!(out, "{}", r.fields().join(","))?;
         }
         Ok(())
     };

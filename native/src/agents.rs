@@ -1,15 +1,16 @@
 //! The library's non-learning agents and its offline evaluation, callable from Python without the
 //! `sorting_line` CLI: `Agent` (rba, rba-hold, bayes, random, constant:K[:M|:cat], the names of
 //! `sorting_line eval --agent`), `evaluate` and `oracle_eval` (the JSON of `sorting_line eval
-//! --json` and `sorting_line oracle --json`, as dicts), `oracle` (one seed's optimum) and
-//! `policy` (the tables of `sorting_line policy`).
+//! --json` and `sorting_line oracle --json`, as dicts), `oracle` (one seed's optimum), `policy`
+//! (the tables of `sorting_line policy`) and `table` (the rows of `sorting_line table`).
 
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 use sorting_line::eval::{add_oracle, evaluate as run_eval, evaluate_oracle};
 use sorting_line::sim::agent::{Agent as LibAgent, AgentSpec};
 use sorting_line::sim::material::Category;
-use sorting_line::sim::rba::policy as lib_policy;
-use sorting_line::sim::{oracle as lib_oracle, Observation, Setup, Variant};
+use sorting_line::sim::rba::{analysis_table, policy as lib_policy, ANALYSIS_COLUMNS};
+use sorting_line::sim::{oracle as lib_oracle, LineConfig, Observation, Setup, Variant};
 
 use crate::{value_error, LineSettings, Spec};
 
@@ -114,11 +115,32 @@ fn policy<'py>(py: Python<'py>, setup: &str, variant: &str) -> PyResult<Bound<'p
     json_to_py(py, &lib_policy(setup, variant))
 }
 
+/// The rows of `sorting_line table --variant VARIANT --threshold THRESHOLD` (`sim::rba::analysis`,
+/// the rule-based agent's expected-reward analysis; the threshold defaults to the line's): one
+/// dict per CSV row, column name to the text the CLI prints.
+#[pyfunction]
+#[pyo3(signature = (variant, threshold=None))]
+fn table<'py>(py: Python<'py>, variant: &str, threshold: Option<f64>) -> PyResult<Bound<'py, PyList>> {
+    let variant: Variant = variant.parse().map_err(value_error)?;
+    let threshold = threshold.unwrap_or(LineConfig::default().threshold);
+    let rows = analysis_table(variant, threshold).map_err(|e| value_error(e.to_string()))?;
+    let out = PyList::empty(py);
+    for row in &rows {
+        let fields = PyDict::new(py);
+        for (column, text) in ANALYSIS_COLUMNS.iter().zip(row.fields()) {
+            fields.set_item(*column, text)?;
+        }
+        out.append(fields)?;
+    }
+    Ok(out)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeAgent>()?;
     m.add_function(wrap_pyfunction!(policy, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_eval, m)?)?;
     m.add_function(wrap_pyfunction!(oracle, m)?)?;
+    m.add_function(wrap_pyfunction!(table, m)?)?;
     Ok(())
 }

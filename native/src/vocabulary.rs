@@ -8,7 +8,8 @@
 //!   (key, kind, `LineState` fields), `START_CONTENTS` (input, belt, machine: (A, B)),
 //!   `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
 //! - Builders: `observations(variant, quantity, category)`, `action_mask(variant, sort_modes)`,
-//!   `level(quantity)` (the row of the rule-based agent's table), `speed_index_of(speed)`.
+//!   `level(quantity)` (the row of the rule-based agent's table), `speed_index_of(speed)`,
+//!   `reward(accuracy, speed_index, threshold, penalty)` (the step reward).
 
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -19,7 +20,8 @@ use sorting_line::sim::evolution::{CATEGORY_UNKNOWN_CODE, CATEGORY_UNKNOWN_OBSER
 use sorting_line::sim::line::{action_mask as mask_of, START_BELT, START_INPUT, START_MACHINE};
 use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
 use sorting_line::sim::observation::{level as level_of, LEVELS};
-use sorting_line::sim::speed::{index_of_speed, SPEEDS, SPEED_TOLERANCE, START_SPEED_INDEX};
+use sorting_line::sim::reward::reward as reward_of;
+use sorting_line::sim::speed::{index_of_speed, SPEEDS, SPEED_COUNT, SPEED_TOLERANCE, START_SPEED_INDEX};
 use sorting_line::sim::{Action, LineConfig, Variant};
 
 use crate::info::INFO;
@@ -88,6 +90,36 @@ fn level(quantity: f64) -> usize {
 #[pyfunction]
 fn speed_index_of(speed: f64) -> Option<usize> {
     index_of_speed(speed)
+}
+
+/// The step reward (src/sim/reward.rs `reward`) for accuracy value(s) in 0..=1 at a speed index,
+/// float64 of the accuracies' shape: the accuracy and speed terms minus `penalty` (the switching
+/// penalty a change of speed costs), a flat -0.1 below the threshold (default: the line's).
+#[pyfunction]
+#[pyo3(signature = (accuracy, speed_index, threshold=None, penalty=0.0))]
+fn reward<'py>(
+    py: Python<'py>,
+    accuracy: &Bound<'py, PyAny>,
+    speed_index: i64,
+    threshold: Option<f64>,
+    penalty: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let speed_index = usize::try_from(speed_index).ok().filter(|&i| i < SPEED_COUNT).ok_or_else(|| {
+        value_error(format!("speed_index = {speed_index} is out of range: allowed 0 ..= {}", SPEED_COUNT - 1))
+    })?;
+    let threshold = threshold.unwrap_or(LineConfig::default().threshold);
+    LineConfig::check_threshold(threshold).map_err(|e| value_error(e.to_string()))?;
+    LineConfig::check_action_penalty(penalty).map_err(|e| value_error(e.to_string()))?;
+    let a = py.import("numpy")?.call_method1("asarray", (accuracy, "float64"))?.cast_into::<PyArrayDyn<f64>>()?;
+    let a = a.try_readonly()?;
+    let mut out = Vec::with_capacity(a.len());
+    for &accuracy in a.as_array().iter() {
+        if !(0.0..=1.0).contains(&accuracy) {
+            return Err(value_error(format!("accuracy = {accuracy} is out of range: allowed 0.0 ..= 1.0")));
+        }
+        out.push(reward_of(accuracy, threshold, speed_index, penalty));
+    }
+    numpy::PyArray1::from_vec(py, out).reshape(a.shape())
 }
 
 /// The setups, their input generator, sensor noise and switching penalty.
@@ -176,5 +208,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(action_mask, m)?)?;
     m.add_function(wrap_pyfunction!(level, m)?)?;
     m.add_function(wrap_pyfunction!(speed_index_of, m)?)?;
+    m.add_function(wrap_pyfunction!(reward, m)?)?;
     Ok(())
 }

@@ -15,7 +15,7 @@
 use serde::Serialize;
 
 use super::accuracy::{accuracy_law, noiseless_accuracy, ModeEffect};
-use super::config::{InputKind, LineConfig, Setup, Variant};
+use super::config::{ConfigError, InputKind, LineConfig, Setup, Variant};
 use super::input::{prior, MAX_TOTAL};
 use super::line::{Action, Observation};
 use super::material::{Category, SortMode, CATEGORIES};
@@ -215,6 +215,49 @@ pub struct AnalysisRow {
     pub best: bool,
 }
 
+/// The columns of `sorting_line table`'s CSV, in the order of [`AnalysisRow::fields`].
+pub const ANALYSIS_COLUMNS: [&str; 10] = [
+    "variant",
+    "occupancy",
+    "category",
+    "speed",
+    "mode",
+    "noiseless_accuracy",
+    "expected_accuracy",
+    "p_above_threshold",
+    "expected_reward",
+    "best",
+];
+
+impl AnalysisRow {
+    /// The row as `sorting_line table` prints it, one text per [`ANALYSIS_COLUMNS`] entry:
+    /// occupancy to 2 decimals, speed to 1, the accuracies, probability and reward to 6, the
+    /// category, mode and `best` as numbers (the one formatting of the CLI and the extension).
+    pub fn fields(&self) -> [String; ANALYSIS_COLUMNS.len()] {
+        [
+            self.variant.to_string(),
+            format!("{:.2}", self.occupancy),
+            (self.category as u8).to_string(),
+            format!("{:.1}", self.speed),
+            (self.mode as u8).to_string(),
+            format!("{:.6}", self.noiseless_accuracy),
+            format!("{:.6}", self.expected_accuracy),
+            format!("{:.6}", self.p_above_threshold),
+            format!("{:.6}", self.expected_reward),
+            u8::from(self.best).to_string(),
+        ]
+    }
+}
+
+/// The analysis `sorting_line table --variant VARIANT --threshold THRESHOLD` prints: [`analysis`]
+/// of the default line with that variant and threshold, the threshold checked as
+/// [`LineConfig::validate`] checks it.
+pub fn analysis_table(variant: Variant, threshold: f64) -> Result<Vec<AnalysisRow>, ConfigError> {
+    let config = LineConfig { variant, threshold, ..LineConfig::default() };
+    config.validate()?;
+    Ok(analysis(&config))
+}
+
 /// The noise-free model analysis behind the agent: every (occupancy, category, speed, mode).
 /// The basic line has one category (its rows say `basic`).
 pub fn analysis(config: &LineConfig) -> Vec<AnalysisRow> {
@@ -340,5 +383,26 @@ mod tests {
         let rows = analysis(&LineConfig::for_setup(Setup::A, Variant::Advanced));
         assert_eq!(rows.len(), 101 * 3 * 30);
         assert_eq!(rows.iter().filter(|r| r.best).count(), 101 * 3);
+    }
+
+    #[test]
+    fn the_table_is_the_default_lines_analysis_as_the_cli_prints_it() {
+        let rows = analysis_table(Variant::Advanced, 0.5).unwrap();
+        let config = LineConfig { variant: Variant::Advanced, threshold: 0.5, ..LineConfig::default() };
+        assert_eq!(rows.len(), analysis(&config).len());
+        // Occupancy 0.3, category B-rich, speed 0.4, mode positive: the fields in the columns' order.
+        let row = rows
+            .iter()
+            .find(|r| {
+                r.occupancy == 0.3 && r.category == Category::Negative && r.speed == 0.4 && r.mode == SortMode::Positive
+            })
+            .unwrap();
+        let fields = row.fields();
+        assert_eq!(fields[..5], ["advanced", "0.30", "2", "0.4", "1"]);
+        assert_eq!(fields[5], format!("{:.6}", row.noiseless_accuracy));
+        assert_eq!(fields[8], format!("{:.6}", row.expected_reward));
+        assert_eq!(ANALYSIS_COLUMNS[5], "noiseless_accuracy");
+        let error = analysis_table(Variant::Basic, 1.0).unwrap_err();
+        assert_eq!(error.to_string(), "threshold = 1 is out of range: allowed 0.0 ..< 1.0");
     }
 }

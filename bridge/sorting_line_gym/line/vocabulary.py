@@ -165,6 +165,14 @@ def action_mask(variant: str, sort_modes: bool = True) -> np.ndarray:
     return _native.action_mask(check_variant(variant), bool(sort_modes))
 
 
+def reward(accuracy, speed_index: int, threshold: float = THRESHOLD, penalty: float = 0.0) -> np.ndarray:
+    """The step reward for accuracy value(s) in 0..1 at a speed index, float64 of the accuracies'
+    shape: the library's (src/sim/reward.rs ``reward``), a flat -0.1 below ``threshold``, else the
+    accuracy and speed terms minus ``penalty`` (what a change of speed costs). A value out of its
+    range raises ValueError naming it and the range."""
+    return _native.reward(accuracy, speed_index, threshold, penalty)
+
+
 def sim_seconds(sec, nanosec):
     """Simulated seconds of a stamp (or of arrays of stamps)."""
     return sec + nanosec * 1e-9

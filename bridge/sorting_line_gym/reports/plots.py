@@ -2,8 +2,9 @@
 
 - :func:`benchmark_figure`: the paper's Figure 7, mean episode reward per setup and agent, with
   our spread as error bars and the paper's Table 1 values as markers.
-- :func:`analysis_figure`: the paper's Figure 3 for the basic line, drawn from ``sorting_line
-  table`` (the library's expected-reward analysis, the one the rule-based agent decides with):
+- :func:`analysis_figure`: the paper's Figure 3 for the basic line, drawn from the rows of
+  ``sorting_line table`` (the library's expected-reward analysis, the one the rule-based agent
+  decides with, made in-process) and the library's step reward:
   accuracy against occupancy per speed; the accuracy heat map with the area under the threshold
   in black; reward against accuracy per speed; the expected-reward heat map with the best speed
   per occupancy marked.
@@ -22,9 +23,6 @@ leaves the caller's matplotlib backend and open windows alone.
 
 from __future__ import annotations
 
-import csv
-import io
-import subprocess
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,8 +34,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from ..line.process import find_node_binary
-from ..line.vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS
+import sorting_line_gym._native as _native
+
+from ..line.vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS, check_variant, reward, speed_index_of
 
 AGENT_COLORS = {
     "random": "#9e9e9e",
@@ -102,18 +101,18 @@ def benchmark_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Pat
 
 
 def read_table(variant: str = "basic") -> list[dict[str, str]]:
-    """The rows of ``sorting_line table --variant VARIANT``."""
-    argv = [find_node_binary(), "table", "--variant", variant]
-    result = subprocess.run(argv, capture_output=True, text=True, timeout=120)
-    if result.returncode != 0:
-        raise RuntimeError(f"`{' '.join(argv)}` failed with {result.returncode}: {result.stderr.strip()}")
-    return list(csv.DictReader(io.StringIO(result.stdout)))
+    """The rows of ``sorting_line table --variant VARIANT``, made in-process by the library
+    (``_native.table``): column name to the text the CLI prints."""
+    return _native.table(check_variant(variant))
 
 
 def reward_of(accuracy: np.ndarray, speed: float) -> np.ndarray:
-    """The step reward without a speed change (src/sim/reward.rs)."""
-    r = 0.5 * (accuracy - THRESHOLD) / (1 - THRESHOLD) + 0.5 * (speed - SPEEDS[0]) / (SPEEDS[-1] - SPEEDS[0])
-    return np.where(accuracy < THRESHOLD, -0.1, r)
+    """The step reward without a speed change at belt speed ``speed``, the library's
+    (src/sim/reward.rs); a speed that is not one of the ten raises ValueError."""
+    index = speed_index_of(speed)
+    if index is None:
+        raise ValueError(f"speed = {speed!r} is not a belt speed: allowed {', '.join(map(str, SPEEDS))}")
+    return reward(accuracy, index)
 
 
 def _dynamics_grid() -> tuple[np.ndarray, list[float], np.ndarray, np.ndarray]:

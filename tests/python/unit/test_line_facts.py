@@ -9,8 +9,11 @@ tests/python/unit/test_vocabulary.py holds the same exports to the CLI's ``sorti
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 import re
+import subprocess
 from dataclasses import fields
 from pathlib import Path
 from types import SimpleNamespace
@@ -24,6 +27,8 @@ from sorting_line_gym.envs import env as env_module
 from sorting_line_gym.line import vocabulary as v
 from sorting_line_gym.line.options import LineOptions
 from sorting_line_gym.line.policy_card import action_decoding
+from sorting_line_gym.reports import plots
+from support import ros_harness as h
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -165,3 +170,48 @@ def test_the_dashboard_starts_with_the_librarys_contents():
     history = env_module._History
     assert (history.START_INPUT, history.START_BELT, history.START_MACHINE) == tuple(v.START_CONTENTS.values())
     assert v.START_OCCUPANCY == sum(v.START_CONTENTS["belt"]) / 100
+
+
+@pytest.mark.parametrize("variant", v.VARIANTS)
+def test_the_plots_table_is_the_clis(variant):
+    """reports.plots reads ``sorting_line table`` in-process: the same rows, text for text."""
+    argv = [str(h.node_binary()), "table", "--variant", variant]
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert plots.read_table(variant) == list(csv.DictReader(io.StringIO(r.stdout)))
+    with pytest.raises(ValueError, match="threshold = 1 is out of range: allowed 0.0 ..< 1.0"):
+        _native.table(variant, 1.0)
+    with pytest.raises(ValueError, match="variant = 'fancy' is not valid: allowed basic, advanced"):
+        plots.read_table("fancy")
+
+
+@pytest.mark.parametrize("variant", v.VARIANTS)
+def test_the_plots_reward_is_the_tables_where_the_accuracy_is_sure(variant):
+    """Where the table's accuracy clears the threshold for sure (or surely not), its expected
+    reward is the step reward of its expected accuracy: reward_of (the library's reward) gives it,
+    to the table's six decimals."""
+    rows = plots.read_table(variant)
+    sure = [r for r in rows if r["p_above_threshold"] in ("1.000000", "0.000000")]
+    assert {r["p_above_threshold"] for r in sure} == {"1.000000", "0.000000"}
+    assert len({r["speed"] for r in sure}) == v.SPEED_COUNT
+    accuracy = np.array([float(r["expected_accuracy"]) for r in sure])
+    got = np.array([plots.reward_of(a, float(r["speed"])) for a, r in zip(accuracy, sure, strict=True)])
+    expected = np.array([float(r["expected_reward"]) for r in sure])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-6)
+
+
+def test_the_reward_checks_its_inputs():
+    np.testing.assert_array_equal(v.reward([0.69, 0.7, 1.0], 9), [-0.1, 0.5, 1.0])
+    assert v.reward(0.85, 4, penalty=0.5).shape == () and v.reward(np.zeros((2, 3)), 0).shape == (2, 3)
+    assert plots.reward_of(np.array([1.0]), v.SPEEDS[-1]).tolist() == [1.0]
+    for call, message in [
+        (lambda: v.reward(0.8, 10), "speed_index = 10 is out of range: allowed 0 ..= 9"),
+        (lambda: v.reward(0.8, -1), "speed_index = -1 is out of range: allowed 0 ..= 9"),
+        (lambda: v.reward([0.8, 1.5], 0), "accuracy = 1.5 is out of range: allowed 0.0 ..= 1.0"),
+        (lambda: v.reward(math.nan, 0), "accuracy = NaN is out of range: allowed 0.0 ..= 1.0"),
+        (lambda: v.reward(0.8, 0, threshold=1.0), "threshold = 1 is out of range: allowed 0.0 ..< 1.0"),
+        (lambda: v.reward(0.8, 0, penalty=-0.5), r"action_penalty = -0.5 is out of range: allowed 0.0 ..= 10.0"),
+        (lambda: plots.reward_of(np.array([0.8]), 0.55), "speed = 0.55 is not a belt speed: allowed 0.1, 0.2,"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            call()
