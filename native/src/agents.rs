@@ -8,8 +8,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sorting_line::eval::{add_oracle, evaluate as run_eval, evaluate_oracle};
 use sorting_line::sim::agent::{Agent as LibAgent, AgentSpec};
-use sorting_line::sim::material::Category;
+use sorting_line::sim::material::{Category, CATEGORIES};
 use sorting_line::sim::rba::{analysis_table, policy as lib_policy, ANALYSIS_COLUMNS};
+use sorting_line::sim::speed::SPEED_COUNT;
 use sorting_line::sim::{oracle as lib_oracle, LineConfig, Observation, Setup, Variant};
 
 use crate::{value_error, LineSettings, Spec};
@@ -38,11 +39,13 @@ impl NativeAgent {
         if !(0.0..=1.0).contains(&quantity) {
             return Err(value_error(format!("quantity = {quantity} is out of range: allowed 0.0 ..= 1.0")));
         }
-        let category = Category::from_index(category)
-            .ok_or_else(|| value_error(format!("category = {category} is out of range: allowed 0, 1, 2")))?;
-        if current_speed_index >= 10 {
+        let category = Category::from_index(category).ok_or_else(|| {
+            value_error(format!("category = {category} is out of range: allowed {}", category_codes()))
+        })?;
+        if current_speed_index >= SPEED_COUNT {
             return Err(value_error(format!(
-                "current_speed_index = {current_speed_index} is out of range: allowed 0 ..= 9"
+                "current_speed_index = {current_speed_index} is out of range: allowed 0 ..= {}",
+                SPEED_COUNT - 1
             )));
         }
         let action = self.agent.act(Observation { quantity, category }, current_speed_index);
@@ -53,6 +56,11 @@ impl NativeAgent {
     fn reseed(&mut self, seed: u64) {
         self.agent.reseed(seed);
     }
+}
+
+/// The ratio categories' codes, as an error message lists them (`0, 1, 2`).
+fn category_codes() -> String {
+    CATEGORIES.iter().map(|c| c.index().to_string()).collect::<Vec<_>>().join(", ")
 }
 
 fn json_to_py<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {

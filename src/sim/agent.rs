@@ -8,7 +8,7 @@ use std::str::FromStr;
 use super::bayes::BayesAgent;
 use super::config::{LineConfig, Variant};
 use super::line::{Action, Observation};
-use super::material::SortMode;
+use super::material::{SortMode, SORT_MODES};
 use super::rba::RbaTable;
 use super::rng::{integer, stream, SimRng, Stream};
 use super::speed::SPEED_COUNT;
@@ -35,8 +35,10 @@ impl FromStr for AgentSpec {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        let usage =
-            "allowed: rba, rba-hold, bayes, random, constant:K, constant:K:cat, constant:K:M (K = 0..9, M = 0..2)";
+        let (last_speed, last_mode) = (SPEED_COUNT - 1, SORT_MODES.len() - 1);
+        let usage = format!(
+            "allowed: rba, rba-hold, bayes, random, constant:K, constant:K:cat, constant:K:M (K = 0..{last_speed}, M = 0..{last_mode})"
+        );
         match s {
             "rba" => return Ok(AgentSpec::Rba),
             "rba-hold" => return Ok(AgentSpec::RbaHold),
@@ -48,11 +50,10 @@ impl FromStr for AgentSpec {
         if parts[0] != "constant" || !(2..=3).contains(&parts.len()) {
             return Err(format!("unknown agent '{s}': {usage}"));
         }
-        let speed_index = parts[1]
-            .parse::<usize>()
-            .ok()
-            .filter(|&k| k < SPEED_COUNT)
-            .ok_or_else(|| format!("speed index '{}' in '{s}' is out of range: allowed 0..9", parts[1]))?;
+        let speed_index =
+            parts[1].parse::<usize>().ok().filter(|&k| k < SPEED_COUNT).ok_or_else(|| {
+                format!("speed index '{}' in '{s}' is out of range: allowed 0..{last_speed}", parts[1])
+            })?;
         let mode = match parts.get(2) {
             None => ModeChoice::Fixed(SortMode::Basic),
             Some(&"cat") => ModeChoice::Observed,
@@ -60,7 +61,7 @@ impl FromStr for AgentSpec {
                 m.parse::<u8>()
                     .ok()
                     .and_then(SortMode::from_index)
-                    .ok_or_else(|| format!("mode '{m}' in '{s}' is out of range: allowed 0..2 or cat"))?,
+                    .ok_or_else(|| format!("mode '{m}' in '{s}' is out of range: allowed 0..{last_mode} or cat"))?,
             ),
         };
         Ok(AgentSpec::Constant { speed_index, mode })
@@ -156,6 +157,7 @@ mod tests {
         }
         assert!("constant:10".parse::<AgentSpec>().unwrap_err().contains("allowed 0..9"));
         assert!("constant:1:5".parse::<AgentSpec>().unwrap_err().contains("allowed 0..2 or cat"));
+        assert!("fancy".parse::<AgentSpec>().unwrap_err().ends_with("constant:K:M (K = 0..9, M = 0..2)"));
         assert!("ppo".parse::<AgentSpec>().unwrap_err().starts_with("unknown agent 'ppo'"));
     }
 

@@ -66,14 +66,14 @@ impl TryFrom<RawAction> for Action {
         if raw.speed_index < SPEED_COUNT {
             Ok(Action { speed_index: raw.speed_index, mode: raw.mode })
         } else {
-            Err(format!("speed_index = {} is out of range: allowed 0..=9", raw.speed_index))
+            Err(format!("speed_index = {} is out of range: allowed 0..={}", raw.speed_index, SPEED_COUNT - 1))
         }
     }
 }
 
 impl Action {
     pub fn new(speed_index: usize, mode: SortMode) -> Self {
-        assert!(speed_index < SPEED_COUNT, "speed index {speed_index} out of 0..=9");
+        assert!(speed_index < SPEED_COUNT, "speed index {speed_index} out of 0..={}", SPEED_COUNT - 1);
         Action { speed_index, mode }
     }
 
@@ -361,7 +361,7 @@ impl Line {
     /// [`Action::new`] and decoding check it). The check comes first, so the line is never left
     /// half-stepped.
     pub fn step(&mut self, action: Action) -> StepOutcome {
-        assert!(action.speed_index < SPEED_COUNT, "speed index {} out of 0..=9", action.speed_index);
+        assert!(action.speed_index < SPEED_COUNT, "speed index {} out of 0..={}", action.speed_index, SPEED_COUNT - 1);
         if self.tick == self.due_tick {
             self.apply_tick_events();
         }
@@ -660,7 +660,7 @@ mod tests {
     #[test]
     fn out_of_range_actions_are_refused_when_decoded_and_before_stepping() {
         let err = serde_json::from_str::<Action>(r#"{"speed_index": 12, "mode": "basic"}"#).unwrap_err();
-        assert!(err.to_string().contains("speed_index = 12 is out of range"), "{err}");
+        assert!(err.to_string().contains("speed_index = 12 is out of range: allowed 0..=9"), "{err}");
         let ok: Action = serde_json::from_str(r#"{"speed_index": 9, "mode": "negative"}"#).unwrap();
         assert_eq!(ok, Action::new(9, SortMode::Negative));
         let mut line = Line::new(LineConfig::default(), 1);

@@ -66,8 +66,8 @@ impl RbaTable {
     pub fn build(config: &LineConfig) -> Self {
         let joint = prior(config.input);
         let options = options(config.variant);
-        let mut best = Vec::with_capacity(LEVELS * 3);
-        let mut hold = Vec::with_capacity(LEVELS * 3 * SPEED_COUNT);
+        let mut best = Vec::with_capacity(LEVELS * CATEGORIES.len());
+        let mut hold = Vec::with_capacity(LEVELS * CATEGORIES.len() * SPEED_COUNT);
         for reading in 0..LEVELS {
             for category in CATEGORIES {
                 // Posterior weight of each true total given the reading (and category).
@@ -119,7 +119,7 @@ impl RbaTable {
             Variant::Basic => Category::Basic, // the basic line has no ratio sensor
             Variant::Advanced => observation.category,
         };
-        level(observation.quantity) * 3 + category.index()
+        level(observation.quantity) * CATEGORIES.len() + category.index()
     }
 
     /// `rba`: the action with the highest expected immediate reward, ignoring the switching

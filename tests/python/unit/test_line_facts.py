@@ -215,3 +215,15 @@ def test_the_reward_checks_its_inputs():
     ]:
         with pytest.raises(ValueError, match=re.escape(message)):
             call()
+
+
+def test_the_native_agent_names_the_librarys_ranges():
+    settings = dict(v.SETUPS["A"], variant="advanced", threshold=v.THRESHOLD, max_steps=v.EPISODE_STEPS)
+    agent = _native.Agent("rba", settings)
+    assert 0 <= agent.act(0.5, 2, v.SPEED_COUNT - 1) < v.ACTION_COUNTS["advanced"]
+    codes = ", ".join(map(str, sorted(v.CATEGORIES.values())))
+    with pytest.raises(ValueError, match=re.escape(f"category = 3 is out of range: allowed {codes}")):
+        agent.act(0.5, 3, 0)
+    last = v.SPEED_COUNT - 1
+    with pytest.raises(ValueError, match=re.escape(f"current_speed_index = 10 is out of range: allowed 0 ..= {last}")):
+        agent.act(0.5, 0, v.SPEED_COUNT)
