@@ -38,6 +38,7 @@ use sorting_line::ros::protocol::{
     REJECTIONS,
 };
 use sorting_line::ros::ros_args::RosArgs;
+use sorting_line::ros::topics;
 use sorting_line::sim::config::{SETUPS, VARIANTS};
 use sorting_line::sim::{Line, LineConfig, SortMode, Variant};
 
@@ -255,7 +256,7 @@ fn send_junk(
         "a rejected command changed the line"
     );
     *tally.rejected.entry(reason).or_default() += 1;
-    counters.reject(reason, if is_speed { "cmd/speed" } else { "cmd/sort_mode" }, "fuzz");
+    counters.reject(reason, if is_speed { topics::SPEED_CMD.name } else { topics::SORT_MODE_CMD.name }, "fuzz");
     Ok(())
 }
 
@@ -506,7 +507,7 @@ fn fuzz_batch_commands() {
                         prop_assert!(detail.contains(&format!("for {lines} lines")), "{detail}");
                         // No line sees any of it; the node counts it once, on line 0.
                         *tallies[0].rejected.entry(Rejection::Malformed).or_default() += 1;
-                        counters[0].reject(Rejection::Malformed, "batch/cmd", &detail);
+                        counters[0].reject(Rejection::Malformed, topics::BATCH_CMD.name, &detail);
                         continue;
                     }
                     Ok(entries) => entries,
@@ -545,7 +546,7 @@ fn fuzz_batch_commands() {
                                     entry.stamp
                                 );
                                 *tallies[k].rejected.entry(reason).or_default() += 1;
-                                counters[k].reject(reason, "batch/cmd", "fuzz");
+                                counters[k].reject(reason, topics::BATCH_CMD.name, "fuzz");
                             }
                             (allowed, got) => {
                                 return Err(TestCaseError::fail(format!(

@@ -6,26 +6,32 @@
 use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
 
 use super::params::{MAX_RATE, MAX_SEED, PARAMETERS, TICK_PERIOD_RANGE};
+use super::topics::{CLOCK, DIAGNOSTICS, PARAMETER_EVENTS};
 use crate::sim::config::{ACTION_PENALTY_RANGE, MAX_EPISODE_STEPS, MAX_NODE_LINES, OBS_NOISE_RANGE, THRESHOLD_RANGE};
 
-/// What each parameter is for, in the order of [`PARAMETERS`].
-const DESCRIPTIONS: &[(&str, &str)] = &[
-    ("variant", "Line variant: basic (belt speed only) or advanced (speed and sort mode, ratio sensor)"),
-    ("input", "Input material stream: random, seasonal (9 patterns) or seasonal3"),
-    ("obs_noise", "Noise of the observed input quantity (0 = exact)"),
-    ("action_penalty", "Reward penalty per change of the belt speed"),
-    ("threshold", "Sorting accuracy below which a step earns the flat -0.1 reward"),
-    ("max_steps", "Episode length in ticks"),
-    ("seed", "Seed of line 0's random streams; line k uses seed + k"),
-    ("mode", "lockstep (a tick when its commands have arrived) or realtime (ticks at `rate`)"),
-    ("rate", "Realtime mode: ticks per second of wall time"),
-    ("lines", "Lines hosted by this node (more than one: <namespace>/line_<k>)"),
-    ("tick_period", "Simulated seconds per tick (the step of /clock and of every stamp)"),
-    ("setup", "The paper's setup A, B, C or D (empty: none); sets input, obs_noise and action_penalty unless given explicitly"),
-    ("use_sim_time", "Ignored: this node is the clock, it publishes /clock"),
-    ("evolution_file", "Evolution schedule every line follows (upgrades, drifts, sensor faults; empty: none); the values it changes are updated on /parameter_events"),
-    ("foxglove", "Where the Foxglove WebSocket live view listens ([ADDR:]PORT; empty: off): every topic, /clock's time, /diagnostics and the line as a scene (docs/foxglove.md)"),
-];
+/// What parameter `name` is for (empty for a name that is no parameter). The topics it names are
+/// the topic table's ([`super::topics`]).
+fn description(name: &str) -> String {
+    let (clock, diagnostics, parameter_events) = (CLOCK.name, DIAGNOSTICS.name, PARAMETER_EVENTS.name);
+    match name {
+        "variant" => "Line variant: basic (belt speed only) or advanced (speed and sort mode, ratio sensor)".into(),
+        "input" => "Input material stream: random, seasonal (9 patterns) or seasonal3".into(),
+        "obs_noise" => "Noise of the observed input quantity (0 = exact)".into(),
+        "action_penalty" => "Reward penalty per change of the belt speed".into(),
+        "threshold" => "Sorting accuracy below which a step earns the flat -0.1 reward".into(),
+        "max_steps" => "Episode length in ticks".into(),
+        "seed" => "Seed of line 0's random streams; line k uses seed + k".into(),
+        "mode" => "lockstep (a tick when its commands have arrived) or realtime (ticks at `rate`)".into(),
+        "rate" => "Realtime mode: ticks per second of wall time".into(),
+        "lines" => "Lines hosted by this node (more than one: <namespace>/line_<k>)".into(),
+        "tick_period" => format!("Simulated seconds per tick (the step of {clock} and of every stamp)"),
+        "setup" => "The paper's setup A, B, C or D (empty: none); sets input, obs_noise and action_penalty unless given explicitly".into(),
+        "use_sim_time" => format!("Ignored: this node is the clock, it publishes {clock}"),
+        "evolution_file" => format!("Evolution schedule every line follows (upgrades, drifts, sensor faults; empty: none); the values it changes are updated on {parameter_events}"),
+        "foxglove" => format!("Where the Foxglove WebSocket live view listens ([ADDR:]PORT; empty: off): every topic, {clock}'s time, {diagnostics} and the line as a scene (docs/foxglove.md)"),
+        _ => String::new(),
+    }
+}
 
 /// The parameters an evolution schedule changes while the node runs (on /parameter_events).
 pub const EVOLVING_PARAMETERS: [&str; 4] = ["obs_noise", "action_penalty", "threshold", "input"];
@@ -58,7 +64,7 @@ pub fn descriptors() -> Vec<ParameterDescriptor> {
             name: name.to_string(),
             // ros2-client answers with the type of the current value.
             param_type: ParameterType::NotSet,
-            description: DESCRIPTIONS.iter().find(|(n, _)| n == name).map(|(_, d)| d.to_string()).unwrap_or_default(),
+            description: description(name),
             additional_constraints: if EVOLVING_PARAMETERS.contains(name) {
                 format!("{allowed}; fixed for the run but for the node's evolution schedule (evolution_file), which updates it")
             } else {
@@ -75,6 +81,7 @@ pub fn descriptors() -> Vec<ParameterDescriptor> {
 mod tests {
     use super::*;
     use crate::ros::params::NodeParams;
+    use crate::ros::topics;
     use serde_yaml::Value;
 
     fn accepts(name: &str, value: Value) -> bool {
@@ -89,6 +96,37 @@ mod tests {
             assert!(!d.description.is_empty(), "{} has no description", d.name);
             assert!(d.read_only, "{}", d.name);
         }
+    }
+
+    /// Every absolute name a description mentions is one of the node's topics, as the topic
+    /// table spells it; the three descriptions that name one name it.
+    #[test]
+    fn the_descriptions_name_the_topic_tables_topics() {
+        let globals: Vec<&str> = topics::TOPICS.iter().map(|t| t.name).filter(|n| n.starts_with('/')).collect();
+        let mut named = Vec::new();
+        for d in descriptors() {
+            for word in d.description.split(|c: char| c.is_whitespace() || matches!(c, ',' | ';' | '(' | ')' | '\'')) {
+                if word.starts_with('/') {
+                    assert!(
+                        globals.contains(&word),
+                        "{}'s description names {word}, which is no topic of the node",
+                        d.name
+                    );
+                    named.push((d.name.clone(), word.to_string()));
+                }
+            }
+        }
+        let named: Vec<(&str, &str)> = named.iter().map(|(p, t)| (p.as_str(), t.as_str())).collect();
+        assert_eq!(
+            named,
+            [
+                ("tick_period", CLOCK.name),
+                ("use_sim_time", CLOCK.name),
+                ("evolution_file", PARAMETER_EVENTS.name),
+                ("foxglove", CLOCK.name),
+                ("foxglove", DIAGNOSTICS.name),
+            ]
+        );
     }
 
     /// The advertised range is the enforced one: its bounds pass (unless stated open) and the
