@@ -12,13 +12,39 @@ the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
 - steps to recover: training steps after the change (for "from scratch": from its start) until
   the 10-episode moving mean of the training rewards first reaches 90 % of the from-scratch final
   score (its IQM over runs x seeds); a run that never does counts as its whole budget (so the
-  figure is a lower bound when not all runs reached it); IQM over runs with its interval.
+  figure is a lower bound when not all runs reached it); IQM over runs with its interval;
+- the continual-RL metrics (``continual``), each per run with the IQM over runs and its interval
+  over whole runs:
+
+  - *jumpstart*: the score right after the change, i.e. the frozen snapshot's evaluation on the
+    changed line (the continued agent is that snapshot at the change), for continued and frozen;
+    from scratch has no evaluation at its start, so none;
+  - *AUC*: the area under the normalised training curve after the change, the mean over the
+    after-change episodes of ``(reward - random) / (oracle - random)``, with random's and the
+    oracle's means after the change from the scenario's baselines cell (``normalisation``; none
+    where that cell has not both, e.g. one of the study's first version, which recorded no random:
+    the table says why); for continued (its curve after the change) and from scratch (its whole
+    curve);
+  - *steps to rba-hold*: training steps after the change (from scratch: from its start) until the
+    10-episode moving mean of the training rewards first reaches rba-hold's mean after the change;
+    a run that never does counts as its budget, so the figure is then a lower bound (as for the
+    steps to recover);
+  - *forward transfer*: ``(AUC - AUC_scratch) / (1 - AUC_scratch)`` per continued run, against the
+    mean AUC of the from-scratch runs (held fixed: the interval resamples the continued runs);
+    none when that mean is 1 or more (from-scratch runs at the oracle's mean or above: no scale);
+  - *crossover*: the training steps after the change at which the from-scratch run's cumulative
+    training reward first exceeds the continued run's of the same training seed; a pair where it
+    never does counts as the budget (a lower bound).
+
+  Forgetting (the score on the line before the change) is not reported: no cell evaluates an
+  agent on that line.
 
 No ROS and no Stable-Baselines3 here: the report redraws from the cell files alone.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +53,25 @@ import numpy as np
 from . import stats
 
 WINDOW = 10
-#: (cell kind, record key) of each strategy's evaluation episodes.
-EVALUATIONS = {
-    "continued": ("transfer", "continued_eval"),
-    "frozen": ("transfer", "frozen_eval"),
-    "scratch": ("scratch", "scratch_eval"),
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """A strategy of the study: the cell kind and record key of its evaluation episodes and of its
+    training curve (None: it trains no further), and how the tables and figures name and colour it."""
+
+    kind: str
+    evaluation: str
+    curve: str | None
+    label: str
+    colour: str
+
+
+#: The strategies, in the order of every table and figure.
+STRATEGIES = {
+    "continued": Strategy("transfer", "continued_eval", "continued_curve", "(a) continued", "tab:blue"),
+    "frozen": Strategy("transfer", "frozen_eval", None, "(b) frozen", "tab:gray"),
+    "scratch": Strategy("scratch", "scratch_eval", "scratch_curve", "(c) from scratch", "tab:orange"),
 }
 COMPARISONS = (("continued", "scratch"), ("continued", "frozen"), ("scratch", "frozen"))
 RECOVERY_SHARE = 0.9
@@ -48,8 +88,8 @@ def runs_of(records: list[dict], scenario: str, algo: str, kind: str) -> list[di
 
 def scores(records: list[dict], scenario: str, algo: str, strategy: str) -> np.ndarray:
     """Runs x evaluation seeds of one strategy (empty when no cell is in)."""
-    kind, key = EVALUATIONS[strategy]
-    return np.array([r[key] for r in runs_of(records, scenario, algo, kind)], dtype=float)
+    st = STRATEGIES[strategy]
+    return np.array([r[st.evaluation] for r in runs_of(records, scenario, algo, st.kind)], dtype=float)
 
 
 def recovery_target(final: float) -> float:
@@ -73,6 +113,23 @@ def recovery_steps(curve, target: float, episode_steps: int, window: int = WINDO
     return None
 
 
+def curves_after(records: list[dict], scenario: str, algo: str, key: dict[str, Any]) -> dict[str, dict[int, list]]:
+    """Per strategy that trains, each run's (training seed's) training curve after the change:
+    continued from episode ``before`` on, from scratch whole."""
+    found = {}
+    for strategy, st in STRATEGIES.items():
+        if st.curve is not None:
+            runs = runs_of(records, scenario, algo, st.kind)
+            found[strategy] = {r["cell"]["seed"]: r[st.curve][_change_at(st, key) :] for r in runs}
+    return found
+
+
+def _change_at(st: Strategy, key: dict[str, Any]) -> int:
+    """The episode of ``st``'s training curve at which the line has changed: ``before`` for the agent
+    trained through the change, 0 for one trained on the changed line."""
+    return key["before"] if st.kind == "transfer" else 0
+
+
 def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any]) -> dict[str, Any] | None:
     """Steps to recover of continued (after the change) and from scratch, against one target."""
     scratch = scores(records, scenario, algo, "scratch")
@@ -81,20 +138,108 @@ def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any])
         return None
     target = recovery_target(float(stats.iqm(scratch)))
     budget = key["after"] * key["episode_steps"]
-    curves = {
-        "continued": [r["continued_curve"][key["before"] :] for r in transfer],
-        "scratch": [r["scratch_curve"] for r in runs_of(records, scenario, algo, "scratch")],
-    }
     found: dict[str, Any] = {"target": target, "budget_steps": budget}
+    for strategy, runs in curves_after(records, scenario, algo, key).items():
+        steps = [recovery_steps(c, target, key["episode_steps"], key["window"]) for c in runs.values()]
+        found[strategy] = _counted(steps, budget)
+    return found
+
+
+def _counted(steps: list[int | None], budget: int) -> dict[str, Any]:
+    """Steps per run (None: never within ``budget``) with their IQM over runs, a run that never got
+    there counted as ``budget`` (the figure is then a lower bound)."""
+    counted = np.array([[s if s is not None else budget] for s in steps], dtype=float)
+    return {
+        "per_run": steps,
+        "reached": sum(s is not None for s in steps),
+        "runs": len(steps),
+        "iqm": stats.iqm_interval(counted).as_dict(),
+    }
+
+
+def _over_runs(values: list[float]) -> dict[str, Any]:
+    """One value per run with their IQM and its interval over runs."""
+    return {"per_run": values, "runs": len(values), "iqm": stats.iqm_interval(np.array(values)[:, None]).as_dict()}
+
+
+def normalisation(record: dict[str, Any]) -> dict[str, Any]:
+    """The scale of a scenario's normalised curves from its baselines cell: ``low`` and ``high``,
+    random's and the oracle's means after the change; or, where the cell has not both or the
+    oracle is not above random, ``missing``: why there is none."""
+    after = record["after"]
+    absent = [agent for agent in ("random", "oracle") if agent not in after]
+    if absent:
+        why = record.get("oracle_after_missing") if absent == ["oracle"] else None
+        return {"missing": f"the baselines cell has no {' and no '.join(absent)} after the change"
+                + (f" ({why})" if why else "")}  # fmt: skip
+    low, high = float(np.mean(after["random"])), float(np.mean(after["oracle"]))
+    if not high > low:
+        return {"missing": f"the oracle's mean after the change ({high:.2f}) is not above random's ({low:.2f})"}
+    return {"low": low, "high": high}
+
+
+def auc(curve, low: float, high: float) -> float:
+    """The area under the normalised curve of episode rewards ``curve``, per episode: the mean of
+    ``(reward - low) / (high - low)`` (1: ``high`` from the first episode on)."""
+    return float(np.mean(stats.normalized(np.asarray(curve, dtype=float), low, high)))
+
+
+def forward_transfer(auc_run: float, auc_scratch: float) -> float | None:
+    """``(AUC - AUC_scratch) / (1 - AUC_scratch)``; None when ``AUC_scratch`` >= 1."""
+    return (auc_run - auc_scratch) / (1 - auc_scratch) if auc_scratch < 1 else None
+
+
+def crossover_steps(scratch_curve, continued_curve, episode_steps: int) -> int | None:
+    """Steps after the change at the end of the first episode where the cumulative reward of
+    ``scratch_curve`` exceeds that of ``continued_curve`` (both from the change on), or None."""
+    n = min(len(scratch_curve), len(continued_curve))
+    ahead = np.cumsum(np.asarray(scratch_curve[:n], dtype=float)) > np.cumsum(
+        np.asarray(continued_curve[:n], dtype=float)
+    )
+    return (int(np.argmax(ahead)) + 1) * episode_steps if ahead.any() else None
+
+
+def continual(
+    records: list[dict],
+    scenario: str,
+    algo: str,
+    key: dict[str, Any],
+    scale: dict[str, Any] | None,
+    rba_hold: float | None,
+) -> dict[str, Any]:
+    """The continual-RL metrics of one scenario and algorithm (module docstring), per strategy, and
+    the crossover between from scratch and continued."""
+    budget = key["after"] * key["episode_steps"]
+    curves = curves_after(records, scenario, algo, key)
+    found: dict[str, Any] = {s: {} for s in STRATEGIES}
+    if runs_of(records, scenario, algo, "transfer"):
+        # The continued agent at the change is the frozen snapshot: one score right after it for both.
+        at_change = scores(records, scenario, algo, "frozen")
+        jumpstart = {"per_run": at_change.mean(axis=1).tolist(), "runs": at_change.shape[0],
+                     "iqm": stats.iqm_interval(at_change).as_dict()}  # fmt: skip
+        for strategy in ("continued", "frozen"):
+            found[strategy]["jumpstart"] = jumpstart
     for strategy, runs in curves.items():
-        steps = [recovery_steps(c, target, key["episode_steps"], key["window"]) for c in runs]
-        counted = np.array([[s if s is not None else budget] for s in steps], dtype=float)
-        found[strategy] = {
-            "per_run": steps,
-            "reached": sum(s is not None for s in steps),
-            "runs": len(steps),
-            "iqm": stats.iqm_interval(counted).as_dict(),
-        }
+        if not runs:
+            continue
+        if scale is not None and "missing" not in scale:
+            found[strategy]["auc"] = _over_runs([auc(c, scale["low"], scale["high"]) for c in runs.values()])
+        if rba_hold is not None:
+            steps = [recovery_steps(c, rba_hold, key["episode_steps"], key["window"]) for c in runs.values()]
+            found[strategy]["steps_to_rba_hold"] = {**_counted(steps, budget), "target": rba_hold}
+    if "auc" in found["continued"] and "auc" in found["scratch"]:
+        base = float(np.mean(found["scratch"]["auc"]["per_run"]))
+        transfers = [t for a in found["continued"]["auc"]["per_run"] if (t := forward_transfer(a, base)) is not None]
+        if len(transfers) == len(found["continued"]["auc"]["per_run"]):
+            found["continued"]["forward_transfer"] = {**_over_runs(transfers), "auc_scratch": base}
+        else:
+            found["continued"]["forward_transfer_missing"] = (
+                f"the from-scratch runs' mean AUC is {base:.3f}, not below 1"
+            )
+    pairs = sorted(set(curves["continued"]) & set(curves["scratch"]))
+    if pairs:
+        steps = [crossover_steps(curves["scratch"][s], curves["continued"][s], key["episode_steps"]) for s in pairs]
+        found["scratch"]["crossover"] = {**_counted(steps, budget), "seeds": pairs}
     return found
 
 
@@ -107,9 +252,13 @@ def baseline_summary(record: dict[str, Any]) -> dict[str, Any]:
     return summary
 
 
-def algo_summary(records: list[dict], scenario: str, algo: str, key: dict[str, Any], rba_hold) -> dict[str, Any]:
+def algo_summary(
+    records: list[dict], scenario: str, algo: str, key: dict[str, Any], rba_hold, scale: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """A scenario's and algorithm's strategies, comparisons, steps to recover and continual-RL
+    metrics; ``rba_hold``: its episodes after the change (1 x seeds), ``scale``: ``normalisation``."""
     strategies, improvements = {}, {}
-    for strategy in EVALUATIONS:
+    for strategy in STRATEGIES:
         s = scores(records, scenario, algo, strategy)
         if s.size:
             strategies[strategy] = {
@@ -126,7 +275,13 @@ def algo_summary(records: list[dict], scenario: str, algo: str, key: dict[str, A
         sx, sy = scores(records, scenario, algo, x), scores(records, scenario, algo, y)
         if sx.size and sy.size:
             improvements[f"{x} > {y}"] = stats.probability_of_improvement_interval(sx, sy).as_dict()
-    return {"strategies": strategies, "improvement": improvements, "recovery": recovery(records, scenario, algo, key)}
+    target = float(rba_hold.mean()) if rba_hold is not None else None
+    return {
+        "strategies": strategies,
+        "improvement": improvements,
+        "recovery": recovery(records, scenario, algo, key),
+        "continual": continual(records, scenario, algo, key, scale, target),
+    }
 
 
 def summarize(records: list[dict], key: dict[str, Any], scenarios, algos) -> dict[str, Any]:
@@ -135,9 +290,11 @@ def summarize(records: list[dict], key: dict[str, Any], scenarios, algos) -> dic
     for scenario in scenarios:
         base = [r for r in records if r["cell"]["scenario"] == scenario and r["cell"]["kind"] == "baselines"]
         rba_hold = np.array([base[0]["after"]["rba-hold"]]) if base else None
+        scale = normalisation(base[0]) if base else None
         found[scenario] = {
             "baselines": baseline_summary(base[0]) if base else None,
-            "algos": {a: algo_summary(records, scenario, a, key, rba_hold) for a in algos},
+            "normalisation": scale,
+            "algos": {a: algo_summary(records, scenario, a, key, rba_hold, scale) for a in algos},
         }
     return found
 
@@ -160,7 +317,7 @@ def _baseline_cells(b: dict[str, Any] | None) -> list[str]:
     return [
         f"{b['before']['rba-hold']:.2f} / {b['after']['rba-hold']:.2f}",
         f"{b['before']['rba']:.2f} / {b['after']['rba']:.2f}",
-        f"{b['after']['oracle']:.2f}" if "oracle" in b["after"] else "n/a (not a fixed setup)",
+        f"{b['after']['oracle']:.2f}" if "oracle" in b["after"] else "n/a (below)",
     ]
 
 
@@ -169,22 +326,26 @@ def _score_table(summary: dict[str, Any], key: dict[str, Any]) -> list[str]:
         f"## Final score after the change: IQM [95 % CI] over runs x {key['evaluations']} held-out seeds "
         f"(from {key['eval_seed']})",
         "",
-        "| scenario | algorithm | runs | (a) continued | (b) frozen | (c) from scratch | rba-hold before / after "
-        "| rba before / after | oracle after |",
+        "| scenario | algorithm | runs | "
+        + " | ".join(st.label for st in STRATEGIES.values())
+        + " | rba-hold before / after | rba before / after | oracle after |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for scenario, s in summary.items():
         base = _baseline_cells(s["baselines"])
         for algo, a in s["algos"].items():
             st = a["strategies"]
-            runs = "/".join(str(st[x]["runs"]) if x in st else "0" for x in EVALUATIONS)
-            scores = [_interval(st.get(x, {}).get("iqm")) for x in EVALUATIONS]
+            runs = "/".join(str(st[x]["runs"]) if x in st else "0" for x in STRATEGIES)
+            scores = [_interval(st.get(x, {}).get("iqm")) for x in STRATEGIES]
             lines.append(f"| {scenario} | {algo} | {runs} | " + " | ".join(scores + base) + " |")
+    missing = {sc: s["baselines"]["oracle_after_missing"] for sc, s in summary.items()
+               if s["baselines"] and s["baselines"].get("oracle_after_missing")}  # fmt: skip
+    lines += ["", *(f"No oracle after the change in {sc}: {why}." for sc, why in missing.items())] if missing else []
     return lines
 
 
 def _improvement_table(summary: dict[str, Any]) -> list[str]:
-    pairs = [f"{x} > {y}" for x, y in COMPARISONS] + [f"{x} > rba-hold" for x in EVALUATIONS]
+    pairs = [f"{x} > {y}" for x, y in COMPARISONS] + [f"{x} > rba-hold" for x in STRATEGIES]
     lines = [
         "## Probability of improvement P(X > Y) [95 % CI]",
         "",
@@ -203,7 +364,8 @@ def _recovery_table(summary: dict[str, Any]) -> list[str]:
     lines = [
         f"## Steps to recover: to {RECOVERY_SHARE:.0%} of the from-scratch final score, IQM [95 % CI] over runs",
         "",
-        "| scenario | algorithm | target reward | (a) continued, after the change | (c) from scratch |",
+        f"| scenario | algorithm | target reward | {STRATEGIES['continued'].label}, after the change "
+        f"| {STRATEGIES['scratch'].label} |",
         "|---|---|---|---|---|",
     ]
     for scenario, s in summary.items():
@@ -217,9 +379,65 @@ def _recovery_table(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
+#: The continual-RL tables' columns: (title, the metric in ``continual``'s strategy, digits).
+CONTINUAL_COLUMNS = (
+    ("jumpstart", "jumpstart", 2),
+    ("AUC after the change", "auc", 3),
+    ("steps to rba-hold", "steps_to_rba_hold", 0),
+    ("forward transfer", "forward_transfer", 3),
+    ("new agent's cumulative reward passes the continued one's at", "crossover", 0),
+)
+
+
+def _normalised_between(scale: dict[str, Any] | None) -> str:
+    if scale is None:
+        return "no baselines cell: no AUC"
+    if "missing" in scale:
+        return f"no AUC: {scale['missing']}"
+    return f"AUC normalised between random and the oracle after the change ({scale['low']:.2f} and {scale['high']:.2f})"
+
+
+def _continual_cell(metric: dict[str, Any] | None, digits: int) -> str:
+    if not metric:
+        return "-"
+    if "reached" in metric:
+        return f"{_interval(metric['iqm'], digits)} ({metric['reached']}/{metric['runs']})"
+    return _interval(metric["iqm"], digits)
+
+
+def _continual_tables(summary: dict[str, Any], key: dict[str, Any]) -> list[str]:
+    lines = [
+        "## Continual-RL metrics: IQM [95 % CI] over runs",
+        "",
+        "Jumpstart: the score right after the change (the frozen snapshot's, evaluated on the changed line). "
+        "AUC: the mean normalised training reward after the change, (reward - random) / (oracle - random) "
+        "(1: the oracle's mean throughout). "
+        f"Steps to rba-hold: until the {key['window']}-episode moving mean of the training rewards reaches "
+        "rba-hold's mean "
+        "after the change ((k/n): k of n runs did; the others count as the budget, a lower bound). "
+        "Forward transfer: (AUC - AUC_scratch) / (1 - AUC_scratch), against the mean AUC of the from-scratch runs. "
+        "Crossover: steps after the change at which the from-scratch run's cumulative training reward first "
+        "exceeds the continued run's of the same seed ((k/n) as above). Forgetting is not reported: no cell "
+        "evaluates on the line before the change.",
+    ]
+    header = "| strategy | runs | final score | " + " | ".join(c[0] for c in CONTINUAL_COLUMNS) + " |"
+    for scenario, s in summary.items():
+        for algo, a in s["algos"].items():
+            lines += ["", f"### {scenario}, {algo}: {_normalised_between(s.get('normalisation'))}", "", header,
+                      "|---|---|---|" + "---|" * len(CONTINUAL_COLUMNS)]  # fmt: skip
+            for strategy in STRATEGIES:
+                st, metrics = a["strategies"].get(strategy), a.get("continual", {}).get(strategy, {})
+                cells = [_continual_cell(metrics.get(name), digits) for _, name, digits in CONTINUAL_COLUMNS]
+                final = _interval(st["iqm"]) if st else "-"
+                lines.append(f"| {strategy} | {st['runs'] if st else 0} | {final} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
-    """The three tables: final scores, probabilities of improvement, steps to recover."""
+    """The tables: final scores, probabilities of improvement, steps to recover, and the
+    continual-RL metrics per scenario and algorithm."""
     lines = _score_table(summary, key) + [""] + _improvement_table(summary) + [""] + _recovery_table(summary)
+    lines += [""] + _continual_tables(summary, key)
     lines += [
         "",
         "Runs: training seeds. A run that does not reach the target within its budget counts as the whole "
@@ -232,25 +450,24 @@ def markdown(summary: dict[str, Any], key: dict[str, Any]) -> str:
 
 
 def _panel(ax, records: list[dict], summary: dict[str, Any], scenario: str, algo: str, key: dict[str, Any]) -> None:
-    before = key["before"]
-    transfer = runs_of(records, scenario, algo, "transfer")
-    scratch = runs_of(records, scenario, algo, "scratch")
-    for runs, curve_key, offset, colour, label in (
-        (transfer, "continued_curve", before, "tab:blue", "(a) continued"),
-        (scratch, "scratch_curve", 0, "tab:orange", "(c) from scratch"),
-    ):
+    before, window = key["before"], key["window"]
+    for strategy in (st for st in STRATEGIES.values() if st.curve is not None):
+        runs = runs_of(records, scenario, algo, strategy.kind)
         if not runs:
             continue
-        curves = np.array([moving(r[curve_key]) for r in runs])
-        x = np.arange(curves.shape[1]) - offset
+        curves = np.array([moving(r[strategy.curve], window) for r in runs])
+        x = np.arange(curves.shape[1]) - _change_at(strategy, key)
         seeds = f"mean of {len(runs)} seeds, band min-max" if len(runs) > 1 else "1 seed"
-        ax.plot(x, curves.mean(axis=0), color=colour, label=f"{label}: {seeds}")
-        ax.fill_between(x, curves.min(axis=0), curves.max(axis=0), color=colour, alpha=0.2, lw=0)
+        ax.plot(x, curves.mean(axis=0), color=strategy.colour, label=f"{strategy.label}: {seeds}")
+        ax.fill_between(x, curves.min(axis=0), curves.max(axis=0), color=strategy.colour, alpha=0.2, lw=0)
     s = summary[scenario]
     frozen = s["algos"][algo]["strategies"].get("frozen")
     if frozen:
         ax.axhline(
-            frozen["iqm"]["point"], color="tab:gray", ls="--", label=f"(b) frozen, IQM: {frozen['iqm']['point']:.1f}"
+            frozen["iqm"]["point"],
+            color=STRATEGIES["frozen"].colour,
+            ls="--",
+            label=f"{STRATEGIES['frozen'].label}, IQM: {frozen['iqm']['point']:.1f}",
         )
     for agent, style in (("rba-hold", ":"), ("oracle", "-.")):
         if s["baselines"] and agent in s["baselines"]["after"]:
@@ -258,8 +475,8 @@ def _panel(ax, records: list[dict], summary: dict[str, Any], scenario: str, algo
             ax.axhline(value, color="tab:green", ls=style, label=f"{agent} after the change: {value:.1f}")
     ax.axvline(0, color="black", lw=0.8)
     ax.set_title(f"{scenario}, {algo}: change after {before} episodes", fontsize=9)
-    ax.set_xlabel("episodes relative to the change (50 steps each)")
-    ax.set_ylabel(f"episode reward ({WINDOW}-episode moving mean)")
+    ax.set_xlabel(f"episodes relative to the change ({key['episode_steps']} steps each)")
+    ax.set_ylabel(f"episode reward ({window}-episode moving mean)")
     ax.legend(fontsize=6, loc="lower right")
 
 
@@ -288,15 +505,13 @@ def runs_plot(summary: dict[str, Any], stem: Path) -> list[Path]:
     as lines; ``stem``.png and .svg (nothing when no strategy has runs)."""
     from .plots import Strip, StripPanel, strip_figure
 
-    colours = {"continued": "tab:blue", "frozen": "tab:gray", "scratch": "tab:orange"}
-    labels = {"continued": "(a) continued", "frozen": "(b) frozen", "scratch": "(c) from scratch"}
     panels = []
     for scenario, s in summary.items():
         after = (s["baselines"] or {}).get("after", {})
         refs = [(agent, after[agent]) for agent in ("rba-hold", "oracle") if agent in after]
         for algo, a in s["algos"].items():
             strips = [
-                Strip(labels[name], st["per_run"], st["iqm"], colours[name])
+                Strip(STRATEGIES[name].label, st["per_run"], st["iqm"], STRATEGIES[name].colour)
                 for name, st in a["strategies"].items()
                 if "per_run" in st
             ]

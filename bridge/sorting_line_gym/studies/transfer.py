@@ -9,10 +9,10 @@ For each scenario, algorithm and training seed: (a) **continued**, an agent trai
 episodes before the change and `--after` more after it, unchanged (the schedule changes the line:
 the agent is not told); (b) **frozen**, its snapshot at the change, evaluated on the changed line
 without further learning; (c) **from scratch**, a new agent trained `--after` episodes on the changed
-line; against rba and rba-hold (`sorting_line eval`, offline) and the oracle after the change
-where it can solve that line. Scenarios: `upgrade` (basic B -> advanced B: machine and sensor
-upgrade, the paper's) and `drift` (B with sensor noise 0 -> 0.3 and threshold 0.7 -> 0.8 in three
-steps), from the ready schedules in `evolutions/` with the change moved to episode `--before` + 1.
+line; against rba, rba-hold and random (`sorting_line eval`, offline) and the oracle. Scenarios
+(`--scenarios`, default `upgrade drift`): ``transfer_cells.SCENARIOS``, the ready schedules of the
+same names in `evolutions/` (docs/evolving.md says what each changes), with the change moved to
+episode `--before` + 1; a `--out` written by the study's first version takes only its two.
 What a cell runs: ``transfer_cells``; the statistics: ``reports.transfer_report``.
 
 Each finished cell is saved at once in `<out>/cells/` (whole or not at all); a rerun of the same
@@ -57,7 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
     preset = p.add_mutually_exclusive_group()
     preset.add_argument("--full", action="store_true", help=f"the paper's scale: {FULL} (options given override it)")
     preset.add_argument("--smoke", action="store_true", help=f"CI size: {SMOKE} (options given override it)")
-    p.add_argument("--scenarios", nargs="+", choices=tc.SCENARIOS, default=list(tc.SCENARIOS), help="default: both")
+    p.add_argument(
+        "--scenarios",
+        nargs="+",
+        choices=tc.SCENARIOS,
+        default=list(tc.FIRST_SCENARIOS),
+        help=f"default: {' '.join(tc.FIRST_SCENARIOS)}",
+    )
     p.add_argument("--algos", nargs="+", choices=tc.ALGOS, default=list(tc.ALGOS), help="default: ppo a2c")
     p.add_argument(
         "--ppo-settings",
@@ -121,6 +127,10 @@ def options(argv: list[str] | None):
         )
     if args.after < tc.WINDOW or args.after % tc.WINDOW:
         parser.error(f"--after = {args.after} is not valid: allowed a multiple of {tc.WINDOW}, at least {tc.WINDOW}")
+    if len(set(args.seeds)) != len(args.seeds) or min(args.seeds) < 0:
+        parser.error(
+            f"--seeds {' '.join(map(str, args.seeds))} is not valid: allowed distinct training seeds, each 0 or more"
+        )
     if args.evaluations < 1:
         parser.error(f"--evaluations = {args.evaluations} is not valid: allowed 1 or more")
     if args.jobs < 1:
@@ -291,6 +301,18 @@ def report(args, key: dict, done: dict[str, dict]) -> str:
     return text
 
 
+def study_key(args) -> dict:
+    """The key of the study's cells: the options that change results, with the schedules of every
+    scenario, or of the first two where ``--out`` holds a store of the first version
+    (``tc.key_scenarios``, which raises ``tc.OlderStore`` if it is asked for the others there)."""
+    study = args.out / "study.json"
+    saved = json.loads(study.read_text()).get("key") if study.is_file() else None
+    key = args.settings.key(scenarios=tc.key_scenarios(saved, args.scenarios, str(args.out)))
+    if args.engine != "sb3":  # an SB3 store's key stays as it was before there were two engines
+        key["engine"] = args.engine
+    return key
+
+
 def main(argv: list[str] | None = None) -> int:
     args = options(argv)
     # Its cells train agents, and its configuration's key holds their SB3 hyperparameters.
@@ -300,9 +322,6 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    key = args.settings.key()
-    if args.engine != "sb3":  # an SB3 store's key stays as it was before there were two engines
-        key["engine"] = args.engine
     earlier = args.out / "transfer.json"
     if earlier.is_file() and "runs" in json.loads(earlier.read_text()):
         print(
@@ -312,12 +331,15 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     try:
+        key = study_key(args)
         store = CellStore(args.out, key)
-    except ConfigurationMismatch as e:
+    except ConfigurationMismatch as e:  # tc.OlderStore too
         print(f"sorting-line-transfer: {e}", file=sys.stderr)
         return 2
     cells = tc.plan(args.scenarios, args.algos, args.seeds)
     done = {c.name: r for c in cells if (r := store.load(c.name)) is not None}
+    for name in [] if args.report_only else [n for n, r in done.items() if tc.outdated(r)]:
+        print(f"sorting-line-transfer: {name}: {tc.outdated(done.pop(name))}", file=sys.stderr)
     todo = [] if args.report_only else [c for c in cells if c.name not in done]
     status = 0
     if todo:

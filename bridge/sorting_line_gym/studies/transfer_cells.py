@@ -1,10 +1,12 @@
 """The cells of the transfer study (`sorting-line-transfer`): what each one trains and evaluates.
 
 A cell is saved as soon as it finishes (``studies.cell_store``), so a stopped study resumes cell
-by cell. The cells of a scenario:
+by cell. The scenarios (``SCENARIOS``) are the ready schedules of ``evolutions/`` of the same name;
+``line_states`` says what each one's line is before and after its change. The cells of a scenario:
 
-- ``baselines``: `rba` and `rba-hold` on the line before and after the change, and the oracle
-  (`sorting_line oracle`, the clairvoyant optimum per seed) where the line is one it can solve;
+- ``baselines``: `rba`, `rba-hold` and `random` on the line before and after the change, and the
+  oracle (`sorting_line oracle`, the clairvoyant optimum per seed) of each side: random and the
+  oracle are the lower and upper references of the report's normalised curves;
 - ``transfer`` per algorithm and training seed: one agent trained ``before`` episodes on the
   evolving line and ``after`` more past the change (strategy **continued**), and its snapshot at
   the change (strategy **frozen**), both evaluated on the changed line;
@@ -40,8 +42,15 @@ import numpy as np
 import yaml
 
 from ..line.vocabulary import EPISODE_STEPS
+from .cell_store import ConfigurationMismatch
 
-SCENARIOS = ("upgrade", "drift")
+#: The scenarios, each a ready schedule (evolutions/<name>.yaml): the paper's machine and sensor
+#: upgrade, its sensor half and its machine half (both ending on advanced B as it does), the drift of
+#: noise and threshold together, each alone, and the change of input and penalty from setup A to B.
+SCENARIOS = ("upgrade", "drift", "sensor", "machine", "noise-drift", "threshold-drift", "setup-a-to-b")
+#: The scenarios of the study's first version: the default of --scenarios, and the only ones a store
+#: written then has in its key (``key_scenarios``).
+FIRST_SCENARIOS = ("upgrade", "drift")
 ALGOS = ("ppo", "a2c")
 #: The cells' kinds: a scenario's rule-based baselines, then per algorithm and seed the agent
 #: trained before and after the change (its continued and frozen strategies) and the one trained
@@ -126,12 +135,94 @@ class Settings:
         }
 
 
+class OlderStore(ConfigurationMismatch):
+    """A results directory written before some of the asked scenarios existed."""
+
+
+def key_scenarios(saved_key: dict[str, Any] | None, asked, where: str = "the store") -> tuple[str, ...]:
+    """The scenarios whose schedules are in the key of a store (``saved_key``: its study.json's key,
+    None for a new one; ``where``: the store, for the message): ``SCENARIOS``, or ``FIRST_SCENARIOS``
+    for a store of the first version, so that its cells stay valid; such a store refuses the other
+    scenarios (``OlderStore``)."""
+    if saved_key is None or set(saved_key.get("schedules", {})) != set(FIRST_SCENARIOS):
+        return SCENARIOS
+    newer = [s for s in asked if s not in FIRST_SCENARIOS]
+    if newer:
+        raise OlderStore(
+            f"{where} was written before the scenarios {', '.join(newer)} existed (its key holds the schedules "
+            f"of {', '.join(FIRST_SCENARIOS)} only): allowed there --scenarios {' '.join(FIRST_SCENARIOS)}; "
+            "run the others into another --out"
+        )
+    return FIRST_SCENARIOS
+
+
+def ready_events(scenario: str) -> list[dict[str, Any]]:
+    """The events of the ready schedule of ``scenario`` (one of ``SCENARIOS``)."""
+    from ..envs.evolving import schedule_file
+    from ..line.vocabulary import check
+
+    return yaml.safe_load(schedule_file(check("scenario", scenario, SCENARIOS)).read_text())["events"]
+
+
+def start_line() -> dict[str, Any]:
+    """The settings every line of the study starts from before its schedule: advanced B (``make_env``
+    and ``library`` run setup B, and the evolving line has the advanced hardware), from the library."""
+    from ..line.vocabulary import SETUPS, THRESHOLD
+
+    return {**SETUPS["B"], "threshold": THRESHOLD, **VARIANT_HARDWARE["advanced"]}
+
+
+#: The hardware of the paper's two variants, as the schedule's fields name it (src/sim/evolution.rs).
+VARIANT_HARDWARE = {
+    "basic": {"sort_modes": False, "ratio_sensor": False},
+    "advanced": {"sort_modes": True, "ratio_sensor": True},
+}
+
+
+def line_states(scenario: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The settings of the line of ``scenario`` before its change (episode 0's events) and after
+    all of it (every event), as the schedule's fields name them."""
+    before, after = start_line(), start_line()
+    for e in ready_events(scenario):
+        fields = {k: v for k, v in e.items() if k != "at"}
+        if e["at"].get("episode") == 0:
+            before.update(fields)
+        after.update(fields)
+    return before, after
+
+
+def paper_line(state: dict[str, Any]) -> tuple[str, str] | None:
+    """(setup, variant) of the paper whose line has the settings ``state``, or None: where rba and
+    rba-hold, built for a setup, run on that setup itself."""
+    from ..line.vocabulary import SETUPS, THRESHOLD
+
+    for setup, settings in SETUPS.items():
+        for variant, hardware in VARIANT_HARDWARE.items():
+            if state == {**settings, "threshold": THRESHOLD, **hardware}:
+                return setup, variant
+    return None
+
+
+def fixed_line(state: dict[str, Any]) -> dict[str, Any]:
+    """The library's settings of the fixed line (no schedule) with the dynamics and rewards of the
+    line with the settings ``state``: the variant of its machine (sort modes: advanced), its input,
+    noise, penalty and threshold. The ratio sensor does not enter: it changes what an agent reads,
+    not what a step does, and the oracle reads nothing. The oracle solves this line."""
+    variant = next(v for v, hardware in VARIANT_HARDWARE.items() if hardware["sort_modes"] == state["sort_modes"])
+    fields = ("input", "obs_noise", "action_penalty", "threshold")
+    return {"variant": variant, **{k: state[k] for k in fields}, "max_steps": EPISODE_STEPS}
+
+
+def frozen_mode0(scenario: str) -> bool:
+    """Whether the line of ``scenario`` has no sort modes before its change: the frozen snapshot
+    never chose one, and is evaluated on the changed line with the old machine's masks."""
+    return not line_states(scenario)[0]["sort_modes"]
+
+
 def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     """(the evolving schedule with the change after `before` episodes, the changed line's schedule
     from episode 0), written to `out`/schedules/, from the ready schedule of `scenario`."""
-    from ..envs.evolving import schedule_file
-
-    events = yaml.safe_load(schedule_file(scenario).read_text())["events"]
+    events = ready_events(scenario)
     first = min(e["at"]["episode"] for e in events if e["at"].get("episode", 0) > 0)
     evolving, final = [], {}
     for e in events:
@@ -146,6 +237,10 @@ def schedules(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     a.parent.mkdir(parents=True, exist_ok=True)
     a.write_text(yaml.safe_dump({"events": evolving}, sort_keys=False))
     b.write_text(yaml.safe_dump({"events": [{"at": {"episode": 0}, **final}]}, sort_keys=False))
+    # The line before the change alone, for the baselines (random, and rba where it is no paper setup).
+    initial = {k: v for e in events if e["at"].get("episode") == 0 for k, v in e.items() if k != "at"}
+    first_line = {"events": [{"at": {"episode": 0}, **initial}]}
+    before_path(scenario, out).write_text(yaml.safe_dump(first_line, sort_keys=False))
     return a, b
 
 
@@ -224,7 +319,7 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
     frozen_model = algorithm_class(cell.algo).load(snapshot, device="cpu")
     eval_env = make_env(changed, settings.backend)
     try:
-        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
+        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
         continued = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
     finally:
         eval_env.close()
@@ -252,45 +347,84 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
     return {"scratch_curve": curve, "scratch_eval": final, **timing}
 
 
-def library(command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None) -> list[float]:
-    """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on setup B,
-    seeds 10000..., offline: the library's own evaluation, in this process (``_native.evaluate``
-    and ``_native.oracle_eval`` give the JSON of the two commands)."""
+def library(
+    command: str, agent: str | None, variant: str, episodes: int, schedule: Path | None = None, setup: str = "B"
+) -> list[float]:
+    """Per-episode rewards of `sorting_line eval` (an agent) or `sorting_line oracle` on ``setup``
+    (the study's B by default) and ``variant``, on ``schedule`` if given (eval only), seeds
+    10000..., offline (``rewards``)."""
+    from ..line.vocabulary import SETUPS, THRESHOLD, check_setup, check_variant
+
+    settings = dict(SETUPS[check_setup(setup)], variant=check_variant(variant), threshold=THRESHOLD)
+    settings["max_steps"] = EPISODE_STEPS
+    if schedule is not None:
+        settings["evolution"] = str(schedule)
+    return rewards(command, agent, settings, episodes)
+
+
+#: The library's two offline evaluations: an agent's (``_native.evaluate``) and the oracle's.
+COMMANDS = ("eval", "oracle")
+
+
+def rewards(command: str, agent: str | None, settings: dict[str, Any], episodes: int) -> list[float]:
+    """Per-episode rewards of `sorting_line eval` (``agent``) or `sorting_line oracle` on the line of
+    the library's ``settings``, seeds 10000..., offline: the library's own evaluation, in this
+    process (``_native.evaluate`` and ``_native.oracle_eval`` give the JSON of the two commands)."""
     import sorting_line_gym._native as _native
 
-    from ..line.vocabulary import SETUPS, THRESHOLD
+    from ..line.vocabulary import check
 
-    settings = dict(SETUPS["B"], variant=variant, threshold=THRESHOLD, max_steps=EPISODE_STEPS)
-    if command == "oracle":
-        if schedule is not None:
+    if check("command", command, COMMANDS) == "oracle":
+        if "evolution" in settings:
             raise ValueError("the oracle models a fixed line; it cannot solve an evolving one")
         summary = _native.oracle_eval(settings, episodes, EVAL_SEED)
     else:
-        if schedule is not None:
-            settings["evolution"] = str(schedule)
         summary = _native.evaluate(agent, settings, episodes, EVAL_SEED)
     return [float(e["reward"]) for e in summary["per_episode"]]
 
 
-def run_baselines(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
-    """rba and rba-hold before and after the change; the oracle of each side where the oracle can
-    solve it. It models the paper's fixed lines, so after the change it is used only when the
-    changed line is advanced B (rba-hold's episodes there equal the schedule's to the last digit);
-    otherwise the record says why it is missing."""
+def run_baselines(cell: Cell, settings: Settings, changed: Path, before: Path) -> dict[str, Any]:
+    """rba, rba-hold and random before and after the change, and the oracle of each side.
+
+    rba and rba-hold, built for a setup, run on the line before the change as that setup where it is
+    one of the paper's (``paper_line``: the agents weigh the readings by the noise of the setup they
+    are built for), else on ``before`` (the schedule of that line); after the change on the changed
+    schedule, as the agents trained there. random runs on the schedules of both sides. The oracle
+    takes no schedule: it solves each side's ``fixed_line``, once random's episodes there equal its
+    episodes on the side's schedule to the last digit (the oracle depends on the line's dynamics and
+    rewards, which random's actions see, not on what it reads); otherwise the record says why it is
+    missing (``oracle_before_missing``, ``oracle_after_missing``)."""
     n = settings.evaluations
-    before_variant = "basic" if cell.scenario == "upgrade" else "advanced"
+    states = dict(zip(("before", "after"), line_states(cell.scenario), strict=True))
+    on_schedule = {"before": before, "after": changed}
     record: dict[str, Any] = {"before": {}, "after": {}}
+    first = paper_line(states["before"])
     for agent in ("rba", "rba-hold"):
-        record["before"][agent] = library("eval", agent, before_variant, n)
+        if first is not None:
+            record["before"][agent] = library("eval", agent, first[1], n, setup=first[0])
+        else:
+            record["before"][agent] = library("eval", agent, "advanced", n, before)
         record["after"][agent] = library("eval", agent, "advanced", n, changed)
-    record["before"]["oracle"] = library("oracle", None, before_variant, n)
-    if library("eval", "rba-hold", "advanced", n) == record["after"]["rba-hold"]:
-        record["after"]["oracle"] = library("oracle", None, "advanced", n)
-    else:
-        record["oracle_after_missing"] = (
-            "the changed line is not one of the paper's setups (the oracle models those: it takes no schedule)"
-        )
+    for side, schedule in on_schedule.items():
+        record[side]["random"] = library("eval", "random", "advanced", n, schedule)
+        line = fixed_line(states[side])
+        if rewards("eval", "random", line, n) == record[side]["random"]:
+            record[side]["oracle"] = rewards("oracle", None, line, n)
+        else:
+            record[f"oracle_{side}_missing"] = (
+                f"random's episodes on the fixed line {line} differ from those on the schedule {schedule.name}: "
+                "the oracle of that line is not this one's"
+            )
     return record
+
+
+def outdated(record: dict[str, Any]) -> str | None:
+    """Why the study runs a saved cell again, or None: a baselines cell of the study's first
+    version recorded no random agent (the lower reference of the normalised curves) and the oracle
+    on the paper's setups only; it is redone offline in seconds, the trained cells kept."""
+    if record["cell"]["kind"] == "baselines" and any("random" not in record[side] for side in ("before", "after")):
+        return "a baselines cell of the study's first version (no random agent's episodes): run again, offline"
+    return None
 
 
 def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
@@ -301,7 +435,7 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
     started = time.monotonic()
     evolving, changed = schedule_paths(cell.scenario, settings.before, out)
     if cell.kind == "baselines":
-        result = run_baselines(cell, settings, changed)
+        result = run_baselines(cell, settings, changed, before_path(cell.scenario, out))
     elif cell.kind == "transfer":
         models = out / "models"
         models.mkdir(parents=True, exist_ok=True)
@@ -314,6 +448,11 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
 def schedule_paths(scenario: str, before: int, out: Path) -> tuple[Path, Path]:
     """Where ``schedules`` wrote the scenario's two schedules (the study writes them at its start)."""
     return out / "schedules" / f"{scenario}-at-{before + 1}.yaml", out / "schedules" / f"{scenario}-after.yaml"
+
+
+def before_path(scenario: str, out: Path) -> Path:
+    """Where ``schedules`` wrote the schedule of the scenario's line before the change."""
+    return out / "schedules" / f"{scenario}-before.yaml"
 
 
 # ------------------------------------------------------------------------------------------
@@ -433,7 +572,7 @@ def run_batch(
         try:
             if cell.kind == "transfer":
                 frozen_model = algorithm_class(cell.algo).load(snapshots[s], device="cpu")
-                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, cell.scenario == "upgrade")
+                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
                 continued = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
                 result = {"continued_curve": curves.curves[s], "continued_eval": continued, "frozen_eval": frozen}
             else:

@@ -140,6 +140,22 @@ def test_vector_env_follows_the_trace_across_autoresets(setup, variant):
 # The evolving line
 
 
+#: A setting each ready schedule has changed by its last event (episode 2201 at the latest), and its value then.
+CHANGED = {
+    "upgrade": ("sort_modes", True),
+    "drift": ("obs_noise", 0.3),
+    "sensor": ("ratio_sensor", True),
+    "machine": ("sort_modes", True),
+    "noise-drift": ("obs_noise", 0.3),
+    "threshold-drift": ("threshold", 0.8),
+    "setup-a-to-b": ("input", "seasonal"),
+}
+
+
+def test_every_ready_schedule_names_what_it_changes():
+    assert sorted(CHANGED) == sorted(READY_SCHEDULES)
+
+
 @pytest.mark.parametrize("schedule", READY_SCHEDULES)
 def test_ready_schedules_follow_the_trace_through_their_events(schedule):
     """2,203 one-step episodes: past the upgrade (episode 2001) and the drift's steps (2101, 2201)."""
@@ -149,6 +165,7 @@ def test_ready_schedules_follow_the_trace_through_their_events(schedule):
     for _ in range(1, 2204):
         seed, action = int(rng.integers(0, 1000)), int(rng.integers(0, 30))
         obs, info = env.reset(seed=seed)
+        last = info["settings"]
         got.append((obs, info["settings"]["obs_noise"], info["settings"]["sort_modes"]))
         got.append(env.step(action)[:2])
         tokens += [f"r{seed}", action]
@@ -162,7 +179,8 @@ def test_ready_schedules_follow_the_trace_through_their_events(schedule):
             expected = (trace_obs("advanced", entry["step"]["observation"], entry["category_reading"]),
                         entry["step"]["reward"])  # fmt: skip
         assert same(tuple(returned), expected), f"entry {t}: {returned!r} vs {expected!r}"
-    assert got[-2][2] if schedule == "upgrade" else got[-2][1] == 0.3
+    field, value = CHANGED[schedule]
+    assert last[field] == value, f"{schedule}: {field} = {last[field]!r} at the last reset, want {value!r}"
 
 
 # --------------------------------------------------------------------------------------------

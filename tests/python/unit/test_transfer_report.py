@@ -1,0 +1,122 @@
+"""The transfer report's continual-RL metrics (reports/transfer_report.py ``continual``) on records
+made up here, whose curves give known answers: jumpstart, the area under the normalised curve after
+the change (between random and the oracle; none, saying why, without them), steps to rba-hold (a run
+that never gets there counted as its budget, a lower bound), forward transfer against the
+from-scratch runs' mean AUC (none when that mean is not below 1), the crossover of the cumulative
+training rewards, and their table. No node, no training.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from sorting_line_gym.reports import transfer_report as tr
+
+KEY = {"before": 10, "after": 20, "episode_steps": 50, "window": 10, "evaluations": 4, "eval_seed": 10_000}
+BUDGET = 20 * 50
+
+
+def record(kind: str, seed: int | None = None, **values) -> dict:
+    algo = None if kind == "baselines" else "ppo"
+    return {"cell": {"scenario": "sensor", "kind": kind, "algo": algo, "seed": seed}, **values}
+
+
+def records(after: dict[str, list[float]], scratch1=None) -> list[dict]:
+    """Two seeds. Continued after the change: 5 throughout (seed 1), 2 throughout (seed 2); from
+    scratch: 0 for 8 episodes then 10 (seed 1), 1 throughout (seed 2)."""
+    return [
+        record("transfer", 1, continued_curve=[9.0] * 10 + [5.0] * 20, continued_eval=[6.0] * 4, frozen_eval=[1.0] * 4),
+        record("transfer", 2, continued_curve=[9.0] * 10 + [2.0] * 20, continued_eval=[4.0] * 4, frozen_eval=[3.0] * 4),
+        record("scratch", 1, scratch_curve=scratch1 or [0.0] * 8 + [10.0] * 12, scratch_eval=[9.0] * 4),
+        record("scratch", 2, scratch_curve=[1.0] * 20, scratch_eval=[1.0] * 4),
+        record("baselines", before={"rba": [1.0] * 4, "rba-hold": [2.0] * 4}, after=after),
+    ]
+
+
+BOTH_RBAS = {"rba": [3.0] * 4, "rba-hold": [5.0] * 4}
+RANDOM_AND_ORACLE = {**BOTH_RBAS, "random": [0.0] * 4, "oracle": [10.0] * 4}
+
+
+def continual(after, **kwargs) -> tuple[dict, dict]:
+    summary = tr.summarize(records(after, **kwargs), KEY, ["sensor"], ["ppo"])["sensor"]
+    return summary, summary["algos"]["ppo"]["continual"]
+
+
+def test_the_metrics_of_known_curves_between_random_and_the_oracle():
+    summary, found = continual(RANDOM_AND_ORACLE)
+    assert summary["normalisation"] == {"low": 0.0, "high": 10.0}
+    # Jumpstart: the frozen snapshot's scores (1 and 3 per run), for continued and frozen alike.
+    for strategy in ("continued", "frozen"):
+        assert found[strategy]["jumpstart"]["per_run"] == [1.0, 3.0]
+        assert found[strategy]["jumpstart"]["iqm"]["point"] == pytest.approx(2.0)
+    assert "jumpstart" not in found["scratch"] and found["frozen"].keys() == {"jumpstart"}
+    # AUC: the mean of reward / 10 after the change.
+    assert found["continued"]["auc"]["per_run"] == pytest.approx([0.5, 0.2])
+    assert found["scratch"]["auc"]["per_run"] == pytest.approx([0.6, 0.1])
+    assert found["continued"]["auc"]["iqm"]["point"] == pytest.approx(0.35)
+    auc = found["continued"]["auc"]["iqm"]
+    assert auc["low"] == pytest.approx(0.2) and auc["high"] == pytest.approx(0.5)  # two runs, resampled whole
+    # Steps to rba-hold (5): continued seed 1 at its first full window, seed 2 never; from scratch
+    # seed 1 when its window holds five 10s (episode 13), seed 2 never.
+    steps = found["continued"]["steps_to_rba_hold"]
+    assert steps["per_run"] == [500, None] and steps["reached"] == 1 and steps["target"] == 5.0
+    assert steps["iqm"]["point"] == pytest.approx((500 + BUDGET) / 2)  # the one that never did counts as the budget
+    assert found["scratch"]["steps_to_rba_hold"]["per_run"] == [650, None]
+    # Forward transfer against the from-scratch mean AUC 0.35.
+    ft = found["continued"]["forward_transfer"]
+    assert ft["auc_scratch"] == pytest.approx(0.35)
+    assert ft["per_run"] == pytest.approx([0.15 / 0.65, -0.15 / 0.65])
+    # Crossover: seed 1's cumulative rewards 10 (k - 7) against 5 (k + 1) after episode k: first
+    # above at k = 16 (90 > 85; at 15 they tie); seed 2's never (1 against 2 per episode).
+    cross = found["scratch"]["crossover"]
+    assert cross["per_run"] == [17 * 50, None] and cross["reached"] == 1 and cross["seeds"] == [1, 2]
+    assert cross["iqm"]["point"] == pytest.approx((850 + BUDGET) / 2)
+
+
+@pytest.mark.parametrize(
+    "after,why",
+    [
+        (BOTH_RBAS, "the baselines cell has no random and no oracle after the change"),
+        ({**BOTH_RBAS, "oracle": [10.0] * 4}, "the baselines cell has no random after the change"),
+        ({**BOTH_RBAS, "random": [0.0] * 4}, "the baselines cell has no oracle after the change"),
+        ({**BOTH_RBAS, "random": [4.0] * 4, "oracle": [4.0] * 4}, "(4.00) is not above random's (4.00)"),
+    ],
+)
+def test_without_random_and_the_oracle_after_the_change_there_is_no_auc_and_the_table_says_why(after, why):
+    """One normalisation only (the issue's, the benchmark's): a baselines cell of the study's first
+    version, which has no random, gets no AUC and no forward transfer rather than another scale."""
+    summary, found = continual(after)
+    assert why in summary["normalisation"]["missing"] and "low" not in summary["normalisation"]
+    assert all("auc" not in found[s] and "forward_transfer" not in found[s] for s in found)
+    assert found["continued"]["steps_to_rba_hold"]["per_run"] == [500, None]  # the rest stays
+    text = tr.markdown(tr.summarize(records(after), KEY, ["sensor"], ["ppo"]), KEY)
+    assert f"### sensor, ppo: no AUC: {summary['normalisation']['missing']}" in text
+
+
+def test_forward_transfer_is_left_out_when_the_from_scratch_auc_is_not_below_1():
+    _, found = continual(RANDOM_AND_ORACLE, scratch1=[20.0] * 20)  # AUCs 2.0 and 0.1
+    assert "forward_transfer" not in found["continued"]
+    assert "mean AUC is 1.050, not below 1" in found["continued"]["forward_transfer_missing"]
+
+
+def test_the_pure_metrics():
+    assert tr.auc([0.0, 10.0], -10.0, 10.0) == pytest.approx(0.75)
+    with pytest.raises(ValueError, match="best > worst"):
+        tr.auc([1.0], 5.0, 5.0)
+    assert tr.forward_transfer(0.8, 0.5) == pytest.approx(0.6) and tr.forward_transfer(0.8, 1.0) is None
+    assert tr.crossover_steps([3.0, 3.0], [1.0, 9.0], 50) == 50  # ahead from the first episode
+    assert tr.crossover_steps([1.0, 1.0], [1.0, 1.0], 50) is None  # a tie is not a pass
+
+
+def test_the_table_names_the_normalisation_and_leaves_out_forgetting():
+    summary = tr.summarize(records(RANDOM_AND_ORACLE), KEY, ["sensor"], ["ppo"])
+    text = tr.markdown(summary, KEY)
+    assert "### sensor, ppo: AUC normalised between random and the oracle after the change (0.00 and 10.00)" in text
+    rows = {line.split(" | ")[0]: line for line in text.splitlines() if line.startswith(("| continued", "| scratch"))}
+    # strategy, runs, final score, jumpstart, AUC, steps to rba-hold, forward transfer, crossover
+    assert rows["| continued"].startswith(
+        "| continued | 2 | 5.00 [4.00, 6.00] | 2.00 [1.00, 3.00] | 0.350 [0.200, 0.500] |"
+    )
+    assert "750 [500, 1000] (1/2)" in rows["| continued"]
+    assert rows["| scratch"].endswith("| 925 [850, 1000] (1/2) |")
+    assert "Forgetting is not reported" in text
