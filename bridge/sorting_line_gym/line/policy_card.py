@@ -23,6 +23,7 @@ from .vocabulary import (
     ACTION_COUNTS,
     CATEGORY_UNKNOWN_OBSERVATION,
     ENV_IDS,
+    MODE_COUNT,
     MODES,
     SPEEDS,
     check_setup,
@@ -61,7 +62,8 @@ def action_decoding(variant: str) -> dict[str, Any]:
     """How an action index becomes commands (``vocabulary.decode_actions``)."""
     decoding = {"n": ACTION_COUNTS[check_variant(variant)], "speeds": list(SPEEDS)}
     if variant == "advanced":
-        return {**decoding, "speed_index": "action // 3", "mode": "action % 3", "modes": dict(MODES)}
+        rules = {"speed_index": f"action // {MODE_COUNT}", "mode": f"action % {MODE_COUNT}"}
+        return {**decoding, **rules, "modes": dict(MODES)}
     return {**decoding, "speed_index": "action", "mode": "always 0"}
 
 

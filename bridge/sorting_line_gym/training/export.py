@@ -31,7 +31,7 @@ import numpy as np
 
 from ..agents.learned_policy import TRAIN_HINT, PolicyFileError, Sb3Parts, load_learned_policy, read_sb3_zip, sb3_card
 from ..line.policy_card import PolicyCard, PolicyCardError
-from ..line.vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import MODE_COUNT, SETUPS, VARIANTS
 
 #: ONNX operator set of the written graph (onnxruntime runs 7..23).
 OPSET = 17
@@ -128,7 +128,7 @@ def sample_inputs(obs_space, n_actions: int, count: int, seed: int, masked: bool
     if not masked:
         return obs, None
     masks = rng.random((count, n_actions)) < 0.5
-    masks[::2] = np.arange(n_actions) % 3 == 0
+    masks[::2] = np.arange(n_actions) % MODE_COUNT == 0
     masks[np.arange(count), rng.integers(0, n_actions, count)] = True
     return obs, masks
 

@@ -17,15 +17,18 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 from xml.etree import ElementTree as ET
 
+from ...line.vocabulary import MODES, SPEEDS
 from ..transport.compare import show_ns
 
 EXIT_PASS, EXIT_FAILED_VERDICT, EXIT_BAD_INPUT, EXIT_RUN_FAILED = 0, 1, 2, 3
 
+_MODES = [f"{number} ({name})" for name, number in MODES.items()]
+
 #: Why the node refuses a command, by the key it counts it under on /diagnostics (the node's own
 #: rules, src/ros/protocol.rs ``Rejection``): the reasons a check can name without a node.
 NODE_REASONS = {
-    "invalid_speed": "speed is not one of 0.1, 0.2, ..., 1.0",
-    "unknown_mode": "sort mode is not 0 (basic), 1 (positive) or 2 (negative)",
+    "invalid_speed": f"speed is not one of {SPEEDS[0]}, {SPEEDS[1]}, ..., {SPEEDS[-1]}",
+    "unknown_mode": f"sort mode is not {', '.join(_MODES[:-1])} or {_MODES[-1]}",
     "mode_on_basic_line": "the basic line has no sort mode",
     "stale": "stamp names a tick the line has already left",
     "unknown_tick": "stamp names no current tick (ahead of the line or between ticks)",
