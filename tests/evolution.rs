@@ -565,6 +565,11 @@ fn eval_reports_the_events_of_each_episode() {
     assert_eq!(summary["evolution"]["events"][0]["at"], json!({"episode": 3}));
 }
 
+/// The value `event` sets for `field`, as JSON (None: it leaves the field alone).
+fn event_field(event: &Event, field: &str) -> Option<Value> {
+    serde_json::to_value(event).unwrap().get(field).cloned()
+}
+
 fn evolutions_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("bridge/sorting_line_gym/evolutions")
 }
@@ -578,7 +583,18 @@ fn the_ready_schedules_parse_and_run() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     files.sort();
-    assert_eq!(files, ["drift.yaml", "upgrade.yaml"]);
+    assert_eq!(
+        files,
+        [
+            "drift.yaml",
+            "machine.yaml",
+            "noise-drift.yaml",
+            "sensor.yaml",
+            "setup-a-to-b.yaml",
+            "threshold-drift.yaml",
+            "upgrade.yaml"
+        ]
+    );
 
     // The paper's upgrade: basic B, then advanced B.
     let upgrade = read("upgrade.yaml");
@@ -616,6 +632,36 @@ fn the_ready_schedules_parse_and_run() {
     }
     assert_eq!((line.config().obs_noise, line.config().threshold), (0.3, 0.8));
     assert!(noise.windows(2).all(|w| w[0] <= w[1]) && threshold.windows(2).all(|w| w[0] <= w[1]), "monotone drift");
+
+    // The transfer study's single-change scenarios: past their last event, the line has what their
+    // events set, each field at its last value.
+    for name in ["machine.yaml", "noise-drift.yaml", "sensor.yaml", "setup-a-to-b.yaml", "threshold-drift.yaml"] {
+        let schedule = read(name);
+        let At::Episode(last) = schedule.events.iter().map(|e| e.at).max().unwrap() else { panic!("{name}: episodes") };
+        let mut line = Line::with_evolution(LineConfig::for_setup(Setup::B, Variant::Basic), 42, schedule.clone());
+        while line.episode() <= last {
+            for _ in 0..50 {
+                line.step(Action::new(5, SortMode::Basic));
+            }
+            line.reset(None);
+        }
+        let got = line.settings();
+        let events = &schedule.events;
+        let last_set = |field: &str| events.iter().rev().find_map(|e| event_field(e, field));
+        for field in ["obs_noise", "action_penalty", "threshold", "input", "sort_modes", "ratio_sensor"] {
+            if let Some(want) = last_set(field) {
+                let have = match field {
+                    "obs_noise" => json!(got.obs_noise),
+                    "action_penalty" => json!(got.action_penalty),
+                    "threshold" => json!(got.threshold),
+                    "input" => serde_json::to_value(got.input).unwrap(),
+                    "sort_modes" => json!(got.sort_modes),
+                    _ => json!(got.ratio_sensor),
+                };
+                assert_eq!(have, want, "{name}: {field} after the last event");
+            }
+        }
+    }
 }
 
 // ---- random schedules ----
