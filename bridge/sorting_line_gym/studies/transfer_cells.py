@@ -96,8 +96,10 @@ def plan(scenarios, algos, seeds) -> list[Cell]:
 def hyperparameters(algo: str, ppo_settings: str = "study") -> dict[str, Any]:
     """The constructor arguments of ``algo`` in this study: PPO by ``ppo_settings`` (above), A2C the
     paper's (the benchmark's `hyperparams/a2c.yml`)."""
+    from ..line.vocabulary import check
     from ..training import hyperparams
 
+    check("algo", algo, ALGOS)
     paper = hyperparams.split(hyperparams.load(algo, "advanced"))[1]
     if algo != "ppo":
         return paper
@@ -262,7 +264,9 @@ def make_env(schedule: Path, backend: str = "ros"):
 
 
 def algorithm_class(algo: str):
-    if algo == "ppo":
+    from ..line.vocabulary import check
+
+    if check("algo", algo, ALGOS) == "ppo":
         from sb3_contrib import MaskablePPO
 
         return MaskablePPO
@@ -280,13 +284,17 @@ def act(model, algo: str, obs, masks: np.ndarray) -> int:
     """The deterministic action of ``model``; an A2C action the masks refuse runs in mode 0, as on the line."""
     if algo == "ppo":
         return int(model.predict(obs, action_masks=masks, deterministic=True)[0])
+    from ..line.vocabulary import decode_action, encode_actions
+
     action = int(model.predict(obs, deterministic=True)[0])
-    return action if masks[action] else action - action % 3
+    return action if masks[action] else encode_actions("advanced", decode_action("advanced", action)[0], 0)
 
 
 def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
     """Deterministic episodes of `model` on `env` (seeds 10000, 10001, ...); `mode0`: the masks of a
     machine without sort modes, whatever the line has."""
+    from ..line.vocabulary import action_mask
+
     rewards = []
     for i in range(episodes):
         obs, _ = env.reset(seed=EVAL_SEED + i)
@@ -294,7 +302,7 @@ def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
         while not done:
             masks = env.get_wrapper_attr("action_masks")()
             if mode0:
-                masks = np.array([a % 3 == 0 for a in range(len(masks))])
+                masks = action_mask("advanced", sort_modes=False)
             obs, reward, terminated, truncated, _ = env.step(act(model, algo, obs, masks))
             total += float(reward)
             done = terminated or truncated

@@ -122,6 +122,13 @@ def test_the_offline_evaluation_names_the_allowed_values():
         tc.rewards("oracle", None, {"evolution": "upgrade.yaml"}, 1)
 
 
+def test_an_algorithm_the_study_does_not_train_is_refused():
+    # Once, anything but "ppo" became A2C here.
+    for build in (tc.hyperparameters, tc.algorithm_class):
+        with pytest.raises(ValueError, match="algo = 'dqn' is not valid: allowed ppo, a2c"):
+            build("dqn")
+
+
 def test_a_store_of_the_first_version_keeps_its_key_and_refuses_the_newer_scenarios(tmp_path, capsys):
     args = transfer.options(["--smoke", "--out", str(tmp_path)])
     old = args.settings.key(scenarios=tc.FIRST_SCENARIOS)
