@@ -8,7 +8,8 @@ inside the test's. Checked: the default job (24 baseline rows, the PPO row, the 
 ``--backend native``, a failing step (exit 1 naming the step and its log, no summary) and bad arguments (exit 2
 naming the value and what is allowed, before anything runs).
 
-About 6 minutes in all on a quiet 2-core machine, most of it the default job's cells through ROS.
+About 5 minutes in all on a 2-core machine (2026-12-03, beside the suite's background checks), most of it the
+default job's cells through ROS.
 """
 
 from __future__ import annotations
