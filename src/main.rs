@@ -146,7 +146,7 @@ struct TableArgs {
     #[arg(long, default_value = "basic")]
     variant: Variant,
     /// Accuracy threshold of the reward.
-    #[arg(long, default_value_t = 0.7)]
+    #[arg(long, default_value_t = LineConfig::default().threshold)]
     threshold: f64,
 }
 
