@@ -2,7 +2,7 @@
 # The Rust checks that cost minutes of CPU and that no later test needs: clippy (three
 # configurations), rustdoc, the simulation library alone (no ros feature) and the vendored crates'
 # own unit tests. test.sh runs this in the background, niced, beside the Python tiers, which mostly
-# wait (nodes starting, DDS discovery, replies): the ROS tier held a 2-core machine's load near 0.7.
+# wait (nodes starting, DDS discovery, replies): the ROS tier held a 2-core machine's load near 1.
 # Run it on its own to check the Rust side before a push.
 #
 # It never takes target/release's build lock, which the tests' own cargo builds take (run.sh's
@@ -37,7 +37,7 @@ RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked
 step "The simulation library alone (no ros feature: no DDS dependency)"
 # Its own target dir: the features the DDS stack widens (rand, rand_chacha, serde_json) are then
 # those a user of the library alone gets, and the tests' target/release stays untouched. About
-# 2 CPU-minutes (the library's dependencies and the test dependencies in release).
+# 5 CPU-minutes (4.7 measured: the library's dependencies and the test dependencies in release).
 no_ros=(--release --locked --no-default-features --target-dir target/no-ros)
 cargo build "${no_ros[@]}"
 cargo test "${no_ros[@]}" --lib --tests

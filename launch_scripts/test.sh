@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Every test of sorting_line, from a fresh clone: installs what it needs (launch_scripts/setup.sh),
-# then runs the Rust tests, the Python unit tests (tests/python/unit, on the host) and the Python/ROS
-# integration tests (the rest of tests/python). The ROS tests run inside a
+# then runs the Rust tests, then the Python/ROS integration tests (the rest of tests/python) with the
+# Python unit tests (tests/python/unit, on the host) and the slower Rust checks
+# (launch_scripts/rust_checks.sh) in the background beside them. The ROS tests run inside a
 # loopback-only network namespace on a test-specific ROS_DOMAIN_ID, so no DDS traffic leaves
 # this machine and parallel runs cannot cross-talk over the network. (Not over shared memory,
 # which namespaces do not separate: every rclpy participant in LOCALHOST mode opens Fast DDS's
@@ -9,7 +10,7 @@
 # Two Pythons: the whole suite runs in .venv (with the training stack; a fresh clone's is CPython
 # 3.11), and the README's snippets and a subset (OTHER_PYTHON_TESTS) run again in a core venv
 # (setup.sh without --train) of the other supported version, .venv-3.12 (or .venv-3.11), set up in
-# the background beside the Rust tests. Without that interpreter the subset is skipped, loudly.
+# the background beside the lints and the Rust tests. Without that interpreter the subset is skipped, loudly.
 #
 # Usage: launch_scripts/test.sh [--rust-only] [PYTEST_ARGS...]
 set -euo pipefail
@@ -121,8 +122,9 @@ cargo test --release --locked
 step "Rust checks (launch_scripts/rust_checks.sh: clippy, rustdoc, the library alone, the vendored crates' tests)"
 # About 10 CPU-minutes that nothing after them needs; before the Python tiers, which mostly wait, they
 # took 9 of a fresh clone's 22 minutes before the first Python test (2026-12-03). So they run in the
-# background, niced (the tests' processes come first on the CPU), and their output and verdict come
-# after the ROS tier; a failure there still fails test.sh. With --rust-only, here and now.
+# background, niced (the tests' processes come first on a CPU; the cores' caches are still shared, and
+# the ROS tier ran about 2 minutes slower beside them: docs/installing.md), and their output and verdict
+# come after the ROS tier; a failure there still fails test.sh. With --rust-only, here and now.
 if [[ $RUST_ONLY == 1 ]]; then
   bash launch_scripts/rust_checks.sh
   exit 0
