@@ -220,14 +220,59 @@ fi
 # after the tests, so runs neither pile them up nor start among a dead run's ports.
 shm_clean() { .venv/bin/fastdds shm clean | tr '\n' ' ' | sed 's/^/Fast DDS /; s/ $/\n/' || true; }
 shm_clean
-unshare -n bash -c '
+# The tier runs in SHARDS pytest sessions at once (default 2), each in a network namespace of its own on
+# a domain id of its own, taking the test files from a shared folder of claims (a file runs in the
+# session that claims it first: tests/python/support/shards.py). Most of these tests wait, so one session
+# kept the 2 cores about half busy for the last third of the tier (docs/installing.md). The first session
+# prints here; the others' output follows it.
+SHARDS="${SORTING_LINE_TEST_SHARDS:-2}"
+if ! [[ $SHARDS =~ ^[1-9]$ ]]; then
+  echo "test.sh: SORTING_LINE_TEST_SHARDS=$SHARDS: allowed a whole number 1 ..= 9 (ROS-tier sessions at once)" >&2
+  exit 2
+fi
+claims="$(mktemp -d /tmp/sorting_line_claims.XXXXXX)"
+# shellcheck disable=SC2317 # its lines run, through `bash -c ros_shard` (export -f) below
+ros_shard() {
   set -euo pipefail
-  ip link set lo up
-  source launch_scripts/env.sh
-  # --durations: where the minutes of the suite go, in every CI log (the 20 slowest; a run must stay well
-  # under 20 min).
-  python -m pytest tests/python --ignore=tests/python/unit -q -rs -p no:cacheprovider --durations=20 "$@"
-' test.sh "$@" || status=$?
+  local shard=$1
+  shift
+  local base
+  base="$(mktemp -d "/tmp/sorting_line_ros_tier$shard.XXXXXX")"
+  local status=0 domain=$ROS_DOMAIN_ID
+  # The others' domains spread over 100..199, so the ids the tests derive from their session's stay apart too.
+  ((shard == 0)) || domain=$((100 + (ROS_DOMAIN_ID - 100 + shard * 100 / SHARDS) % 100))
+  # shellcheck disable=SC2016 # the inner script expands its own arguments and environment
+  ROS_DOMAIN_ID=$domain unshare -n bash -c '
+    set -euo pipefail
+    ip link set lo up
+    source launch_scripts/env.sh
+    echo "test.sh: ROS-tier session $1 of $SHARDS, ROS_DOMAIN_ID=$ROS_DOMAIN_ID"
+    base=$2
+    shift 2
+    # --durations: where the minutes of the suite go, in every CI log (the 20 slowest of each session);
+    # classic output: no percentage, which would count the tests of the other sessions too.
+    python -m pytest tests/python --ignore=tests/python/unit -q -rs -p no:cacheprovider --durations=20 \
+      -o console_output_style=classic \
+      --basetemp "$base/pytest" "$@"
+  ' test.sh "$shard" "$base" "$@" || status=$?
+  rm -rf "$base"
+  return "$status"
+}
+export -f ros_shard
+export SHARDS SORTING_LINE_TEST_CLAIMS="$claims"
+for ((shard = 1; shard < SHARDS; shard++)); do
+  job_start "ros_shard$shard" bash -c '
+    set -euo pipefail
+    ros_shard "$@"
+  ' test.sh "$shard" "$@"
+done
+ros_shard 0 "$@" || status=$?
+for ((shard = 1; shard < SHARDS; shard++)); do
+  step "Python/ROS integration tests, session $shard of $SHARDS (beside the one above)"
+  job_collect "ros_shard$shard" "test.sh: ROS-tier session $shard" || status=1
+done
+unset SORTING_LINE_TEST_CLAIMS
+rm -rf "$claims"
 shm_clean
 
 step "Python unit tests (tests/python/unit), run beside the ROS tier"

@@ -32,7 +32,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from support import ros2_cli, tiers, torch_threads  # noqa: E402
+from support import ros2_cli, shards, tiers, torch_threads  # noqa: E402
 from support import ros_harness as h  # noqa: E402
 from support.line_client import LineClient  # noqa: E402
 
@@ -55,6 +55,12 @@ def pytest_collection_modifyitems(config, items):
     outside = [item.nodeid for item in items if not tiers.in_unit(item.path)]
     if outside and not tiers.is_ros_tier(config):
         pytest.exit(f"a unit-tier session collected tests outside {tiers.UNIT}: {outside[:3]}", returncode=3)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session):
+    """The ROS tier's files shared with other sessions when test.sh runs several (support/shards.py)."""
+    return shards.run_claimed(session) if tiers.is_ros_tier(session.config) else None
 
 
 def pytest_report_header(config):
