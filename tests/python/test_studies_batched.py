@@ -7,7 +7,11 @@ test_training.py, test_native_tools.py and the transfer tests hold it.
 What must hold:
 - one cell per seed (the benchmark's named ``..._batched_seed<S>``), its record naming the engine;
 - a rerun with a cell missing trains that seed alone (a batch of one) and leaves the others;
-- a transfer cell's evaluations equal SB3's cell of the same seed (its curve to float32);
+- a transfer cell's evaluations equal SB3's cell of the same seed (its curve to float32), and so do a
+  shrink-and-perturb cell's (the same perturbation in both engines), whose curve up to the change is
+  the transfer cell's of its seed;
+- a transfer cell saved before forgetting was measured (no evaluations on the line before the
+  change) is trained again, the other cells kept;
 - on one node's lines (``--backend ros``) a batch records the scores native lines give;
 - bad input fails at start: an unknown engine, a batch too large for one node, the batched
   transfer on the ROS backend (the evolving line's masks are native only).
@@ -101,28 +105,60 @@ def test_a_batched_transfer_saves_a_cell_per_seed_equal_to_sb3s_and_resumes(tmp_
     assert "2 seeds" in capsys.readouterr().err
     store = json.loads((out / "study.json").read_text())
     assert store["key"]["engine"] == "batched"
-    names = [f"upgrade_a2c_{kind}_seed{s}" for kind in ("transfer", "scratch") for s in (1, 2)]
+    names = [f"upgrade_a2c_{kind}_seed{s}" for kind in ("transfer", "scratch", "perturbed") for s in (1, 2)]
     first = {n: json.loads((out / "cells" / f"{n}.json").read_text()) for n in names}
     for record in first.values():
         assert record["engine"] == "batched" and record["batch"]["seeds"] == [1, 2]
-    # SB3's scratch cell of seed 2, on the same native line: the same evaluations, the same curve.
-    cell = tc.Cell("upgrade", "scratch", "a2c", 2)
-    sb3 = tc.run_cell(cell, tc.Settings(10, 10, 2, backend="native"), out)
-    batched = first[cell.name]
-    assert batched["scratch_eval"] == sb3["scratch_eval"]
-    assert batched["scratch_curve"] == pytest.approx(sb3["scratch_curve"], rel=1e-5, abs=1e-5)
+    # SB3's scratch and perturbed cells of seed 2, on the same native line: the same evaluations, the same curve.
+    for kind, curve in (("scratch", "scratch_curve"), ("perturbed", "perturbed_curve")):
+        cell = tc.Cell("upgrade", kind, "a2c", 2)
+        sb3 = tc.run_cell(cell, tc.Settings(10, 10, 2, backend="native"), out)
+        batched = first[cell.name]
+        for key in tc.BEFORE_EVALUATIONS[kind] + (f"{kind}_eval",):
+            assert batched[key] == sb3[key], (kind, key)
+        assert batched[curve] == pytest.approx(sb3[curve], rel=1e-5, abs=1e-5), kind
+    # Shrink-and-perturb is the transfer cell's agent up to the change; after it, another one.
+    perturbed, through = first["upgrade_a2c_perturbed_seed1"], first["upgrade_a2c_transfer_seed1"]
+    assert perturbed["perturbed_curve"][:10] == through["continued_curve"][:10]
+    assert perturbed["perturbed_at_change_eval"] != through["frozen_eval"]
+    assert len(through["continued_before_eval"]) == len(through["frozen_before_eval"]) == 2
+    summary = json.loads((out / "transfer.json").read_text())["summary"]["upgrade"]["algos"]["a2c"]["continual"]
+    for strategy in ("continued", "scratch", "perturbed"):
+        f = summary[strategy]["forgetting"]["iqm"]
+        assert f["low"] <= f["point"] <= f["high"] and summary[strategy]["forgetting"]["runs"] == 2, strategy
+    assert "by construction" in summary["frozen"]["forgetting_note"]
 
     # A batch cut after seed 1's cell was saved: the rerun trains seed 2 alone.
     (out / "cells" / "upgrade_a2c_transfer_seed2.json").unlink()
     assert transfer.main(argv) == 0
-    assert "4 already done, 1 to run" in capsys.readouterr().err
+    assert "6 already done, 1 to run" in capsys.readouterr().err
     again = json.loads((out / "cells" / "upgrade_a2c_transfer_seed2.json").read_text())
     assert again["batch"]["seeds"] == [2] and again["invocation"] == 2
-    for key in ("continued_curve", "continued_eval", "frozen_eval"):
+    for key in ("continued_curve", "continued_eval", "frozen_eval", "continued_before_eval", "frozen_before_eval"):
         assert again[key] == first["upgrade_a2c_transfer_seed2"][key], key
+    an_old_cell_is_trained_again(transfer, out, argv, names, capsys)
     # The store of one engine refuses the other's options.
     assert transfer.main([*TRANSFER[2:], "--backend", "native", "--out", str(out)]) == 2
     assert "engine: saved 'batched', asked None" in capsys.readouterr().err
+
+
+def an_old_cell_is_trained_again(transfer, out, argv, names, capsys) -> None:
+    """A transfer cell saved before forgetting was measured: trained again, saying so; the rest kept."""
+    old_cell = out / "cells" / "upgrade_a2c_transfer_seed1.json"
+    old = json.loads(old_cell.read_text())
+    kept = {n: (out / "cells" / f"{n}.json").stat().st_mtime_ns for n in names if n != old_cell.stem}
+    old_cell.write_text(json.dumps({k: v for k, v in old.items() if not k.endswith("_before_eval")}))
+    assert transfer.main([*argv, "--report-only"]) == 0  # reported as it is: without its forgetting
+    assert (
+        "No forgetting for continued: cells saved before forgetting was measured" in (out / "transfer.md").read_text()
+    )
+    assert transfer.main(argv) == 0
+    err = capsys.readouterr().err
+    assert "upgrade_a2c_transfer_seed1: a transfer cell without evaluations on the line before the change" in err
+    assert "trained again" in err and "6 already done, 1 to run" in err
+    redone = json.loads(old_cell.read_text())
+    assert redone["invocation"] == 3 and redone["frozen_before_eval"] == old["frozen_before_eval"]
+    assert {n: (out / "cells" / f"{n}.json").stat().st_mtime_ns for n in kept} == kept
 
 
 def test_the_transfer_refuses_the_batched_engine_on_ros(tmp_path, capsys):

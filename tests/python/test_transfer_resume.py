@@ -1,21 +1,22 @@
 """sorting-line-transfer at smoke size, against real nodes over DDS: the pipeline of the full study
-(the baselines and the oracle offline, MaskablePPO continued / frozen / from scratch through the
-evolving node, the statistics and the plot), stopped after some cells and resumed.
+(the baselines and the oracle offline, MaskablePPO continued / frozen / from scratch /
+shrink-and-perturb through the evolving node, the statistics and the plot), stopped after some
+cells and resumed.
 
 What must hold:
 - a stopped study resumes without redoing finished cells: their files are not rewritten (same
   mtime, same bytes, still marked as run by the first invocation) and the second invocation runs
   exactly the rest (``study.json`` lists what each invocation ran), here two at a time in workers;
-- the report has IQM intervals per strategy, probabilities of improvement and steps to recover
-  with intervals, and the plot;
+- the report has IQM intervals per strategy, probabilities of improvement, steps to recover and
+  forgetting (frozen's 0 by construction) with intervals, and the plot;
 - progress comes as plain lines with a projected end when stderr is not a terminal;
 - other result-changing options into the same --out are refused, naming what differs, and so is
   a --out with the earlier format's transfer.json; bad flags fail at once with exit code 2;
 - the statistics on known records (no node): steps to recover, a run that never recovers counted
   as its budget, IQM and probability of improvement.
 
-Cost: about 42 s of CPU (5 cells of 10 + 10 episodes, 3 evaluation episodes; the last 3 two at a time);
-115 s of wall time at load 13-17 under nice -n 19.
+Cost: 57 s of CPU, 117 s of wall time for the whole file on 2026-12-03 (7 cells of 10 + 10
+episodes, 3 evaluation episodes on each side of the change; the last 5 two at a time).
 """
 
 from __future__ import annotations
@@ -28,7 +29,13 @@ from support.images import assert_real_image
 
 SMOKE = ["--smoke", "--scenarios", "upgrade", "--algos", "ppo", "--seeds", "1", "2"]
 FIRST = ["upgrade_baselines", "upgrade_ppo_transfer_seed1"]
-REST = ["upgrade_ppo_scratch_seed1", "upgrade_ppo_transfer_seed2", "upgrade_ppo_scratch_seed2"]
+REST = [
+    "upgrade_ppo_scratch_seed1",
+    "upgrade_ppo_perturbed_seed1",
+    "upgrade_ppo_transfer_seed2",
+    "upgrade_ppo_scratch_seed2",
+    "upgrade_ppo_perturbed_seed2",
+]
 
 
 def snapshot(cells) -> dict[str, tuple[int, bytes]]:
@@ -42,14 +49,14 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
     argv = [*SMOKE, "--out", str(out)]
     assert transfer.main([*argv, "--max-cells", "2"]) == 0
     err = capsys.readouterr().err
-    assert "5 cells, 0 already done, 5 to run" in err and "cell 2/5 done: upgrade_ppo_transfer_seed1" in err
-    assert "projected end" in err and "2 of 5 cells done; 3 left" in err
+    assert "7 cells, 0 already done, 7 to run" in err and "cell 2/7 done: upgrade_ppo_transfer_seed1" in err
+    assert "projected end" in err and "2 of 7 cells done; 5 left" in err
     first = snapshot(out / "cells")
     assert sorted(first) == sorted(FIRST)
 
     assert transfer.main([*argv, "--jobs", "2"]) == 0  # the rest two at a time, in worker processes
     err = capsys.readouterr().err
-    assert "5 cells, 2 already done, 3 to run, 2 at a time" in err and "5 of 5 cells done" in err
+    assert "7 cells, 2 already done, 5 to run, 2 at a time" in err and "7 of 7 cells done" in err
     after = snapshot(out / "cells")
     assert {name: after[name] for name in FIRST} == first, "a finished cell was run again"
     invocations = json.loads((out / "study.json").read_text())["invocations"]
@@ -59,10 +66,11 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
 
     summary = json.loads((out / "transfer.json").read_text())["summary"]["upgrade"]
     ppo = summary["algos"]["ppo"]
-    for strategy in ("continued", "frozen", "scratch"):
+    for strategy in ("continued", "frozen", "scratch", "perturbed"):
         iqm = ppo["strategies"][strategy]["iqm"]
         assert ppo["strategies"][strategy]["runs"] == 2 and iqm["low"] <= iqm["point"] <= iqm["high"], strategy
-    for pair in ("continued > scratch", "continued > frozen", "scratch > frozen", "continued > rba-hold"):
+    for pair in ("continued > scratch", "continued > frozen", "scratch > frozen", "continued > rba-hold",
+                 "perturbed > continued"):  # fmt: skip
         p = ppo["improvement"][pair]
         assert 0.0 <= p["low"] <= p["point"] <= p["high"] <= 1.0, pair
     recovery = ppo["recovery"]
@@ -78,7 +86,12 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
         baselines["after"]["rba-hold"], ppo["strategies"]["continued"]["iqm"]["point"]
     )
     table = (out / "transfer.md").read_text()
-    assert "| upgrade | ppo | 2/2/2 | " in table and "IQM [95 % CI]" in table and "reached)" in table
+    assert "| upgrade | ppo | 2/2/2/2 | " in table and "IQM [95 % CI]" in table and "reached)" in table
+    # Forgetting on the line before the change (basic B), against the snapshot of the same seed.
+    for strategy in ("continued", "scratch", "perturbed"):
+        f = ppo["continual"][strategy]["forgetting"]
+        assert f["runs"] == 2 and f["iqm"]["low"] <= f["iqm"]["point"] <= f["iqm"]["high"], strategy
+    assert "forgetting" not in ppo["continual"]["frozen"] and "0 (by construction)" in table
     assert_real_image(out / "transfer.png")
     assert (out / "transfer.svg").stat().st_size > 10_000
     # Each strategy's runs beside its interval: one mean per training seed.

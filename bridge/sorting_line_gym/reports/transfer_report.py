@@ -36,8 +36,19 @@ the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
     training reward first exceeds the continued run's of the same training seed; a pair where it
     never does counts as the budget (a lower bound).
 
-  Forgetting (the score on the line before the change) is not reported: no cell evaluates an
-  agent on that line.
+  - *score before the change* and *forgetting* (``forgetting``): every trained agent and the
+    snapshot at the change are evaluated on the line before the change too (the same held-out
+    seeds); the score there normalised by random's and the oracle's means on that line, and the
+    forgetting, ``(snapshot - agent) / (oracle - random)`` per seed against the snapshot of the
+    same training seed (the agent deployed when the line changed): IQM over runs x seeds, the
+    interval over whole runs, as the final score. Frozen's forgetting is 0 by construction (it is
+    that snapshot) and is not computed; cells saved before these evaluations existed have none
+    (the study trains them again: ``transfer_cells.outdated``).
+
+  The strategies (``STRATEGIES``): (a) continued, (b) frozen, (c) from scratch and (d)
+  shrink-and-perturb, the continued agent shrunk and perturbed at the change
+  (``transfer_cells.shrink_perturb``); (d) has the metrics of (a), its jumpstart its own
+  perturbed snapshot's.
 
 No ROS and no Stable-Baselines3 here: the report redraws from the cell files alone.
 """
@@ -65,15 +76,32 @@ class Strategy:
     curve: str | None
     label: str
     colour: str
+    #: The record key of its agent's evaluation right after the change (jumpstart), or None.
+    at_change: str | None = None
+    #: The record key of its agent's evaluation on the line before the change (forgetting).
+    before: str | None = None
 
 
-#: The strategies, in the order of every table and figure.
+#: The strategies, in the order of every table and figure. The continued agent at the change is
+#: the frozen snapshot: one jumpstart for both.
 STRATEGIES = {
-    "continued": Strategy("transfer", "continued_eval", "continued_curve", "(a) continued", "tab:blue"),
-    "frozen": Strategy("transfer", "frozen_eval", None, "(b) frozen", "tab:gray"),
-    "scratch": Strategy("scratch", "scratch_eval", "scratch_curve", "(c) from scratch", "tab:orange"),
-}
-COMPARISONS = (("continued", "scratch"), ("continued", "frozen"), ("scratch", "frozen"))
+    "continued": Strategy("transfer", "continued_eval", "continued_curve", "(a) continued", "tab:blue",
+                          "frozen_eval", "continued_before_eval"),
+    "frozen": Strategy("transfer", "frozen_eval", None, "(b) frozen", "tab:gray", "frozen_eval", "frozen_before_eval"),
+    "scratch": Strategy("scratch", "scratch_eval", "scratch_curve", "(c) from scratch", "tab:orange",
+                        None, "scratch_before_eval"),
+    "perturbed": Strategy("perturbed", "perturbed_eval", "perturbed_curve", "(d) shrink-and-perturb", "tab:purple",
+                          "perturbed_at_change_eval", "perturbed_before_eval"),
+}  # fmt: skip
+#: Forgetting is measured against the agent deployed at the change: the transfer cell's snapshot.
+FORGETTING_REFERENCE = "frozen"
+COMPARISONS = (
+    ("continued", "scratch"),
+    ("continued", "frozen"),
+    ("scratch", "frozen"),
+    ("perturbed", "continued"),
+    ("perturbed", "scratch"),
+)
 RECOVERY_SHARE = 0.9
 
 
@@ -125,9 +153,9 @@ def curves_after(records: list[dict], scenario: str, algo: str, key: dict[str, A
 
 
 def _change_at(st: Strategy, key: dict[str, Any]) -> int:
-    """The episode of ``st``'s training curve at which the line has changed: ``before`` for the agent
+    """The episode of ``st``'s training curve at which the line has changed: ``before`` for an agent
     trained through the change, 0 for one trained on the changed line."""
-    return key["before"] if st.kind == "transfer" else 0
+    return key["before"] if st.kind in ("transfer", "perturbed") else 0
 
 
 def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any]) -> dict[str, Any] | None:
@@ -140,8 +168,9 @@ def recovery(records: list[dict], scenario: str, algo: str, key: dict[str, Any])
     budget = key["after"] * key["episode_steps"]
     found: dict[str, Any] = {"target": target, "budget_steps": budget}
     for strategy, runs in curves_after(records, scenario, algo, key).items():
-        steps = [recovery_steps(c, target, key["episode_steps"], key["window"]) for c in runs.values()]
-        found[strategy] = _counted(steps, budget)
+        if runs:
+            steps = [recovery_steps(c, target, key["episode_steps"], key["window"]) for c in runs.values()]
+            found[strategy] = _counted(steps, budget)
     return found
 
 
@@ -162,19 +191,19 @@ def _over_runs(values: list[float]) -> dict[str, Any]:
     return {"per_run": values, "runs": len(values), "iqm": stats.iqm_interval(np.array(values)[:, None]).as_dict()}
 
 
-def normalisation(record: dict[str, Any]) -> dict[str, Any]:
-    """The scale of a scenario's normalised curves from its baselines cell: ``low`` and ``high``,
-    random's and the oracle's means after the change; or, where the cell has not both or the
-    oracle is not above random, ``missing``: why there is none."""
-    after = record["after"]
-    absent = [agent for agent in ("random", "oracle") if agent not in after]
+def normalisation(record: dict[str, Any], side: str = "after") -> dict[str, Any]:
+    """The scale of a scenario's normalised scores from its baselines cell: ``low`` and ``high``,
+    random's and the oracle's means on the line after the change (``side`` "before": before it);
+    or, where the cell has not both or the oracle is not above random, ``missing``: why there is none."""
+    line = record[side]
+    absent = [agent for agent in ("random", "oracle") if agent not in line]
     if absent:
-        why = record.get("oracle_after_missing") if absent == ["oracle"] else None
-        return {"missing": f"the baselines cell has no {' and no '.join(absent)} after the change"
+        why = record.get(f"oracle_{side}_missing") if absent == ["oracle"] else None
+        return {"missing": f"the baselines cell has no {' and no '.join(absent)} {side} the change"
                 + (f" ({why})" if why else "")}  # fmt: skip
-    low, high = float(np.mean(after["random"])), float(np.mean(after["oracle"]))
+    low, high = float(np.mean(line["random"])), float(np.mean(line["oracle"]))
     if not high > low:
-        return {"missing": f"the oracle's mean after the change ({high:.2f}) is not above random's ({low:.2f})"}
+        return {"missing": f"the oracle's mean {side} the change ({high:.2f}) is not above random's ({low:.2f})"}
     return {"low": low, "high": high}
 
 
@@ -199,6 +228,62 @@ def crossover_steps(scratch_curve, continued_curve, episode_steps: int) -> int |
     return (int(np.argmax(ahead)) + 1) * episode_steps if ahead.any() else None
 
 
+def _over_runs_and_seeds(values: np.ndarray) -> dict[str, Any]:
+    """Runs x evaluation seeds with each run's mean and the IQM over all of them, its interval over
+    whole runs (as the final score's)."""
+    return {"per_run": values.mean(axis=1).tolist(), "runs": values.shape[0],
+            "iqm": stats.iqm_interval(values).as_dict()}  # fmt: skip
+
+
+#: Why frozen's forgetting is not computed: its agent is the reference itself.
+FROZEN_FORGETTING = "0 by construction: the frozen agent is the snapshot at the change, the reference"
+
+
+def forgetting(
+    records: list[dict], scenario: str, algo: str, scale: dict[str, Any] | None
+) -> dict[str, dict[str, Any]]:
+    """Per strategy, its forgetting and its score on the line before the change (``before``), both
+    normalised by ``scale`` (random's and the oracle's means before the change, ``normalisation``):
+    ``score_before_change``, the IQM over runs x seeds of ``(score - random) / (oracle - random)``;
+    ``forgetting``, of ``(reference - score) / (oracle - random)`` per seed, the reference the
+    snapshot at the change of the same training seed (the agent deployed when the line changed), so
+    that 0 is nothing forgotten and 1 the oracle's margin over random lost. Intervals over whole
+    runs. Frozen's forgetting is 0 by construction, not computed (``forgetting_note``). None of it
+    where ``scale`` is missing or the cells have no evaluations on the line before the change
+    (``forgetting_missing`` says why)."""
+    found: dict[str, dict[str, Any]] = {s: {} for s in STRATEGIES}
+    found[FORGETTING_REFERENCE]["forgetting_note"] = FROZEN_FORGETTING
+    ref_st = STRATEGIES[FORGETTING_REFERENCE]
+    reference = {r["cell"]["seed"]: r.get(ref_st.before) for r in runs_of(records, scenario, algo, ref_st.kind)}
+    for strategy, st in STRATEGIES.items():
+        runs = runs_of(records, scenario, algo, st.kind)
+        if not runs or st.before is None:
+            continue
+        why = None
+        if scale is None or "missing" in scale:
+            why = "no baselines cell" if scale is None else scale["missing"]
+        elif any(st.before not in r for r in runs):
+            why = "cells saved before forgetting was measured (no evaluations on the line before the change)"
+        if why is not None or scale is None:
+            found[strategy]["forgetting_missing"] = why
+            continue
+        low, high = scale["low"], scale["high"]
+        own = np.array([r[st.before] for r in runs], dtype=float)
+        found[strategy]["score_before_change"] = _over_runs_and_seeds(stats.normalized(own, low, high))
+        if strategy == FORGETTING_REFERENCE:
+            continue
+        seeds = [r["cell"]["seed"] for r in runs]
+        if any(reference.get(seed) is None for seed in seeds):
+            found[strategy]["forgetting_missing"] = (
+                f"no snapshot at the change of seeds {[s for s in seeds if reference.get(s) is None]} "
+                "evaluated on the line before it"
+            )
+            continue
+        drop = (np.array([reference[seed] for seed in seeds], dtype=float) - own) / (high - low)
+        found[strategy]["forgetting"] = {**_over_runs_and_seeds(drop), "seeds": seeds}
+    return found
+
+
 def continual(
     records: list[dict],
     scenario: str,
@@ -206,19 +291,19 @@ def continual(
     key: dict[str, Any],
     scale: dict[str, Any] | None,
     rba_hold: float | None,
+    scale_before: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The continual-RL metrics of one scenario and algorithm (module docstring), per strategy, and
-    the crossover between from scratch and continued."""
+    the crossover between from scratch and continued; ``scale_before``: the normalisation of the
+    line before the change (``forgetting``)."""
     budget = key["after"] * key["episode_steps"]
     curves = curves_after(records, scenario, algo, key)
     found: dict[str, Any] = {s: {} for s in STRATEGIES}
-    if runs_of(records, scenario, algo, "transfer"):
-        # The continued agent at the change is the frozen snapshot: one score right after it for both.
-        at_change = scores(records, scenario, algo, "frozen")
-        jumpstart = {"per_run": at_change.mean(axis=1).tolist(), "runs": at_change.shape[0],
-                     "iqm": stats.iqm_interval(at_change).as_dict()}  # fmt: skip
-        for strategy in ("continued", "frozen"):
-            found[strategy]["jumpstart"] = jumpstart
+    for strategy, st in STRATEGIES.items():
+        cells = runs_of(records, scenario, algo, st.kind)
+        if st.at_change is not None and cells and all(st.at_change in r for r in cells):
+            at_change = np.array([r[st.at_change] for r in cells], dtype=float)
+            found[strategy]["jumpstart"] = _over_runs_and_seeds(at_change)
     for strategy, runs in curves.items():
         if not runs:
             continue
@@ -227,16 +312,18 @@ def continual(
         if rba_hold is not None:
             steps = [recovery_steps(c, rba_hold, key["episode_steps"], key["window"]) for c in runs.values()]
             found[strategy]["steps_to_rba_hold"] = {**_counted(steps, budget), "target": rba_hold}
-    if "auc" in found["continued"] and "auc" in found["scratch"]:
+    for strategy in ("continued", "perturbed"):
+        if "auc" not in found[strategy] or "auc" not in found["scratch"]:
+            continue
         base = float(np.mean(found["scratch"]["auc"]["per_run"]))
-        transfers = [t for a in found["continued"]["auc"]["per_run"] if (t := forward_transfer(a, base)) is not None]
-        if len(transfers) == len(found["continued"]["auc"]["per_run"]):
-            found["continued"]["forward_transfer"] = {**_over_runs(transfers), "auc_scratch": base}
+        transfers = [t for a in found[strategy]["auc"]["per_run"] if (t := forward_transfer(a, base)) is not None]
+        if len(transfers) == len(found[strategy]["auc"]["per_run"]):
+            found[strategy]["forward_transfer"] = {**_over_runs(transfers), "auc_scratch": base}
         else:
-            found["continued"]["forward_transfer_missing"] = (
-                f"the from-scratch runs' mean AUC is {base:.3f}, not below 1"
-            )
-    pairs = sorted(set(curves["continued"]) & set(curves["scratch"]))
+            found[strategy]["forward_transfer_missing"] = f"the from-scratch runs' mean AUC is {base:.3f}, not below 1"
+    for strategy, metrics in forgetting(records, scenario, algo, scale_before).items():
+        found[strategy].update(metrics)
+    pairs = sorted(set(curves.get("continued", {})) & set(curves.get("scratch", {})))
     if pairs:
         steps = [crossover_steps(curves["scratch"][s], curves["continued"][s], key["episode_steps"]) for s in pairs]
         found["scratch"]["crossover"] = {**_counted(steps, budget), "seeds": pairs}
@@ -253,10 +340,17 @@ def baseline_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def algo_summary(
-    records: list[dict], scenario: str, algo: str, key: dict[str, Any], rba_hold, scale: dict[str, Any] | None = None
+    records: list[dict],
+    scenario: str,
+    algo: str,
+    key: dict[str, Any],
+    rba_hold,
+    scale: dict[str, Any] | None = None,
+    scale_before: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """A scenario's and algorithm's strategies, comparisons, steps to recover and continual-RL
-    metrics; ``rba_hold``: its episodes after the change (1 x seeds), ``scale``: ``normalisation``."""
+    metrics; ``rba_hold``: its episodes after the change (1 x seeds), ``scale`` and ``scale_before``:
+    ``normalisation`` after and before the change."""
     strategies, improvements = {}, {}
     for strategy in STRATEGIES:
         s = scores(records, scenario, algo, strategy)
@@ -280,7 +374,7 @@ def algo_summary(
         "strategies": strategies,
         "improvement": improvements,
         "recovery": recovery(records, scenario, algo, key),
-        "continual": continual(records, scenario, algo, key, scale, target),
+        "continual": continual(records, scenario, algo, key, scale, target, scale_before),
     }
 
 
@@ -291,10 +385,12 @@ def summarize(records: list[dict], key: dict[str, Any], scenarios, algos) -> dic
         base = [r for r in records if r["cell"]["scenario"] == scenario and r["cell"]["kind"] == "baselines"]
         rba_hold = np.array([base[0]["after"]["rba-hold"]]) if base else None
         scale = normalisation(base[0]) if base else None
+        scale_before = normalisation(base[0], "before") if base else None
         found[scenario] = {
             "baselines": baseline_summary(base[0]) if base else None,
             "normalisation": scale,
-            "algos": {a: algo_summary(records, scenario, a, key, rba_hold, scale) for a in algos},
+            "normalisation_before": scale_before,
+            "algos": {a: algo_summary(records, scenario, a, key, rba_hold, scale, scale_before) for a in algos},
         }
     return found
 
@@ -329,7 +425,7 @@ def _score_table(summary: dict[str, Any], key: dict[str, Any]) -> list[str]:
         "| scenario | algorithm | runs | "
         + " | ".join(st.label for st in STRATEGIES.values())
         + " | rba-hold before / after | rba before / after | oracle after |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|" + "---|" * len(STRATEGIES) + "---|---|---|",
     ]
     for scenario, s in summary.items():
         base = _baseline_cells(s["baselines"])
@@ -361,21 +457,19 @@ def _improvement_table(summary: dict[str, Any]) -> list[str]:
 
 
 def _recovery_table(summary: dict[str, Any]) -> list[str]:
+    training = [name for name, st in STRATEGIES.items() if st.curve is not None]
+    titles = [STRATEGIES[n].label + (", after the change" if STRATEGIES[n].kind != "scratch" else "") for n in training]
     lines = [
         f"## Steps to recover: to {RECOVERY_SHARE:.0%} of the from-scratch final score, IQM [95 % CI] over runs",
         "",
-        f"| scenario | algorithm | target reward | {STRATEGIES['continued'].label}, after the change "
-        f"| {STRATEGIES['scratch'].label} |",
-        "|---|---|---|---|---|",
+        "| scenario | algorithm | target reward | " + " | ".join(titles) + " |",
+        "|---|---|---|" + "---|" * len(training),
     ]
     for scenario, s in summary.items():
         for algo, a in s["algos"].items():
             r = a["recovery"]
-            lines.append(
-                f"| {scenario} | {algo} | {r['target']:.2f} | {_steps(r['continued'])} | {_steps(r['scratch'])} |"
-                if r
-                else f"| {scenario} | {algo} | - | - | - |"
-            )
+            cells = [f"{r['target']:.2f}", *(_steps(r.get(n)) for n in training)] if r else ["-"] * (1 + len(training))
+            lines.append(f"| {scenario} | {algo} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -386,6 +480,8 @@ CONTINUAL_COLUMNS = (
     ("steps to rba-hold", "steps_to_rba_hold", 0),
     ("forward transfer", "forward_transfer", 3),
     ("new agent's cumulative reward passes the continued one's at", "crossover", 0),
+    ("score before the change", "score_before_change", 3),
+    ("forgetting", "forgetting", 3),
 )
 
 
@@ -397,7 +493,17 @@ def _normalised_between(scale: dict[str, Any] | None) -> str:
     return f"AUC normalised between random and the oracle after the change ({scale['low']:.2f} and {scale['high']:.2f})"
 
 
-def _continual_cell(metric: dict[str, Any] | None, digits: int) -> str:
+def _forgetting_between(scale: dict[str, Any] | None) -> str:
+    if scale is None:
+        return "no forgetting"
+    if "missing" in scale:
+        return f"no forgetting: {scale['missing']}"
+    return f"forgetting normalised between random and the oracle before it ({scale['low']:.2f} and {scale['high']:.2f})"
+
+
+def _continual_cell(metric: dict[str, Any] | None, digits: int, note: str | None = None) -> str:
+    if note is not None:
+        return "0 (by construction)"
     if not metric:
         return "-"
     if "reached" in metric:
@@ -417,19 +523,31 @@ def _continual_tables(summary: dict[str, Any], key: dict[str, Any]) -> list[str]
         "after the change ((k/n): k of n runs did; the others count as the budget, a lower bound). "
         "Forward transfer: (AUC - AUC_scratch) / (1 - AUC_scratch), against the mean AUC of the from-scratch runs. "
         "Crossover: steps after the change at which the from-scratch run's cumulative training reward first "
-        "exceeds the continued run's of the same seed ((k/n) as above). Forgetting is not reported: no cell "
-        "evaluates on the line before the change.",
+        "exceeds the continued run's of the same seed ((k/n) as above). "
+        "Score before the change: the agent's score on the line before the change after its training, "
+        "(score - random) / (oracle - random) there. Forgetting: (the snapshot at the change's score - the agent's) / "
+        "(oracle - random), both on the line before the change, per seed against the snapshot of the same training "
+        "seed (0: nothing forgotten; frozen: 0 by construction, it is that snapshot).",
     ]
     header = "| strategy | runs | final score | " + " | ".join(c[0] for c in CONTINUAL_COLUMNS) + " |"
     for scenario, s in summary.items():
         for algo, a in s["algos"].items():
-            lines += ["", f"### {scenario}, {algo}: {_normalised_between(s.get('normalisation'))}", "", header,
+            lines += ["", f"### {scenario}, {algo}: {_normalised_between(s.get('normalisation'))}; "
+                      f"{_forgetting_between(s.get('normalisation_before'))}", "", header,
                       "|---|---|---|" + "---|" * len(CONTINUAL_COLUMNS)]  # fmt: skip
             for strategy in STRATEGIES:
                 st, metrics = a["strategies"].get(strategy), a.get("continual", {}).get(strategy, {})
-                cells = [_continual_cell(metrics.get(name), digits) for _, name, digits in CONTINUAL_COLUMNS]
+                cells = [
+                    _continual_cell(metrics.get(name), digits, metrics.get("forgetting_note") if name == "forgetting"
+                                    else None)
+                    for _, name, digits in CONTINUAL_COLUMNS
+                ]  # fmt: skip
                 final = _interval(st["iqm"]) if st else "-"
                 lines.append(f"| {strategy} | {st['runs'] if st else 0} | {final} | " + " | ".join(cells) + " |")
+            missing = {
+                n: m["forgetting_missing"] for n, m in a.get("continual", {}).items() if "forgetting_missing" in m
+            }
+            lines += ["", *(f"No forgetting for {n}: {why}." for n, why in missing.items())] if missing else []
     return lines
 
 

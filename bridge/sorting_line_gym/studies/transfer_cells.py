@@ -11,10 +11,15 @@ by cell. The scenarios (``SCENARIOS``) are the ready schedules of ``evolutions/`
   evolving line and ``after`` more past the change (strategy **continued**), and its snapshot at
   the change (strategy **frozen**), both evaluated on the changed line;
 - ``scratch`` per algorithm and training seed: a new agent trained ``after`` episodes on the
-  changed line (strategy **from scratch**), evaluated there.
+  changed line (strategy **from scratch**), evaluated there;
+- ``perturbed`` per algorithm and training seed: the transfer cell's agent of the same seed
+  (trained again: the same episodes up to the change), shrunk and perturbed at the change
+  (``shrink_perturb``) and trained ``after`` more (strategy **shrink-and-perturb**).
 
 Evaluation: ``evaluations`` deterministic episodes from seed 10000 (held out: no training episode
-starts from them), on the line after the change, through the node like the training.
+starts from them), on the line after the change, through the node like the training; and the
+same episodes on the line before the change (``BEFORE_EVALUATIONS``, the report's forgetting):
+every trained agent, and the snapshot at the change.
 
 Algorithms: MaskablePPO (sb3-contrib; it reads the env's action masks) and A2C (SB3). A2C rather
 than DQN because it is on-policy like PPO: "continued" then means the same for both, learning from
@@ -53,9 +58,27 @@ SCENARIOS = ("upgrade", "drift", "sensor", "machine", "noise-drift", "threshold-
 FIRST_SCENARIOS = ("upgrade", "drift")
 ALGOS = ("ppo", "a2c")
 #: The cells' kinds: a scenario's rule-based baselines, then per algorithm and seed the agent
-#: trained before and after the change (its continued and frozen strategies) and the one trained
-#: from scratch after it (reports/transfer_report.py's EVALUATIONS reads each strategy's record).
-KINDS = ("baselines", "transfer", "scratch")
+#: trained before and after the change (its continued and frozen strategies), the one trained
+#: from scratch after it, and the one shrunk and perturbed at the change (reports/transfer_report.py's
+#: STRATEGIES reads each strategy's record).
+KINDS = ("baselines", "transfer", "scratch", "perturbed")
+#: A trained cell's evaluations on the line before the change (the report's forgetting), per kind:
+#: a cell saved without them (before forgetting was measured) is trained again (``outdated``).
+BEFORE_EVALUATIONS = {
+    "transfer": ("continued_before_eval", "frozen_before_eval"),
+    "scratch": ("scratch_before_eval",),
+    "perturbed": ("perturbed_before_eval",),
+}
+#: Shrink-and-perturb (Ash & Adams, "On Warm-Starting Neural Network Training", NeurIPS 2020):
+#: at the change every parameter theta becomes SHRINK * theta + PERTURB * theta_fresh, theta_fresh
+#: that parameter of a fresh initialisation of the same policy (the paper's noise: "a randomly
+#: initialised model as the noise source", so each layer's noise has its own init's scale). The
+#: paper sweeps both; 0.4 and 0.1 are the values implementations of the method commonly take (and
+#: the brief's lambda); they could not be checked against the paper's text here (docs/evolving.md).
+SHRINK, PERTURB = 0.4, 0.1
+#: The fresh initialisation of seed s's perturbation is seeded FRESH_SEED + s: its own, not the
+#: agent's initial weights (seeded s), and the same on every run of the cell.
+FRESH_SEED = 1_000_000
 #: Episodes of the moving mean of the training curves; --before and --after are multiples of it.
 WINDOW = 10
 EVAL_SEED = 10_000
@@ -310,13 +333,80 @@ def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
     return rewards
 
 
-def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, models: Path) -> dict[str, Any]:
-    """Strategies continued and frozen: one agent through the change, and its snapshot at it."""
+def fresh_policy(model, seed: int):
+    """A fresh initialisation of ``model``'s policy (same class, spaces and settings), its weights
+    drawn from torch seeded ``seed``; the global generators are left as they were, so the agent's
+    own training draws what it would have drawn without it."""
+    import random
+
+    import torch
+
+    saved = torch.get_rng_state(), np.random.get_state(), random.getstate()
+    try:
+        torch.manual_seed(seed)
+        return model.policy_class(model.observation_space, model.action_space, model.lr_schedule,
+                                  **model.policy_kwargs)  # fmt: skip
+    finally:
+        torch.set_rng_state(saved[0])
+        np.random.set_state(saved[1])
+        random.setstate(saved[2])
+
+
+def shrink_perturb(model, seed: int) -> None:
+    """Shrink-and-perturb ``model``'s policy in place: theta <- SHRINK * theta + PERTURB * theta_fresh,
+    theta_fresh from ``fresh_policy(model, FRESH_SEED + seed)``. The optimiser's state carries on,
+    as the continued agent's does: only the weights differ from it."""
+    import torch
+
+    fresh = dict(fresh_policy(model, FRESH_SEED + seed).named_parameters())
+    with torch.no_grad():
+        for name, theta in model.policy.named_parameters():
+            theta.mul_(SHRINK).add_(fresh[name], alpha=PERTURB)
+
+
+def evaluations(cell: Cell, settings: Settings, trained, at_change: Path | None, changed: Path, before: Path,
+                backend: str) -> dict[str, list[float]]:  # fmt: skip
+    """A trained cell's evaluation episodes: on the changed line the ``trained`` agent's and, for a
+    transfer or perturbed cell, its snapshot ``at_change``'s (frozen; perturbed at the change), the
+    snapshot with the old machine's masks where the old machine had no modes; on the line before
+    the change (``before``) the trained agent's and the transfer cell's snapshot's
+    (``BEFORE_EVALUATIONS``), with that line's own masks."""
+    n, mode0 = settings.evaluations, frozen_mode0(cell.scenario)
+    strategy = {"transfer": "continued", "scratch": "scratch", "perturbed": "perturbed"}[cell.kind]
+    snapshot = algorithm_class(cell.algo).load(at_change, device="cpu") if at_change is not None else None
+    found: dict[str, list[float]] = {}
+    env = make_env(changed, backend)
+    try:
+        if snapshot is not None:
+            at = "frozen_eval" if cell.kind == "transfer" else f"{strategy}_at_change_eval"
+            found[at] = evaluate(snapshot, cell.algo, env, n, mode0)
+        found[f"{strategy}_eval"] = evaluate(trained, cell.algo, env, n, False)
+    finally:
+        env.close()
+    env = make_env(before, backend)
+    try:
+        found[f"{strategy}_before_eval"] = evaluate(trained, cell.algo, env, n, False)
+        if cell.kind == "transfer":
+            found["frozen_before_eval"] = evaluate(snapshot, cell.algo, env, n, False)
+    finally:
+        env.close()
+    return found
+
+
+def run_transfer(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
+    """Strategies continued and frozen (a transfer cell): one agent through the change, and its
+    snapshot at it; or shrink-and-perturb (a perturbed cell): the same agent, shrunk and perturbed
+    at the change."""
     started = time.monotonic()
+    evolving, changed = schedule_paths(cell.scenario, settings.before, out)
+    models = out / "models"
+    models.mkdir(parents=True, exist_ok=True)
     env = make_env(evolving, settings.backend)
     try:
         model = new_model(cell.algo, env, cell.seed, settings)
         model.learn(settings.before * EPISODE_STEPS)
+        if cell.kind == "perturbed":
+            shrink_perturb(model, int(cell.seed))  # type: ignore[arg-type]
         snapshot = models / f"{cell.name}-at-the-change.zip"
         model.save(snapshot)
         model.learn(settings.after * EPISODE_STEPS, reset_num_timesteps=False)
@@ -324,20 +414,16 @@ def run_transfer(cell: Cell, settings: Settings, evolving: Path, changed: Path, 
     finally:
         env.close()
     trained = time.monotonic()
-    frozen_model = algorithm_class(cell.algo).load(snapshot, device="cpu")
-    eval_env = make_env(changed, settings.backend)
-    try:
-        frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
-        continued = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
-    finally:
-        eval_env.close()
+    found = evaluations(cell, settings, model, snapshot, changed, before_path(cell.scenario, out), settings.backend)
     timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
-    return {"continued_curve": curve, "continued_eval": continued, "frozen_eval": frozen, **timing}
+    curve_key = "continued_curve" if cell.kind == "transfer" else "perturbed_curve"
+    return {curve_key: curve, **found, **timing}
 
 
-def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]:
+def run_scratch(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
     """Strategy from scratch: a new agent on the changed line."""
     started = time.monotonic()
+    changed = schedule_paths(cell.scenario, settings.before, out)[1]
     env = make_env(changed, settings.backend)
     try:
         model = new_model(cell.algo, env, cell.seed, settings)
@@ -346,13 +432,9 @@ def run_scratch(cell: Cell, settings: Settings, changed: Path) -> dict[str, Any]
     finally:
         env.close()
     trained = time.monotonic()
-    eval_env = make_env(changed, settings.backend)
-    try:
-        final = evaluate(model, cell.algo, eval_env, settings.evaluations, False)
-    finally:
-        eval_env.close()
+    found = evaluations(cell, settings, model, None, changed, before_path(cell.scenario, out), settings.backend)
     timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
-    return {"scratch_curve": curve, "scratch_eval": final, **timing}
+    return {"scratch_curve": curve, **found, **timing}
 
 
 def library(
@@ -429,9 +511,18 @@ def run_baselines(cell: Cell, settings: Settings, changed: Path, before: Path) -
 def outdated(record: dict[str, Any]) -> str | None:
     """Why the study runs a saved cell again, or None: a baselines cell of the study's first
     version recorded no random agent (the lower reference of the normalised curves) and the oracle
-    on the paper's setups only; it is redone offline in seconds, the trained cells kept."""
-    if record["cell"]["kind"] == "baselines" and any("random" not in record[side] for side in ("before", "after")):
+    on the paper's setups only; it is redone offline in seconds. A trained cell saved before
+    forgetting was measured has no evaluations on the line before the change
+    (``BEFORE_EVALUATIONS``), and its final agent was not kept: it is trained again."""
+    kind = record["cell"]["kind"]
+    if kind == "baselines" and any("random" not in record[side] for side in ("before", "after")):
         return "a baselines cell of the study's first version (no random agent's episodes): run again, offline"
+    missing = [k for k in BEFORE_EVALUATIONS.get(kind, ()) if k not in record]
+    if missing:
+        return (
+            f"a {kind} cell without evaluations on the line before the change ({', '.join(missing)}: "
+            "forgetting), saved before they were made: trained again"
+        )
     return None
 
 
@@ -441,15 +532,13 @@ def run_cell(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
 
     torch.set_num_threads(1)  # small MLPs on 2 cores: the other core for the node and the bridge
     started = time.monotonic()
-    evolving, changed = schedule_paths(cell.scenario, settings.before, out)
+    changed = schedule_paths(cell.scenario, settings.before, out)[1]
     if cell.kind == "baselines":
         result = run_baselines(cell, settings, changed, before_path(cell.scenario, out))
-    elif cell.kind == "transfer":
-        models = out / "models"
-        models.mkdir(parents=True, exist_ok=True)
-        result = run_transfer(cell, settings, evolving, changed, models)
+    elif cell.kind in ("transfer", "perturbed"):
+        result = run_transfer(cell, settings, out)
     else:
-        result = run_scratch(cell, settings, changed)
+        result = run_scratch(cell, settings, out)
     return {"cell": asdict(cell), **result, "seconds": time.monotonic() - started}
 
 
@@ -531,6 +620,17 @@ def _learn(trainer, steps: int, curves: Curves, progress: bool, reset: bool = Tr
             bar.close()
 
 
+def _shrink_perturb(trainer) -> None:
+    """``shrink_perturb`` of every seed's weights in the batched ``trainer``: written into its SB3
+    models, perturbed there as the SB3 engine perturbs them, and read back; its optimiser state,
+    generators and lines go on as they were."""
+    from ..training.batched import params
+
+    for seed, model in zip(trainer.seeds, trainer.sync_models(), strict=True):
+        shrink_perturb(model, int(seed))
+    trainer.params = params.stack(trainer.trees)
+
+
 class _Offset:
     """A trainer seen by the progress bar as if its steps counted from ``start`` (a continued learn)."""
 
@@ -557,10 +657,13 @@ def run_batch(
     seeds = [int(c.seed) for c in cells]  # type: ignore[arg-type]
     curves = Curves(len(cells))
     snapshots: list[Path] = []
-    trainer = _trainer(first, seeds, settings, evolving if first.kind == "transfer" else changed)
+    through = first.kind in ("transfer", "perturbed")  # trained through the change
+    trainer = _trainer(first, seeds, settings, evolving if through else changed)
     try:
-        if first.kind == "transfer":
+        if through:
             _learn(trainer, settings.before * EPISODE_STEPS, curves, progress)
+            if first.kind == "perturbed":
+                _shrink_perturb(trainer)
             models = out / "models"
             models.mkdir(parents=True, exist_ok=True)
             snapshots = trainer.save([models / f"{c.name}-at-the-change.zip" for c in cells])
@@ -574,20 +677,12 @@ def run_batch(
     share = (time.monotonic() - started) / len(cells)
     batch = {"seeds": seeds, "steps_per_s": rate}
     records = []
+    curve_key = {"transfer": "continued_curve", "scratch": "scratch_curve", "perturbed": "perturbed_curve"}[first.kind]
     for s, cell in enumerate(cells):
         evaluated = time.monotonic()
-        eval_env = make_env(changed, "native")
-        try:
-            if cell.kind == "transfer":
-                frozen_model = algorithm_class(cell.algo).load(snapshots[s], device="cpu")
-                frozen = evaluate(frozen_model, cell.algo, eval_env, settings.evaluations, frozen_mode0(cell.scenario))
-                continued = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
-                result = {"continued_curve": curves.curves[s], "continued_eval": continued, "frozen_eval": frozen}
-            else:
-                final = evaluate(trained[s], cell.algo, eval_env, settings.evaluations, False)
-                result = {"scratch_curve": curves.curves[s], "scratch_eval": final}
-        finally:
-            eval_env.close()
+        at_change = snapshots[s] if through else None
+        found = evaluations(cell, settings, trained[s], at_change, changed, before_path(cell.scenario, out), "native")
+        result = {curve_key: curves.curves[s], **found}
         own = time.monotonic() - evaluated
         timing = {"train_seconds": share, "eval_seconds": own}
         record = {"cell": asdict(cell), **result, **timing, "seconds": share + own, "engine": "batched", "batch": batch}

@@ -3,7 +3,9 @@ made up here, whose curves give known answers: jumpstart, the area under the nor
 the change (between random and the oracle; none, saying why, without them), steps to rba-hold (a run
 that never gets there counted as its budget, a lower bound), forward transfer against the
 from-scratch runs' mean AUC (none when that mean is not below 1), the crossover of the cumulative
-training rewards, and their table. No node, no training.
+training rewards, forgetting against the snapshot at the change between random and the oracle
+before it (frozen's 0 by construction; none, saying why, for cells without the evaluations), the
+shrink-and-perturb strategy's metrics, and their table. No node, no training.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ def test_the_metrics_of_known_curves_between_random_and_the_oracle():
     for strategy in ("continued", "frozen"):
         assert found[strategy]["jumpstart"]["per_run"] == [1.0, 3.0]
         assert found[strategy]["jumpstart"]["iqm"]["point"] == pytest.approx(2.0)
-    assert "jumpstart" not in found["scratch"] and found["frozen"].keys() == {"jumpstart"}
+    assert "jumpstart" not in found["scratch"] and "auc" not in found["frozen"]
     # AUC: the mean of reward / 10 after the change.
     assert found["continued"]["auc"]["per_run"] == pytest.approx([0.5, 0.2])
     assert found["scratch"]["auc"]["per_run"] == pytest.approx([0.6, 0.1])
@@ -108,15 +110,111 @@ def test_the_pure_metrics():
     assert tr.crossover_steps([1.0, 1.0], [1.0, 1.0], 50) is None  # a tie is not a pass
 
 
-def test_the_table_names_the_normalisation_and_leaves_out_forgetting():
+def test_the_table_names_the_normalisation_and_says_why_forgetting_is_missing():
+    """Records without evaluations on the line before the change (cells saved before forgetting was
+    measured) and a baselines cell without random before it: no forgetting, and the table says why."""
     summary = tr.summarize(records(RANDOM_AND_ORACLE), KEY, ["sensor"], ["ppo"])
     text = tr.markdown(summary, KEY)
     assert "### sensor, ppo: AUC normalised between random and the oracle after the change (0.00 and 10.00)" in text
+    assert "no forgetting: the baselines cell has no random and no oracle before the change" in text
     rows = {line.split(" | ")[0]: line for line in text.splitlines() if line.startswith(("| continued", "| scratch"))}
-    # strategy, runs, final score, jumpstart, AUC, steps to rba-hold, forward transfer, crossover
+    # strategy, runs, final, jumpstart, AUC, steps to rba-hold, forward transfer, crossover, score before, forgetting
     assert rows["| continued"].startswith(
         "| continued | 2 | 5.00 [4.00, 6.00] | 2.00 [1.00, 3.00] | 0.350 [0.200, 0.500] |"
     )
-    assert "750 [500, 1000] (1/2)" in rows["| continued"]
-    assert rows["| scratch"].endswith("| 925 [850, 1000] (1/2) |")
-    assert "Forgetting is not reported" in text
+    assert "750 [500, 1000] (1/2)" in rows["| continued"] and rows["| continued"].endswith("| - | - |")
+    assert rows["| scratch"].endswith("| 925 [850, 1000] (1/2) | - | - |")
+    assert "No forgetting for continued: the baselines cell has no random and no oracle before the change." in text
+    frozen = next(line for line in text.splitlines() if line.startswith("| frozen"))
+    assert frozen.endswith("| 0 (by construction) |")  # not computed: it is the reference itself
+
+
+# ----------------------------------------------------------------------------------------------
+# Forgetting and shrink-and-perturb
+
+BEFORE_SCALE = {"rba": [1.0] * 4, "rba-hold": [2.0] * 4, "random": [0.0] * 4, "oracle": [20.0] * 4}
+
+
+def records_before(before=BEFORE_SCALE, scratch_before=True) -> list[dict]:
+    """``records`` with every evaluation on the line before the change, between random 0 and the
+    oracle 20 there, and the perturbed cells. Snapshots at the change score 10 (seed 1) and 8
+    (seed 2) before it; after training continued 6 and 8, from scratch 2 and 4, shrink-and-perturb
+    10 and 4 (known forgetting: 0.2 and 0, 0.4 and 0.2, 0 and 0.2)."""
+    found = records(RANDOM_AND_ORACLE)
+    own = {("transfer", 1): [6.0] * 4, ("transfer", 2): [8.0] * 4, ("scratch", 1): [2.0] * 4,
+           ("scratch", 2): [4.0] * 4}  # fmt: skip
+    for r in found:
+        kind, seed = r["cell"]["kind"], r["cell"]["seed"]
+        if kind == "transfer":
+            r["continued_before_eval"] = own[kind, seed]
+            r["frozen_before_eval"] = [10.0] * 4 if seed == 1 else [8.0] * 4
+        elif kind == "scratch" and scratch_before:
+            r["scratch_before_eval"] = own[kind, seed]
+        elif kind == "baselines":
+            r["before"] = before
+    for seed, before_score in ((1, [10.0] * 4), (2, [4.0] * 4)):
+        found.append(
+            record(
+                "perturbed",
+                seed,
+                perturbed_curve=[9.0] * 10 + [float(7 * seed - 4)] * 20,  # 3 then 10 after the change
+                perturbed_eval=[7.0] * 4,
+                perturbed_at_change_eval=[0.5 * seed] * 4,
+                perturbed_before_eval=before_score,
+            )
+        )
+    return found
+
+
+def test_forgetting_of_known_scores_against_the_snapshot_between_random_and_the_oracle_before_the_change():
+    summary = tr.summarize(records_before(), KEY, ["sensor"], ["ppo"])["sensor"]
+    assert summary["normalisation_before"] == {"low": 0.0, "high": 20.0}
+    found = summary["algos"]["ppo"]["continual"]
+    # (snapshot - agent) / (oracle - random) before the change, per seed of the same training seed.
+    expected = {"continued": [0.2, 0.0], "scratch": [0.4, 0.2], "perturbed": [0.0, 0.2]}
+    for strategy, per_run in expected.items():
+        f = found[strategy]["forgetting"]
+        assert f["per_run"] == pytest.approx(per_run) and f["runs"] == 2 and f["seeds"] == [1, 2], strategy
+        # IQM over runs x seeds of two runs of 4 equal seeds: the mean; resampling whole runs, the two runs' values.
+        assert f["iqm"]["point"] == pytest.approx(sum(per_run) / 2), strategy
+        assert (f["iqm"]["low"], f["iqm"]["high"]) == pytest.approx((min(per_run), max(per_run))), strategy
+    # Frozen is the reference: 0 by construction, not computed; its own score before the change is.
+    assert "forgetting" not in found["frozen"] and "by construction" in found["frozen"]["forgetting_note"]
+    assert found["frozen"]["score_before_change"]["per_run"] == pytest.approx([0.5, 0.4])
+    assert found["continued"]["score_before_change"]["per_run"] == pytest.approx([0.3, 0.4])
+    text = tr.markdown(tr.summarize(records_before(), KEY, ["sensor"], ["ppo"]), KEY)
+    assert "forgetting normalised between random and the oracle before it (0.00 and 20.00)" in text
+    row = next(line for line in text.splitlines() if line.startswith("| scratch"))
+    assert row.endswith("| 0.150 [0.100, 0.200] | 0.300 [0.200, 0.400] |")
+    assert "No forgetting for" not in text
+
+
+def test_forgetting_is_left_out_saying_why_for_cells_without_the_evaluations_before_the_change():
+    found = tr.summarize(records_before(scratch_before=False), KEY, ["sensor"], ["ppo"])["sensor"]["algos"]["ppo"]
+    scratch = found["continual"]["scratch"]
+    assert "forgetting" not in scratch and "saved before forgetting was measured" in scratch["forgetting_missing"]
+    assert "forgetting" in found["continual"]["continued"]  # the others keep theirs
+    oracle_below = {**BEFORE_SCALE, "oracle": [0.0] * 4}
+    found = tr.summarize(records_before(oracle_below), KEY, ["sensor"], ["ppo"])["sensor"]["algos"]["ppo"]
+    assert "is not above random's" in found["continual"]["continued"]["forgetting_missing"]
+
+
+def test_shrink_and_perturb_is_a_strategy_with_the_metrics_of_continued():
+    summary = tr.summarize(records_before(), KEY, ["sensor"], ["ppo"])["sensor"]
+    ppo = summary["algos"]["ppo"]
+    assert list(tr.STRATEGIES) == ["continued", "frozen", "scratch", "perturbed"]
+    assert ppo["strategies"]["perturbed"]["iqm"]["point"] == pytest.approx(7.0)
+    found = ppo["continual"]["perturbed"]
+    # Its jumpstart is its own perturbed snapshot's, not the frozen one's.
+    assert found["jumpstart"]["per_run"] == pytest.approx([0.5, 1.0])
+    assert found["auc"]["per_run"] == pytest.approx([0.3, 1.0])  # rewards 3 and 10 after the change, of 10
+    ft = found["forward_transfer"]
+    assert ft["per_run"] == pytest.approx([(0.3 - 0.35) / 0.65, (1.0 - 0.35) / 0.65])
+    assert found["steps_to_rba_hold"]["per_run"] == [None, 500]
+    assert ppo["recovery"]["perturbed"]["per_run"] == [None, 500]  # 90 % of from scratch's IQM (5.0)
+    assert ppo["improvement"]["perturbed > continued"]["point"] == 1.0  # 7 against 6 and 4
+    text = tr.markdown(tr.summarize(records_before(), KEY, ["sensor"], ["ppo"]), KEY)
+    assert "| (d) shrink-and-perturb |" in text and "| sensor | ppo | 2/2/2/2 |" in text
+    assert "(d) shrink-and-perturb, after the change" in text
+    row = next(line for line in text.splitlines() if line.startswith("| perturbed"))
+    assert row.startswith("| perturbed | 2 | 7.00 [7.00, 7.00] | 0.75 [0.50, 1.00] | 0.650 [0.300, 1.000] |")
