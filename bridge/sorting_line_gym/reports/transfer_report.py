@@ -485,20 +485,13 @@ CONTINUAL_COLUMNS = (
 )
 
 
-def _normalised_between(scale: dict[str, Any] | None) -> str:
+def _normalised_between(scale: dict[str, Any] | None, what: str = "AUC", where: str = "after the change") -> str:
+    """How ``what`` is normalised (``scale``: ``normalisation`` of the line ``where``), or why it is not."""
     if scale is None:
-        return "no baselines cell: no AUC"
+        return f"no baselines cell: no {what}"
     if "missing" in scale:
-        return f"no AUC: {scale['missing']}"
-    return f"AUC normalised between random and the oracle after the change ({scale['low']:.2f} and {scale['high']:.2f})"
-
-
-def _forgetting_between(scale: dict[str, Any] | None) -> str:
-    if scale is None:
-        return "no forgetting"
-    if "missing" in scale:
-        return f"no forgetting: {scale['missing']}"
-    return f"forgetting normalised between random and the oracle before it ({scale['low']:.2f} and {scale['high']:.2f})"
+        return f"no {what}: {scale['missing']}"
+    return f"{what} normalised between random and the oracle {where} ({scale['low']:.2f} and {scale['high']:.2f})"
 
 
 def _continual_cell(metric: dict[str, Any] | None, digits: int, note: str | None = None) -> str:
@@ -533,7 +526,7 @@ def _continual_tables(summary: dict[str, Any], key: dict[str, Any]) -> list[str]
     for scenario, s in summary.items():
         for algo, a in s["algos"].items():
             lines += ["", f"### {scenario}, {algo}: {_normalised_between(s.get('normalisation'))}; "
-                      f"{_forgetting_between(s.get('normalisation_before'))}", "", header,
+                      f"{_normalised_between(s.get('normalisation_before'), 'forgetting', 'before it')}", "", header,
                       "|---|---|---|" + "---|" * len(CONTINUAL_COLUMNS)]  # fmt: skip
             for strategy in STRATEGIES:
                 st, metrics = a["strategies"].get(strategy), a.get("continual", {}).get(strategy, {})
