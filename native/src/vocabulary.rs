@@ -2,11 +2,11 @@
 //! `sorting_line_gym.line.vocabulary` to re-export: Python states none of them again.
 //!
 //! - Constants: `VARIANTS`, `INPUTS`, `SETUPS`, `SPEEDS`, `SPEED_TOLERANCE`, `START_SPEED_INDEX`,
-//!   `MODES`, `MODE_COUNT`, `CATEGORIES`, `CATEGORY_UNKNOWN_CODE`, `CATEGORY_UNKNOWN_OBSERVATION`,
-//!   `THRESHOLD`, `EPISODE_STEPS`, `MAX_EPISODE_STEPS`, `NODE_LINES`, `ACTION_COUNTS` (per variant),
-//!   `SETTING_RANGES` (name: (low, high, whether high is allowed)), `INFO_KEYS` and `INFO_FIELDS`
-//!   (key, kind, `LineState` fields), `START_CONTENTS` (input, belt, machine: (A, B)),
-//!   `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
+//!   `MODES`, `MODE_COUNT`, `MODE_LABELS` (wire value: label), `CATEGORIES`, `CATEGORY_UNKNOWN_CODE`,
+//!   `CATEGORY_UNKNOWN_OBSERVATION`, `THRESHOLD`, `EPISODE_STEPS`, `MAX_EPISODE_STEPS`, `NODE_LINES`,
+//!   `ACTION_COUNTS` (per variant), `SETTING_RANGES` (name: (low, high, whether high is allowed)),
+//!   `INFO_KEYS` and `INFO_FIELDS` (key, kind, `LineState` fields), `START_CONTENTS` (input, belt,
+//!   machine: (A, B)), `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
 //! - Builders: `observations(variant, quantity, category)`, `action_mask(variant, sort_modes)`,
 //!   `level(quantity)` (the row of the rule-based agent's table), `speed_index_of(speed)`,
 //!   `reward(accuracy, speed_index, threshold, penalty)` (the step reward).
@@ -176,6 +176,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("MODES", modes)?;
     m.add("MODE_COUNT", SORT_MODES.len())?;
+    let labels = PyDict::new(py);
+    for mode in SORT_MODES {
+        labels.set_item(mode.index(), mode.label())?;
+    }
+    m.add("MODE_LABELS", labels)?;
     let categories = PyDict::new(py);
     for category in CATEGORIES {
         categories.set_item(serde_name(category), category.index())?;

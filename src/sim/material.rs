@@ -92,6 +92,15 @@ impl SortMode {
     pub fn index(self) -> usize {
         self as usize
     }
+    /// What the mode is for, as the node's scene and the Python dashboard and reports label it:
+    /// its name, with the batches it is made for.
+    pub fn label(self) -> &'static str {
+        match self {
+            SortMode::Basic => "basic",
+            SortMode::Positive => "positive (A-rich)",
+            SortMode::Negative => "negative (B-rich)",
+        }
+    }
     /// The mode made for batches of this category.
     pub fn for_category(category: Category) -> Self {
         SORT_MODES[category.index()]
@@ -115,6 +124,15 @@ mod tests {
         assert_eq!(Batch::new(0, 0).category(), Category::Positive); // B == 0 counts as ratio 3
         assert_eq!(Batch::new(0, 7).category(), Category::Negative);
         assert_eq!(Batch::new(30, 50).category(), Category::Basic);
+    }
+
+    /// Each label starts with the mode's own name (`trace`, parameter files): one naming, not two.
+    #[test]
+    fn mode_labels_start_with_the_modes_names() {
+        for m in SORT_MODES {
+            let name = serde_json::to_value(m).unwrap();
+            assert!(m.label().starts_with(name.as_str().unwrap()), "{m:?}: {}", m.label());
+        }
     }
 
     #[test]

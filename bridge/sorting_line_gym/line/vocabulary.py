@@ -64,8 +64,9 @@ CATEGORIES: Mapping[str, int] = MappingProxyType(dict(_native.CATEGORIES))
 #: category's value, so "no sensor" differs from "mixed batch" (src/sim/evolution.rs).
 CATEGORY_UNKNOWN_CODE: int = _native.CATEGORY_UNKNOWN_CODE
 CATEGORY_UNKNOWN_OBSERVATION: float = _native.CATEGORY_UNKNOWN_OBSERVATION
-#: What each mode number is for, as the dashboard and reports label it.
-MODE_LABELS: Mapping[int, str] = MappingProxyType({0: "basic", 1: "positive (A-rich)", 2: "negative (B-rich)"})
+#: What each mode number is for, as the dashboard and reports label it (the node's scene too:
+#: src/sim/material.rs ``SortMode::label``).
+MODE_LABELS: Mapping[int, str] = MappingProxyType(dict(_native.MODE_LABELS))
 
 #: Speed index every reset starts the belt at (speed 0.6).
 START_SPEED_INDEX: int = _native.START_SPEED_INDEX

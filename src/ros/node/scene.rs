@@ -69,14 +69,6 @@ fn stack(x: f64, y: f64, width: f64, parts: [(f64, (f64, f64, f64)); 2], per_uni
     out
 }
 
-fn mode_name(mode: SortMode) -> &'static str {
-    match mode {
-        SortMode::Basic => "basic",
-        SortMode::Positive => "positive (A-rich)",
-        SortMode::Negative => "negative (B-rich)",
-    }
-}
-
 /// The entity of line `index` (in `namespace`).
 fn line_entity(host: &HostedLine, index: usize, namespace: &str, timestamp: Option<Timestamp>) -> SceneEntity {
     let model = host.line();
@@ -107,9 +99,9 @@ fn line_entity(host: &HostedLine, index: usize, namespace: &str, timestamp: Opti
     let machine_x = start + BELT_LENGTH + 0.75;
     let (machine, label) = match (host.takes_modes(), model.mode()) {
         (false, _) => (STEEL, "sorter".to_string()),
-        (true, SortMode::Basic) => (STEEL, format!("mode {}", mode_name(SortMode::Basic))),
-        (true, SortMode::Positive) => (A, format!("mode {}", mode_name(SortMode::Positive))),
-        (true, SortMode::Negative) => (B, format!("mode {}", mode_name(SortMode::Negative))),
+        (true, SortMode::Basic) => (STEEL, format!("mode {}", SortMode::Basic.label())),
+        (true, SortMode::Positive) => (A, format!("mode {}", SortMode::Positive.label())),
+        (true, SortMode::Negative) => (B, format!("mode {}", SortMode::Negative.label())),
     };
     cubes.push(cube((machine_x, y, 0.6), (1.0, 1.2, 1.2), machine));
     texts.push(text((machine_x, y, 1.6), label));

@@ -52,7 +52,15 @@ REEXPORTED = (
     "INFO_FIELDS",
 )
 #: The read-only mappings among them.
-REEXPORTED_MAPPINGS = ("SETUPS", "MODES", "CATEGORIES", "ACTION_COUNTS", "SETTING_RANGES", "START_CONTENTS")
+REEXPORTED_MAPPINGS = (
+    "SETUPS",
+    "MODES",
+    "MODE_LABELS",
+    "CATEGORIES",
+    "ACTION_COUNTS",
+    "SETTING_RANGES",
+    "START_CONTENTS",
+)
 
 
 @pytest.mark.parametrize("name", REEXPORTED)
@@ -71,6 +79,7 @@ def test_the_vocabularys_mappings_are_the_librarys_read_only(name):
 def test_what_python_derives_follows_from_the_library():
     assert v.SPEED_COUNT == len(v.SPEEDS) and v.START_SPEED == v.SPEEDS[v.START_SPEED_INDEX]
     assert set(v.MODE_LABELS) == set(v.MODES.values()) == set(v.CATEGORIES.values())
+    assert all(v.MODE_LABELS[number].startswith(name) for name, number in v.MODES.items())
     assert v.ACTION_COUNTS == {"basic": v.SPEED_COUNT, "advanced": v.SPEED_COUNT * v.MODE_COUNT}
     assert set(v.ENV_IDS) == set(v.VARIANTS)
     assert v.INFO_KEYS == tuple(key for key, _, _ in v.INFO_FIELDS)
