@@ -13,6 +13,7 @@ use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 #[cfg(feature = "ros")]
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
+use sorting_line::sim::config::{EVAL_EPISODES, EVAL_FIRST_SEED};
 use sorting_line::sim::evolution::{category_code, At, Schedule};
 use sorting_line::sim::rba::{analysis_table, ANALYSIS_COLUMNS};
 use sorting_line::sim::{LineConfig, Setup, Variant};
@@ -84,10 +85,10 @@ struct EpisodeArgs {
     #[arg(long, default_value = "basic")]
     variant: Variant,
     /// Number of episodes; episode i is reset with seed SEED + i.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = EVAL_EPISODES)]
     episodes: usize,
     /// Seed of episode 0 (SEED); episode i uses SEED + i.
-    #[arg(long, default_value_t = 42)]
+    #[arg(long, default_value_t = EVAL_FIRST_SEED)]
     seed: u64,
     /// Steps per episode (the advanced oracle: at most 2000).
     #[arg(long, default_value_t = 50)]

@@ -3,10 +3,11 @@
 //!
 //! - Constants: `VARIANTS`, `INPUTS`, `SETUPS`, `SPEEDS`, `SPEED_TOLERANCE`, `START_SPEED_INDEX`,
 //!   `MODES`, `MODE_COUNT`, `MODE_LABELS` (wire value: label), `CATEGORIES`, `CATEGORY_UNKNOWN_CODE`,
-//!   `CATEGORY_UNKNOWN_OBSERVATION`, `THRESHOLD`, `EPISODE_STEPS`, `MAX_EPISODE_STEPS`, `NODE_LINES`,
-//!   `ACTION_COUNTS` (per variant), `SETTING_RANGES` (name: (low, high, whether high is allowed)),
-//!   `INFO_KEYS` and `INFO_FIELDS` (key, kind, `LineState` fields), `START_CONTENTS` (input, belt,
-//!   machine: (A, B)), `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
+//!   `CATEGORY_UNKNOWN_OBSERVATION`, `THRESHOLD`, `BELOW_THRESHOLD_REWARD`, `EPISODE_STEPS`,
+//!   `MAX_EPISODE_STEPS`, `NODE_LINES`, `EVAL_FIRST_SEED` and `EVAL_EPISODES` (the paper's evaluation
+//!   seeds), `ACTION_COUNTS` (per variant), `SETTING_RANGES` (name: (low, high, whether high is
+//!   allowed)), `INFO_KEYS` and `INFO_FIELDS` (key, kind, `LineState` fields), `START_CONTENTS`
+//!   (input, belt, machine: (A, B)), `START_ACCURACY`, `START_OCCUPANCY`, `LEVELS`.
 //! - Builders: `observations(variant, quantity, category)`, `action_mask(variant, sort_modes)`,
 //!   `level(quantity)` (the row of the rule-based agent's table), `speed_index_of(speed)`,
 //!   `reward(accuracy, speed_index, threshold, penalty)` (the step reward).
@@ -15,12 +16,14 @@ use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use sorting_line::sim::accuracy::START_ACCURACY;
-use sorting_line::sim::config::{INPUT_KINDS, MAX_EPISODE_STEPS, MAX_NODE_LINES, SETUPS, VARIANTS};
+use sorting_line::sim::config::{
+    EVAL_EPISODES, EVAL_FIRST_SEED, INPUT_KINDS, MAX_EPISODE_STEPS, MAX_NODE_LINES, SETUPS, VARIANTS,
+};
 use sorting_line::sim::evolution::{CATEGORY_UNKNOWN_CODE, CATEGORY_UNKNOWN_OBSERVATION};
 use sorting_line::sim::line::{action_mask as mask_of, START_BELT, START_INPUT, START_MACHINE};
 use sorting_line::sim::material::{CATEGORIES, SORT_MODES};
 use sorting_line::sim::observation::{level as level_of, LEVELS};
-use sorting_line::sim::reward::reward as reward_of;
+use sorting_line::sim::reward::{reward as reward_of, BELOW_THRESHOLD_REWARD};
 use sorting_line::sim::speed::{index_of_speed, SPEEDS, SPEED_COUNT, SPEED_TOLERANCE, START_SPEED_INDEX};
 use sorting_line::sim::{Action, LineConfig, Variant};
 
@@ -190,8 +193,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CATEGORY_UNKNOWN_OBSERVATION", CATEGORY_UNKNOWN_OBSERVATION)?;
     let defaults = LineConfig::default();
     m.add("THRESHOLD", defaults.threshold)?;
+    m.add("BELOW_THRESHOLD_REWARD", BELOW_THRESHOLD_REWARD)?;
     m.add("EPISODE_STEPS", defaults.max_steps)?;
     m.add("MAX_EPISODE_STEPS", MAX_EPISODE_STEPS)?;
+    m.add("EVAL_FIRST_SEED", EVAL_FIRST_SEED)?;
+    m.add("EVAL_EPISODES", EVAL_EPISODES)?;
     m.add("NODE_LINES", MAX_NODE_LINES)?;
     let counts = PyDict::new(py);
     for variant in VARIANTS {

@@ -105,6 +105,12 @@ fn check_range(
     }
 }
 
+/// The paper's evaluation: `EVAL_EPISODES` episodes of the default length, episode i reset with
+/// seed `EVAL_FIRST_SEED + i` (seeds 42..51): `sorting_line eval`'s and `oracle`'s defaults, and
+/// the Python package's (`vocabulary.EVAL_FIRST_SEED`, `sorting-line-eval`).
+pub const EVAL_FIRST_SEED: u64 = 42;
+pub const EVAL_EPISODES: usize = 10;
+
 /// Largest accepted episode length: keeps step counters and per-episode series bounded.
 pub const MAX_EPISODE_STEPS: u32 = 1_000_000;
 

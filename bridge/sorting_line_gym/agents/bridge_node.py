@@ -17,7 +17,17 @@ import gymnasium as gym
 import numpy as np
 
 from ..line.errors import BridgeError
-from ..line.vocabulary import ENV_IDS, MODE_COUNT, MODES, SETUPS, SPEED_COUNT, VARIANTS, encode_actions
+from ..line.vocabulary import (
+    ENV_IDS,
+    MODE_COUNT,
+    MODES,
+    SETUP_SPAN,
+    SETUPS,
+    SPEED_COUNT,
+    VARIANT_CHOICE,
+    VARIANTS,
+    encode_actions,
+)
 
 
 def parse_agent(text: str, variant: str):
@@ -42,8 +52,10 @@ def parse_agent(text: str, variant: str):
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sorting-line-bridge", description=__doc__.split("\n\n")[0])
-    p.add_argument("--setup", choices=list(SETUPS), default="A", help="the paper's setup A..D (default %(default)s)")
-    p.add_argument("--variant", choices=VARIANTS, default="basic", help="basic or advanced line (default %(default)s)")
+    p.add_argument(
+        "--setup", choices=list(SETUPS), default="A", help=f"the paper's setup {SETUP_SPAN} (default %(default)s)"
+    )
+    p.add_argument("--variant", choices=VARIANTS, default="basic", help=f"{VARIANT_CHOICE} line (default %(default)s)")
     p.add_argument("--episodes", type=int, default=3, help="episodes to run (default %(default)s)")
     p.add_argument("--seed", type=int, default=42, help="episode i is reset with seed + i")
     p.add_argument("--agent", default="random", help="random, constant:K or constant:K:M")

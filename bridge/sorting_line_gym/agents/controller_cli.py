@@ -36,7 +36,7 @@ from rclpy.utilities import remove_ros_args
 
 from ..line.errors import BridgeError
 from ..line.policy_card import PolicyCard
-from ..line.vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import SETUP_SPAN, SETUPS, VARIANT_CHOICE, VARIANTS
 from ..ros.context import check_domain_id
 from .controller import SPIN_PERIOD, ControllerNode
 from .learned_policy import LearnedAgent, PolicyFileError, load_learned_policy
@@ -59,8 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--namespace", default=None, help="the line's namespace (the node's, or <node ns>/line_<k> with --lines N > 1)"
     )
-    p.add_argument("--setup", choices=list(SETUPS), help="the setup of the node's line (A..D; --agent needs it)")
-    p.add_argument("--variant", choices=VARIANTS, help="basic or advanced line (default: the policy's, else basic)")
+    p.add_argument(
+        "--setup", choices=list(SETUPS), help=f"the setup of the node's line ({SETUP_SPAN}; --agent needs it)"
+    )
+    p.add_argument("--variant", choices=VARIANTS, help=f"{VARIANT_CHOICE} line (default: the policy's, else basic)")
     who = p.add_mutually_exclusive_group()
     who.add_argument("--agent", choices=["rba", "rba-hold"], help="a rule-based policy (default rba)")
     who.add_argument("--policy", type=Path, metavar="FILE", help="a learned policy: POLICY.onnx or an SB3 MODEL.zip")

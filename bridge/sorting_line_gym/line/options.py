@@ -14,11 +14,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .vocabulary import (
+    BELOW_THRESHOLD_REWARD,
     INPUTS,
     MAX_EPISODE_STEPS,
     SETTING_RANGES,
     SETUPS,
     THRESHOLD,
+    VARIANTS,
     check,
     check_setup,
     check_variant,
@@ -36,6 +38,18 @@ def option(default: Any, meaning: str) -> Any:
     return field(default=default, metadata={"meaning": meaning})
 
 
+def _quoted(values: Any) -> str:
+    """``"a", "b" or "c"``: a text option's allowed values as its meaning names them."""
+    quoted = [f'"{v}"' for v in values]
+    return f"{', '.join(quoted[:-1])} or {quoted[-1]}"
+
+
+def _range(name: str) -> str:
+    """``(0.0 ..= 1.0)``: a setting's range as the library checks it (``SETTING_RANGES``)."""
+    low, high, high_allowed = SETTING_RANGES[name]
+    return f"({low} {'..=' if high_allowed else '..<'} {high})"
+
+
 @dataclass(frozen=True, kw_only=True)
 class LineOptions:
     """The line's setup and variant, how the node is reached, its episode length and the
@@ -43,8 +57,12 @@ class LineOptions:
     ones when the object is made. The env constructors take these fields as keyword arguments
     (``envs/keywords.py``): a field renamed here is renamed for all of them."""
 
-    setup: str = option("A", '"A".."D", the paper\'s setups: the input generator, sensor noise and switching penalty')
-    variant: str = option("basic", '"basic" or "advanced" (ratio sensor and sort modes; set by the Gymnasium id)')
+    setup: str = option(
+        "A",
+        f'"{min(SETUPS)}".."{max(SETUPS)}", the paper\'s setups: the input generator, sensor noise and switching'
+        " penalty",
+    )
+    variant: str = option("basic", f"{_quoted(VARIANTS)} (ratio sensor and sort modes; set by the Gymnasium id)")
     namespace: str | None = option(None, 'the node\'s namespace (needed with node="attach")')
     node: str = option(
         "spawn",
@@ -56,10 +74,16 @@ class LineOptions:
     )
     step_timeout: float = option(2.0, "seconds a step's round trip may take (the error names the topic and tick)")
     startup_timeout: float = option(20.0, "seconds the node may take to start or answer the first reset")
-    threshold: float = option(THRESHOLD, "the accuracy below which a batch is rewarded -0.1 (0.0 ..< 1.0)")
-    input: str | None = option(None, '"random", "seasonal" or "seasonal3" instead of the setup\'s input generator')
-    obs_noise: float | None = option(None, "the input sensor's relative noise instead of the setup's (0.0 ..= 1.0)")
-    action_penalty: float | None = option(None, "the switching penalty instead of the setup's (0.0 ..= 10.0)")
+    threshold: float = option(
+        THRESHOLD, f"the accuracy below which a batch is rewarded {BELOW_THRESHOLD_REWARD} {_range('threshold')}"
+    )
+    input: str | None = option(None, f"{_quoted(INPUTS)} instead of the setup's input generator")
+    obs_noise: float | None = option(
+        None, f"the input sensor's relative noise instead of the setup's {_range('obs_noise')}"
+    )
+    action_penalty: float | None = option(
+        None, f"the switching penalty instead of the setup's {_range('action_penalty')}"
+    )
     evolution: str | None = option(None, "an evolution schedule file the node runs the line by (--evolution)")
     foxglove: int | str | None = option(
         None,

@@ -79,8 +79,14 @@ START_OCCUPANCY: float = _native.START_OCCUPANCY
 
 #: Accuracy below which a step earns a flat -0.1 (the node's ``--threshold`` default).
 THRESHOLD: float = _native.THRESHOLD
+#: The flat reward of a step below the threshold (src/sim/reward.rs BELOW_THRESHOLD_REWARD).
+BELOW_THRESHOLD_REWARD: float = _native.BELOW_THRESHOLD_REWARD
 #: Episode length of the paper and the node's ``--max-steps`` default.
 EPISODE_STEPS: int = _native.EPISODE_STEPS
+#: The paper's evaluation: EVAL_EPISODES episodes of EPISODE_STEPS steps, episode i from seed
+#: ``EVAL_FIRST_SEED + i`` (``sorting_line eval``'s defaults; src/sim/config.rs).
+EVAL_FIRST_SEED: int = _native.EVAL_FIRST_SEED
+EVAL_EPISODES: int = _native.EVAL_EPISODES
 #: Longest episode the node accepts (src/sim/config.rs MAX_EPISODE_STEPS).
 MAX_EPISODE_STEPS: int = _native.MAX_EPISODE_STEPS
 #: The most lines one node serves (``sorting_line node --lines``; src/sim/config.rs MAX_NODE_LINES).
@@ -97,6 +103,16 @@ ENV_IDS: Mapping[str, str] = MappingProxyType({"basic": "SortingLine-v0", "advan
 
 #: Gymnasium actions per variant: the speed index, or speed index * MODE_COUNT + mode.
 ACTION_COUNTS: Mapping[str, int] = MappingProxyType(dict(_native.ACTION_COUNTS))
+
+
+# -- Texts: the facts above as help texts, plot labels and reports name them ---------------------
+
+#: The setups' span, ``"A..D"``.
+SETUP_SPAN = f"{min(SETUPS)}..{max(SETUPS)}"
+#: The variants as a choice, ``"basic or advanced"``.
+VARIANT_CHOICE = " or ".join(VARIANTS)
+#: The paper's evaluation seeds, ``"42..51"``.
+EVAL_SEEDS = f"{EVAL_FIRST_SEED}..{EVAL_FIRST_SEED + EVAL_EPISODES - 1}"
 
 
 def speed_index_of(speed: float) -> int | None:

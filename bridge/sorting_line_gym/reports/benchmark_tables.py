@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..line.vocabulary import SETUPS, VARIANTS
+from ..line.vocabulary import EPISODE_STEPS, EVAL_EPISODES, EVAL_SEEDS, SETUPS, VARIANTS
 from ..training.hyperparams import ALGOS
 from .benchmark_summary import (
     AGENTS,
@@ -19,7 +19,7 @@ from .benchmark_summary import (
 )
 
 TABLE_HEADER = [
-    "| index | setup | env | agent | runs | seeds 42..51: reward | held-out: mean |"
+    f"| index | setup | env | agent | runs | seeds {EVAL_SEEDS}: reward | held-out: mean |"
     " held-out: IQM [95% CI] | gap to oracle |"
     " speed % | purity % | speed changes | paper: reward | reference impl.: reward |",
     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -59,15 +59,16 @@ def _our_cells(row: dict[str, Any] | None, agent: str, best: float) -> list[str]
 
 def _table_note(timesteps: int, heldout: Heldout) -> str:
     return (
-        "\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds 42..51: the paper's protocol (10"
-        " episodes of 50 steps, deterministic policy), mean +- population std over the episodes, or for RL with several"
+        f"\nRuns: training seeds (RL) or 1 (the deterministic baselines). Seeds {EVAL_SEEDS}: the paper's protocol"
+        f" ({EVAL_EPISODES} episodes of {EPISODE_STEPS} steps, deterministic policy), mean +- population std over the"
+        " episodes, or for RL with several"
         f" runs the mean over runs +- the std across them. Held-out: {heldout.episodes} seeds from {heldout.seed}; mean"
         " and IQM over runs x episodes, the IQM's 95% bootstrap interval resamples whole runs (a run's scores on"
         " all held-out seeds together; one run: exact); each run's held-out mean is drawn in `runs.png`; gap to"
         " oracle = mean over runs x seeds of `sorting_line oracle` - agent. RL"
         f" agents trained for {timesteps} steps with the paper's hyperparameters. The paper's Table 1 has no random,"
         " rba-hold or oracle rows, and its RBA figures are not what the reference implementation's code gives on the"
-        " same protocol (last column). Bold: our best agent on seeds 42..51."
+        f" same protocol (last column). Bold: our best agent on seeds {EVAL_SEEDS}."
     )
 
 

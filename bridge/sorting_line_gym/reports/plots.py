@@ -36,7 +36,17 @@ from matplotlib.figure import Figure
 
 import sorting_line_gym._native as _native
 
-from ..line.vocabulary import SETUPS, SPEEDS, THRESHOLD, VARIANTS, check_variant, reward, speed_index_of
+from ..line.vocabulary import (
+    EPISODE_STEPS,
+    EVAL_SEEDS,
+    SETUPS,
+    SPEEDS,
+    THRESHOLD,
+    VARIANTS,
+    check_variant,
+    reward,
+    speed_index_of,
+)
 
 AGENT_COLORS = {
     "random": "#9e9e9e",
@@ -92,7 +102,7 @@ def benchmark_figure(rows: dict[tuple[str, str, str], dict[str, Any]], stem: Pat
             ax.scatter(x + offset, paper, marker="_", s=120, color="black", zorder=3, linewidths=2)
     ax.scatter([], [], marker="_", s=120, color="black", linewidths=2, label="paper (Table 1)")
     ax.set_xticks(x, [f"{s} {'adv' if v == 'advanced' else 'basic'}" for s, v in groups])
-    ax.set_ylabel("episode reward (50 steps, seeds 42..51)")
+    ax.set_ylabel(f"episode reward ({EPISODE_STEPS} steps, seeds {EVAL_SEEDS})")
     ax.set_title("Mean episode reward per setup and agent, through ROS 2 (bars: ours, +- std; marks: the paper)")
     ax.axhline(0, color="black", linewidth=0.6)
     ax.grid(axis="y", alpha=0.3)

@@ -70,7 +70,16 @@ from typing import Any
 
 from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
 from ..envs.native import BACKENDS
-from ..line.vocabulary import EPISODE_STEPS, NODE_LINES, SETUPS, THRESHOLD, VARIANTS
+from ..line.vocabulary import (
+    EPISODE_STEPS,
+    EVAL_EPISODES,
+    EVAL_FIRST_SEED,
+    EVAL_SEEDS,
+    NODE_LINES,
+    SETUPS,
+    THRESHOLD,
+    VARIANTS,
+)
 from ..reports import results_csv
 from ..reports.benchmark_summary import (
     AGENTS,
@@ -267,7 +276,7 @@ def write_report(
 
     lines = sorted({(r["cell"]["setup"], r["cell"]["variant"]) for r in records})
     oracles = {line: oracle(*line, heldout.seed, heldout.episodes, out / "oracle") for line in lines}
-    paper_oracles = {line: oracle(*line, 42, 10, out / "oracle") for line in lines}
+    paper_oracles = {line: oracle(*line, EVAL_FIRST_SEED, EVAL_EPISODES, out / "oracle") for line in lines}
     rows = summarize(records, oracles)
     rows.update(oracle_rows(oracles, paper_oracles))
     poi = improvements(records)
@@ -332,10 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         type=int,
         default=list(DEFAULT_SEEDS),
-        help="training seeds of the RL agents (default 42 43 44 45 46)",
+        help=f"training seeds of the RL agents (default {' '.join(map(str, DEFAULT_SEEDS))})",
     )
     p.add_argument(
-        "--timesteps", type=int, default=100_000, help="training budget per RL agent (default 100000, the paper's)"
+        "--timesteps", type=int, default=100_000, help="training budget per RL agent (default %(default)s, the paper's)"
     )
     p.add_argument(
         "--n-envs",
@@ -594,7 +603,7 @@ def run_with_bar(todo: list[Cell], cells: list[Cell], done: dict, failures: list
             r = outcome["evaluation"]
             h = outcome["heldout"]
             bar.write(
-                f"{cell.name}: seeds 42..51 {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
+                f"{cell.name}: seeds {EVAL_SEEDS} {r['reward_mean']:.2f} +- {r['reward_std']:.2f}"
                 f", held-out {h['reward_mean']:.2f}"
                 f" +- {h['reward_std']:.2f} ({outcome['wall_s']:.0f} s)"
             )

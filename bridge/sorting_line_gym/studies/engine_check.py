@@ -65,12 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("results/engine-check"), help="results directory")
     p.add_argument("--engines", nargs="+", default=list(benchmark.ENGINES), choices=benchmark.ENGINES,
                    help="the engines to train (default both; the report compares whatever is saved)")  # fmt: skip
-    p.add_argument("--algos", nargs="+", default=list(DEFAULT_ALGOS), choices=ALGOS, help="default ppo dqn a2c")
+    p.add_argument("--algos", nargs="+", default=list(DEFAULT_ALGOS), choices=ALGOS,
+                   help=f"default {' '.join(DEFAULT_ALGOS)}")  # fmt: skip
     p.add_argument("--lines", nargs="+", default=list(DEFAULT_LINES), metavar="SETUP:VARIANT",
-                   help="default B:advanced D:basic")  # fmt: skip
+                   help=f"default {' '.join(DEFAULT_LINES)}")  # fmt: skip
     p.add_argument("--train-seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS),
-                   help=f"training seeds per engine (default 42 .. 51; at least {MIN_RUNS})")  # fmt: skip
-    p.add_argument("--timesteps", type=int, default=100_000, help="training steps per run (default 100000)")
+                   help=f"training seeds per engine (default {DEFAULT_SEEDS[0]} .. {DEFAULT_SEEDS[-1]};"
+                        f" at least {MIN_RUNS})")  # fmt: skip
+    p.add_argument("--timesteps", type=int, default=100_000, help="training steps per run (default %(default)s)")
     p.add_argument("--heldout-seed", type=int, default=HELDOUT_SEED, help=f"first held-out seed ({HELDOUT_SEED})")
     p.add_argument("--heldout-episodes", type=int, default=HELDOUT_EPISODES,
                    help=f"held-out seeds a run is scored on (default {HELDOUT_EPISODES})")  # fmt: skip

@@ -31,12 +31,24 @@ from pathlib import Path
 from ..agents.policies import Agent
 from ..envs.native import BACKENDS
 from ..line.flags import call_with_flags
-from ..line.vocabulary import EPISODE_STEPS, SETUPS, START_SPEED_INDEX, VARIANTS, check_setup, check_variant
+from ..line.vocabulary import (
+    EPISODE_STEPS,
+    EVAL_EPISODES,
+    EVAL_FIRST_SEED,
+    EVAL_SEEDS,
+    SETUP_SPAN,
+    SETUPS,
+    START_SPEED_INDEX,
+    VARIANT_CHOICE,
+    VARIANTS,
+    check_setup,
+    check_variant,
+)
 from ..training.trained_agent import make_agent
 
-#: The paper's evaluation protocol (episodes of EPISODE_STEPS steps).
-FIRST_SEED = 42
-EPISODES = 10
+#: The paper's evaluation protocol (episodes of EPISODE_STEPS steps): the library's.
+FIRST_SEED = EVAL_FIRST_SEED
+EPISODES = EVAL_EPISODES
 
 
 @dataclass
@@ -234,13 +246,14 @@ def write_outputs(result: Evaluation, out: Path, stem: str) -> list[Path]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="sorting-line-eval",
-        description="Evaluate an agent on a sorting line through ROS 2 (seeds 42..51, 50 steps, deterministic).",
+        description=f"Evaluate an agent on a sorting line through ROS 2 (seeds {EVAL_SEEDS}, {EPISODE_STEPS} steps,"
+        " deterministic).",
     )
     p.add_argument(
         "--agent", required=True, help="random, rba, rba-hold, constant:K[:M|:cat], or ppo:PATH / dqn:PATH / a2c:PATH"
     )
-    p.add_argument("--setup", required=True, choices=list(SETUPS), help="the paper's setup A..D")
-    p.add_argument("--variant", default="basic", choices=VARIANTS, help="basic or advanced line (default %(default)s)")
+    p.add_argument("--setup", required=True, choices=list(SETUPS), help=f"the paper's setup {SETUP_SPAN}")
+    p.add_argument("--variant", default="basic", choices=VARIANTS, help=f"{VARIANT_CHOICE} line (default %(default)s)")
     p.add_argument(
         "--episodes", type=int, default=EPISODES, help=f"episodes, seeded seed, seed+1, ... (default {EPISODES})"
     )

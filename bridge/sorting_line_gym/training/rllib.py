@@ -35,7 +35,7 @@ from typing import Any
 
 import gymnasium
 
-from ..line.vocabulary import EPISODE_STEPS, SETUPS
+from ..line.vocabulary import EPISODE_STEPS, SETUP_SPAN, SETUPS
 
 #: The name the envs are registered under with Ray Tune.
 ENV_NAME = "sorting_line"
@@ -127,7 +127,9 @@ def _parser():
 
     p = argparse.ArgumentParser(prog="python -m sorting_line_gym.training.rllib", description=main.__doc__)
     p.add_argument("--id", default=DEFAULT_ID, help="Gymnasium id (default %(default)s)")
-    p.add_argument("--setup", default="B", choices=list(SETUPS), help="the paper's setup A..D (default %(default)s)")
+    p.add_argument(
+        "--setup", default="B", choices=list(SETUPS), help=f"the paper's setup {SETUP_SPAN} (default %(default)s)"
+    )
     p.add_argument("--env-runners", type=int, default=2, help="EnvRunner processes (default %(default)s)")
     p.add_argument("--envs-per-runner", type=int, default=4, help="envs in each EnvRunner (default %(default)s)")
     p.add_argument("--timesteps", type=int, default=4000, help="env steps to train for (whole iterations)")

@@ -32,7 +32,7 @@ from typing import Any
 from ..agents.learned_policy import TRAIN_HINT, missing_training_stack
 from ..envs.native import BACKENDS
 from ..line.flags import call_with_flags
-from ..line.vocabulary import SETUPS, VARIANTS, check_setup
+from ..line.vocabulary import SETUPS, VARIANT_CHOICE, VARIANTS, check_setup
 from . import hyperparams
 from .run_record import TrainingRun, model_stem, write_record
 
@@ -128,9 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--setup",
         required=True,
         choices=list(SETUPS),
-        help="A random, B seasonal + penalty, C random + noise, D seasonal + noise + penalty",
+        help=", ".join(
+            f"{name} {s['input']}{' + noise' if s['obs_noise'] else ''}{' + penalty' if s['action_penalty'] else ''}"
+            for name, s in SETUPS.items()
+        ),
     )
-    p.add_argument("--variant", default="basic", choices=VARIANTS, help="basic or advanced line (default %(default)s)")
+    p.add_argument("--variant", default="basic", choices=VARIANTS, help=f"{VARIANT_CHOICE} line (default %(default)s)")
     p.add_argument("--seed", type=int, help="seed of the algorithm and of the first training episodes (default 42)")
     p.add_argument(
         "--timesteps", type=int, help="training budget (default: n_timesteps of the hyperparameters, 100000)"
