@@ -20,14 +20,23 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import yaml
 
 from sorting_line_gym import _native
 from sorting_line_gym.agents import policies
 from sorting_line_gym.envs import env as env_module
+from sorting_line_gym.envs import evolving as evolving_module
 from sorting_line_gym.line import vocabulary as v
 from sorting_line_gym.line.options import LineOptions
 from sorting_line_gym.line.policy_card import action_decoding
 from sorting_line_gym.reports import plots
+from sorting_line_gym.reports import results_csv as results_csv_module
+from sorting_line_gym.reports.benchmark_summary import HELDOUT_EPISODES, HELDOUT_SEED
+from sorting_line_gym.studies import benchmark as benchmark_module
+from sorting_line_gym.studies import curves as curves_module
+from sorting_line_gym.studies import engine_check as engine_check_module
+from sorting_line_gym.studies import evaluate as evaluate_module
+from sorting_line_gym.training import trained_agent
 from support import ros_harness as h
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -176,6 +185,117 @@ def test_the_env_docstring_says_the_librarys_line():
     assert f"below the threshold ({v.THRESHOLD})" in doc and f"TimeLimit\nof {v.EPISODE_STEPS} steps" in doc
     listed = re.sub(r"\(.*?\)", "", doc.split("## Info\n", 1)[1], flags=re.S)  # without the explanations
     assert tuple(k.strip().rstrip(".") for k in listed.split(",")) == v.INFO_KEYS
+
+
+def _prose(doc: str | None) -> str:
+    """A docstring with its line breaks and indentation as single spaces."""
+    assert doc
+    return " ".join(doc.split())
+
+
+def _setups_where(key: str) -> str:
+    return ", ".join(name for name, setup in v.SETUPS.items() if setup[key])
+
+
+@pytest.mark.parametrize("module", [env_module, evolving_module], ids=["env", "evolving"])
+def test_the_env_docstrings_actions_are_the_librarys(module):
+    """The action encoding and the modes' labels the docstrings state, evaluated: the codec's."""
+    doc = _prose(module.__doc__)
+    assert f"`Discrete({v.ACTION_COUNTS['advanced']})`" in doc
+    rule = re.search(r"`(speed_index \* \d+ \+ mode)`", doc)
+    assert rule, doc
+    for speed_index in range(v.SPEED_COUNT):
+        for mode in v.MODES.values():
+            action = eval(rule.group(1), {"speed_index": speed_index, "mode": mode})
+            assert action == v.encode_actions("advanced", speed_index, mode), rule.group(1)
+    labels = ", ".join(f"{number} {label}" for number, label in sorted(v.MODE_LABELS.items()))
+    assert f"mode {labels}" in doc
+
+
+def test_the_env_docstrings_spaces_and_reward_are_the_librarys():
+    """The numbers of env.py's docstring beyond its start contents, episode and info (above): the
+    speed of an index, the observation spaces, the setups with noise and a penalty, and the reward
+    formula, evaluated on a grid against the library's reward; and the training episode length
+    against the packaged hyperparameters."""
+    doc = _prose(env_module.__doc__)
+    speed = re.search(r"the belt speed index i \(speed (.+?)\)\.", doc)
+    assert speed, doc
+    speeds = [eval(speed.group(1), {"i": i}) for i in range(v.SPEED_COUNT)]
+    assert [v.speed_index_of(s) for s in speeds] == list(range(v.SPEED_COUNT))
+    for variant in v.VARIANTS:
+        box = env_module.observation_space(variant)
+        stated = f"`Box({box.low.min():g}, {box.high.max():g}, {box.shape}, {box.dtype})`"
+        assert f"{variant}: {stated}" in doc
+    assert f"ratio category ({', '.join(map(str, sorted(v.CATEGORIES.values())))})" in doc
+    assert f"relative noise in setups {_setups_where('obs_noise')};" in doc
+    penalties = {s["action_penalty"] for s in v.SETUPS.values() if s["action_penalty"]}
+    assert len(penalties) == 1 and f"the penalty ({penalties.pop()} in setups {_setups_where('action_penalty')})" in doc
+    below = re.search(r"below the threshold \(([\d.]+)\): (-?[\d.]+)\. Otherwise (.+?), where", doc)
+    assert below, doc
+    assert float(below.group(1)) == v.THRESHOLD and float(below.group(2)) == v.BELOW_THRESHOLD_REWARD
+    formula = below.group(3)
+    for speed_index, speed_value in enumerate(v.SPEEDS):
+        for penalty in (0.0, 0.5):
+            for accuracy in np.linspace(v.THRESHOLD, 1.0, 7):
+                stated = eval(formula, {"accuracy": accuracy, "speed": speed_value, "penalty": penalty})
+                assert math.isclose(stated, v.reward(accuracy, speed_index, penalty=penalty), abs_tol=1e-12), formula
+            assert v.reward(math.nextafter(v.THRESHOLD, 0), speed_index, penalty=penalty) == v.BELOW_THRESHOLD_REWARD
+    training = re.search(r"`max_episode_steps=(\d+)` for training", doc)
+    assert training, doc
+    hyperparams = ROOT / "bridge" / "sorting_line_gym" / "training" / "hyperparams"
+    for path in sorted(hyperparams.glob("*.yml")):
+        for env_id, entry in yaml.safe_load(path.read_text()).items():
+            assert entry["episode_steps"] == int(training.group(1)), f"{path.name} {env_id}"
+
+
+def test_the_evolving_docstring_says_the_librarys_mask_and_unknown_category():
+    doc = _prose(evolving_module.__doc__)
+    mode0 = int(v.action_mask("advanced", sort_modes=False).sum())
+    assert mode0 == v.SPEED_COUNT and "allows the ten actions with mode 0" in doc
+    assert f"reads **{v.CATEGORY_UNKNOWN_OBSERVATION}**" in doc
+
+
+@pytest.mark.parametrize(
+    ("module", "stated"),
+    [
+        (evaluate_module, [f"seed {v.EVAL_FIRST_SEED} + i ({v.EVAL_EPISODES} episodes, {v.EPISODE_STEPS} steps each)"]),
+        (
+            benchmark_module,
+            [
+                f"``sorting-line-eval``'s protocol ({v.EPISODE_STEPS} steps, deterministic)",
+                f"the paper's {v.EVAL_EPISODES} seeds {v.EVAL_SEEDS}",
+                f"``--heldout-episodes`` ({HELDOUT_EPISODES}) held-out seeds from ``--heldout-seed`` ({HELDOUT_SEED})",
+                f"every setup ({min(v.SETUPS)}-{max(v.SETUPS)}) and variant ({', '.join(v.VARIANTS)})",
+            ],
+        ),
+        (curves_module, [f"seed ``seed + i`` for episode i, {v.EPISODE_STEPS} steps"]),
+        (
+            results_csv_module,
+            [
+                f"the held-out seeds, {HELDOUT_SEED}..{HELDOUT_SEED + HELDOUT_EPISODES - 1} by default",
+                f"summed reward ({v.EPISODE_STEPS} steps, deterministic policy",
+            ],
+        ),
+        (
+            engine_check_module,
+            [
+                f"scored on {HELDOUT_EPISODES} held-out seeds (from {HELDOUT_SEED})",
+                f"training seeds {engine_check_module.DEFAULT_SEEDS[0]}..{engine_check_module.DEFAULT_SEEDS[-1]}",
+            ],
+        ),
+    ],
+    ids=["evaluate", "benchmark", "curves", "results_csv", "engine_check"],
+)
+def test_the_studies_docstrings_say_the_protocol(module, stated):
+    """The episode length and the seeds the studies' docstrings state are the ones they run."""
+    doc = _prose(module.__doc__)
+    for text in stated:
+        assert text in doc, text
+
+
+def test_make_agents_docstring_says_the_ranges():
+    doc = _prose(trained_agent.make_agent.__doc__)
+    assert f"(K = 0..{v.SPEED_COUNT - 1}, M = 0..{v.MODE_COUNT - 1})" in doc
 
 
 def test_the_dashboard_starts_with_the_librarys_contents():
