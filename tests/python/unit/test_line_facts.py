@@ -36,6 +36,7 @@ from sorting_line_gym.studies import benchmark as benchmark_module
 from sorting_line_gym.studies import curves as curves_module
 from sorting_line_gym.studies import engine_check as engine_check_module
 from sorting_line_gym.studies import evaluate as evaluate_module
+from sorting_line_gym.training import hyperparams as hyperparams_module
 from sorting_line_gym.training import trained_agent
 from support import ros_harness as h
 
@@ -193,6 +194,15 @@ def _prose(doc: str | None) -> str:
     return " ".join(doc.split())
 
 
+def _training_episode_steps() -> int:
+    """The training episode length of the packaged hyperparameters: one for every algorithm and line."""
+    hyperparams = ROOT / "bridge" / "sorting_line_gym" / "training" / "hyperparams"
+    entries = [entry for path in hyperparams.glob("*.yml") for entry in yaml.safe_load(path.read_text()).values()]
+    lengths = {entry["episode_steps"] for entry in entries}
+    assert len(entries) >= 6 and len(lengths) == 1, lengths
+    return lengths.pop()
+
+
 def _setups_where(key: str) -> str:
     return ", ".join(name for name, setup in v.SETUPS.items() if setup[key])
 
@@ -241,11 +251,7 @@ def test_the_env_docstrings_spaces_and_reward_are_the_librarys():
                 assert math.isclose(stated, v.reward(accuracy, speed_index, penalty=penalty), abs_tol=1e-12), formula
             assert v.reward(math.nextafter(v.THRESHOLD, 0), speed_index, penalty=penalty) == v.BELOW_THRESHOLD_REWARD
     training = re.search(r"`max_episode_steps=(\d+)` for training", doc)
-    assert training, doc
-    hyperparams = ROOT / "bridge" / "sorting_line_gym" / "training" / "hyperparams"
-    for path in sorted(hyperparams.glob("*.yml")):
-        for env_id, entry in yaml.safe_load(path.read_text()).items():
-            assert entry["episode_steps"] == int(training.group(1)), f"{path.name} {env_id}"
+    assert training and int(training.group(1)) == _training_episode_steps(), doc
 
 
 def test_the_evolving_docstring_says_the_librarys_mask_and_unknown_category():
@@ -296,6 +302,26 @@ def test_the_studies_docstrings_say_the_protocol(module, stated):
 def test_make_agents_docstring_says_the_ranges():
     doc = _prose(trained_agent.make_agent.__doc__)
     assert f"(K = 0..{v.SPEED_COUNT - 1}, M = 0..{v.MODE_COUNT - 1})" in doc
+
+
+def test_the_agents_and_hyperparameters_docstrings_say_the_librarys_line():
+    """policies.py's and hyperparams.py's numbers: the action encoding, the categories, the start
+    speed, the decision tables' cells, the constant and random agents' ranges, the episode lengths."""
+    doc = _prose(policies.__doc__)
+    assert f"advanced: speed index * {v.MODE_COUNT} + mode" in doc
+    assert all(f"{number} {name}" in doc for name, number in v.CATEGORIES.items())
+    assert f":data:`START_SPEED_INDEX` (speed {v.START_SPEED})" in doc
+    table = policies.load_policy("A", "advanced")
+    assert len(table["rba"]) == len(table["rba_hold"]) == table["levels"] * len(v.CATEGORIES)
+    assert all(len(cell) == v.SPEED_COUNT for cell in table["rba_hold"])
+    doc = _prose(policies.load_policy.__doc__)
+    assert f"``level * {len(v.CATEGORIES)} + category``" in doc and f"current speed 0..{v.SPEED_COUNT - 1}" in doc
+    assert f"mode ``mode`` (0..{v.MODE_COUNT - 1})" in _prose(policies.ConstantAgent.__doc__)
+    assert f"({v.SPEED_COUNT} speeds; x {v.MODE_COUNT} modes on the advanced line)" in _prose(
+        policies.RandomAgent.__doc__
+    )
+    stated = f"the paper trains on {_training_episode_steps()}, evaluates on {v.EPISODE_STEPS}"
+    assert stated in _prose(hyperparams_module.__doc__)
 
 
 def test_the_dashboard_starts_with_the_librarys_contents():
