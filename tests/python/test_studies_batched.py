@@ -9,7 +9,7 @@ What must hold:
 - a rerun with a cell missing trains that seed alone (a batch of one) and leaves the others;
 - a transfer cell's evaluations equal SB3's cell of the same seed (its curve to float32), and so do a
   shrink-and-perturb cell's (the same perturbation in both engines), whose curve up to the change is
-  the transfer cell's of its seed;
+  the transfer cell's of its seed, and a cloned cell's (the same behaviour cloning);
 - a transfer cell saved before forgetting was measured (no evaluations on the line before the
   change) is trained again, the other cells kept;
 - on one node's lines (``--backend ros``) a batch records the scores native lines give;
@@ -105,12 +105,12 @@ def test_a_batched_transfer_saves_a_cell_per_seed_equal_to_sb3s_and_resumes(tmp_
     assert "2 seeds" in capsys.readouterr().err
     store = json.loads((out / "study.json").read_text())
     assert store["key"]["engine"] == "batched"
-    names = [f"upgrade_a2c_{kind}_seed{s}" for kind in ("transfer", "scratch", "perturbed") for s in (1, 2)]
+    names = [f"upgrade_a2c_{kind}_seed{s}" for kind in ("transfer", "scratch", "perturbed", "cloned") for s in (1, 2)]
     first = {n: json.loads((out / "cells" / f"{n}.json").read_text()) for n in names}
     for record in first.values():
         assert record["engine"] == "batched" and record["batch"]["seeds"] == [1, 2]
     # SB3's scratch and perturbed cells of seed 2, on the same native line: the same evaluations, the same curve.
-    for kind, curve in (("scratch", "scratch_curve"), ("perturbed", "perturbed_curve")):
+    for kind, curve in (("scratch", "scratch_curve"), ("perturbed", "perturbed_curve"), ("cloned", "cloned_curve")):
         cell = tc.Cell("upgrade", kind, "a2c", 2)
         sb3 = tc.run_cell(cell, tc.Settings(10, 10, 2, backend="native"), out)
         batched = first[cell.name]
@@ -123,7 +123,8 @@ def test_a_batched_transfer_saves_a_cell_per_seed_equal_to_sb3s_and_resumes(tmp_
     assert perturbed["perturbed_at_change_eval"] != through["frozen_eval"]
     assert len(through["continued_before_eval"]) == len(through["frozen_before_eval"]) == 2
     summary = json.loads((out / "transfer.json").read_text())["summary"]["upgrade"]["algos"]["a2c"]["continual"]
-    for strategy in ("continued", "scratch", "perturbed"):
+    assert first["upgrade_a2c_cloned_seed2"]["clone_losses"] == sb3["clone_losses"]  # sb3: the cloned cell's
+    for strategy in ("continued", "scratch", "perturbed", "cloned"):
         f = summary[strategy]["forgetting"]["iqm"]
         assert f["low"] <= f["point"] <= f["high"] and summary[strategy]["forgetting"]["runs"] == 2, strategy
     assert "by construction" in summary["frozen"]["forgetting_note"]
@@ -131,7 +132,7 @@ def test_a_batched_transfer_saves_a_cell_per_seed_equal_to_sb3s_and_resumes(tmp_
     # A batch cut after seed 1's cell was saved: the rerun trains seed 2 alone.
     (out / "cells" / "upgrade_a2c_transfer_seed2.json").unlink()
     assert transfer.main(argv) == 0
-    assert "6 already done, 1 to run" in capsys.readouterr().err
+    assert "8 already done, 1 to run" in capsys.readouterr().err
     again = json.loads((out / "cells" / "upgrade_a2c_transfer_seed2.json").read_text())
     assert again["batch"]["seeds"] == [2] and again["invocation"] == 2
     for key in ("continued_curve", "continued_eval", "frozen_eval", "continued_before_eval", "frozen_before_eval"):
@@ -155,7 +156,7 @@ def an_old_cell_is_trained_again(transfer, out, argv, names, capsys) -> None:
     assert transfer.main(argv) == 0
     err = capsys.readouterr().err
     assert "upgrade_a2c_transfer_seed1: a transfer cell without evaluations on the line before the change" in err
-    assert "trained again" in err and "6 already done, 1 to run" in err
+    assert "trained again" in err and "8 already done, 1 to run" in err
     redone = json.loads(old_cell.read_text())
     assert redone["invocation"] == 3 and redone["frozen_before_eval"] == old["frozen_before_eval"]
     assert {n: (out / "cells" / f"{n}.json").stat().st_mtime_ns for n in kept} == kept

@@ -1,7 +1,7 @@
 """sorting-line-transfer at smoke size, against real nodes over DDS: the pipeline of the full study
 (the baselines and the oracle offline, MaskablePPO continued / frozen / from scratch /
-shrink-and-perturb through the evolving node, the statistics and the plot), stopped after some
-cells and resumed.
+shrink-and-perturb / cloned from the oracle through the evolving node, the statistics and the
+plot), stopped after some cells and resumed.
 
 What must hold:
 - a stopped study resumes without redoing finished cells: their files are not rewritten (same
@@ -15,8 +15,8 @@ What must hold:
 - the statistics on known records (no node): steps to recover, a run that never recovers counted
   as its budget, IQM and probability of improvement.
 
-Cost: 57 s of CPU, 117 s of wall time for the whole file on 2026-12-03 (7 cells of 10 + 10
-episodes, 3 evaluation episodes on each side of the change; the last 5 two at a time).
+Cost: 67 s of CPU, 121 s of wall time for the whole file on 2026-12-03 (9 cells of 10 + 10
+episodes, 3 evaluation episodes on each side of the change; the last 7 two at a time).
 """
 
 from __future__ import annotations
@@ -32,9 +32,11 @@ FIRST = ["upgrade_baselines", "upgrade_ppo_transfer_seed1"]
 REST = [
     "upgrade_ppo_scratch_seed1",
     "upgrade_ppo_perturbed_seed1",
+    "upgrade_ppo_cloned_seed1",
     "upgrade_ppo_transfer_seed2",
     "upgrade_ppo_scratch_seed2",
     "upgrade_ppo_perturbed_seed2",
+    "upgrade_ppo_cloned_seed2",
 ]
 
 
@@ -49,14 +51,14 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
     argv = [*SMOKE, "--out", str(out)]
     assert transfer.main([*argv, "--max-cells", "2"]) == 0
     err = capsys.readouterr().err
-    assert "7 cells, 0 already done, 7 to run" in err and "cell 2/7 done: upgrade_ppo_transfer_seed1" in err
-    assert "projected end" in err and "2 of 7 cells done; 5 left" in err
+    assert "9 cells, 0 already done, 9 to run" in err and "cell 2/9 done: upgrade_ppo_transfer_seed1" in err
+    assert "projected end" in err and "2 of 9 cells done; 7 left" in err
     first = snapshot(out / "cells")
     assert sorted(first) == sorted(FIRST)
 
     assert transfer.main([*argv, "--jobs", "2"]) == 0  # the rest two at a time, in worker processes
     err = capsys.readouterr().err
-    assert "7 cells, 2 already done, 5 to run, 2 at a time" in err and "7 of 7 cells done" in err
+    assert "9 cells, 2 already done, 7 to run, 2 at a time" in err and "9 of 9 cells done" in err
     after = snapshot(out / "cells")
     assert {name: after[name] for name in FIRST} == first, "a finished cell was run again"
     invocations = json.loads((out / "study.json").read_text())["invocations"]
@@ -66,11 +68,11 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
 
     summary = json.loads((out / "transfer.json").read_text())["summary"]["upgrade"]
     ppo = summary["algos"]["ppo"]
-    for strategy in ("continued", "frozen", "scratch", "perturbed"):
+    for strategy in ("continued", "frozen", "scratch", "perturbed", "cloned"):
         iqm = ppo["strategies"][strategy]["iqm"]
         assert ppo["strategies"][strategy]["runs"] == 2 and iqm["low"] <= iqm["point"] <= iqm["high"], strategy
     for pair in ("continued > scratch", "continued > frozen", "scratch > frozen", "continued > rba-hold",
-                 "perturbed > continued"):  # fmt: skip
+                 "perturbed > continued", "cloned > scratch"):  # fmt: skip
         p = ppo["improvement"][pair]
         assert 0.0 <= p["low"] <= p["point"] <= p["high"] <= 1.0, pair
     recovery = ppo["recovery"]
@@ -86,9 +88,9 @@ def test_a_stopped_study_resumes_without_redoing_cells_and_reports_intervals(tmp
         baselines["after"]["rba-hold"], ppo["strategies"]["continued"]["iqm"]["point"]
     )
     table = (out / "transfer.md").read_text()
-    assert "| upgrade | ppo | 2/2/2/2 | " in table and "IQM [95 % CI]" in table and "reached)" in table
+    assert "| upgrade | ppo | 2/2/2/2/2 | " in table and "IQM [95 % CI]" in table and "reached)" in table
     # Forgetting on the line before the change (basic B), against the snapshot of the same seed.
-    for strategy in ("continued", "scratch", "perturbed"):
+    for strategy in ("continued", "scratch", "perturbed", "cloned"):
         f = ppo["continual"][strategy]["forgetting"]
         assert f["runs"] == 2 and f["iqm"]["low"] <= f["iqm"]["point"] <= f["iqm"]["high"], strategy
     assert "forgetting" not in ppo["continual"]["frozen"] and "0 (by construction)" in table

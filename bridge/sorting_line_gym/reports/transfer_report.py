@@ -45,10 +45,12 @@ the *tasks* are the held-out evaluation seeds. Per scenario and algorithm:
     that snapshot) and is not computed; cells saved before these evaluations existed have none
     (the study trains them again: ``transfer_cells.outdated``).
 
-  The strategies (``STRATEGIES``): (a) continued, (b) frozen, (c) from scratch and (d)
+  The strategies (``STRATEGIES``): (a) continued, (b) frozen, (c) from scratch, (d)
   shrink-and-perturb, the continued agent shrunk and perturbed at the change
-  (``transfer_cells.shrink_perturb``); (d) has the metrics of (a), its jumpstart its own
-  perturbed snapshot's.
+  (``transfer_cells.shrink_perturb``), and (e) a new agent cloned from the exact oracle's
+  episodes before it trains (``transfer_cells.clone_oracle``); (d) has the metrics of (a), its
+  jumpstart its own perturbed snapshot's; (e) those of (c), and a jumpstart: the cloned agent's
+  score before its RL training.
 
 No ROS and no Stable-Baselines3 here: the report redraws from the cell files alone.
 """
@@ -92,6 +94,8 @@ STRATEGIES = {
                         None, "scratch_before_eval"),
     "perturbed": Strategy("perturbed", "perturbed_eval", "perturbed_curve", "(d) shrink-and-perturb", "tab:purple",
                           "perturbed_at_change_eval", "perturbed_before_eval"),
+    "cloned": Strategy("cloned", "cloned_eval", "cloned_curve", "(e) new, cloned from the oracle", "tab:brown",
+                       "cloned_at_change_eval", "cloned_before_eval"),
 }  # fmt: skip
 #: Forgetting is measured against the agent deployed at the change: the transfer cell's snapshot.
 FORGETTING_REFERENCE = "frozen"
@@ -101,6 +105,7 @@ COMPARISONS = (
     ("scratch", "frozen"),
     ("perturbed", "continued"),
     ("perturbed", "scratch"),
+    ("cloned", "scratch"),
 )
 RECOVERY_SHARE = 0.9
 
@@ -312,7 +317,7 @@ def continual(
         if rba_hold is not None:
             steps = [recovery_steps(c, rba_hold, key["episode_steps"], key["window"]) for c in runs.values()]
             found[strategy]["steps_to_rba_hold"] = {**_counted(steps, budget), "target": rba_hold}
-    for strategy in ("continued", "perturbed"):
+    for strategy in ("continued", "perturbed", "cloned"):
         if "auc" not in found[strategy] or "auc" not in found["scratch"]:
             continue
         base = float(np.mean(found["scratch"]["auc"]["per_run"]))

@@ -10,7 +10,8 @@ episodes before the change and `--after` more after it, unchanged (the schedule 
 the agent is not told); (b) **frozen**, its snapshot at the change, evaluated on the changed line
 without further learning; (c) **from scratch**, a new agent trained `--after` episodes on the changed
 line; (d) **shrink-and-perturb**, (a)'s agent shrunk and perturbed at the change (Ash & Adams 2020)
-and trained on; each also evaluated on the line before the change (forgetting); against rba,
+and trained on; (e) **new, cloned from the oracle**, (c) fitted first to the exact oracle's
+episodes; each also evaluated on the line before the change (forgetting); against rba,
 rba-hold and random (`sorting_line eval`, offline) and the oracle. Scenarios
 (`--scenarios`, default `upgrade drift`): ``transfer_cells.SCENARIOS``, the ready schedules of the
 same names in `evolutions/` (docs/evolving.md says what each changes), with the change moved to

@@ -14,7 +14,10 @@ by cell. The scenarios (``SCENARIOS``) are the ready schedules of ``evolutions/`
   changed line (strategy **from scratch**), evaluated there;
 - ``perturbed`` per algorithm and training seed: the transfer cell's agent of the same seed
   (trained again: the same episodes up to the change), shrunk and perturbed at the change
-  (``shrink_perturb``) and trained ``after`` more (strategy **shrink-and-perturb**).
+  (``shrink_perturb``) and trained ``after`` more (strategy **shrink-and-perturb**);
+- ``cloned`` per algorithm and training seed: a new agent first cloned from the exact oracle's
+  episodes on the changed line (``clone_oracle``), then trained ``after`` episodes there (strategy
+  **new, cloned from the oracle**).
 
 Evaluation: ``evaluations`` deterministic episodes from seed 10000 (held out: no training episode
 starts from them), on the line after the change, through the node like the training; and the
@@ -47,6 +50,7 @@ import numpy as np
 import yaml
 
 from ..line.vocabulary import EPISODE_STEPS
+from . import transfer_warm as warm
 from .cell_store import ConfigurationMismatch
 
 #: The scenarios, each a ready schedule (evolutions/<name>.yaml): the paper's machine and sensor
@@ -61,24 +65,17 @@ ALGOS = ("ppo", "a2c")
 #: trained before and after the change (its continued and frozen strategies), the one trained
 #: from scratch after it, and the one shrunk and perturbed at the change (reports/transfer_report.py's
 #: STRATEGIES reads each strategy's record).
-KINDS = ("baselines", "transfer", "scratch", "perturbed")
+KINDS = ("baselines", "transfer", "scratch", "perturbed", "cloned")
 #: A trained cell's evaluations on the line before the change (the report's forgetting), per kind:
 #: a cell saved without them (before forgetting was measured) is trained again (``outdated``).
 BEFORE_EVALUATIONS = {
     "transfer": ("continued_before_eval", "frozen_before_eval"),
     "scratch": ("scratch_before_eval",),
     "perturbed": ("perturbed_before_eval",),
+    "cloned": ("cloned_before_eval",),
 }
-#: Shrink-and-perturb (Ash & Adams, "On Warm-Starting Neural Network Training", NeurIPS 2020):
-#: at the change every parameter theta becomes SHRINK * theta + PERTURB * theta_fresh, theta_fresh
-#: that parameter of a fresh initialisation of the same policy (the paper's noise: "a randomly
-#: initialised model as the noise source", so each layer's noise has its own init's scale). The
-#: paper sweeps both; 0.4 and 0.1 are the values implementations of the method commonly take (and
-#: the brief's lambda); they could not be checked against the paper's text here (docs/evolving.md).
-SHRINK, PERTURB = 0.4, 0.1
-#: The fresh initialisation of seed s's perturbation is seeded FRESH_SEED + s: its own, not the
-#: agent's initial weights (seeded s), and the same on every run of the cell.
-FRESH_SEED = 1_000_000
+#: The strategy a trained cell's record keys are named after, per kind.
+STRATEGY_OF = {"transfer": "continued", "scratch": "scratch", "perturbed": "perturbed", "cloned": "cloned"}
 #: Episodes of the moving mean of the training curves; --before and --after are multiples of it.
 WINDOW = 10
 EVAL_SEED = 10_000
@@ -333,35 +330,14 @@ def evaluate(model, algo: str, env, episodes: int, mode0: bool) -> list[float]:
     return rewards
 
 
-def fresh_policy(model, seed: int):
-    """A fresh initialisation of ``model``'s policy (same class, spaces and settings), its weights
-    drawn from torch seeded ``seed``; the global generators are left as they were, so the agent's
-    own training draws what it would have drawn without it."""
-    import random
-
-    import torch
-
-    saved = torch.get_rng_state(), np.random.get_state(), random.getstate()
+def oracle_demonstrations(scenario: str, changed: Path):
+    """``warm.oracle_demonstrations`` of the line after the change of ``scenario``: the oracle of
+    that side's ``fixed_line``, replayed on the changed schedule's native line."""
+    env = make_env(changed, "native")
     try:
-        torch.manual_seed(seed)
-        return model.policy_class(model.observation_space, model.action_space, model.lr_schedule,
-                                  **model.policy_kwargs)  # fmt: skip
+        return warm.oracle_demonstrations(fixed_line(line_states(scenario)[1]), env)
     finally:
-        torch.set_rng_state(saved[0])
-        np.random.set_state(saved[1])
-        random.setstate(saved[2])
-
-
-def shrink_perturb(model, seed: int) -> None:
-    """Shrink-and-perturb ``model``'s policy in place: theta <- SHRINK * theta + PERTURB * theta_fresh,
-    theta_fresh from ``fresh_policy(model, FRESH_SEED + seed)``. The optimiser's state carries on,
-    as the continued agent's does: only the weights differ from it."""
-    import torch
-
-    fresh = dict(fresh_policy(model, FRESH_SEED + seed).named_parameters())
-    with torch.no_grad():
-        for name, theta in model.policy.named_parameters():
-            theta.mul_(SHRINK).add_(fresh[name], alpha=PERTURB)
+        env.close()
 
 
 def evaluations(cell: Cell, settings: Settings, trained, at_change: Path | None, changed: Path, before: Path,
@@ -372,7 +348,9 @@ def evaluations(cell: Cell, settings: Settings, trained, at_change: Path | None,
     the change (``before``) the trained agent's and the transfer cell's snapshot's
     (``BEFORE_EVALUATIONS``), with that line's own masks."""
     n, mode0 = settings.evaluations, frozen_mode0(cell.scenario)
-    strategy = {"transfer": "continued", "scratch": "scratch", "perturbed": "perturbed"}[cell.kind]
+    if cell.kind == "cloned":  # a new agent's snapshot: the changed line's masks
+        mode0 = False
+    strategy = STRATEGY_OF[cell.kind]
     snapshot = algorithm_class(cell.algo).load(at_change, device="cpu") if at_change is not None else None
     found: dict[str, list[float]] = {}
     env = make_env(changed, backend)
@@ -406,7 +384,7 @@ def run_transfer(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
         model = new_model(cell.algo, env, cell.seed, settings)
         model.learn(settings.before * EPISODE_STEPS)
         if cell.kind == "perturbed":
-            shrink_perturb(model, int(cell.seed))  # type: ignore[arg-type]
+            warm.shrink_perturb(model, int(cell.seed))  # type: ignore[arg-type]
         snapshot = models / f"{cell.name}-at-the-change.zip"
         model.save(snapshot)
         model.learn(settings.after * EPISODE_STEPS, reset_num_timesteps=False)
@@ -421,20 +399,29 @@ def run_transfer(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
 
 
 def run_scratch(cell: Cell, settings: Settings, out: Path) -> dict[str, Any]:
-    """Strategy from scratch: a new agent on the changed line."""
+    """Strategy from scratch (a scratch cell): a new agent on the changed line; or new, cloned from
+    the oracle (a cloned cell): the same, cloned from the oracle's episodes before it trains."""
     started = time.monotonic()
     changed = schedule_paths(cell.scenario, settings.before, out)[1]
     env = make_env(changed, settings.backend)
+    cloned: dict[str, Any] = {}
     try:
         model = new_model(cell.algo, env, cell.seed, settings)
+        snapshot = None
+        if cell.kind == "cloned":
+            demonstrations = oracle_demonstrations(cell.scenario, changed)
+            cloned["clone_losses"] = warm.clone_oracle(model, int(cell.seed), demonstrations)  # type: ignore[arg-type]
+            snapshot = out / "models" / f"{cell.name}-cloned.zip"
+            snapshot.parent.mkdir(parents=True, exist_ok=True)
+            model.save(snapshot)
         model.learn(settings.after * EPISODE_STEPS)
         curve = [float(r) for r in env.get_episode_rewards()]
     finally:
         env.close()
     trained = time.monotonic()
-    found = evaluations(cell, settings, model, None, changed, before_path(cell.scenario, out), settings.backend)
+    found = evaluations(cell, settings, model, snapshot, changed, before_path(cell.scenario, out), settings.backend)
     timing = {"train_seconds": trained - started, "eval_seconds": time.monotonic() - trained}
-    return {"scratch_curve": curve, **found, **timing}
+    return {f"{STRATEGY_OF[cell.kind]}_curve": curve, **cloned, **found, **timing}
 
 
 def library(
@@ -620,17 +607,6 @@ def _learn(trainer, steps: int, curves: Curves, progress: bool, reset: bool = Tr
             bar.close()
 
 
-def _shrink_perturb(trainer) -> None:
-    """``shrink_perturb`` of every seed's weights in the batched ``trainer``: written into its SB3
-    models, perturbed there as the SB3 engine perturbs them, and read back; its optimiser state,
-    generators and lines go on as they were."""
-    from ..training.batched import params
-
-    for seed, model in zip(trainer.seeds, trainer.sync_models(), strict=True):
-        shrink_perturb(model, int(seed))
-    trainer.params = params.stack(trainer.trees)
-
-
 class _Offset:
     """A trainer seen by the progress bar as if its steps counted from ``start`` (a continued learn)."""
 
@@ -657,18 +633,24 @@ def run_batch(
     seeds = [int(c.seed) for c in cells]  # type: ignore[arg-type]
     curves = Curves(len(cells))
     snapshots: list[Path] = []
+    clone_losses: list[list[float]] = []
     through = first.kind in ("transfer", "perturbed")  # trained through the change
     trainer = _trainer(first, seeds, settings, evolving if through else changed)
     try:
         if through:
             _learn(trainer, settings.before * EPISODE_STEPS, curves, progress)
             if first.kind == "perturbed":
-                _shrink_perturb(trainer)
+                warm.in_batched(trainer, warm.shrink_perturb)
             models = out / "models"
             models.mkdir(parents=True, exist_ok=True)
             snapshots = trainer.save([models / f"{c.name}-at-the-change.zip" for c in cells])
             _learn(trainer, settings.after * EPISODE_STEPS, curves, progress, reset=False)
         else:
+            if first.kind == "cloned":
+                demonstrations = oracle_demonstrations(first.scenario, changed)
+                clone_losses = warm.in_batched(trainer, lambda m, seed: warm.clone_oracle(m, seed, demonstrations))
+                (out / "models").mkdir(parents=True, exist_ok=True)
+                snapshots = trainer.save([out / "models" / f"{c.name}-cloned.zip" for c in cells])
             _learn(trainer, settings.after * EPISODE_STEPS, curves, progress)
         rate = trainer.num_timesteps * len(cells) / max(time.monotonic() - started, 1e-9)
         trained = trainer.sync_models()  # each seed's SB3 model with its trained weights
@@ -677,12 +659,13 @@ def run_batch(
     share = (time.monotonic() - started) / len(cells)
     batch = {"seeds": seeds, "steps_per_s": rate}
     records = []
-    curve_key = {"transfer": "continued_curve", "scratch": "scratch_curve", "perturbed": "perturbed_curve"}[first.kind]
     for s, cell in enumerate(cells):
         evaluated = time.monotonic()
-        at_change = snapshots[s] if through else None
+        at_change = snapshots[s] if snapshots else None
         found = evaluations(cell, settings, trained[s], at_change, changed, before_path(cell.scenario, out), "native")
-        result = {curve_key: curves.curves[s], **found}
+        result = {f"{STRATEGY_OF[cell.kind]}_curve": curves.curves[s], **found}
+        if clone_losses:
+            result["clone_losses"] = clone_losses[s]
         own = time.monotonic() - evaluated
         timing = {"train_seconds": share, "eval_seconds": own}
         record = {"cell": asdict(cell), **result, **timing, "seconds": share + own, "engine": "batched", "batch": batch}

@@ -202,7 +202,7 @@ def test_forgetting_is_left_out_saying_why_for_cells_without_the_evaluations_bef
 def test_shrink_and_perturb_is_a_strategy_with_the_metrics_of_continued():
     summary = tr.summarize(records_before(), KEY, ["sensor"], ["ppo"])["sensor"]
     ppo = summary["algos"]["ppo"]
-    assert list(tr.STRATEGIES) == ["continued", "frozen", "scratch", "perturbed"]
+    assert list(tr.STRATEGIES) == ["continued", "frozen", "scratch", "perturbed", "cloned"]
     assert ppo["strategies"]["perturbed"]["iqm"]["point"] == pytest.approx(7.0)
     found = ppo["continual"]["perturbed"]
     # Its jumpstart is its own perturbed snapshot's, not the frozen one's.
@@ -214,7 +214,27 @@ def test_shrink_and_perturb_is_a_strategy_with_the_metrics_of_continued():
     assert ppo["recovery"]["perturbed"]["per_run"] == [None, 500]  # 90 % of from scratch's IQM (5.0)
     assert ppo["improvement"]["perturbed > continued"]["point"] == 1.0  # 7 against 6 and 4
     text = tr.markdown(tr.summarize(records_before(), KEY, ["sensor"], ["ppo"]), KEY)
-    assert "| (d) shrink-and-perturb |" in text and "| sensor | ppo | 2/2/2/2 |" in text
+    assert "| (d) shrink-and-perturb |" in text and "| sensor | ppo | 2/2/2/2/0 |" in text
     assert "(d) shrink-and-perturb, after the change" in text
     row = next(line for line in text.splitlines() if line.startswith("| perturbed"))
     assert row.startswith("| perturbed | 2 | 7.00 [7.00, 7.00] | 0.75 [0.50, 1.00] | 0.650 [0.300, 1.000] |")
+
+
+def test_the_new_agent_cloned_from_the_oracle_has_the_metrics_of_from_scratch_and_a_jumpstart():
+    """Cloned from the oracle: its jumpstart is the cloned agent before its RL training; its curve
+    starts at the change, as from scratch's; forward transfer and forgetting as the others'."""
+    found = records_before()
+    for seed, curve, before in ((1, [10.0] * 20, [9.0] * 4), (2, [5.0] * 20, [8.0] * 4)):
+        found.append(record("cloned", seed, cloned_curve=curve, cloned_eval=[9.0 + seed] * 4,
+                            cloned_at_change_eval=[8.0] * 4, cloned_before_eval=before))  # fmt: skip
+    ppo = tr.summarize(found, KEY, ["sensor"], ["ppo"])["sensor"]["algos"]["ppo"]
+    cloned = ppo["continual"]["cloned"]
+    assert cloned["jumpstart"]["per_run"] == [8.0, 8.0]
+    assert cloned["auc"]["per_run"] == pytest.approx([1.0, 0.5])  # from its first episode: no part before a change
+    assert cloned["forward_transfer"]["per_run"] == pytest.approx([0.65 / 0.65, 0.15 / 0.65])
+    assert cloned["forgetting"]["per_run"] == pytest.approx([0.05, 0.0])  # (10 - 9) / 20, (8 - 8) / 20
+    assert cloned["steps_to_rba_hold"]["per_run"] == [500, 500]
+    assert ppo["improvement"]["cloned > scratch"]["point"] == 1.0  # 10 and 11 against 9 and 1
+    assert ppo["strategies"]["cloned"]["per_run"] == [10.0, 11.0]
+    text = tr.markdown(tr.summarize(found, KEY, ["sensor"], ["ppo"]), KEY)
+    assert "| (e) new, cloned from the oracle |" in text and "| sensor | ppo | 2/2/2/2/2 |" in text
