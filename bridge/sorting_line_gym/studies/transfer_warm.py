@@ -23,9 +23,10 @@ import numpy as np
 #: Shrink-and-perturb (Ash & Adams, "On Warm-Starting Neural Network Training", NeurIPS 2020):
 #: at the change every parameter theta becomes SHRINK * theta + PERTURB * theta_fresh, theta_fresh
 #: that parameter of a fresh initialisation of the same policy (the paper's noise: "a randomly
-#: initialised model as the noise source", so each layer's noise has its own init's scale). The
-#: paper sweeps both; 0.4 and 0.1 are the values implementations of the method commonly take (and
-#: the brief's lambda); they could not be checked against the paper's text here (docs/evolving.md).
+#: initialised model as the noise source", so each layer's noise has its own init's scale). 0.4 and
+#: 0.1 are the defaults of the authors' own code (github.com/JordanAsh/warm_start, run.py's --shrink
+#: and --perturb); the paper sweeps both. Unlike that code, which starts a new optimizer, the agent's
+#: Adam state goes on, as the continued agent's does (docs/evolving.md).
 SHRINK, PERTURB = 0.4, 0.1
 #: The fresh initialisation of seed s's perturbation is seeded FRESH_SEED + s: its own, not the
 #: agent's initial weights (seeded s), and the same on every run of the cell.
