@@ -171,8 +171,9 @@ unit_tier() {
   set -euo pipefail
   local unit_home
   unit_home="$(mktemp -d /tmp/sorting_line_unit.XXXXXX)"
+  # -n 0: one process here, where it shares the cores with the ROS tier (alone it takes two: pytest.ini).
   local unit_tests=(.venv/bin/python -m pytest tests/python/unit -q -rs -p no:cacheprovider --durations=8
-    --basetemp "$unit_home/pytest")
+    -n 0 --basetemp "$unit_home/pytest")
   local nobody=(setpriv --reuid=65534 --regid=65534 --clear-groups)
   # The probe runs the interpreter as the tier does (through env) and checks that it is the venv's: a
   # checkout under a directory nobody cannot enter (mktemp -d's mode 700) once let a bare probe start

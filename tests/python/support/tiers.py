@@ -5,6 +5,7 @@ by tests/python/conftest.py; unit/conftest.py reads it back."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -30,3 +31,15 @@ def is_ros_tier(config: pytest.Config) -> bool:
 
 def in_unit(path: Path) -> bool:
     return path.resolve().is_relative_to(UNIT)
+
+
+#: The most workers a session of the whole unit tier starts (each imports torch and JAX).
+MAX_UNIT_WORKERS = 4
+
+
+def unit_workers(config: pytest.Config) -> int:
+    """pytest-xdist workers of a unit-tier session (unit/pytest.ini's ``-n auto``): one per CPU, at most
+    :data:`MAX_UNIT_WORKERS`, when the session is given folders (the whole tier), none when it names a file
+    or a test (one process, started at once, where ``--pdb`` and ``-s`` work as usual)."""
+    named = [arg for arg in config.args if "::" in arg or not (config.invocation_params.dir / arg).is_dir()]
+    return 0 if named else min(MAX_UNIT_WORKERS, len(os.sched_getaffinity(0)))

@@ -22,7 +22,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from support import torch_threads  # noqa: E402
-from support.tiers import is_ros_tier  # noqa: E402
+from support.tiers import is_ros_tier, unit_workers  # noqa: E402
 
 
 class _NoRclpy(importlib.abc.MetaPathFinder):
@@ -36,6 +36,11 @@ class _NoRclpy(importlib.abc.MetaPathFinder):
                 name=fullname,
             )
         return None
+
+
+def pytest_xdist_auto_num_workers(config):
+    """The workers of pytest.ini's ``-n auto`` (support/tiers.py)."""
+    return unit_workers(config)
 
 
 def _rclpy_modules() -> list[str]:
