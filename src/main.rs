@@ -13,8 +13,9 @@ use sorting_line::eval::{add_oracle, evaluate, evaluate_oracle, EvalSummary};
 #[cfg(feature = "ros")]
 use sorting_line::ros::options::NodeArgs;
 use sorting_line::sim::agent::AgentSpec;
-use sorting_line::sim::config::{EVAL_EPISODES, EVAL_FIRST_SEED};
+use sorting_line::sim::config::{EPISODE_STEPS, EVAL_EPISODES, EVAL_FIRST_SEED};
 use sorting_line::sim::evolution::{category_code, At, Schedule};
+use sorting_line::sim::material::SORT_MODES;
 use sorting_line::sim::rba::{analysis_table, ANALYSIS_COLUMNS};
 use sorting_line::sim::{LineConfig, Setup, Variant};
 
@@ -61,18 +62,27 @@ struct TraceArgs {
     #[arg(long, default_value_t = 42)]
     seed: u64,
     /// Steps per episode: the line reports `truncated` at the last one.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = EPISODE_STEPS)]
     max_steps: u32,
-    /// Comma-separated Gymnasium actions (basic: speed index; advanced: speed index * 3 + mode);
-    /// `r` resets without a seed, `r<N>` resets with seed N. With --evolution, actions are
-    /// always advanced ones (speed index * 3 + mode), as SortingLineEvolving-v0 takes them.
-    #[arg(long, value_delimiter = ',')]
+    // The help states `Action::to_discrete`'s encoding, its factor the library's mode count.
+    #[arg(long, value_delimiter = ',', help = actions_help())]
     actions: Vec<String>,
     /// An evolution schedule (YAML, see docs/evolving.md): each JSON line then also carries `tick`,
     /// the `evolution` events applied there, the line's `settings` and its `category_reading`
     /// (3 = unknown: no ratio sensor).
     #[arg(long, value_name = "FILE")]
     evolution: Option<PathBuf>,
+}
+
+/// `trace --actions`' help: the Gymnasium encoding of an action (`Action::to_discrete`), its
+/// factor the library's count of sort modes.
+fn actions_help() -> String {
+    let advanced = format!("speed index * {} + mode", SORT_MODES.len());
+    format!(
+        "Comma-separated Gymnasium actions (basic: speed index; advanced: {advanced}); `r` resets without a \
+         seed, `r<N>` resets with seed N. With --evolution, actions are always advanced ones ({advanced}), as \
+         SortingLineEvolving-v0 takes them"
+    )
 }
 
 /// The episodes `eval` and `oracle` run: episode i is reset with seed SEED + i.
@@ -91,7 +101,7 @@ struct EpisodeArgs {
     #[arg(long, default_value_t = EVAL_FIRST_SEED)]
     seed: u64,
     /// Steps per episode (the advanced oracle: at most 2000).
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = EPISODE_STEPS)]
     max_steps: u32,
     /// Print one JSON object instead of a summary.
     #[arg(long)]

@@ -67,7 +67,7 @@ impl Default for LineConfig {
             obs_noise: 0.0,
             action_penalty: 0.0,
             threshold: 0.7,
-            max_steps: 50,
+            max_steps: EPISODE_STEPS,
         }
     }
 }
@@ -104,6 +104,10 @@ fn check_range(
         Err(ConfigError { field, value: value.to_string(), allowed })
     }
 }
+
+/// The paper's episode length, in steps: `LineConfig`'s default `max_steps`, and so the length of
+/// `sorting_line eval`, `oracle` and `trace` unless `--max-steps` says otherwise.
+pub const EPISODE_STEPS: u32 = 50;
 
 /// The paper's evaluation: `EVAL_EPISODES` episodes of the default length, episode i reset with
 /// seed `EVAL_FIRST_SEED + i` (seeds 42..51): `sorting_line eval`'s and `oracle`'s defaults, and
