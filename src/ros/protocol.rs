@@ -42,7 +42,8 @@ use super::clock::SimClock;
 use super::messages::{LineCommands, ResetLinesRequest, Time};
 use super::options::TickMode;
 use crate::sim::evolution::{category_code, Schedule};
-use crate::sim::speed::{index_of_speed, START_SPEED_INDEX};
+use crate::sim::material::SORT_MODES;
+use crate::sim::speed::{index_of_speed, SPEEDS, START_SPEED_INDEX};
 use crate::sim::{Action, Line, LineConfig, Observation, SortMode, StepOutcome, Variant};
 
 /// Why a command was dropped.
@@ -104,11 +105,20 @@ impl Rejection {
         }
     }
 
-    /// A sentence for the log.
-    pub fn explain(self) -> &'static str {
-        match self {
-            Rejection::InvalidSpeed => "speed is not one of 0.1, 0.2, ..., 1.0",
-            Rejection::UnknownMode => "sort mode is not 0 (basic), 1 (positive) or 2 (negative)",
+    /// A sentence for the log. The speeds and the modes' numbers and names are the library's
+    /// (`SPEEDS`; `SORT_MODES` by the names serde gives them, which their labels start with).
+    pub fn explain(self) -> String {
+        let text = match self {
+            Rejection::InvalidSpeed => {
+                let (first, second, last) = (SPEEDS[0], SPEEDS[1], SPEEDS[SPEEDS.len() - 1]);
+                return format!("speed is not one of {first:?}, {second:?}, ..., {last:?}");
+            }
+            Rejection::UnknownMode => {
+                let named: Vec<String> =
+                    SORT_MODES.iter().map(|&m| format!("{} ({})", m.index(), mode_name(m))).collect();
+                let (last, rest) = named.split_last().expect("the line has sort modes");
+                return format!("sort mode is not {} or {last}", rest.join(", "));
+            }
             Rejection::ModeOnBasicLine => "the basic line has no sort mode",
             Rejection::Stale => "stamp names a tick the line has already left",
             Rejection::Duplicate => "a command of this kind already answered this tick",
@@ -122,8 +132,14 @@ impl Rejection {
                 "the sorting machine has no sort modes now (before its machine upgrade): only mode 0 is valid"
             }
             Rejection::Stopped => "the simulation is STOPPED; set it to PAUSED or PLAYING (~/set_simulation_state)",
-        }
+        };
+        text.to_string()
     }
+}
+
+/// A sort mode's name as `trace` and parameter files write it (its serde name).
+fn mode_name(mode: SortMode) -> String {
+    serde_json::to_value(mode).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default()
 }
 
 /// Who sent a command: the GUID prefix of its DDS writer, i.e. the sending participant (one rclpy

@@ -263,3 +263,11 @@ fn a_stopped_line_rejects_commands_and_a_mode_switch_clears_pending_ones() {
     assert_eq!(h.command_from([1; 12], h.stamp(), Command::Mode(1)), Ok(Accepted::Stored));
     assert!(matches!(h.command_from([1; 12], h.stamp(), Command::Speed(0.5)), Ok(Accepted::Stepped(_))));
 }
+
+/// The two explanations formatted from the library's speeds and sort modes read as the node has
+/// always logged them (the Python bag check's `NODE_REASONS` states the same texts).
+#[test]
+fn speed_and_mode_rejections_name_the_librarys_speeds_and_modes() {
+    assert_eq!(Rejection::InvalidSpeed.explain(), "speed is not one of 0.1, 0.2, ..., 1.0");
+    assert_eq!(Rejection::UnknownMode.explain(), "sort mode is not 0 (basic), 1 (positive) or 2 (negative)");
+}
