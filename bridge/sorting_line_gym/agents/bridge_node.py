@@ -19,6 +19,7 @@ import numpy as np
 from ..line.errors import BridgeError
 from ..line.vocabulary import (
     ENV_IDS,
+    EVAL_FIRST_SEED,
     MODE_COUNT,
     MODES,
     SETUP_SPAN,
@@ -57,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--variant", choices=VARIANTS, default="basic", help=f"{VARIANT_CHOICE} line (default %(default)s)")
     p.add_argument("--episodes", type=int, default=3, help="episodes to run (default %(default)s)")
-    p.add_argument("--seed", type=int, default=42, help="episode i is reset with seed + i")
+    p.add_argument("--seed", type=int, default=EVAL_FIRST_SEED, help="episode i is reset with seed + i")
     p.add_argument("--agent", default="random", help="random, constant:K or constant:K:M")
     p.add_argument(
         "--node",

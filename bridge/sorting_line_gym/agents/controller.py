@@ -55,7 +55,7 @@ from sorting_line_interfaces.msg import (
 )
 
 from ..line.topics import BELT_OCCUPANCY, EVOLUTION_EVENT, INPUT, SENSORS_RATIO, SORT_MODE_CMD, SPEED_CMD
-from ..line.vocabulary import CATEGORY_UNKNOWN_CODE, SPEEDS, speed_index_of
+from ..line.vocabulary import CATEGORIES, CATEGORY_UNKNOWN_CODE, SPEED_COUNT, SPEEDS, speed_index_of
 from ..ros.links import QOS, publish_commands
 from .controller_diagnostics import ControllerDiagnostics
 from .policies import Agent
@@ -67,6 +67,8 @@ MAX_PENDING = 32
 LATENCY_WINDOW = 10_000
 #: Longest wait of the executor: how soon a signal stops the controller.
 SPIN_PERIOD = 0.1
+#: The ratio categories' wire numbers as a refused reading's warning lists them ("0, 1 or 2").
+_CATEGORY_NUMBERS = " or ".join(", ".join(map(str, CATEGORIES.values())).rsplit(", ", 1))
 
 
 def stamp_ns(stamp) -> int:
@@ -186,10 +188,10 @@ class ControllerNode(Node):
     def _on_ratio(self, msg: MaterialRatio) -> None:
         if self.evolving:
             self.ratio_sensor = True  # it publishes: it is fitted (whether or not we saw the event)
-        if msg.category > 2:
+        if msg.category not in CATEGORIES.values():
             self.invalid += 1
             self.get_logger().warning(
-                f"{SENSORS_RATIO}: category {msg.category} is not 0, 1 or 2", throttle_duration_sec=5.0
+                f"{SENSORS_RATIO}: category {msg.category} is not {_CATEGORY_NUMBERS}", throttle_duration_sec=5.0
             )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, category=int(msg.category))
@@ -199,7 +201,7 @@ class ControllerNode(Node):
         if index is None:
             self.invalid += 1
             self.get_logger().warning(
-                f"{BELT_OCCUPANCY}: speed {msg.speed} is not one of the ten speeds", throttle_duration_sec=5.0
+                f"{BELT_OCCUPANCY}: speed {msg.speed} is not one of the {SPEED_COUNT} speeds", throttle_duration_sec=5.0
             )
             return
         self._reading(msg.header.stamp, msg.episode, msg.step, speed_index=index)

@@ -50,6 +50,7 @@ import numpy as np
 import yaml
 
 from ..line.vocabulary import EPISODE_STEPS
+from ..reports.benchmark_summary import HELDOUT_SEED
 from . import transfer_warm as warm
 from .cell_store import ConfigurationMismatch
 
@@ -78,7 +79,8 @@ BEFORE_EVALUATIONS = {
 STRATEGY_OF = {"transfer": "continued", "scratch": "scratch", "perturbed": "perturbed", "cloned": "cloned"}
 #: Episodes of the moving mean of the training curves; --before and --after are multiples of it.
 WINDOW = 10
-EVAL_SEED = 10_000
+#: The held-out evaluation's first seed: the benchmark's (no training episode starts there).
+EVAL_SEED = HELDOUT_SEED
 #: MaskablePPO as the study ran it from the start (10-episode rollouts; SB3's defaults otherwise).
 PPO_PARAMS = {"n_steps": 10 * EPISODE_STEPS, "batch_size": 100, "n_epochs": 5}
 #: --ppo-settings: "study" is PPO_PARAMS; "paper" adds the paper's gamma, learning rate and entropy
