@@ -68,11 +68,10 @@ def units(items: list[pytest.Item]) -> list[tuple[str, list[pytest.Item]]]:
         by_unit.setdefault(group_of.get(name, name), []).append(item)
     rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
 
-    def order(unit: str) -> int:
-        return min(rank.get(name, len(rank)) for name in unit.split("+"))
+    def order(unit: tuple[str, list[pytest.Item]]) -> int:
+        return min(rank.get(name, len(rank)) for name in unit[0].split("+"))
 
-    collected = list(by_unit)
-    return sorted(by_unit.items(), key=lambda kv: (order(kv[0]), collected.index(kv[0])))
+    return sorted(by_unit.items(), key=order)  # stable: ties keep the collection's order
 
 
 def claim(folder: Path, unit: str) -> bool:
@@ -97,6 +96,7 @@ def run_claimed(session: pytest.Session) -> bool | None:
     if session.config.option.collectonly:
         return True
     all_units = units(session.items)
+    firsts = [items[0] for _, items in all_units]
     skipped: list[pytest.Item] = []
     for index, (unit, items) in enumerate(all_units):
         if not claim(folder, unit):
@@ -104,9 +104,9 @@ def run_claimed(session: pytest.Session) -> bool | None:
             continue
         # The item after a unit's last is one of another file, run or not: pytest then tears down this
         # file's module fixtures and keeps the session's (None would end rclpy's session too).
-        later = [other for _, others in all_units[index + 1 :] + all_units[:index] for other in others[:1]]
+        other = next((first for j, first in enumerate(firsts) if j != index), None)
         for i, item in enumerate(items):
-            nextitem = items[i + 1] if i + 1 < len(items) else (later[0] if later else None)
+            nextitem = items[i + 1] if i + 1 < len(items) else other
             item.config.hook.pytest_runtest_protocol(item=item, nextitem=nextitem)
             if session.shouldfail:
                 raise session.Failed(session.shouldfail)
