@@ -55,7 +55,7 @@ from sorting_line_interfaces.msg import (
 )
 
 from ..line.topics import BELT_OCCUPANCY, EVOLUTION_EVENT, INPUT, SENSORS_RATIO, SORT_MODE_CMD, SPEED_CMD
-from ..line.vocabulary import CATEGORIES, CATEGORY_UNKNOWN_CODE, SPEED_COUNT, SPEEDS, speed_index_of
+from ..line.vocabulary import CATEGORIES, CATEGORY_UNKNOWN_CODE, SPEED_COUNT, SPEEDS, alternatives, speed_index_of
 from ..ros.links import QOS, publish_commands
 from .controller_diagnostics import ControllerDiagnostics
 from .policies import Agent
@@ -68,7 +68,7 @@ LATENCY_WINDOW = 10_000
 #: Longest wait of the executor: how soon a signal stops the controller.
 SPIN_PERIOD = 0.1
 #: The ratio categories' wire numbers as a refused reading's warning lists them ("0, 1 or 2").
-_CATEGORY_NUMBERS = " or ".join(", ".join(map(str, CATEGORIES.values())).rsplit(", ", 1))
+_CATEGORY_NUMBERS = alternatives(CATEGORIES.values())
 
 
 def stamp_ns(stamp) -> int:

@@ -107,10 +107,17 @@ ACTION_COUNTS: Mapping[str, int] = MappingProxyType(dict(_native.ACTION_COUNTS))
 
 # -- Texts: the facts above as help texts, plot labels and reports name them ---------------------
 
+
+def alternatives(values: Iterable[object]) -> str:
+    """The values as a text names a choice among them: ``"A, B, C or D"``, ``"basic or advanced"``."""
+    texts = [str(v) for v in values]
+    return " or ".join([", ".join(texts[:-1]), texts[-1]] if len(texts) > 1 else texts)
+
+
 #: The setups' span, ``"A..D"``.
 SETUP_SPAN = f"{min(SETUPS)}..{max(SETUPS)}"
 #: The variants as a choice, ``"basic or advanced"``.
-VARIANT_CHOICE = " or ".join(VARIANTS)
+VARIANT_CHOICE = alternatives(VARIANTS)
 #: The paper's evaluation seeds, ``"42..51"``.
 EVAL_SEEDS = f"{EVAL_FIRST_SEED}..{EVAL_FIRST_SEED + EVAL_EPISODES - 1}"
 

@@ -29,15 +29,15 @@ from typing import Any
 
 import numpy as np
 
-from ..line.vocabulary import EPISODE_STEPS, SETUPS, VARIANTS
+from ..line.vocabulary import EPISODE_STEPS, SETUPS, VARIANT_CHOICE, VARIANTS, alternatives
 from .benchmark_summary import References, by_cell, episode_seeds, references
 
 COLUMNS = ("setup", "variant", "agent", "train_seed", "heldout_seed", "reward", "normalized")
 #: What a file to compare must have (``normalized`` is recomputed from the table's references).
 REQUIRED = COLUMNS[:-1]
 COLUMN_MEANINGS = {
-    "setup": f"{', '.join(list(SETUPS)[:-1])} or {list(SETUPS)[-1]}: the paper's setup",
-    "variant": " or ".join(VARIANTS),
+    "setup": f"{alternatives(SETUPS)}: the paper's setup",
+    "variant": VARIANT_CHOICE,
     "agent": "random, rba, rba-hold, dqn, ppo, a2c, or oracle (the exact optimum of the seed); yours: its own name",
     "train_seed": "the training seed of an RL run (one run); empty for a deterministic baseline and the oracle",
     "heldout_seed": "the evaluation episode's seed",
